@@ -1,0 +1,420 @@
+#include "common/splat/ply.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <bit>
+#include <charconv>
+#include <cmath>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+
+#include "absl/status/status.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "absl/strings/strip.h"
+#include "common/core/status.h"
+
+namespace instascene {
+namespace {
+
+constexpr float kMaxExactInteger = 16777216.0f;  // 2^24: integers beyond it do not fit a float
+
+bool ParseScalarType(absl::string_view s, ScalarType* type) {
+  struct Entry {
+    absl::string_view name;
+    ScalarType type;
+  };
+  static constexpr Entry kTypes[] = {
+      {"char", ScalarType::kInt8},     {"int8", ScalarType::kInt8},
+      {"uchar", ScalarType::kUint8},   {"uint8", ScalarType::kUint8},
+      {"short", ScalarType::kInt16},   {"int16", ScalarType::kInt16},
+      {"ushort", ScalarType::kUint16}, {"uint16", ScalarType::kUint16},
+      {"int", ScalarType::kInt32},     {"int32", ScalarType::kInt32},
+      {"uint", ScalarType::kUint32},   {"uint32", ScalarType::kUint32},
+      {"float", ScalarType::kFloat32}, {"float32", ScalarType::kFloat32},
+      {"double", ScalarType::kFloat64}, {"float64", ScalarType::kFloat64},
+  };
+  for (const Entry& e : kTypes) {
+    if (e.name == s) {
+      *type = e.type;
+      return true;
+    }
+  }
+  return false;
+}
+
+bool IsIntegerType(ScalarType t) { return t != ScalarType::kFloat32 && t != ScalarType::kFloat64; }
+
+// Decodes one binary scalar at p (which has at least ScalarTypeSize bytes) as double.
+double DecodeBinary(const char* p, ScalarType type, bool big_endian) {
+  unsigned char buf[8];
+  const int n = ScalarTypeSize(type);
+  std::memcpy(buf, p, n);
+  if (big_endian != (std::endian::native == std::endian::big)) {
+    for (int i = 0; i < n / 2; ++i) std::swap(buf[i], buf[n - 1 - i]);
+  }
+  switch (type) {
+    case ScalarType::kInt8: { int8_t v; std::memcpy(&v, buf, 1); return v; }
+    case ScalarType::kUint8: { uint8_t v; std::memcpy(&v, buf, 1); return v; }
+    case ScalarType::kInt16: { int16_t v; std::memcpy(&v, buf, 2); return v; }
+    case ScalarType::kUint16: { uint16_t v; std::memcpy(&v, buf, 2); return v; }
+    case ScalarType::kInt32: { int32_t v; std::memcpy(&v, buf, 4); return v; }
+    case ScalarType::kUint32: { uint32_t v; std::memcpy(&v, buf, 4); return v; }
+    case ScalarType::kFloat32: { float v; std::memcpy(&v, buf, 4); return v; }
+    case ScalarType::kFloat64: { double v; std::memcpy(&v, buf, 8); return v; }
+  }
+  return 0.0;
+}
+
+// Sequential reader over the data section, binary or ASCII, with bounds checks.
+class DataCursor {
+ public:
+  DataCursor(absl::string_view data, size_t offset, PlyFormat format)
+      : data_(data), pos_(offset), format_(format) {}
+
+  size_t remaining() const { return data_.size() - pos_; }
+
+  // Reads one scalar; false at end of data or on a malformed ASCII token.
+  bool Read(ScalarType type, double* value) {
+    if (format_ != PlyFormat::kAscii) {
+      const size_t n = ScalarTypeSize(type);
+      if (remaining() < n) return false;
+      *value = DecodeBinary(data_.data() + pos_, type, format_ == PlyFormat::kBinaryBigEndian);
+      pos_ += n;
+      return true;
+    }
+    while (pos_ < data_.size() && IsSpace(data_[pos_])) ++pos_;
+    size_t end = pos_;
+    while (end < data_.size() && !IsSpace(data_[end])) ++end;
+    if (end == pos_) return false;
+    const char* first = data_.data() + pos_;
+    const char* last = data_.data() + end;
+    if (*first == '+') ++first;
+    std::from_chars_result r;
+    if (IsIntegerType(type)) {
+      int64_t iv = 0;
+      r = std::from_chars(first, last, iv);
+      *value = static_cast<double>(iv);
+    } else {
+      r = std::from_chars(first, last, *value);
+      if (r.ec == std::errc::result_out_of_range) return false;
+    }
+    if (r.ec != std::errc() || r.ptr != last) return false;
+    pos_ = end;
+    return true;
+  }
+
+  // Skips `count` scalars of a fixed type.
+  bool Skip(ScalarType type, int64_t count) {
+    if (format_ != PlyFormat::kAscii) {
+      const uint64_t n = static_cast<uint64_t>(count) * ScalarTypeSize(type);
+      if (remaining() < n) return false;
+      pos_ += n;
+      return true;
+    }
+    double dummy;
+    for (int64_t i = 0; i < count; ++i) {
+      if (!Read(type, &dummy)) return false;
+    }
+    return true;
+  }
+
+ private:
+  static bool IsSpace(char c) { return c == ' ' || c == '\n' || c == '\r' || c == '\t'; }
+  absl::string_view data_;
+  size_t pos_;
+  PlyFormat format_;
+};
+
+// Smallest number of bytes one instance of `element` can occupy (lists count as empty).
+uint64_t MinInstanceBytes(const PlyElement& element, PlyFormat format) {
+  uint64_t bytes = 0;
+  for (const PlyProperty& p : element.properties) {
+    if (format == PlyFormat::kAscii) {
+      bytes += 2;  // at least one character and one separator per value (or list count)
+    } else {
+      bytes += ScalarTypeSize(p.is_list ? p.count_type : p.type);
+    }
+  }
+  return bytes;
+}
+
+std::string DescribeFormat(PlyFormat f) {
+  switch (f) {
+    case PlyFormat::kAscii: return "ascii";
+    case PlyFormat::kBinaryLittleEndian: return "binary_little_endian";
+    case PlyFormat::kBinaryBigEndian: return "binary_big_endian";
+  }
+  return "?";
+}
+
+}  // namespace
+
+int ScalarTypeSize(ScalarType type) {
+  switch (type) {
+    case ScalarType::kInt8: case ScalarType::kUint8: return 1;
+    case ScalarType::kInt16: case ScalarType::kUint16: return 2;
+    case ScalarType::kInt32: case ScalarType::kUint32: case ScalarType::kFloat32: return 4;
+    case ScalarType::kFloat64: return 8;
+  }
+  return 0;
+}
+
+absl::string_view ScalarTypeName(ScalarType type) {
+  switch (type) {
+    case ScalarType::kInt8: return "char";
+    case ScalarType::kUint8: return "uchar";
+    case ScalarType::kInt16: return "short";
+    case ScalarType::kUint16: return "ushort";
+    case ScalarType::kInt32: return "int";
+    case ScalarType::kUint32: return "uint";
+    case ScalarType::kFloat32: return "float";
+    case ScalarType::kFloat64: return "double";
+  }
+  return "?";
+}
+
+int PlyColumns::Find(absl::string_view name) const {
+  for (size_t i = 0; i < names.size(); ++i) {
+    if (names[i] == name) return static_cast<int>(i);
+  }
+  return -1;
+}
+
+absl::StatusOr<PlyHeader> ParsePlyHeader(absl::string_view data, absl::string_view source,
+                                         const PlyLimits& limits) {
+  auto error = [&](int line, absl::string_view what) {
+    return absl::InvalidArgumentError(absl::StrCat(source, ": PLY header line ", line, ": ", what));
+  };
+  if (!absl::StartsWith(data, "ply\n") && !absl::StartsWith(data, "ply\r\n")) {
+    return absl::InvalidArgumentError(absl::StrCat(source, ": not a PLY file (missing 'ply' magic)"));
+  }
+  const absl::string_view kEnd = "end_header";
+  size_t end = data.find(kEnd);
+  if (end == absl::string_view::npos || end > limits.max_header_bytes) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(source, ": PLY header has no 'end_header' within ", limits.max_header_bytes,
+                     " bytes (truncated file?)"));
+  }
+  size_t newline = data.find('\n', end);
+  if (newline == absl::string_view::npos) {
+    return absl::InvalidArgumentError(absl::StrCat(source, ": PLY header not terminated by newline"));
+  }
+  PlyHeader header;
+  header.data_offset = newline + 1;
+  bool have_format = false;
+  int line_no = 0;
+  for (absl::string_view line : absl::StrSplit(data.substr(0, end), '\n')) {
+    ++line_no;
+    line = absl::StripTrailingAsciiWhitespace(line);
+    std::vector<absl::string_view> tok = absl::StrSplit(line, ' ', absl::SkipEmpty());
+    if (tok.empty() || tok[0] == "ply") continue;
+    if (tok[0] == "comment" || tok[0] == "obj_info") {
+      header.comments.emplace_back(absl::StripPrefix(line, tok[0]));
+      continue;
+    }
+    if (tok[0] == "format") {
+      if (tok.size() != 3) return error(line_no, "malformed 'format' line");
+      if (tok[1] == "ascii") header.format = PlyFormat::kAscii;
+      else if (tok[1] == "binary_little_endian") header.format = PlyFormat::kBinaryLittleEndian;
+      else if (tok[1] == "binary_big_endian") header.format = PlyFormat::kBinaryBigEndian;
+      else return error(line_no, absl::StrCat("unknown format '", tok[1], "'"));
+      have_format = true;
+    } else if (tok[0] == "element") {
+      int64_t count = -1;
+      if (tok.size() != 3 ||
+          std::from_chars(tok[2].data(), tok[2].data() + tok[2].size(), count).ec != std::errc() ||
+          count < 0) {
+        return error(line_no, "malformed 'element' line (expected: element NAME COUNT)");
+      }
+      header.elements.push_back({std::string(tok[1]), count, {}});
+    } else if (tok[0] == "property") {
+      if (header.elements.empty()) return error(line_no, "property before any element");
+      PlyElement& element = header.elements.back();
+      if (static_cast<int>(element.properties.size()) >= limits.max_properties) {
+        return error(line_no, absl::StrCat("more than ", limits.max_properties, " properties"));
+      }
+      PlyProperty prop;
+      if (tok.size() == 5 && tok[1] == "list") {
+        prop.is_list = true;
+        if (!ParseScalarType(tok[2], &prop.count_type) || !ParseScalarType(tok[3], &prop.type) ||
+            !IsIntegerType(prop.count_type)) {
+          return error(line_no, absl::StrCat("unknown list property type in '", line, "'"));
+        }
+        prop.name = std::string(tok[4]);
+      } else if (tok.size() == 3) {
+        if (!ParseScalarType(tok[1], &prop.type)) {
+          return error(line_no, absl::StrCat("unknown property type '", tok[1], "' of property '",
+                                             tok[2], "'"));
+        }
+        prop.name = std::string(tok[2]);
+      } else {
+        return error(line_no, absl::StrCat("malformed property line '", line, "'"));
+      }
+      for (const PlyProperty& other : element.properties) {
+        if (other.name == prop.name) {
+          return error(line_no, absl::StrCat("duplicate property '", prop.name, "'"));
+        }
+      }
+      element.properties.push_back(std::move(prop));
+    } else {
+      return error(line_no, absl::StrCat("unknown keyword '", tok[0], "'"));
+    }
+  }
+  if (!have_format) return absl::InvalidArgumentError(absl::StrCat(source, ": PLY header has no format line"));
+  return header;
+}
+
+absl::StatusOr<PlyColumns> ReadPlyElement(absl::string_view data, const PlyHeader& header,
+                                          absl::string_view element_name, absl::string_view source,
+                                          const PlyLimits& limits) {
+  DataCursor cursor(data, header.data_offset, header.format);
+  for (const PlyElement& element : header.elements) {
+    // Bound the element count by the bytes left before allocating anything.
+    const uint64_t min_bytes = MinInstanceBytes(element, header.format);
+    if (min_bytes > 0 &&
+        static_cast<uint64_t>(element.count) > cursor.remaining() / min_bytes) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          source, ": truncated ", DescribeFormat(header.format), " PLY: header declares ",
+          element.count, " '", element.name, "' elements (at least ", min_bytes,
+          " bytes each) but only ", cursor.remaining(), " bytes follow"));
+    }
+    const bool wanted = element.name == element_name;
+    PlyColumns out;
+    if (wanted) {
+      out.count = element.count;
+      for (const PlyProperty& p : element.properties) {
+        if (p.is_list) continue;
+        out.names.push_back(p.name);
+        out.types.push_back(p.type);
+        out.columns.emplace_back();
+        out.columns.back().reserve(element.count);
+      }
+    }
+    for (int64_t i = 0; i < element.count; ++i) {
+      int column = 0;
+      for (const PlyProperty& p : element.properties) {
+        auto fail = [&](absl::string_view what) {
+          return absl::InvalidArgumentError(absl::StrCat(source, ": element '", element.name,
+                                                         "' #", i, " property '", p.name,
+                                                         "': ", what));
+        };
+        double v = 0.0;
+        if (p.is_list) {
+          if (!cursor.Read(p.count_type, &v)) return fail("truncated or malformed list length");
+          if (v < 0 || v > static_cast<double>(limits.max_list_length)) {
+            return fail(absl::StrCat("list length ", v, " out of range"));
+          }
+          if (!cursor.Skip(p.type, static_cast<int64_t>(v))) return fail("truncated list");
+          continue;
+        }
+        if (!wanted) {
+          if (!cursor.Skip(p.type, 1)) return fail("truncated data");
+          continue;
+        }
+        if (!cursor.Read(p.type, &v)) return fail("truncated data or malformed value");
+        if (IsIntegerType(p.type) && std::abs(v) > kMaxExactInteger) {
+          return fail(absl::StrCat("integer value ", v, " exceeds 2^24 and cannot be kept exactly"));
+        }
+        if (std::isfinite(v) && std::abs(v) > std::numeric_limits<float>::max()) {
+          return fail(absl::StrCat("value ", v, " overflows float"));
+        }
+        out.columns[column++].push_back(static_cast<float>(v));
+      }
+    }
+    if (wanted) return out;
+  }
+  return absl::NotFoundError(
+      absl::StrCat(source, ": PLY file has no element '", element_name, "'"));
+}
+
+absl::StatusOr<std::string> ReadFileBounded(const std::string& path, size_t max_bytes) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec)) {
+    return absl::NotFoundError(absl::StrCat(path, ": no such file"));
+  }
+  const uintmax_t size = std::filesystem::file_size(path, ec);
+  if (ec) return absl::UnavailableError(absl::StrCat(path, ": cannot stat: ", ec.message()));
+  if (size > max_bytes) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat(path, ": file is ", size, " bytes, above the limit of ", max_bytes));
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::UnavailableError(absl::StrCat(path, ": cannot open for reading"));
+  std::string bytes(size, '\0');
+  in.read(bytes.data(), static_cast<std::streamsize>(size));
+  if (static_cast<uintmax_t>(in.gcount()) != size) {
+    return absl::DataLossError(absl::StrCat(path, ": short read"));
+  }
+  return bytes;
+}
+
+absl::Status WriteFileAtomically(const std::string& path, absl::string_view bytes) {
+  const std::string tmp = absl::StrCat(path, ".tmp.", ::getpid());
+  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) {
+    return absl::UnavailableError(absl::StrCat(path, ": cannot create: ", std::strerror(errno)));
+  }
+  size_t written = 0;
+  while (written < bytes.size()) {
+    const ssize_t n = ::write(fd, bytes.data() + written, bytes.size() - written);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      const std::string reason = std::strerror(errno);
+      ::close(fd);
+      ::unlink(tmp.c_str());
+      return absl::UnavailableError(absl::StrCat(path, ": write failed: ", reason));
+    }
+    written += static_cast<size_t>(n);
+  }
+  if (::fsync(fd) != 0 || ::close(fd) != 0) {
+    ::unlink(tmp.c_str());
+    return absl::UnavailableError(absl::StrCat(path, ": fsync/close failed"));
+  }
+  if (::rename(tmp.c_str(), path.c_str()) != 0) {
+    const std::string reason = std::strerror(errno);
+    ::unlink(tmp.c_str());
+    return absl::UnavailableError(absl::StrCat(path, ": rename failed: ", reason));
+  }
+  return absl::OkStatus();
+}
+
+std::string EncodePlyBinary(const std::string& element_name, const PlyColumns& columns,
+                            const std::vector<std::string>& comments) {
+  std::string out = "ply\nformat binary_little_endian 1.0\n";
+  for (const std::string& c : comments) absl::StrAppend(&out, "comment ", c, "\n");
+  absl::StrAppend(&out, "element ", element_name, " ", columns.count, "\n");
+  size_t stride = 0;
+  for (size_t p = 0; p < columns.names.size(); ++p) {
+    absl::StrAppend(&out, "property ", ScalarTypeName(columns.types[p]), " ", columns.names[p], "\n");
+    stride += ScalarTypeSize(columns.types[p]);
+  }
+  out += "end_header\n";
+  const size_t header_size = out.size();
+  out.resize(header_size + stride * columns.count);
+  char* dst = out.data() + header_size;
+  static_assert(std::endian::native == std::endian::little, "writer assumes a little-endian host");
+  for (int64_t i = 0; i < columns.count; ++i) {
+    for (size_t p = 0; p < columns.names.size(); ++p) {
+      const float v = columns.columns[p][i];
+      switch (columns.types[p]) {
+        case ScalarType::kInt8: { int8_t x = static_cast<int8_t>(v); std::memcpy(dst, &x, 1); break; }
+        case ScalarType::kUint8: { uint8_t x = static_cast<uint8_t>(v); std::memcpy(dst, &x, 1); break; }
+        case ScalarType::kInt16: { int16_t x = static_cast<int16_t>(v); std::memcpy(dst, &x, 2); break; }
+        case ScalarType::kUint16: { uint16_t x = static_cast<uint16_t>(v); std::memcpy(dst, &x, 2); break; }
+        case ScalarType::kInt32: { int32_t x = static_cast<int32_t>(v); std::memcpy(dst, &x, 4); break; }
+        case ScalarType::kUint32: { uint32_t x = static_cast<uint32_t>(v); std::memcpy(dst, &x, 4); break; }
+        case ScalarType::kFloat32: std::memcpy(dst, &v, 4); break;
+        case ScalarType::kFloat64: { double x = v; std::memcpy(dst, &x, 8); break; }
+      }
+      dst += ScalarTypeSize(columns.types[p]);
+    }
+  }
+  return out;
+}
+
+}  // namespace instascene

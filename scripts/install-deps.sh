@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# Installs every Debian package the InstaScene backend needs. Idempotent: packages that are
+# already installed are skipped, and nothing is done (no apt-get update) when all are present.
+# Usage: scripts/install-deps.sh [--check]   (--check: exit 1 if something is missing, install nothing)
+set -euo pipefail
+
+PACKAGES=(
+  build-essential cmake ninja-build pkg-config git
+  clang-format clang-tidy
+  libabsl-dev
+  libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
+  libeigen3-dev
+  libopencv-dev
+  libembree-dev
+  libopenimageio-dev openimageio-tools
+  libdraco-dev
+  libtbb-dev
+  libsqlite3-dev
+  nlohmann-json3-dev
+  libspdlog-dev libfmt-dev
+  libcli11-dev
+  libgtest-dev libgmock-dev
+  libbenchmark-dev
+  libssl-dev
+  libnanoflann-dev
+  libcpp-httplib-dev
+  libpqxx-dev
+  zlib1g-dev libpng-dev
+)
+
+missing=()
+for p in "${PACKAGES[@]}"; do
+  if ! dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed"; then
+    missing+=("$p")
+  fi
+done
+
+if [ "${#missing[@]}" -eq 0 ]; then
+  echo "install-deps: all ${#PACKAGES[@]} packages present"
+  exit 0
+fi
+if [ "${1:-}" = "--check" ]; then
+  echo "install-deps: missing: ${missing[*]}"
+  exit 1
+fi
+
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+echo "install-deps: installing ${missing[*]}"
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}"
+echo "install-deps: done"
