@@ -5,7 +5,8 @@ if(INSTASCENE_WERROR)
   list(APPEND INSTASCENE_WARNINGS -Werror)
 endif()
 
-set(INSTASCENE_OPT_FLAGS "")
+# No FMA contraction: results must not depend on how the compiler fuses multiply-adds.
+set(INSTASCENE_OPT_FLAGS -ffp-contract=off)
 if(INSTASCENE_NATIVE)
   list(APPEND INSTASCENE_OPT_FLAGS -march=native)
 endif()
