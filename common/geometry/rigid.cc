@@ -2,6 +2,8 @@
 
 #include <cmath>
 
+#include <Eigen/SVD>
+
 #include "absl/status/status.h"
 
 namespace instascene {
@@ -15,6 +17,9 @@ absl::StatusOr<Rigid3d> RigidFromMatrix(const Eigen::Matrix<double, 3, 4>& matri
     return absl::InvalidArgumentError(
         "pose rotation is not a proper rotation (orthonormal with determinant +1)");
   }
+  // Remove the small non-orthogonality that text formats leave (nearest rotation, by SVD).
+  Eigen::JacobiSVD<Eigen::Matrix3d> svd(rigid.rotation, Eigen::ComputeFullU | Eigen::ComputeFullV);
+  rigid.rotation = svd.matrixU() * svd.matrixV().transpose();
   return rigid;
 }
 

@@ -1,0 +1,117 @@
+#include "common/scene/image_io.h"
+
+#include <unistd.h>
+
+#include <OpenImageIO/imageio.h>
+
+#include <algorithm>
+#include <cstdio>
+#include <filesystem>
+
+#include "absl/strings/str_cat.h"
+
+namespace instascene {
+namespace {
+
+constexpr int kMaxImageSide = 16384;
+
+absl::Status OiioError(const std::string& path, const std::string& what, const std::string& detail) {
+  return absl::InvalidArgumentError(absl::StrCat(path, ": ", what, detail.empty() ? "" : ": ", detail));
+}
+
+// Temp name that keeps the extension (OIIO picks the format from it).
+std::string TempPath(const std::string& path) {
+  std::filesystem::path p(path);
+  return (p.parent_path() / absl::StrCat(".", p.stem().string(), ".tmp", ::getpid(), p.extension().string())).string();
+}
+
+absl::Status WritePixels(const std::string& path, int width, int height, int channels,
+                         OIIO::TypeDesc format, const void* data) {
+  const std::string tmp = TempPath(path);
+  auto out = OIIO::ImageOutput::create(path);
+  if (!out) return OiioError(path, "no writer for this extension", OIIO::geterror());
+  OIIO::ImageSpec spec(width, height, channels, format);
+  if (!out->open(tmp, spec) || !out->write_image(format, data) || !out->close()) {
+    const std::string err = out->geterror();
+    std::remove(tmp.c_str());
+    return absl::UnavailableError(absl::StrCat(path, ": write failed: ", err));
+  }
+  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
+    std::remove(tmp.c_str());
+    return absl::UnavailableError(absl::StrCat(path, ": rename failed"));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<Image> ReadImage(const std::string& path) {
+  if (!std::filesystem::is_regular_file(path)) return absl::NotFoundError(absl::StrCat(path, ": no such file"));
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) return OiioError(path, "cannot decode image", OIIO::geterror());
+  const OIIO::ImageSpec& spec = in->spec();
+  if (spec.width <= 0 || spec.height <= 0 || spec.width > kMaxImageSide || spec.height > kMaxImageSide ||
+      spec.nchannels <= 0 || spec.nchannels > 4) {
+    return OiioError(path, absl::StrCat("unsupported image size ", spec.width, "x", spec.height, "x",
+                                        spec.nchannels), "");
+  }
+  Image image;
+  image.width = spec.width;
+  image.height = spec.height;
+  image.channels = spec.nchannels;
+  image.pixels.resize(static_cast<size_t>(spec.width) * spec.height * spec.nchannels);
+  if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, image.pixels.data())) {
+    return absl::DataLossError(absl::StrCat(path, ": truncated or corrupt image: ", in->geterror()));
+  }
+  return image;
+}
+
+absl::Status WriteImage(const std::string& path, const Image& image, int bits) {
+  const size_t n = static_cast<size_t>(image.width) * image.height * image.channels;
+  if (image.pixels.size() != n || n == 0) return absl::InvalidArgumentError(absl::StrCat(path, ": image buffer size mismatch"));
+  if (bits == 16) {
+    std::vector<uint16_t> data(n);
+    for (size_t i = 0; i < n; ++i) data[i] = static_cast<uint16_t>(std::clamp(image.pixels[i], 0.0f, 1.0f) * 65535.0f + 0.5f);
+    return WritePixels(path, image.width, image.height, image.channels, OIIO::TypeDesc::UINT16, data.data());
+  }
+  std::vector<uint8_t> data(n);
+  for (size_t i = 0; i < n; ++i) data[i] = static_cast<uint8_t>(std::clamp(image.pixels[i], 0.0f, 1.0f) * 255.0f + 0.5f);
+  return WritePixels(path, image.width, image.height, image.channels, OIIO::TypeDesc::UINT8, data.data());
+}
+
+absl::StatusOr<LabelMap> ReadLabelMap(const std::string& path) {
+  if (!std::filesystem::is_regular_file(path)) return absl::NotFoundError(absl::StrCat(path, ": no such file"));
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) return OiioError(path, "cannot decode label map", OIIO::geterror());
+  const OIIO::ImageSpec& spec = in->spec();
+  if (spec.nchannels != 1) {
+    return OiioError(path, absl::StrCat("label map must have 1 channel, has ", spec.nchannels), "");
+  }
+  if (spec.format != OIIO::TypeDesc::UINT8 && spec.format != OIIO::TypeDesc::UINT16) {
+    return OiioError(path, absl::StrCat("label map must be 8- or 16-bit integer, is ", spec.format.c_str()), "");
+  }
+  if (spec.width <= 0 || spec.height <= 0 || spec.width > kMaxImageSide || spec.height > kMaxImageSide) {
+    return OiioError(path, "unsupported label map size", "");
+  }
+  LabelMap map;
+  map.width = spec.width;
+  map.height = spec.height;
+  map.labels.resize(static_cast<size_t>(spec.width) * spec.height);
+  if (!in->read_image(0, 0, 0, 1, OIIO::TypeDesc::UINT16, map.labels.data())) {
+    return absl::DataLossError(absl::StrCat(path, ": truncated or corrupt label map: ", in->geterror()));
+  }
+  if (spec.format == OIIO::TypeDesc::UINT8) {
+    // OIIO rescales 8-bit to the 16-bit range (v * 257); undo it to keep the ids.
+    for (uint16_t& v : map.labels) v = static_cast<uint16_t>(v / 257);
+  }
+  return map;
+}
+
+absl::Status WriteLabelMap(const std::string& path, const LabelMap& labels) {
+  if (labels.labels.size() != static_cast<size_t>(labels.width) * labels.height || labels.labels.empty()) {
+    return absl::InvalidArgumentError(absl::StrCat(path, ": label buffer size mismatch"));
+  }
+  return WritePixels(path, labels.width, labels.height, 1, OIIO::TypeDesc::UINT16, labels.labels.data());
+}
+
+}  // namespace instascene

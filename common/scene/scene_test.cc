@@ -1,0 +1,226 @@
+#include <gtest/gtest.h>
+
+#include <OpenImageIO/imageio.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "common/scene/image_io.h"
+#include "common/scene/importers.h"
+#include "common/scene/scene.h"
+#include "common/splat/ply.h"
+
+namespace instascene {
+namespace {
+
+namespace fs = std::filesystem;
+
+std::string FreshDir(const std::string& name) {
+  const std::string dir = ::testing::TempDir() + "/scene_test_" + name;
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  return dir;
+}
+
+SceneView MakeView(const std::string& name, double yaw) {
+  SceneView v;
+  v.name = name;
+  v.image = "images/" + name + ".png";
+  v.mask = "masks/" + name + ".png";
+  v.camera = OrbitCamera({0, 0, 0}, {0, 0, 1}, 3.0, yaw, 20.0, 32, 24, 60.0);
+  return v;
+}
+
+TEST(SceneJson, RoundTripKeepsViewsAndMetadata) {
+  Scene scene;
+  scene.directory = FreshDir("roundtrip");
+  scene.views = {MakeView("a", 0), MakeView("b", 45)};
+  scene.metadata["gt"] = {{"instances", "gt/instances.json"}};
+  ASSERT_TRUE(WriteScene(scene).ok());
+  absl::StatusOr<Scene> back = ReadScene(scene.directory);
+  ASSERT_TRUE(back.ok()) << back.status();
+  ASSERT_EQ(back->views.size(), 2u);
+  EXPECT_EQ(back->views[1].name, "b");
+  EXPECT_EQ(back->views[1].mask, "masks/b.png");
+  EXPECT_LT((back->views[1].camera.camera_from_world.ToMatrix() -
+             scene.views[1].camera.camera_from_world.ToMatrix()).norm(), 1e-12);
+  EXPECT_EQ(back->metadata["gt"]["instances"], "gt/instances.json");
+  EXPECT_EQ(*ResolveView(*back, "b"), 1);
+  EXPECT_EQ(*ResolveView(*back, "0"), 0);
+  EXPECT_EQ(ResolveView(*back, "7").status().code(), absl::StatusCode::kNotFound);
+}
+
+void ExpectBadScene(const std::string& text, absl::string_view fragment) {
+  absl::StatusOr<Scene> scene = ParseSceneJson(text, "scene.json");
+  ASSERT_FALSE(scene.ok()) << text;
+  EXPECT_NE(scene.status().message().find(fragment), std::string::npos) << scene.status();
+}
+
+TEST(SceneJson, RejectsMalformedManifests) {
+  const std::string view =
+      R"({"name":"v","width":4,"height":4,"fx":2,"fy":2,"cx":2,"cy":2,"camera_from_world":[[1,0,0,0],[0,1,0,0],[0,0,1,0]]})";
+  ExpectBadScene("{", "not valid JSON");
+  ExpectBadScene(R"({"format":"other","views":[]})", "format");
+  ExpectBadScene(R"({"format":"instascene.scene/1","views":[)" + view + "," + view + "]}", "duplicate view");
+  ExpectBadScene(R"({"format":"instascene.scene/1","gaussians":"../x.ply","views":[]})", "unsafe path");
+  ExpectBadScene(R"({"format":"instascene.scene/1","views":[{"name":"v"}]})", "views[0]");
+  std::string scaled = view;
+  scaled.replace(scaled.find("[[1,0,0,0]"), 10, "[[2,0,0,0]");
+  ExpectBadScene(R"({"format":"instascene.scene/1","views":[)" + scaled + "]}", "rotation");
+  std::string escape = view;
+  escape.insert(1, R"("image":"/etc/passwd",)");
+  ExpectBadScene(R"({"format":"instascene.scene/1","views":[)" + escape + "]}", "unsafe path");
+}
+
+TEST(ImageIo, ImagesAndLabelMapsRoundTrip) {
+  const std::string dir = FreshDir("images");
+  Image image{4, 3, 3, std::vector<float>(36)};
+  for (size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] = static_cast<float>(i % 17) / 16.0f;
+  ASSERT_TRUE(WriteImage(dir + "/a.png", image).ok());
+  absl::StatusOr<Image> back = ReadImage(dir + "/a.png");
+  ASSERT_TRUE(back.ok()) << back.status();
+  for (size_t i = 0; i < image.pixels.size(); ++i) EXPECT_NEAR(back->pixels[i], image.pixels[i], 1.0 / 255);
+  LabelMap labels{5, 2, {0, 1, 2, 300, 65535, 7, 7, 0, 9, 1000}};
+  ASSERT_TRUE(WriteLabelMap(dir + "/m16.png", labels).ok());
+  absl::StatusOr<LabelMap> labels_back = ReadLabelMap(dir + "/m16.png");
+  ASSERT_TRUE(labels_back.ok()) << labels_back.status();
+  EXPECT_EQ(labels_back->labels, labels.labels);
+  // 8-bit label maps keep their ids.
+  std::vector<uint8_t> ids = {0, 1, 2, 3, 255, 4};
+  auto out = OIIO::ImageOutput::create(dir + "/m8.png");
+  ASSERT_TRUE(out->open(dir + "/m8.png", OIIO::ImageSpec(3, 2, 1, OIIO::TypeDesc::UINT8)));
+  ASSERT_TRUE(out->write_image(OIIO::TypeDesc::UINT8, ids.data()));
+  out->close();
+  absl::StatusOr<LabelMap> m8 = ReadLabelMap(dir + "/m8.png");
+  ASSERT_TRUE(m8.ok()) << m8.status();
+  EXPECT_EQ(m8->labels, (std::vector<uint16_t>{0, 1, 2, 3, 255, 4}));
+  // An RGB image is not a label map; a truncated PNG is an error, not a crash.
+  EXPECT_FALSE(ReadLabelMap(dir + "/a.png").ok());
+  std::string bytes = *ReadFileBounded(dir + "/a.png", 1 << 20);
+  ASSERT_TRUE(WriteFileAtomically(dir + "/cut.png", bytes.substr(0, bytes.size() / 2)).ok());
+  EXPECT_FALSE(ReadImage(dir + "/cut.png").ok());
+  EXPECT_EQ(ReadImage(dir + "/missing.png").status().code(), absl::StatusCode::kNotFound);
+}
+
+TEST(Scene, ViewImageSizeMustMatchCamera) {
+  Scene scene;
+  scene.directory = FreshDir("sizes");
+  scene.views = {MakeView("a", 0)};
+  fs::create_directories(scene.directory + "/images");
+  ASSERT_TRUE(WriteImage(scene.Path("images/a.png"), Image{31, 24, 3, std::vector<float>(31 * 24 * 3)}).ok());
+  absl::StatusOr<Image> image = ReadViewImage(scene, 0);
+  ASSERT_FALSE(image.ok());
+  EXPECT_NE(image.status().message().find("31x24"), std::string::npos) << image.status();
+}
+
+// Writes a tiny COLMAP model in the binary or text format.
+void WriteColmap(const std::string& dir, bool binary, int model_id, const std::vector<double>& params) {
+  const char* kNames[] = {"SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL"};
+  const double q[4] = {0.9238795, 0, 0.3826834, 0}, t[3] = {0.5, -1, 2};
+  if (binary) {
+    std::string cams, imgs;
+    auto put = [](std::string* s, const auto& v) { s->append(reinterpret_cast<const char*>(&v), sizeof(v)); };
+    put(&cams, uint64_t{1});
+    put(&cams, uint32_t{3});
+    put(&cams, int32_t{model_id});
+    put(&cams, uint64_t{64});
+    put(&cams, uint64_t{48});
+    for (double p : params) put(&cams, p);
+    put(&imgs, uint64_t{2});
+    for (const char* name : {"b.png", "a.png"}) {
+      put(&imgs, uint32_t{1});
+      for (double v : q) put(&imgs, v);
+      for (double v : t) put(&imgs, v);
+      put(&imgs, uint32_t{3});
+      imgs.append(name, std::strlen(name) + 1);
+      put(&imgs, uint64_t{1});
+      put(&imgs, 1.0);
+      put(&imgs, 2.0);
+      put(&imgs, int64_t{-1});
+    }
+    ASSERT_TRUE(WriteFileAtomically(dir + "/cameras.bin", cams).ok());
+    ASSERT_TRUE(WriteFileAtomically(dir + "/images.bin", imgs).ok());
+  } else {
+    std::ofstream cams(dir + "/cameras.txt");
+    cams << "# Camera list\n3 " << kNames[model_id] << " 64 48";
+    for (double p : params) cams << " " << p;
+    cams << "\n";
+    std::ofstream imgs(dir + "/images.txt");
+    imgs << "# Image list\n";
+    for (const char* name : {"b.png", "a.png"}) {
+      imgs << "1 " << q[0] << " " << q[1] << " " << q[2] << " " << q[3] << " " << t[0] << " " << t[1]
+           << " " << t[2] << " 3 " << name << "\n1.0 2.0 -1\n";
+    }
+  }
+}
+
+TEST(Importers, ColmapBinaryAndTextAgree) {
+  for (bool binary : {true, false}) {
+    const std::string dir = FreshDir(binary ? "colmap_bin" : "colmap_txt");
+    WriteColmap(dir, binary, 1, {50, 52, 32, 24});
+    absl::StatusOr<ImportedCameras> imported = ImportColmapModel(dir);
+    ASSERT_TRUE(imported.ok()) << imported.status();
+    ASSERT_EQ(imported->views.size(), 2u);
+    EXPECT_EQ(imported->views[0].name, "a");  // sorted by name
+    const PinholeCamera& c = imported->views[0].camera;
+    EXPECT_EQ(c.width, 64);
+    EXPECT_DOUBLE_EQ(c.fy, 52);
+    EXPECT_NEAR(c.camera_from_world.translation.y(), -1.0, 1e-12);
+    EXPECT_NEAR(c.camera_from_world.rotation(0, 2), std::sin(M_PI / 4), 1e-6);
+  }
+}
+
+TEST(Importers, ColmapDistortedModelNeedsExplicitUndistortion) {
+  const std::string dir = FreshDir("colmap_radial");
+  WriteColmap(dir, true, 2, {50, 32, 24, 0.01});
+  absl::StatusOr<ImportedCameras> imported = ImportColmapModel(dir);
+  ASSERT_FALSE(imported.ok());
+  EXPECT_NE(imported.status().message().find("SIMPLE_RADIAL"), std::string::npos);
+  ImportOptions options;
+  options.assume_undistorted = true;
+  imported = ImportColmapModel(dir, options);
+  ASSERT_TRUE(imported.ok()) << imported.status();
+  EXPECT_DOUBLE_EQ(imported->views[0].camera.fy, 50);
+  // A truncated binary model is an error.
+  std::string bytes = *ReadFileBounded(dir + "/images.bin", 1 << 20);
+  ASSERT_TRUE(WriteFileAtomically(dir + "/images.bin", bytes.substr(0, 40)).ok());
+  EXPECT_FALSE(ImportColmapModel(dir, options).ok());
+}
+
+TEST(Importers, RealInstantNgpFoxSkipsMissingFrames) {
+  const std::string path = std::string(INSTASCENE_SHARED_DIR) + "/data/fox_instant_ngp/transforms.json";
+  if (!fs::exists(path)) GTEST_SKIP() << "shared data missing";
+  absl::StatusOr<ImportedCameras> strict = ImportTransformsJson(path);
+  ASSERT_FALSE(strict.ok());
+  EXPECT_NE(strict.status().message().find("distortion"), std::string::npos);
+  ImportOptions options;
+  options.assume_undistorted = true;
+  // The original file points at the full-size images, of which the repository keeps none here.
+  EXPECT_FALSE(ImportTransformsJson(path, options).ok());
+  absl::StatusOr<ImportedCameras> fox = ImportTransformsJson(
+      std::string(INSTASCENE_SHARED_DIR) + "/data/fox_instant_ngp/transforms_images_2.json", options);
+  ASSERT_TRUE(fox.ok()) << fox.status();
+  EXPECT_EQ(fox->views.size(), 50u);
+  EXPECT_EQ(fox->views.front().name, "0001");
+  const PinholeCamera& c = fox->views.front().camera;
+  EXPECT_EQ(c.width, 540);
+  EXPECT_EQ(c.height, 960);
+  // Frame 0001: camera centre is the matrix translation; OpenCV forward is the GL -z column.
+  EXPECT_NEAR(c.CenterInWorld().x(), 3.168359405609479, 1e-6);
+  const Eigen::Vector3d forward = c.camera_from_world.rotation.row(2);
+  EXPECT_NEAR(forward.x(), -0.4420900262071262, 1e-6);
+  // All 50 cameras look roughly at a common point (the fox): their optical axes pass near the
+  // centroid of the camera centres' look-at target.
+  int looking_inward = 0;
+  Eigen::Vector3d mean_center = Eigen::Vector3d::Zero();
+  for (const SceneView& v : fox->views) mean_center += v.camera.CenterInWorld() / fox->views.size();
+  for (const SceneView& v : fox->views) {
+    const Eigen::Vector3d f = v.camera.camera_from_world.rotation.row(2);
+    if (f.dot(mean_center - v.camera.CenterInWorld()) > 0) ++looking_inward;
+  }
+  EXPECT_GE(looking_inward, 45);
+}
+
+}  // namespace
+}  // namespace instascene
