@@ -7,8 +7,12 @@ endif()
 
 # No FMA contraction: results must not depend on how the compiler fuses multiply-adds.
 set(INSTASCENE_OPT_FLAGS -ffp-contract=off)
-if(INSTASCENE_NATIVE)
-  list(APPEND INSTASCENE_OPT_FLAGS -march=native)
+if(INSTASCENE_ARCH)
+  # Fall back to the compiler default on CPUs without AVX2 (checked on the build machine).
+  file(READ /proc/cpuinfo _cpuinfo LIMIT 65536)
+  if(NOT INSTASCENE_ARCH STREQUAL "x86-64-v3" OR _cpuinfo MATCHES "avx2")
+    list(APPEND INSTASCENE_OPT_FLAGS -march=${INSTASCENE_ARCH})
+  endif()
 endif()
 
 if(INSTASCENE_SANITIZE)

@@ -1,0 +1,27 @@
+// clients/cli/cli.h: the `instascene` command line. Each command lives in its own file and
+// registers a CLI11 subcommand; errors are returned as absl::Status and printed once by main as a
+// one-line reason with a non-zero exit code.
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <functional>
+#include <string>
+
+#include "absl/status/status.h"
+
+namespace instascene::cli {
+
+// A subcommand's action, run after parsing when that subcommand was selected.
+using Action = std::function<absl::Status()>;
+
+void AddInfoCommand(CLI::App& app, Action* action);
+void AddRenderCommand(CLI::App& app, Action* action);
+void AddBenchCommand(CLI::App& app, Action* action);
+void AddImportCommand(CLI::App& app, Action* action);
+void AddSynthCommand(CLI::App& app, Action* action);
+
+// Prints one JSON object as the last stdout line (the --json contract).
+void PrintJsonLine(const std::string& json);
+
+}  // namespace instascene::cli

@@ -1,0 +1,195 @@
+// `instascene render` and `instascene info`: render a scene view (or a bare .ply from an orbit
+// camera) to PNG, and describe a scene or a .ply.
+#include <cmath>
+#include <cstdio>
+
+#include <Eigen/Geometry>
+#include <nlohmann/json.hpp>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "clients/cli/cli.h"
+#include "common/core/status.h"
+#include "common/raster/rasterizer.h"
+#include "common/raster/visualize.h"
+#include "common/scene/scene.h"
+#include "common/splat/gaussian_ply.h"
+
+namespace instascene::cli {
+namespace {
+
+// Parses "x", "-y", ... into a unit axis.
+absl::StatusOr<Eigen::Vector3d> ParseAxis(const std::string& text) {
+  const double sign = !text.empty() && text[0] == '-' ? -1.0 : 1.0;
+  const std::string axis = text.substr(!text.empty() && (text[0] == '-' || text[0] == '+') ? 1 : 0);
+  if (axis == "x") return Eigen::Vector3d(sign, 0, 0);
+  if (axis == "y") return Eigen::Vector3d(0, sign, 0);
+  if (axis == "z") return Eigen::Vector3d(0, 0, sign);
+  return absl::InvalidArgumentError(absl::StrCat("--up must be one of x, y, z, -x, -y, -z; got '", text, "'"));
+}
+
+// Robust centre and radius of a cloud: the 2nd-98th percentile box of the positions.
+void RobustBounds(const GaussianCloud& cloud, Eigen::Vector3d* center, double* radius) {
+  Eigen::Vector3d lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    std::vector<float> v(cloud.size());
+    for (size_t i = 0; i < cloud.size(); ++i) v[i] = cloud.positions[3 * i + a];
+    std::sort(v.begin(), v.end());
+    lo[a] = v[v.size() * 2 / 100];
+    hi[a] = v[std::min(v.size() - 1, v.size() * 98 / 100)];
+  }
+  *center = 0.5 * (lo + hi);
+  *radius = std::max(0.5 * (hi - lo).norm(), 1e-3);
+}
+
+}  // namespace
+
+// Shared by render and the demo: converts a render result to the requested RGB visualisation.
+absl::StatusOr<std::vector<float>> Visualize(const RenderResult& r, const std::string& mode, int feature_dim) {
+  if (mode == "color") return r.color;
+  if (mode == "depth") return ColorizeDepth(r.median_depth, r.alpha);
+  if (mode == "normal") return NormalsToRgb(r.normal);
+  if (mode == "alpha") return GrayToRgb(r.alpha);
+  if (mode == "features") return FeaturesToRgb(r.features, feature_dim);
+  return absl::InvalidArgumentError(absl::StrCat("unknown --mode '", mode, "' (color, depth, normal, alpha, features)"));
+}
+
+void AddRenderCommand(CLI::App& app, Action* action) {
+  struct Args {
+    std::string scene, view = "0", ply, out, mode = "color", up = "-y", feature_prefix = "segfeat_";
+    std::string orbit = "0,20";
+    int width = 800, height = 600, threads = 0;
+    double fov = 50.0, distance = 2.2;
+    bool surfels = false, json = false;
+    std::vector<float> background = {0, 0, 0};
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand("render", "Render a scene view, or a bare .ply from an orbit camera, to PNG");
+  auto* scene_opt = cmd->add_option("--scene", args->scene, "Scene directory");
+  cmd->add_option("--view", args->view, "View name or index (with --scene)");
+  auto* ply_opt = cmd->add_option("--ply", args->ply, "Render this .ply without a scene (orbit camera)");
+  scene_opt->excludes(ply_opt);
+  cmd->add_option("--out", args->out, "Output PNG")->required();
+  cmd->add_option("--mode", args->mode, "color, depth (median), normal, alpha or features (PCA of --feature-prefix channels)");
+  cmd->add_option("--orbit", args->orbit, "Bare .ply: azimuth,elevation in degrees around the robust centre");
+  cmd->add_option("--distance", args->distance, "Bare .ply: camera distance in units of the robust radius");
+  cmd->add_option("--up", args->up, "Bare .ply: world up axis (3DGS captures are usually -y)");
+  cmd->add_option("--width", args->width, "Bare .ply: image width, px");
+  cmd->add_option("--height", args->height, "Bare .ply: image height, px");
+  cmd->add_option("--fov", args->fov, "Bare .ply: horizontal field of view, degrees");
+  cmd->add_option("--background", args->background, "Background RGB in [0,1]")->expected(3);
+  cmd->add_option("--feature-prefix", args->feature_prefix, "Extra channels rendered by --mode features");
+  cmd->add_flag("--surfels", args->surfels, "Render a 3DGS cloud as 2DGS surfels (drop the smallest axis)");
+  cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");
+  cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
+  cmd->callback([args, action] {
+    *action = [args]() -> absl::Status {
+      if (args->scene.empty() == args->ply.empty()) return absl::InvalidArgumentError("give exactly one of --scene or --ply");
+      GaussianCloud cloud;
+      PinholeCamera camera;
+      if (!args->scene.empty()) {
+        ASSIGN_OR_RETURN(Scene scene, ReadScene(args->scene));
+        ASSIGN_OR_RETURN(int view, ResolveView(scene, args->view));
+        ASSIGN_OR_RETURN(cloud, ReadSceneGaussians(scene));
+        camera = scene.views[view].camera;
+      } else {
+        ASSIGN_OR_RETURN(cloud, ReadGaussianPly(args->ply));
+        if (cloud.size() == 0) return absl::InvalidArgumentError(absl::StrCat(args->ply, ": no Gaussians"));
+        std::vector<std::string> parts = absl::StrSplit(args->orbit, ',');
+        double az = 0, el = 0;
+        if (parts.size() != 2 || !absl::SimpleAtod(parts[0], &az) || !absl::SimpleAtod(parts[1], &el)) {
+          return absl::InvalidArgumentError("--orbit must be AZIMUTH,ELEVATION in degrees");
+        }
+        ASSIGN_OR_RETURN(Eigen::Vector3d up, ParseAxis(args->up));
+        Eigen::Vector3d center;
+        double radius = 1;
+        RobustBounds(cloud, &center, &radius);
+        camera = OrbitCamera(center, up, args->distance * radius, az, el, args->width, args->height, args->fov);
+      }
+      if (args->surfels) cloud = ToSurfels(cloud);
+      RenderOptions options;
+      options.depth = args->mode == "depth";
+      options.normal = args->mode == "normal";
+      for (int c = 0; c < 3; ++c) options.background[c] = args->background[c];
+      options.num_threads = args->threads;
+      std::vector<float> features;
+      int dim = 0;
+      if (args->mode == "features") {
+        ASSIGN_OR_RETURN(features, cloud.GatherExtraGroup(args->feature_prefix, &dim));
+        if (dim == 0) return absl::InvalidArgumentError(absl::StrCat("the cloud has no '", args->feature_prefix, "*' channels"));
+        options.features = features.data();
+        options.feature_dim = dim;
+      }
+      ASSIGN_OR_RETURN(RenderResult r, Render(cloud, camera, options));
+      ASSIGN_OR_RETURN(std::vector<float> rgb, Visualize(r, args->mode, dim));
+      RETURN_IF_ERROR(WriteImage(args->out, Image{r.width, r.height, 3, std::move(rgb)}));
+      std::fprintf(stderr, "render: %s (%dx%d, %zu Gaussians, %s) in %.1f ms\n", args->out.c_str(), r.width,
+                   r.height, cloud.size(), args->mode.c_str(), r.stats.total_ms);
+      if (args->json) {
+        PrintJsonLine(nlohmann::json({{"out", args->out}, {"width", r.width}, {"height", r.height},
+                                      {"gaussians", cloud.size()}, {"ms", r.stats.total_ms}}).dump());
+      }
+      return absl::OkStatus();
+    };
+  });
+}
+
+void AddInfoCommand(CLI::App& app, Action* action) {
+  struct Args {
+    std::string scene, ply;
+    bool json = false;
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand("info", "Describe a scene directory or a .ply");
+  cmd->add_option("--scene", args->scene, "Scene directory");
+  cmd->add_option("--ply", args->ply, "A Gaussian .ply");
+  cmd->add_flag("--json", args->json, "Print the description as one JSON line");
+  cmd->callback([args, action] {
+    *action = [args]() -> absl::Status {
+      if (args->scene.empty() == args->ply.empty()) return absl::InvalidArgumentError("give exactly one of --scene or --ply");
+      nlohmann::json j;
+      GaussianCloud cloud;
+      if (!args->scene.empty()) {
+        ASSIGN_OR_RETURN(Scene scene, ReadScene(args->scene));
+        ASSIGN_OR_RETURN(cloud, ReadSceneGaussians(scene));
+        int masks = 0, images = 0;
+        for (const SceneView& v : scene.views) {
+          masks += !v.mask.empty();
+          images += !v.image.empty();
+        }
+        j["scene"] = args->scene;
+        j["views"] = scene.views.size();
+        j["images"] = images;
+        j["masks"] = masks;
+        if (!scene.views.empty()) {
+          j["width"] = scene.views[0].camera.width;
+          j["height"] = scene.views[0].camera.height;
+        }
+        j["ground_truth"] = scene.metadata.contains("gt");
+      } else {
+        ASSIGN_OR_RETURN(cloud, ReadGaussianPly(args->ply));
+        j["ply"] = args->ply;
+      }
+      j["gaussians"] = cloud.size();
+      j["scales"] = cloud.num_scales;
+      j["sh_degree"] = cloud.sh_degree;
+      std::vector<std::string> extras;
+      for (const ExtraChannel& e : cloud.extras) extras.push_back(e.name);
+      j["extra_channels"] = extras;
+      Eigen::AlignedBox3f box;
+      for (size_t i = 0; i < cloud.size(); ++i) box.extend(Eigen::Vector3f(&cloud.positions[3 * i]));
+      if (!box.isEmpty()) {
+        j["bounds_min"] = {box.min().x(), box.min().y(), box.min().z()};
+        j["bounds_max"] = {box.max().x(), box.max().y(), box.max().z()};
+      }
+      if (args->json) {
+        PrintJsonLine(j.dump());
+      } else {
+        std::printf("%s\n", j.dump(2).c_str());
+      }
+      return absl::OkStatus();
+    };
+  });
+}
+
+}  // namespace instascene::cli

@@ -1,0 +1,38 @@
+// instascene: offline pipeline commands and (later) clients of the services. See --help.
+#include <cstdio>
+
+#include "clients/cli/cli.h"
+
+namespace instascene::cli {
+
+void PrintJsonLine(const std::string& json) {
+  std::fflush(stderr);
+  std::printf("%s\n", json.c_str());
+  std::fflush(stdout);
+}
+
+}  // namespace instascene::cli
+
+int main(int argc, char** argv) {
+  using namespace instascene::cli;
+  CLI::App app{"instascene: decompose captured Gaussian-splat scenes into complete object instances"};
+  app.require_subcommand(1);
+  app.set_version_flag("--version", "instascene 0.1.0");
+  Action action;
+  AddSynthCommand(app, &action);
+  AddImportCommand(app, &action);
+  AddInfoCommand(app, &action);
+  AddRenderCommand(app, &action);
+  AddBenchCommand(app, &action);
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+  const absl::Status status = action ? action() : absl::InternalError("no command selected");
+  if (!status.ok()) {
+    std::fprintf(stderr, "instascene: error: %s\n", status.ToString().c_str());
+    return 1;
+  }
+  return 0;
+}

@@ -1,0 +1,42 @@
+// common/synth/primitives.h: procedural object shapes as closed triangle meshes with UVs.
+//
+// Every shape is built in its object frame: z up, resting on z = 0, centred on the z axis. Solids
+// of revolution (sphere, cylinder, cone, torus, bottle, cup, bowl) come from one lathe routine over
+// a 2D profile; cups and bowls have real walls (outer and inner surface, rim), so they are
+// watertight like the rest. Stateless, thread-safe.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "common/geometry/triangle_mesh.h"
+
+namespace instascene {
+
+enum class ShapeKind { kBox, kSphere, kCylinder, kCone, kTorus, kBottle, kCup, kBowl };
+
+std::string ShapeKindName(ShapeKind kind);
+
+struct ShapeSpec {
+  ShapeKind kind = ShapeKind::kBox;
+  // kBox: full extents (x, y, z). Revolution shapes: (radius, unused, height); kTorus: (major
+  // radius, tube radius, unused); kSphere: (radius, unused, unused). Metres.
+  Eigen::Vector3f size = Eigen::Vector3f::Ones();
+
+  float FootprintRadius() const;  // radius of the bounding circle in the xy plane
+  float Height() const;           // z extent
+};
+
+// A closed mesh of the shape; `segments` is the angular resolution of revolution shapes.
+TriangleMesh MakeShapeMesh(const ShapeSpec& spec, int segments = 48);
+
+// A flat rectangle in the xy plane centred at the origin (normal +z), split into cells.
+TriangleMesh MakeRectangle(float size_x, float size_y, int cells_x, int cells_y);
+
+// A closed lathe: `profile` is a polyline (radius, z) revolved about the z axis; UV u = angle,
+// v = profile arc length fraction.
+TriangleMesh MakeLathe(const std::vector<Eigen::Vector2f>& profile, int segments, bool closed_loop);
+
+}  // namespace instascene
