@@ -11,8 +11,16 @@ namespace instascene {
 namespace {
 
 constexpr float kTableTopZ = 0.75f;
-constexpr float kTableHalfX = 0.7f, kTableHalfY = 0.4f;
-constexpr float kWallY = 0.42f;
+
+// Table and room size: the table grows with the object count so that clutter density stays
+// similar (12 objects fit the base 1.4 m x 0.8 m table).
+struct Layout {
+  explicit Layout(int objects) : scale(std::max(1.0f, std::sqrt(objects / 12.0f))) {}
+  float scale;
+  float half_x() const { return 0.7f * scale; }
+  float half_y() const { return 0.4f * scale; }
+  float wall_y() const { return half_y() + 0.02f; }
+};
 
 struct Rng {
   std::mt19937_64 engine;
@@ -69,13 +77,14 @@ struct StuffPart {
   Appearance appearance;
 };
 
-std::vector<StuffPart> MakeStuff() {
+std::vector<StuffPart> MakeStuff(const Layout& layout) {
+  const float kTableHalfX = layout.half_x(), kTableHalfY = layout.half_y(), kWallY = layout.wall_y();
   std::vector<StuffPart> parts;
   Appearance floor{{0.55f, 0.45f, 0.35f}, {0.45f, 0.36f, 0.27f}, TexturePattern::kChecker, 8.0f};
-  TriangleMesh floor_mesh = MakeRectangle(4.0f, 4.0f, 8, 8);
+  TriangleMesh floor_mesh = MakeRectangle(4.0f * layout.scale, 4.0f * layout.scale, 8, 8);
   parts.push_back({floor_mesh, floor});
   Appearance wall{{0.85f, 0.85f, 0.8f}, {0.75f, 0.78f, 0.8f}, TexturePattern::kNoise, 6.0f, 0.0f, 7};
-  TriangleMesh wall_mesh = MakeRectangle(4.0f, 2.2f, 8, 4);
+  TriangleMesh wall_mesh = MakeRectangle(4.0f * layout.scale, 2.2f, 8, 4);
   Rigid3d wall_pose{Eigen::AngleAxisd(std::numbers::pi / 2, Eigen::Vector3d::UnitX()).toRotationMatrix(),
                     Eigen::Vector3d(0, kWallY + 0.02, 1.1)};
   wall_mesh.Transform(wall_pose);
@@ -99,7 +108,8 @@ struct Placement {
   float radius;
 };
 
-bool Fits(const std::vector<Placement>& placed, const Eigen::Vector2f& xy, float radius) {
+bool Fits(const Layout& layout, const std::vector<Placement>& placed, const Eigen::Vector2f& xy, float radius) {
+  const float kTableHalfX = layout.half_x(), kTableHalfY = layout.half_y(), kWallY = layout.wall_y();
   if (std::abs(xy.x()) > kTableHalfX - radius - 0.01f || xy.y() < -kTableHalfY + radius + 0.01f ||
       xy.y() > kWallY - radius - 0.005f) {
     return false;
@@ -145,6 +155,8 @@ absl::StatusOr<ClutterOptions> ClutterPreset(const std::string& name) {
 absl::StatusOr<ClutterScene> GenerateClutterScene(const ClutterOptions& options) {
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   Rng rng{std::mt19937_64(options.seed)};
+  const Layout layout(options.objects);
+  const float kTableHalfX = layout.half_x(), kTableHalfY = layout.half_y(), kWallY = layout.wall_y();
   ClutterScene scene;
   scene.focus = Eigen::Vector3d(0, 0.05, kTableTopZ + 0.08);
 
@@ -173,11 +185,11 @@ absl::StatusOr<ClutterScene> GenerateClutterScene(const ClutterOptions& options)
         const float a = rng.Uniform(0, 2 * std::numbers::pi_v<float>);
         xy = n.xy + (n.radius + radius + 0.003f) * Eigen::Vector2f(std::cos(a), std::sin(a));
       } else if (is_dup) {
-        xy = {rng.Uniform(-0.45f, -0.1f), rng.Uniform(0.0f, 0.25f)};
+        xy = {rng.Uniform(-0.6f * kTableHalfX, -0.1f), rng.Uniform(0.0f, 0.6f * kTableHalfY)};
       } else {
         xy = {rng.Uniform(-kTableHalfX, kTableHalfX), rng.Uniform(-kTableHalfY, kWallY)};
       }
-      ok = Fits(placed, xy, radius);
+      ok = Fits(layout, placed, xy, radius);
     }
     if (!ok) {
       return absl::ResourceExhaustedError(absl::StrCat("could not place ", options.objects,
@@ -197,7 +209,7 @@ absl::StatusOr<ClutterScene> GenerateClutterScene(const ClutterOptions& options)
   scene.cloud.num_scales = 2;
   scene.cloud.sh_degree = options.sh_degree;
   SurfelSampling sampling;
-  std::vector<StuffPart> stuff = MakeStuff();
+  std::vector<StuffPart> stuff = MakeStuff(layout);
   const size_t stuff_budget = static_cast<size_t>(options.stuff_fraction * options.gaussians);
   double stuff_area = 0, object_area = 0;
   for (const StuffPart& p : stuff) stuff_area += p.mesh.SurfaceArea();
@@ -231,7 +243,7 @@ absl::StatusOr<ClutterScene> GenerateClutterScene(const ClutterOptions& options)
     const float t = options.views == 1 ? 0.5f : static_cast<float>(v) / (options.views - 1);
     const float azimuth = -160.0f + 140.0f * t + rng.Uniform(-4.0f, 4.0f);
     const float elevation = 22.0f + 14.0f * ring + rng.Uniform(-3.0f, 3.0f);
-    const float distance = rng.Uniform(0.95f, 1.25f);
+    const float distance = layout.scale * rng.Uniform(0.95f, 1.25f);
     const Eigen::Vector3d target = scene.focus + Eigen::Vector3d(rng.Uniform(-0.04f, 0.04f), rng.Uniform(-0.04f, 0.04f), rng.Uniform(-0.02f, 0.02f));
     scene.cameras.push_back(OrbitCamera(target, Eigen::Vector3d::UnitZ(), distance, azimuth, elevation,
                                         options.width, options.height, options.fov_x_deg));

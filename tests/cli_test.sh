@@ -1,0 +1,53 @@
+#!/usr/bin/env bash
+# End-to-end test of the instascene CLI: synth -> info -> render (every mode) -> import, plus the
+# error contract (non-zero exit, one-line reason) on bad input. Prints "N passed, N failed".
+set -uo pipefail
+BIN=$1
+SHARED=${2:-../shared}
+WORK=$(mktemp -d)
+trap 'rm -rf "$WORK"' EXIT
+passed=0
+failed=0
+check() {  # check NAME COMMAND...: the command must succeed
+  local name=$1; shift
+  if "$@" >"$WORK/cmd.txt" 2>"$WORK/err.txt"; then passed=$((passed + 1)); cp "$WORK/cmd.txt" "$WORK/out.txt"; else
+    failed=$((failed + 1)); echo "FAIL: $name"; cat "$WORK/err.txt"; fi
+}
+check_fails() {  # check_fails NAME PATTERN COMMAND...: must fail with PATTERN on stderr
+  local name=$1 pattern=$2; shift 2
+  if "$@" >"$WORK/cmd.txt" 2>"$WORK/err.txt"; then failed=$((failed + 1)); echo "FAIL (succeeded): $name"
+  elif grep -q "$pattern" "$WORK/err.txt"; then passed=$((passed + 1)); else
+    failed=$((failed + 1)); echo "FAIL (wrong message): $name"; cat "$WORK/err.txt"; fi
+}
+
+check "synth tiny" "$BIN" synth --out "$WORK/s" --preset tiny --seed 3 --json
+check "synth json contract" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"gaussians\":8000'"
+check "info" "$BIN" info --scene "$WORK/s" --json
+check "info json" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"views\":12'"
+for mode in color depth normal alpha; do
+  check "render $mode" "$BIN" render --scene "$WORK/s" --view 0003 --mode "$mode" --out "$WORK/$mode.png"
+  check "render $mode wrote png" test -s "$WORK/$mode.png"
+done
+check "render by index" "$BIN" render --scene "$WORK/s" --view 5 --out "$WORK/v5.png"
+check "help" "$BIN" --help
+check "render help" "$BIN" render --help
+check_fails "missing scene" "no such file" "$BIN" info --scene "$WORK/nope"
+check_fails "bad view" "no view named" "$BIN" render --scene "$WORK/s" --view 99 --out "$WORK/x.png"
+check_fails "bad mode" "unknown --mode" "$BIN" render --scene "$WORK/s" --mode bogus --out "$WORK/x.png"
+head -c 300 "$WORK/s/gaussians.ply" > "$WORK/trunc.ply"
+check_fails "truncated ply" "truncated" "$BIN" info --ply "$WORK/trunc.ply"
+check_fails "features without channels" "no 'segfeat_" "$BIN" render --scene "$WORK/s" --mode features --out "$WORK/x.png"
+
+if [ -d "$SHARED/data/splats" ]; then
+  check "render real splat" "$BIN" render --ply "$SHARED/data/splats/playbot_lod6.ply" --orbit 45,20 --width 64 --height 48 --out "$WORK/real.png"
+  check "render real splat as surfels" "$BIN" render --ply "$SHARED/data/splats/playbot_lod6.ply" --surfels --mode normal --width 64 --height 48 --out "$WORK/real_n.png"
+  check_fails "compressed ply" "compressed" "$BIN" info --ply "$SHARED/data/splats/originals/guitar.compressed.ply"
+fi
+if [ -d "$SHARED/data/fox_instant_ngp" ]; then
+  check_fails "fox needs undistortion flag" "distortion" "$BIN" import --transforms "$SHARED/data/fox_instant_ngp/transforms_images_2.json" --ply "$WORK/s/gaussians.ply" --out "$WORK/fox"
+  check "import fox" "$BIN" import --transforms "$SHARED/data/fox_instant_ngp/transforms_images_2.json" --ply "$WORK/s/gaussians.ply" --out "$WORK/fox" --assume-undistorted
+  check "fox has 50 views" bash -c "'$BIN' info --scene '$WORK/fox' --json | tail -n 1 | grep -q '\"views\":50'"
+fi
+
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]
