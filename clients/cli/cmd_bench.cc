@@ -36,8 +36,10 @@ absl::Status BenchRaster(const BenchArgs& args) {
   std::fprintf(stderr, "bench raster: scene of %zu Gaussians built in %.1f s; %d frames of %dx%d, %d threads\n",
                scene.cloud.size(), build.ElapsedSeconds(), args.frames, args.width, args.height,
                args.threads > 0 ? args.threads : DefaultThreadCount());
+  RasterWorkspace workspace;  // reused across frames, as a long-running worker would
   RenderOptions plain;
   plain.depth = true;
+  plain.workspace = &workspace;
   plain.num_threads = args.threads;
   RenderOptions traced = plain;
   traced.trace.enabled = true;

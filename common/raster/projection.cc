@@ -51,13 +51,34 @@ bool Finish(const GaussianCloud& cloud, size_t i, const ProjectionParams& p, flo
   return true;
 }
 
-// Clamps a float pixel range [lo, hi] (inclusive, with a 1 px safety margin) to the image.
+// Sets the pixel window [x0, x1) x [y0, y1) to the integer pixels inside the closed float range
+// [lo, hi] widened by 0.05 px (far above float rounding, far below the alpha falloff), clamped to
+// the image, and shrinks the tile rectangle used for binning to the tiles the window touches.
+// A splat whose window misses a tile contributes nothing there, so the output is unchanged.
 inline void SetWindow(float x_lo, float x_hi, float y_lo, float y_hi, const ProjectionParams& p,
-                      int32_t window[4]) {
-  window[0] = static_cast<int32_t>(std::clamp(std::floor(x_lo) - 1.0f, 0.0f, static_cast<float>(p.width)));
-  window[1] = static_cast<int32_t>(std::clamp(std::ceil(x_hi) + 2.0f, 0.0f, static_cast<float>(p.width)));
-  window[2] = static_cast<int32_t>(std::clamp(std::floor(y_lo) - 1.0f, 0.0f, static_cast<float>(p.height)));
-  window[3] = static_cast<int32_t>(std::clamp(std::ceil(y_hi) + 2.0f, 0.0f, static_cast<float>(p.height)));
+                      ProjectedSplat* out) {
+  constexpr float kSlack = 0.05f;
+  int32_t* window = out->window;
+  window[0] = static_cast<int32_t>(std::clamp(std::ceil(x_lo - kSlack), 0.0f, static_cast<float>(p.width)));
+  window[1] = static_cast<int32_t>(std::clamp(std::floor(x_hi + kSlack) + 1.0f, 0.0f, static_cast<float>(p.width)));
+  window[2] = static_cast<int32_t>(std::clamp(std::ceil(y_lo - kSlack), 0.0f, static_cast<float>(p.height)));
+  window[3] = static_cast<int32_t>(std::clamp(std::floor(y_hi + kSlack) + 1.0f, 0.0f, static_cast<float>(p.height)));
+  int32_t* tiles = out->tiles;
+  if (window[0] >= window[1] || window[2] >= window[3]) {
+    tiles[1] = tiles[0];  // nothing to blend anywhere
+    return;
+  }
+  tiles[0] = std::max(tiles[0], window[0] / kTileSize);
+  tiles[1] = std::min(tiles[1], (window[1] - 1) / kTileSize + 1);
+  tiles[2] = std::max(tiles[2], window[2] / kTileSize);
+  tiles[3] = std::min(tiles[3], (window[3] - 1) / kTileSize + 1);
+  if (tiles[0] >= tiles[1] || tiles[2] >= tiles[3]) tiles[1] = tiles[0];
+}
+
+// A splat too transparent to ever reach alpha 1/255: visible, but binned nowhere.
+inline void NoWindow(ProjectedSplat* out) {
+  out->window[0] = out->window[1] = out->window[2] = out->window[3] = 0;
+  out->tiles[1] = out->tiles[0];
 }
 
 }  // namespace
@@ -158,7 +179,7 @@ bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams&
   // rho <= rho_max = 2 ln(255 opacity). Empty when the opacity alone is below 1/255.
   const double rho_max = 2.0 * std::log(255.0 * out->opacity);
   if (!(rho_max > 0.0)) {
-    out->window[0] = out->window[1] = out->window[2] = out->window[3] = 0;
+    NoWindow(out);
     return true;
   }
   const double r2d = std::sqrt(0.5 * rho_max);  // low-pass disk: 2 |mu - x|^2 <= rho_max
@@ -175,8 +196,7 @@ bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams&
     y_hi = p.height;
   }
   SetWindow(static_cast<float>(std::max(x_lo, -1e6)), static_cast<float>(std::min(x_hi, 1e6)),
-            static_cast<float>(std::max(y_lo, -1e6)), static_cast<float>(std::min(y_hi, 1e6)), p,
-            out->window);
+            static_cast<float>(std::max(y_lo, -1e6)), static_cast<float>(std::min(y_hi, 1e6)), p, out);
   return true;
 }
 
@@ -244,13 +264,13 @@ bool ProjectEllipsoid(const GaussianCloud& cloud, size_t i, const ProjectionPara
   if (!Finish(cloud, i, p, radius, out)) return false;
   const float rho_max = 2.0f * std::log(255.0f * out->opacity);
   if (!(rho_max > 0.0f)) {
-    out->window[0] = out->window[1] = out->window[2] = out->window[3] = 0;
+    NoWindow(out);
     return true;
   }
   // d^T Sigma^-1 d <= rho_max spans sqrt(rho_max * Sigma_xx) horizontally.
   const float ex = std::sqrt(rho_max * c2d[0]), ey = std::sqrt(rho_max * c2d[2]);
   SetWindow(out->mean_px[0] - ex, out->mean_px[0] + ex, out->mean_px[1] - ey, out->mean_px[1] + ey,
-            p, out->window);
+            p, out);
   return true;
 }
 

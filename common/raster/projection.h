@@ -36,7 +36,9 @@ struct ProjectedSplat {
   float rgb[3];           // SH colour for this view
   float normal_view[3];   // unit normal in camera frame, facing the camera
   int32_t window[4];      // [x0, x1) x [y0, y1): pixels where alpha >= 1/255 is possible
-  int32_t tiles[4];       // [tx0, tx1) x [ty0, ty1): tile rectangle; empty = not visible
+  // [tx0, tx1) x [ty0, ty1): tiles the splat is binned into: the 2DGS/3DGS tile rectangle of its
+  // radius (which decides visibility) cut down to the tiles its pixel window touches.
+  int32_t tiles[4];
 };
 
 struct ProjectionParams {

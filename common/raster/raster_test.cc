@@ -206,6 +206,9 @@ TEST(Raster, IdenticalForAnyThreadCount) {
   options.num_threads = 2;
   absl::StatusOr<RenderResult> two = Render(cloud, FrontCamera(96, 80, 70.0), options);
   options.num_threads = 4;
+  RasterWorkspace workspace;  // a reused workspace must not leak state between renders
+  options.workspace = &workspace;
+  ASSERT_TRUE(Render(RandomScene(500, 2, 2, 77), FrontCamera(40, 30, 30.0), options).ok());
   absl::StatusOr<RenderResult> four = Render(cloud, FrontCamera(96, 80, 70.0), options);
   ASSERT_TRUE(one.ok() && two.ok() && four.ok());
   for (const RenderResult* other : {&*two, &*four}) {

@@ -8,12 +8,31 @@
 // Thread-safe: Render has no shared mutable state.
 #pragma once
 
+#include <cstdint>
+#include <vector>
+
 #include "absl/status/statusor.h"
 #include "common/geometry/camera.h"
 #include "common/raster/render_types.h"
 #include "common/splat/gaussian_cloud.h"
 
 namespace instascene {
+
+struct ProjectedSplat;
+namespace raster_internal {
+struct TileTraceEntry;
+}
+
+// Scratch buffers Render reuses across calls when RenderOptions::workspace points here (saves the
+// page faults of re-allocating ~100 bytes per Gaussian every frame). Not thread-safe: one workspace
+// per concurrent Render.
+struct RasterWorkspace {
+  RasterWorkspace();
+  ~RasterWorkspace();
+  std::vector<ProjectedSplat> splats;
+  std::vector<uint64_t> keys, tile_offsets, chunk_cursors;
+  std::vector<std::vector<raster_internal::TileTraceEntry>> tile_traces;
+};
 
 // Renders `cloud` seen by `camera`. Fails (InvalidArgument) on an invalid camera or options, a
 // feature buffer of the wrong size, or a model that does not match the cloud's scale count.

@@ -11,6 +11,8 @@
 
 namespace instascene {
 
+struct RasterWorkspace;  // rasterizer.h
+
 enum class SplatModel {
   kAuto,         // kSurfel2d for 2-scale clouds, kEllipsoid3d for 3-scale clouds
   kSurfel2d,     // 2DGS ray-splat intersection (ALGORITHM.md 2); needs a 2-scale cloud (see ToSurfels)
@@ -40,6 +42,7 @@ struct RenderOptions {
   int feature_dim = 0;
   TraceOptions trace;
   int num_threads = 0;  // 0 = all cores; results never depend on it
+  RasterWorkspace* workspace = nullptr;  // optional reusable scratch (not owned)
 
   absl::Status Validate() const;
 };

@@ -1,0 +1,271 @@
+// common/raster/tile_blend.h: the per-tile compositing kernel (internal to the rasterizer).
+//
+// One call blends one 16x16 tile front to back. For each splat of the tile's depth-sorted list and
+// each row of its pixel window, the pixels are processed in one branch-free loop (planar per-pixel
+// state, selects instead of branches) that the compiler vectorises across pixels; feature
+// accumulation and tracing, which append or loop over channels, run in a second scalar pass over
+// the row using the weights the first pass stored. Semantics are exactly ALGORITHM.md 2.4.
+// Thread-safety: each call touches only its tile's pixels and its own TileState.
+#pragma once
+
+#include <algorithm>
+#include <cstdint>
+#include <cstring>
+#include <vector>
+
+#include "common/raster/fast_exp.h"
+#include "common/raster/projection.h"
+#include "common/raster/render_types.h"
+
+namespace instascene::raster_internal {
+
+inline constexpr int kTilePixels = kTileSize * kTileSize;
+
+// One traced contribution inside a tile, before grouping by pixel.
+struct TileTraceEntry {
+  uint16_t local_pixel;
+  Contribution contribution;
+};
+
+// Everything a tile task reads.
+struct FrameContext {
+  const RenderOptions* options;
+  const ProjectionParams* params;
+  const std::vector<ProjectedSplat>* splats;
+  const std::vector<uint64_t>* keys;          // per tile, sorted: (depth bits << 32) | gaussian
+  const std::vector<uint64_t>* tile_offsets;  // num_tiles + 1
+  const std::vector<uint8_t>* trace_mask;     // per pixel, when tracing a subset
+  float world_from_camera[9];                 // row-major rotation
+};
+
+struct TileCounters {
+  uint64_t evaluated = 0, blended = 0;
+};
+
+// 8-lane vectors (GCC/Clang vector extensions: AVX2 where available, SSE pairs otherwise). Every
+// lane computes exactly what the scalar formula computes; nothing is fused or reassociated.
+inline constexpr int kLanes = 8;
+inline constexpr uint64_t kPrefetchDistance = 8;  // splats fetched ahead in a tile's list
+using v8f = float __attribute__((vector_size(32)));
+using v8i = int32_t __attribute__((vector_size(32)));
+inline constexpr v8i kLaneIndex = {0, 1, 2, 3, 4, 5, 6, 7};
+inline v8f Splat(float v) { return v8f{v, v, v, v, v, v, v, v}; }
+inline v8i SplatI(int32_t v) { return v8i{v, v, v, v, v, v, v, v}; }
+inline v8f Load(const float* p) { v8f v; std::memcpy(&v, p, sizeof(v)); return v; }
+inline v8i LoadI(const int32_t* p) { v8i v; std::memcpy(&v, p, sizeof(v)); return v; }
+inline void Store(float* p, v8f v) { std::memcpy(p, &v, sizeof(v)); }
+inline void StoreI(int32_t* p, v8i v) { std::memcpy(p, &v, sizeof(v)); }
+inline int SumLanes(v8i v) { return v[0] + v[1] + v[2] + v[3] + v[4] + v[5] + v[6] + v[7]; }
+
+// FastExpNonPositive (fast_exp.h) on 8 lanes; round-to-nearest by the 1.5 * 2^23 trick, which equals
+// floor(x + 0.5) except at exact ties (where both are within the polynomial's range).
+inline v8f FastExpNonPositive8(v8f x) {
+  x = x < Splat(-87.0f) ? Splat(-87.0f) : x;
+  x = x > Splat(0.0f) ? Splat(0.0f) : x;
+  const v8f magic = Splat(12582912.0f);
+  const v8f n = (x * Splat(1.44269504088896341f) + magic) - magic;
+  v8f r = x - n * Splat(0.693359375f);
+  r = r - n * Splat(-2.12194440e-4f);
+  v8f p = Splat(1.9875691500e-4f);
+  p = p * r + Splat(1.3981999507e-3f);
+  p = p * r + Splat(8.3334519073e-3f);
+  p = p * r + Splat(4.1665795894e-2f);
+  p = p * r + Splat(1.6666665459e-1f);
+  p = p * r + Splat(5.0000001201e-1f);
+  const v8f y = p * r * r + r + Splat(1.0f);
+  const v8i bits = (__builtin_convertvector(n, v8i) + SplatI(127)) << 23;
+  v8f scale;
+  std::memcpy(&scale, &bits, sizeof(scale));
+  return y * scale;
+}
+
+// Per-thread scratch for one tile, planar so the pixel loop vectorises. Arrays have kLanes of
+// padding: a vector that starts in a row's last pixels reads (and writes back unchanged) the
+// following entries.
+struct alignas(64) TileState {
+  static constexpr int kPadded = kTilePixels + kLanes;
+  float T[kPadded], r[kPadded], g[kPadded], b[kPadded];
+  float depth[kPadded], median[kPadded];
+  float nx[kPadded], ny[kPadded], nz[kPadded];
+  int32_t done[kPadded];
+  int32_t contributors[kPadded];
+  uint32_t row_done[kTileSize];  // bit x of row y: pixel (x, y) of the tile is done
+  float row_weight[kTileSize + kLanes], row_transmittance[kTileSize + kLanes];
+  std::vector<float> features;
+  std::vector<TileTraceEntry> trace;
+};
+
+// Blends one tile; traced entries are appended to `st.trace` in blending order (front to back
+// within each pixel, pixels interleaved).
+template <bool kSurfel, bool kTrace, bool kFeatures>
+void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& out, TileCounters& counters) {
+  const ProjectionParams& p = *ctx.params;
+  const RenderOptions& opt = *ctx.options;
+  const int tx = tile % p.tiles_x, ty = tile / p.tiles_x;
+  const int px0 = tx * kTileSize, py0 = ty * kTileSize;
+  const int px1 = std::min(px0 + kTileSize, p.width), py1 = std::min(py0 + kTileSize, p.height);
+  const int tile_pixels = (px1 - px0) * (py1 - py0);
+  const int dim = opt.feature_dim;
+  std::fill_n(st.T, TileState::kPadded, 1.0f);
+  for (float* a : {st.r, st.g, st.b, st.depth, st.median, st.nx, st.ny, st.nz}) std::fill_n(a, TileState::kPadded, 0.0f);
+  std::fill_n(st.done, TileState::kPadded, 0);
+  std::fill_n(st.row_done, kTileSize, 0u);
+  std::fill_n(st.contributors, TileState::kPadded, 0);
+  if constexpr (kFeatures) st.features.assign(static_cast<size_t>(kTilePixels) * dim, 0.0f);
+  if constexpr (kTrace) st.trace.clear();
+  const uint8_t* trace_mask = ctx.trace_mask->empty() ? nullptr : ctx.trace_mask->data();
+  const float near = p.near_plane;
+  int num_done = 0;
+  uint64_t evaluated = 0, blended = 0;
+
+  const uint64_t begin = (*ctx.tile_offsets)[tile], end = (*ctx.tile_offsets)[tile + 1];
+  for (uint64_t k = begin; k < end && num_done < tile_pixels; ++k) {
+    const uint32_t gid = static_cast<uint32_t>((*ctx.keys)[k] & 0xffffffffu);
+    const ProjectedSplat& s = (*ctx.splats)[gid];
+    // The list visits splats in depth order, i.e. scattered in memory: fetch ahead.
+    if (k + kPrefetchDistance < end) {
+      const char* ahead = reinterpret_cast<const char*>(
+          &(*ctx.splats)[(*ctx.keys)[k + kPrefetchDistance] & 0xffffffffu]);
+      __builtin_prefetch(ahead);
+      __builtin_prefetch(ahead + 64);
+    }
+    const int x0 = std::max(px0, s.window[0]), x1 = std::min(px1, s.window[1]);
+    const int y0 = std::max(py0, s.window[2]), y1 = std::min(py1, s.window[3]);
+    if (x0 >= x1 || y0 >= y1) continue;
+    const float opacity = s.opacity, cr = s.rgb[0], cg = s.rgb[1], cb = s.rgb[2];
+    const float snx = s.normal_view[0], sny = s.normal_view[1], snz = s.normal_view[2];
+    const float tw0 = s.tw[0], tw1 = s.tw[1], tw2 = s.tw[2];
+    const float mx = s.mean_px[0], my = s.mean_px[1];
+    const v8f v_opacity = Splat(opacity), v_cr = Splat(cr), v_cg = Splat(cg), v_cb = Splat(cb);
+    const v8f v_nx = Splat(snx), v_ny = Splat(sny), v_nz = Splat(snz);
+    const v8f v_tw0 = Splat(tw0), v_tw1 = Splat(tw1), v_tw2 = Splat(tw2);
+    const v8f v_tu0 = Splat(s.tu[0]), v_tu1 = Splat(s.tu[1]), v_tu2 = Splat(s.tu[2]);
+    const v8f v_mx = Splat(mx), v_depth = Splat(s.depth);
+    const uint32_t window_bits = ((1u << (x1 - x0)) - 1u) << (x0 - px0);
+    for (int y = y0; y < y1; ++y) {
+      // Skip rows whose window pixels are all done (common once most of the tile is opaque).
+      if ((st.row_done[y - py0] & window_bits) == window_bits) continue;
+      const int row = (y - py0) * kTileSize - px0;  // + x = local pixel index
+      // 2DGS: l = y Tw - Tv is constant along the row (stored relative to the origin pixel).
+      const float ry = static_cast<float>(y - s.origin_px[1]);
+      const v8f l0 = Splat(ry * tw0 + s.tv[0]), l1 = Splat(ry * tw1 + s.tv[1]), l2 = Splat(ry * tw2 + s.tv[2]);
+      const float dy_s = my - static_cast<float>(y);
+      const v8f dy = Splat(dy_s), dy2 = Splat(dy_s * dy_s);
+      v8i row_stops = {}, row_blends = {}, row_live = {};
+      for (int x = x0; x < x1; x += kLanes) {
+        const int i = row + x;
+        const v8i xs = SplatI(x) + kLaneIndex;
+        const v8i in_range = xs < SplatI(x1);
+        const v8f dx = v_mx - __builtin_convertvector(xs, v8f);
+        v8f power, depth;
+        v8i geometric_ok;
+        if constexpr (kSurfel) {
+          const v8f rx = __builtin_convertvector(xs - SplatI(s.origin_px[0]), v8f);
+          const v8f k0 = rx * v_tw0 + v_tu0, k1 = rx * v_tw1 + v_tu1, k2 = rx * v_tw2 + v_tu2;
+          const v8f pz = k0 * l1 - k1 * l0;
+          const v8f inv = Splat(1.0f) / pz;
+          const v8f u = (k1 * l2 - k2 * l1) * inv;
+          const v8f v = (k2 * l0 - k0 * l2) * inv;
+          const v8f rho3d = u * u + v * v;
+          const v8f rho2d = Splat(2.0f) * (dx * dx + dy2);
+          const v8i use3d = rho3d <= rho2d;
+          depth = use3d ? u * v_tw0 + v * v_tw1 + v_tw2 : v_tw2;
+          power = Splat(-0.5f) * (use3d ? rho3d : rho2d);
+          geometric_ok = (pz != Splat(0.0f)) & (depth >= Splat(near)) & (power <= Splat(0.0f));
+        } else {
+          power = Splat(-0.5f) * (Splat(s.tu[0]) * dx * dx + Splat(s.tu[2]) * dy2) - Splat(s.tu[1]) * dx * dy;
+          depth = v_depth;
+          geometric_ok = power <= Splat(0.0f);
+        }
+        const v8f e = v_opacity * FastExpNonPositive8(power);
+        const v8f alpha = e < Splat(kAlphaMax) ? e : Splat(kAlphaMax);
+        const v8i live = in_range & (LoadI(&st.done[i]) == SplatI(0));
+        const v8i valid = live & geometric_ok & (alpha >= Splat(kAlphaMin));
+        const v8f T = Load(&st.T[i]);
+        const v8f next_T = T * (Splat(1.0f) - alpha);
+        const v8i stop = valid & (next_T < Splat(kTransmittanceMin));
+        const v8i blend = valid & ~stop;
+        const v8f w = blend ? alpha * T : Splat(0.0f);
+        const v8f d = blend ? depth : Splat(0.0f);
+        Store(&st.r[i], Load(&st.r[i]) + w * v_cr);
+        Store(&st.g[i], Load(&st.g[i]) + w * v_cg);
+        Store(&st.b[i], Load(&st.b[i]) + w * v_cb);
+        Store(&st.depth[i], Load(&st.depth[i]) + w * d);
+        Store(&st.nx[i], Load(&st.nx[i]) + w * v_nx);
+        Store(&st.ny[i], Load(&st.ny[i]) + w * v_ny);
+        Store(&st.nz[i], Load(&st.nz[i]) + w * v_nz);
+        Store(&st.median[i], (blend & (T > Splat(0.5f))) ? d : Load(&st.median[i]));
+        Store(&st.T[i], blend ? next_T : T);
+        StoreI(&st.done[i], LoadI(&st.done[i]) | (stop & SplatI(1)));
+        StoreI(&st.contributors[i], LoadI(&st.contributors[i]) + (blend & SplatI(1)));
+        if constexpr (kTrace || kFeatures) {
+          Store(&st.row_weight[x - x0], w);
+          Store(&st.row_transmittance[x - x0], T);
+        }
+        row_stops -= stop;
+        uint32_t stop_bits = 0;
+        for (int l = 0; l < kLanes; ++l) stop_bits |= static_cast<uint32_t>(stop[l] & 1) << l;
+        st.row_done[y - py0] |= stop_bits << (x - px0);
+        row_blends -= blend;
+        row_live -= live;
+      }
+      num_done += SumLanes(row_stops);
+      const int blends = SumLanes(row_blends);
+      blended += blends;
+      evaluated += SumLanes(row_live);
+      if constexpr (kTrace || kFeatures) {
+        if (blends == 0) continue;
+        for (int x = x0; x < x1; ++x) {
+          const float w = st.row_weight[x - x0];
+          if (w == 0.0f) continue;
+          const int i = row + x;
+          if constexpr (kFeatures) {
+            const float* f = opt.features + static_cast<size_t>(gid) * dim;
+            float* e = &st.features[static_cast<size_t>(i) * dim];
+            for (int c = 0; c < dim; ++c) e[c] += w * f[c];
+          }
+          if constexpr (kTrace) {
+            if (w > opt.trace.min_weight && (trace_mask == nullptr || trace_mask[y * p.width + x])) {
+              st.trace.push_back({static_cast<uint16_t>(i), {gid, w, st.row_transmittance[x - x0]}});
+            }
+          }
+        }
+      }
+    }
+  }
+  counters.evaluated += evaluated;
+  counters.blended += blended;
+
+  // Write the tile into the frame buffers.
+  const float* R = ctx.world_from_camera;
+  for (int y = py0; y < py1; ++y) {
+    for (int x = px0; x < px1; ++x) {
+      const int i = (y - py0) * kTileSize + (x - px0);
+      const size_t pix = static_cast<size_t>(y) * p.width + x;
+      const float T = st.T[i];
+      const float a = 1.0f - T;
+      out.alpha[pix] = a;
+      out.num_contributors[pix] = static_cast<uint32_t>(st.contributors[i]);
+      if (opt.color) {
+        out.color[3 * pix] = st.r[i] + T * opt.background[0];
+        out.color[3 * pix + 1] = st.g[i] + T * opt.background[1];
+        out.color[3 * pix + 2] = st.b[i] + T * opt.background[2];
+      }
+      if (opt.depth) {
+        const float dval = st.depth[i] / a;
+        out.depth[pix] = std::isfinite(dval) ? dval : 0.0f;
+        out.median_depth[pix] = st.median[i];
+      }
+      if (opt.normal) {
+        for (int c = 0; c < 3; ++c) {
+          out.normal[3 * pix + c] = R[3 * c] * st.nx[i] + R[3 * c + 1] * st.ny[i] + R[3 * c + 2] * st.nz[i];
+        }
+      }
+      if constexpr (kFeatures) {
+        std::memcpy(&out.features[pix * dim], &st.features[static_cast<size_t>(i) * dim], sizeof(float) * dim);
+      }
+    }
+  }
+}
+
+}  // namespace instascene::raster_internal
