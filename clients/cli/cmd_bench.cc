@@ -43,12 +43,16 @@ absl::Status BenchRaster(const BenchArgs& args) {
   plain.num_threads = args.threads;
   RenderOptions traced = plain;
   traced.trace.enabled = true;
-  std::vector<double> ms, trace_ms, pre, bin, blend;
-  double pairs = 0, blended = 0, evaluated = 0, entries = 0;
-  // One untimed warm-up frame (page faults, thread pool start).
-  RETURN_IF_ERROR(Render(scene.cloud, scene.cameras[0], plain).status());
+  RenderOptions tracker = traced;  // the decomposition tracker's rule: keep w > 0.1 only
+  tracker.trace.min_weight = 0.1f;
+  std::vector<double> ms, trace_ms, pre, bin, blend, trace_blend, trace_assembly, tracker_ms;
+  double pairs = 0, blended = 0, evaluated = 0, entries = 0, tracker_entries = 0;
+  // Untimed warm-up frames (thread pool start, first-touch of the reused buffers).
+  RenderResult r, t, k;  // reused across frames
+  RETURN_IF_ERROR(RenderInto(scene.cloud, scene.cameras[0], plain, &r));
+  RETURN_IF_ERROR(RenderInto(scene.cloud, scene.cameras[0], traced, &t));
   for (const PinholeCamera& camera : scene.cameras) {
-    ASSIGN_OR_RETURN(RenderResult r, Render(scene.cloud, camera, plain));
+    RETURN_IF_ERROR(RenderInto(scene.cloud, camera, plain, &r));
     ms.push_back(r.stats.total_ms);
     pre.push_back(r.stats.preprocess_ms);
     bin.push_back(r.stats.binning_ms);
@@ -56,18 +60,26 @@ absl::Status BenchRaster(const BenchArgs& args) {
     pairs += static_cast<double>(r.stats.gaussian_tile_pairs) / args.frames;
     blended += static_cast<double>(r.stats.blended_fragments) / args.frames;
     evaluated += static_cast<double>(r.stats.evaluated_fragments) / args.frames;
-    ASSIGN_OR_RETURN(RenderResult t, Render(scene.cloud, camera, traced));
+    RETURN_IF_ERROR(RenderInto(scene.cloud, camera, traced, &t));
     trace_ms.push_back(t.stats.total_ms);
+    trace_blend.push_back(t.stats.blend_ms);
+    trace_assembly.push_back(t.stats.trace_assembly_ms);
     entries += static_cast<double>(t.trace.entries.size()) / args.frames;
+    RETURN_IF_ERROR(RenderInto(scene.cloud, camera, tracker, &k));
+    tracker_ms.push_back(k.stats.total_ms);
+    tracker_entries += static_cast<double>(k.trace.entries.size()) / args.frames;
   }
   const double median = Median(ms), trace_median = Median(trace_ms);
   std::fprintf(stderr,
                "bench raster: median %.1f ms/frame (preprocess %.1f, binning %.1f, blend %.1f); "
-               "traced %.1f ms (%.2fx)\n"
+               "traced %.1f ms (%.2fx; blend %.1f, assembly %.1f)\n"
                "  %.0f Gaussian-tile pairs, %.0f evaluated and %.0f blended fragments per frame; "
-               "%.1f M pairs/s, %.1f M blended fragments/s; %.0f trace entries per frame\n",
-               median, Median(pre), Median(bin), Median(blend), trace_median, trace_median / median, pairs,
-               evaluated, blended, pairs / median / 1e3, blended / median / 1e3, entries);
+               "%.1f M pairs/s, %.1f M blended fragments/s; %.0f trace entries per frame\n"
+               "  tracker trace (w > 0.1): %.1f ms (%.2fx), %.0f entries per frame\n",
+               median, Median(pre), Median(bin), Median(blend), trace_median, trace_median / median,
+               Median(trace_blend), Median(trace_assembly), pairs,
+               evaluated, blended, pairs / median / 1e3, blended / median / 1e3, entries, Median(tracker_ms),
+               Median(tracker_ms) / median, tracker_entries);
   if (args.json) {
     nlohmann::json j = {{"benchmark", "raster"}, {"gaussians", scene.cloud.size()}, {"width", args.width},
                         {"height", args.height}, {"frames", args.frames},
@@ -76,7 +88,9 @@ absl::Status BenchRaster(const BenchArgs& args) {
                         {"preprocess_ms", Median(pre)}, {"binning_ms", Median(bin)}, {"blend_ms", Median(blend)},
                         {"gaussian_tile_pairs", pairs}, {"evaluated_fragments", evaluated},
                         {"blended_fragments", blended}, {"pairs_per_s", pairs / median * 1e3},
-                        {"blended_fragments_per_s", blended / median * 1e3}, {"trace_entries", entries}};
+                        {"blended_fragments_per_s", blended / median * 1e3}, {"trace_entries", entries}, {"trace_blend_ms", Median(trace_blend)},
+                        {"trace_assembly_ms", Median(trace_assembly)},
+                        {"tracker_trace_median_ms", Median(tracker_ms)}, {"tracker_trace_entries", tracker_entries}};
     PrintJsonLine(j.dump());
   }
   return absl::OkStatus();

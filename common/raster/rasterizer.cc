@@ -21,9 +21,9 @@ using raster_internal::BlendTile;
 using raster_internal::FrameContext;
 using raster_internal::TileCounters;
 using raster_internal::TileState;
-using raster_internal::TileTraceEntry;
+using raster_internal::TileTrace;
 
-using BlendFn = void (*)(const FrameContext&, int, TileState&, RenderResult&, TileCounters&);
+using BlendFn = void (*)(const FrameContext&, int, TileState&, RenderResult&, TileCounters&, TileTrace*);
 
 template <bool kSurfel>
 BlendFn PickBlend(bool trace, bool features) {
@@ -31,9 +31,10 @@ BlendFn PickBlend(bool trace, bool features) {
   return features ? BlendTile<kSurfel, false, true> : BlendTile<kSurfel, false, false>;
 }
 
-// Builds the CSR trace from per-tile lists (each in blending order: front to back within a pixel).
-// Tiles own disjoint pixels, so counting and scattering run tile-parallel without races.
-void AssembleTrace(const ProjectionParams& p, const std::vector<std::vector<TileTraceEntry>>& tiles,
+// Builds the row-major CSR trace from the per-tile lists (in blending order). Tiles own
+// disjoint pixels, so both passes run tile-parallel without races; a tile row's 16 pixels land in
+// one contiguous stretch of the output.
+void AssembleTrace(const ProjectionParams& p, const std::vector<TileTrace>& tiles,
                    const TraceOptions& trace_options, ContributorTrace* trace) {
   const size_t num_pixels = static_cast<size_t>(p.width) * p.height;
   const bool all_pixels = trace_options.pixels.empty();
@@ -46,25 +47,33 @@ void AssembleTrace(const ProjectionParams& p, const std::vector<std::vector<Tile
     slot.assign(num_pixels, -1);
     for (size_t i = 0; i < trace->pixels.size(); ++i) slot[trace->pixels[i]] = static_cast<int64_t>(i);
   }
-  auto row_of = [&](size_t t, uint16_t local) -> size_t {
-    const size_t tx = t % p.tiles_x, ty = t / p.tiles_x;
-    const size_t pix = (ty * kTileSize + local / kTileSize) * p.width + tx * kTileSize + local % kTileSize;
-    return all_pixels ? pix : static_cast<size_t>(slot[pix]);
+  // Calls fn(local pixel, CSR row) for every traced in-image pixel of tile t.
+  auto for_each_pixel = [&](size_t t, auto&& fn) {
+    const int tx = static_cast<int>(t % p.tiles_x), ty = static_cast<int>(t / p.tiles_x);
+    const int x1 = std::min(kTileSize, p.width - tx * kTileSize), y1 = std::min(kTileSize, p.height - ty * kTileSize);
+    for (int ly = 0; ly < y1; ++ly) {
+      for (int lx = 0; lx < x1; ++lx) {
+        const size_t pix = static_cast<size_t>(ty * kTileSize + ly) * p.width + tx * kTileSize + lx;
+        const int64_t row = all_pixels ? static_cast<int64_t>(pix) : slot[pix];
+        if (row >= 0) fn(ly * kTileSize + lx, static_cast<size_t>(row));
+      }
+    }
   };
-  std::vector<uint64_t> offsets(trace->pixels.size() + 1, 0);
+  std::vector<uint64_t>& offsets = trace->offsets;
+  offsets.assign(trace->pixels.size() + 1, 0);
   tbb::parallel_for(size_t{0}, tiles.size(), [&](size_t t) {
-    for (const TileTraceEntry& e : tiles[t]) ++offsets[row_of(t, e.local_pixel) + 1];
+    for_each_pixel(t, [&](int local, size_t row) { offsets[row + 1] = tiles[t].counts[local]; });
   });
   for (size_t i = 1; i < offsets.size(); ++i) offsets[i] += offsets[i - 1];
   trace->entries.resize(offsets.back());
   tbb::parallel_for(size_t{0}, tiles.size(), [&](size_t t) {
-    // Entries of one pixel arrive front to back; offsets[row] is that pixel's write cursor.
-    for (const TileTraceEntry& e : tiles[t]) trace->entries[offsets[row_of(t, e.local_pixel)]++] = e.contribution;
+    // Per-pixel write cursors; entries arrive front to back within each pixel, so a plain scatter
+    // keeps that order. The tile's target rows are 16 short contiguous runs (cache-resident).
+    const TileTrace& tile = tiles[t];
+    uint64_t cursor[raster_internal::kTilePixels];
+    for_each_pixel(t, [&](int local, size_t row) { cursor[local] = offsets[row]; });
+    for (size_t e = 0; e < tile.entries.size(); ++e) trace->entries[cursor[tile.pixels[e]]++] = tile.entries[e];
   });
-  // The cursors now sit at each row's end: shift back by one row to restore the starts.
-  for (size_t i = offsets.size() - 1; i > 0; --i) offsets[i] = offsets[i - 1];
-  offsets[0] = 0;
-  trace->offsets = std::move(offsets);
 }
 
 // Bins visible splats into per-tile key lists, in parallel over fixed chunks of Gaussians (the
@@ -142,6 +151,13 @@ absl::Status RenderOptions::Validate() const {
 
 absl::StatusOr<RenderResult> Render(const GaussianCloud& cloud, const PinholeCamera& camera,
                                     const RenderOptions& options) {
+  RenderResult result;
+  RETURN_IF_ERROR(RenderInto(cloud, camera, options, &result));
+  return result;
+}
+
+absl::Status RenderInto(const GaussianCloud& cloud, const PinholeCamera& camera,
+                        const RenderOptions& options, RenderResult* result) {
   Stopwatch total;
   RETURN_IF_ERROR(camera.Validate());
   RETURN_IF_ERROR(options.Validate());
@@ -159,18 +175,19 @@ absl::StatusOr<RenderResult> Render(const GaussianCloud& cloud, const PinholeCam
   }
   const ProjectionParams params = MakeProjectionParams(camera, options, cloud.sh_degree);
   const size_t n = cloud.size();
-  RenderResult out;
+  // Every pixel of every buffer is overwritten below, so reused buffers need no clearing.
+  RenderResult& out = *result;
   out.width = camera.width;
   out.height = camera.height;
+  out.stats = RasterStats{};
   out.alpha.resize(num_pixels);
   out.num_contributors.resize(num_pixels);
-  if (options.color) out.color.resize(3 * num_pixels);
-  if (options.depth) {
-    out.depth.resize(num_pixels);
-    out.median_depth.resize(num_pixels);
-  }
-  if (options.normal) out.normal.resize(3 * num_pixels);
-  if (options.feature_dim > 0) out.features.resize(num_pixels * options.feature_dim);
+  out.color.resize(options.color ? 3 * num_pixels : 0);
+  out.depth.resize(options.depth ? num_pixels : 0);
+  out.median_depth.resize(options.depth ? num_pixels : 0);
+  out.normal.resize(options.normal ? 3 * num_pixels : 0);
+  out.features.resize(num_pixels * std::max(options.feature_dim, 0));
+  if (!options.trace.enabled) out.trace = ContributorTrace{};
   out.visible.assign(n, 0);
 
   RasterWorkspace local_workspace;
@@ -212,14 +229,13 @@ absl::StatusOr<RenderResult> Render(const GaussianCloud& cloud, const PinholeCam
     const bool trace = options.trace.enabled;
     const bool features = options.feature_dim > 0;
     BlendFn blend = surfel ? PickBlend<true>(trace, features) : PickBlend<false>(trace, features);
-    std::vector<std::vector<TileTraceEntry>>& tile_traces = ws->tile_traces;
+    std::vector<TileTrace>& tile_traces = ws->tile_traces;
     tile_traces.resize(trace ? num_tiles : 0);
     std::vector<TileCounters> counters(num_tiles);
     tbb::parallel_for(tbb::blocked_range<int>(0, num_tiles, 1), [&](const tbb::blocked_range<int>& r) {
       thread_local TileState state;
       for (int t = r.begin(); t < r.end(); ++t) {
-        blend(ctx, t, state, out, counters[t]);
-        if (trace) tile_traces[t].swap(state.trace);
+        blend(ctx, t, state, out, counters[t], trace ? &tile_traces[t] : nullptr);
       }
     });
     for (const TileCounters& c : counters) {
@@ -227,12 +243,14 @@ absl::StatusOr<RenderResult> Render(const GaussianCloud& cloud, const PinholeCam
       out.stats.blended_fragments += c.blended;
     }
     out.stats.gaussian_tile_pairs = keys.size();
-    if (trace) AssembleTrace(params, tile_traces, options.trace, &out.trace);
     out.stats.blend_ms = phase.ElapsedMs();
+    phase.Restart();
+    if (trace) AssembleTrace(params, tile_traces, options.trace, &out.trace);
+    out.stats.trace_assembly_ms = phase.ElapsedMs();
   });
   for (uint8_t v : out.visible) out.stats.visible_gaussians += v;
   out.stats.total_ms = total.ElapsedMs();
-  return out;
+  return absl::OkStatus();
 }
 
 }  // namespace instascene

@@ -20,7 +20,7 @@ namespace instascene {
 
 struct ProjectedSplat;
 namespace raster_internal {
-struct TileTraceEntry;
+struct TileTrace;
 }
 
 // Scratch buffers Render reuses across calls when RenderOptions::workspace points here (saves the
@@ -31,7 +31,7 @@ struct RasterWorkspace {
   ~RasterWorkspace();
   std::vector<ProjectedSplat> splats;
   std::vector<uint64_t> keys, tile_offsets, chunk_cursors;
-  std::vector<std::vector<raster_internal::TileTraceEntry>> tile_traces;
+  std::vector<raster_internal::TileTrace> tile_traces;
 };
 
 // Renders `cloud` seen by `camera`. Fails (InvalidArgument) on an invalid camera or options, a
@@ -39,6 +39,11 @@ struct RasterWorkspace {
 // The cloud must have passed GaussianCloud::Validate (readers guarantee it).
 absl::StatusOr<RenderResult> Render(const GaussianCloud& cloud, const PinholeCamera& camera,
                                     const RenderOptions& options);
+
+// The same, rendering into `result` and reusing its buffers' capacity (no page faults for a
+// caller that renders many frames, e.g. a tracker tracing every view).
+absl::Status RenderInto(const GaussianCloud& cloud, const PinholeCamera& camera,
+                        const RenderOptions& options, RenderResult* result);
 
 // Resolves kAuto against the cloud.
 SplatModel ResolveModel(const GaussianCloud& cloud, SplatModel requested);

@@ -68,7 +68,7 @@ struct RasterStats {
   uint64_t gaussian_tile_pairs = 0;    // entries of all per-tile lists
   uint64_t evaluated_fragments = 0;    // (pixel, Gaussian) pairs whose alpha was computed
   uint64_t blended_fragments = 0;      // (pixel, Gaussian) pairs actually composited
-  double preprocess_ms = 0.0, binning_ms = 0.0, blend_ms = 0.0, total_ms = 0.0;
+  double preprocess_ms = 0.0, binning_ms = 0.0, blend_ms = 0.0, trace_assembly_ms = 0.0, total_ms = 0.0;
 };
 
 struct RenderResult {

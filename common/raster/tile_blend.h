@@ -9,11 +9,15 @@
 #pragma once
 
 #include <algorithm>
+#include <bit>
 #include <cstdint>
 #include <cstring>
 #include <vector>
 
-#include "common/raster/fast_exp.h"
+#if defined(__AVX__) || defined(__FMA__)
+#include <immintrin.h>
+#endif
+
 #include "common/raster/projection.h"
 #include "common/raster/render_types.h"
 
@@ -21,10 +25,12 @@ namespace instascene::raster_internal {
 
 inline constexpr int kTilePixels = kTileSize * kTileSize;
 
-// One traced contribution inside a tile, before grouping by pixel.
-struct TileTraceEntry {
-  uint16_t local_pixel;
-  Contribution contribution;
+// A tile's traced contributions in blending order (front to back within each pixel, pixels
+// interleaved), with each entry's local pixel and the count per local pixel.
+struct TileTrace {
+  std::vector<Contribution> entries;
+  std::vector<uint16_t> pixels;  // local pixel of each entry
+  uint32_t counts[kTilePixels];
 };
 
 // Everything a tile task reads.
@@ -56,23 +62,54 @@ inline v8i LoadI(const int32_t* p) { v8i v; std::memcpy(&v, p, sizeof(v)); retur
 inline void Store(float* p, v8f v) { std::memcpy(p, &v, sizeof(v)); }
 inline void StoreI(int32_t* p, v8i v) { std::memcpy(p, &v, sizeof(v)); }
 inline int SumLanes(v8i v) { return v[0] + v[1] + v[2] + v[3] + v[4] + v[5] + v[6] + v[7]; }
+// Bit l set where lane l of the mask is true.
+inline uint32_t MaskBits(v8i mask) {
+#if defined(__AVX__)
+  __m256 m;
+  std::memcpy(&m, &mask, sizeof(m));
+  return static_cast<uint32_t>(_mm256_movemask_ps(m));
+#else
+  uint32_t bits = 0;
+  for (int l = 0; l < kLanes; ++l) bits |= static_cast<uint32_t>(mask[l] & 1) << l;
+  return bits;
+#endif
+}
 
-// FastExpNonPositive (fast_exp.h) on 8 lanes; round-to-nearest by the 1.5 * 2^23 trick, which equals
-// floor(x + 0.5) except at exact ties (where both are within the polynomial's range).
+// a * b + c, fused where the target has FMA (the polynomial below is evaluated with whichever; its
+// accuracy bound holds for both).
+inline v8f MulAdd(v8f a, v8f b, v8f c) {
+#if defined(__FMA__)
+  __m256 ma, mb, mc;
+  std::memcpy(&ma, &a, sizeof(ma));
+  std::memcpy(&mb, &b, sizeof(mb));
+  std::memcpy(&mc, &c, sizeof(mc));
+  const __m256 r = _mm256_fmadd_ps(ma, mb, mc);
+  v8f out;
+  std::memcpy(&out, &r, sizeof(out));
+  return out;
+#else
+  return a * b + c;
+#endif
+}
+
+// exp(x) for x <= 0 on 8 lanes (Cephes expf: range reduction by ln 2 split in two constants, a
+// degree-6 polynomial, the power of two built in the exponent bits; max relative error ~2e-7).
+// Inputs below -87 clamp to exp(-87) ~ 1.6e-38, far below the 1/255 alpha threshold. Rounding to
+// nearest uses the 1.5 * 2^23 trick.
 inline v8f FastExpNonPositive8(v8f x) {
   x = x < Splat(-87.0f) ? Splat(-87.0f) : x;
   x = x > Splat(0.0f) ? Splat(0.0f) : x;
   const v8f magic = Splat(12582912.0f);
   const v8f n = (x * Splat(1.44269504088896341f) + magic) - magic;
-  v8f r = x - n * Splat(0.693359375f);
-  r = r - n * Splat(-2.12194440e-4f);
+  v8f r = MulAdd(n, Splat(-0.693359375f), x);
+  r = MulAdd(n, Splat(2.12194440e-4f), r);
   v8f p = Splat(1.9875691500e-4f);
-  p = p * r + Splat(1.3981999507e-3f);
-  p = p * r + Splat(8.3334519073e-3f);
-  p = p * r + Splat(4.1665795894e-2f);
-  p = p * r + Splat(1.6666665459e-1f);
-  p = p * r + Splat(5.0000001201e-1f);
-  const v8f y = p * r * r + r + Splat(1.0f);
+  p = MulAdd(p, r, Splat(1.3981999507e-3f));
+  p = MulAdd(p, r, Splat(8.3334519073e-3f));
+  p = MulAdd(p, r, Splat(4.1665795894e-2f));
+  p = MulAdd(p, r, Splat(1.6666665459e-1f));
+  p = MulAdd(p, r, Splat(5.0000001201e-1f));
+  const v8f y = MulAdd(p, r * r, r + Splat(1.0f));
   const v8i bits = (__builtin_convertvector(n, v8i) + SplatI(127)) << 23;
   v8f scale;
   std::memcpy(&scale, &bits, sizeof(scale));
@@ -92,13 +129,12 @@ struct alignas(64) TileState {
   uint32_t row_done[kTileSize];  // bit x of row y: pixel (x, y) of the tile is done
   float row_weight[kTileSize + kLanes], row_transmittance[kTileSize + kLanes];
   std::vector<float> features;
-  std::vector<TileTraceEntry> trace;
 };
 
-// Blends one tile; traced entries are appended to `st.trace` in blending order (front to back
-// within each pixel, pixels interleaved).
+// Blends one tile; with tracing, `tile_trace` receives the tile's contributions.
 template <bool kSurfel, bool kTrace, bool kFeatures>
-void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& out, TileCounters& counters) {
+void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& out, TileCounters& counters,
+               TileTrace* tile_trace) {
   const ProjectionParams& p = *ctx.params;
   const RenderOptions& opt = *ctx.options;
   const int tx = tile % p.tiles_x, ty = tile / p.tiles_x;
@@ -112,11 +148,15 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
   std::fill_n(st.row_done, kTileSize, 0u);
   std::fill_n(st.contributors, TileState::kPadded, 0);
   if constexpr (kFeatures) st.features.assign(static_cast<size_t>(kTilePixels) * dim, 0.0f);
-  if constexpr (kTrace) st.trace.clear();
+  if constexpr (kTrace) {
+    tile_trace->entries.clear();
+    tile_trace->pixels.clear();
+    std::fill_n(tile_trace->counts, kTilePixels, 0u);
+  }
   const uint8_t* trace_mask = ctx.trace_mask->empty() ? nullptr : ctx.trace_mask->data();
   const float near = p.near_plane;
   int num_done = 0;
-  uint64_t evaluated = 0, blended = 0;
+  v8i tile_blends = {}, tile_live = {};  // lane-wise counters, summed once per tile
 
   const uint64_t begin = (*ctx.tile_offsets)[tile], end = (*ctx.tile_offsets)[tile + 1];
   for (uint64_t k = begin; k < end && num_done < tile_pixels; ++k) {
@@ -151,7 +191,7 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
       const v8f l0 = Splat(ry * tw0 + s.tv[0]), l1 = Splat(ry * tw1 + s.tv[1]), l2 = Splat(ry * tw2 + s.tv[2]);
       const float dy_s = my - static_cast<float>(y);
       const v8f dy = Splat(dy_s), dy2 = Splat(dy_s * dy_s);
-      v8i row_stops = {}, row_blends = {}, row_live = {};
+      uint32_t row_blend_bits = 0;
       for (int x = x0; x < x1; x += kLanes) {
         const int i = row + x;
         const v8i xs = SplatI(x) + kLaneIndex;
@@ -202,22 +242,19 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
           Store(&st.row_weight[x - x0], w);
           Store(&st.row_transmittance[x - x0], T);
         }
-        row_stops -= stop;
-        uint32_t stop_bits = 0;
-        for (int l = 0; l < kLanes; ++l) stop_bits |= static_cast<uint32_t>(stop[l] & 1) << l;
+        const uint32_t stop_bits = MaskBits(stop);
         st.row_done[y - py0] |= stop_bits << (x - px0);
-        row_blends -= blend;
-        row_live -= live;
+        num_done += std::popcount(stop_bits);
+        row_blend_bits |= MaskBits(blend) << (x - x0);
+        tile_blends -= blend;
+        tile_live -= live;
       }
-      num_done += SumLanes(row_stops);
-      const int blends = SumLanes(row_blends);
-      blended += blends;
-      evaluated += SumLanes(row_live);
       if constexpr (kTrace || kFeatures) {
-        if (blends == 0) continue;
-        for (int x = x0; x < x1; ++x) {
-          const float w = st.row_weight[x - x0];
-          if (w == 0.0f) continue;
+        // Second pass, over the blended pixels of the row only.
+        for (uint32_t bits = row_blend_bits; bits != 0; bits &= bits - 1) {
+          const int dx_lane = std::countr_zero(bits);
+          const int x = x0 + dx_lane;
+          const float w = st.row_weight[dx_lane];
           const int i = row + x;
           if constexpr (kFeatures) {
             const float* f = opt.features + static_cast<size_t>(gid) * dim;
@@ -226,15 +263,17 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
           }
           if constexpr (kTrace) {
             if (w > opt.trace.min_weight && (trace_mask == nullptr || trace_mask[y * p.width + x])) {
-              st.trace.push_back({static_cast<uint16_t>(i), {gid, w, st.row_transmittance[x - x0]}});
+              tile_trace->entries.push_back({gid, w, st.row_transmittance[dx_lane]});
+              tile_trace->pixels.push_back(static_cast<uint16_t>(i));
+              ++tile_trace->counts[i];
             }
           }
         }
       }
     }
   }
-  counters.evaluated += evaluated;
-  counters.blended += blended;
+  counters.evaluated += static_cast<uint64_t>(SumLanes(tile_live));
+  counters.blended += static_cast<uint64_t>(SumLanes(tile_blends));
 
   // Write the tile into the frame buffers.
   const float* R = ctx.world_from_camera;
