@@ -1,0 +1,108 @@
+// Micro-benchmarks of the rasterizer's hot paths on a synthetic cluttered scene
+// (run: build/common/raster/raster_benchmark; `make bench` runs them with 5 repetitions).
+#include <benchmark/benchmark.h>
+
+#include <map>
+#include <tuple>
+
+#include "common/raster/projection.h"
+#include "common/raster/rasterizer.h"
+#include "common/splat/gaussian_ply.h"
+#include "common/splat/sh.h"
+#include "common/synth/cluttered_scene.h"
+
+namespace instascene {
+namespace {
+
+const ClutterScene& Scene(size_t gaussians, int width, int height) {
+  static std::map<std::tuple<size_t, int, int>, ClutterScene> cache;
+  auto key = std::make_tuple(gaussians, width, height);
+  auto it = cache.find(key);
+  if (it == cache.end()) {
+    ClutterOptions o;
+    o.gaussians = gaussians;
+    o.width = width;
+    o.height = height;
+    o.views = 4;
+    o.objects = 20;
+    it = cache.emplace(key, *GenerateClutterScene(o)).first;
+  }
+  return it->second;
+}
+
+// Full frame: color + depth, with a reused workspace and result (as a worker renders).
+void BM_RenderColorDepth(benchmark::State& state) {
+  const ClutterScene& scene = Scene(state.range(0), 640, 480);
+  RasterWorkspace workspace;
+  RenderOptions options;
+  options.depth = true;
+  options.workspace = &workspace;
+  options.num_threads = static_cast<int>(state.range(1));
+  RenderResult result;
+  uint64_t blended = 0;
+  for (auto _ : state) {
+    if (!RenderInto(scene.cloud, scene.cameras[1], options, &result).ok()) state.SkipWithError("render failed");
+    blended = result.stats.blended_fragments;
+  }
+  state.counters["blended_fragments/s"] = benchmark::Counter(static_cast<double>(blended), benchmark::Counter::kIsIterationInvariantRate);
+}
+BENCHMARK(BM_RenderColorDepth)->Args({300000, 1})->Args({300000, 2})->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The same frame with every contribution traced.
+void BM_RenderTraced(benchmark::State& state) {
+  const ClutterScene& scene = Scene(state.range(0), 640, 480);
+  RasterWorkspace workspace;
+  RenderOptions options;
+  options.workspace = &workspace;
+  options.trace.enabled = true;
+  options.trace.min_weight = static_cast<float>(state.range(1)) / 10.0f;
+  RenderResult result;
+  for (auto _ : state) {
+    if (!RenderInto(scene.cloud, scene.cameras[1], options, &result).ok()) state.SkipWithError("render failed");
+  }
+  state.counters["entries"] = static_cast<double>(result.trace.entries.size());
+}
+BENCHMARK(BM_RenderTraced)->Args({300000, 0})->Args({300000, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// Per-Gaussian preprocessing (2DGS transform, bounding box, window, SH colour), single thread.
+void BM_ProjectSurfel(benchmark::State& state) {
+  const ClutterScene& scene = Scene(300000, 640, 480);
+  const ProjectionParams params = MakeProjectionParams(scene.cameras[1], RenderOptions{}, scene.cloud.sh_degree);
+  ProjectedSplat out;
+  size_t i = 0;
+  for (auto _ : state) {
+    benchmark::DoNotOptimize(ProjectSurfel(scene.cloud, i, params, &out));
+    i = (i + 1) % scene.cloud.size();
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_ProjectSurfel);
+
+void BM_EvalShDegree3(benchmark::State& state) {
+  float coeffs[48];
+  for (int k = 0; k < 48; ++k) coeffs[k] = 0.01f * k;
+  float rgb[3];
+  float x = 0.3f;
+  for (auto _ : state) {
+    EvalShColor(3, coeffs, x, 0.5f, 0.81f, rgb);
+    benchmark::DoNotOptimize(rgb);
+    x = -x;
+  }
+  state.SetItemsProcessed(state.iterations());
+}
+BENCHMARK(BM_EvalShDegree3);
+
+void BM_ParsePly(benchmark::State& state) {
+  const std::string bytes = EncodeGaussianPly(Scene(300000, 640, 480).cloud);
+  for (auto _ : state) {
+    absl::StatusOr<GaussianCloud> cloud = ParseGaussianPly(bytes, "bench");
+    benchmark::DoNotOptimize(cloud);
+  }
+  state.SetBytesProcessed(static_cast<int64_t>(state.iterations() * bytes.size()));
+}
+BENCHMARK(BM_ParsePly)->Unit(benchmark::kMillisecond);
+
+}  // namespace
+}  // namespace instascene
+
+BENCHMARK_MAIN();
