@@ -23,7 +23,9 @@ check_fails() {  # check_fails NAME PATTERN COMMAND...: must fail with PATTERN o
 check "synth tiny" "$BIN" synth --out "$WORK/s" --preset tiny --seed 3 --json
 check "synth json contract" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"gaussians\":8000'"
 check "info" "$BIN" info --scene "$WORK/s" --json
-check "info json" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"views\":12'"
+check "info json" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"masks\":12'"
+check "gt masks written" test -s "$WORK/s/gt/masks/0011.png"
+check_fails "bad noise level" "mask-noise" "$BIN" synth --out "$WORK/bad" --mask-noise extreme
 for mode in color depth normal alpha; do
   check "render $mode" "$BIN" render --scene "$WORK/s" --view 0003 --mode "$mode" --out "$WORK/$mode.png"
   check "render $mode wrote png" test -s "$WORK/$mode.png"

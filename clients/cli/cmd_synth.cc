@@ -15,7 +15,7 @@ namespace instascene::cli {
 
 void AddSynthCommand(CLI::App& app, Action* action) {
   struct Args {
-    std::string out, preset = "small";
+    std::string out, preset = "small", mask_noise = "medium";
     int64_t seed = -1, objects = -1, views = -1, width = -1, height = -1, gaussians = -1;
     int threads = 0;
     bool json = false;
@@ -30,6 +30,8 @@ void AddSynthCommand(CLI::App& app, Action* action) {
   cmd->add_option("--width", args->width, "Image width, px");
   cmd->add_option("--height", args->height, "Image height, px");
   cmd->add_option("--gaussians", args->gaussians, "Total number of surfels");
+  cmd->add_option("--mask-noise", args->mask_noise, "Simulated 2D segmenter noise: none, low, medium (default), high")
+      ->check(CLI::IsMember({"none", "low", "medium", "high"}));
   cmd->add_option("--threads", args->threads, "Rendering threads (0 = all cores)");
   cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
   cmd->callback([args, action] {
@@ -46,6 +48,8 @@ void AddSynthCommand(CLI::App& app, Action* action) {
       ProgressBar bar("synth: rendering views");
       SceneWriteOptions write;
       write.num_threads = args->threads;
+      write.mask_noise = args->mask_noise;
+      write.seed = options.seed;
       write.progress = [&bar](int done, int total) { bar.Update(done, total); };
       RETURN_IF_ERROR(WriteClutterScene(scene, args->out, write));
       std::fprintf(stderr, "synth: wrote %s: %zu Gaussians, %d objects, %zu views of %dx%d in %.1f s\n",

@@ -9,8 +9,73 @@
 #include "common/raster/rasterizer.h"
 #include "common/scene/scene.h"
 #include "common/splat/gaussian_ply.h"
+#include "common/splat/ply.h"
+
+#include <algorithm>
+#include <nlohmann/json.hpp>
 
 namespace instascene {
+namespace {
+
+// Binary little-endian triangle-mesh PLY (vertex x y z, face vertex_indices).
+std::string EncodeMeshPly(const TriangleMesh& mesh) {
+  std::string out = absl::StrCat("ply\nformat binary_little_endian 1.0\nelement vertex ", mesh.vertices.size(),
+                                 "\nproperty float x\nproperty float y\nproperty float z\nelement face ",
+                                 mesh.triangles.size(), "\nproperty list uchar int vertex_indices\nend_header\n");
+  for (const Eigen::Vector3f& v : mesh.vertices) out.append(reinterpret_cast<const char*>(v.data()), 12);
+  for (const auto& t : mesh.triangles) {
+    out.push_back(3);
+    for (uint32_t i : t) {
+      const int32_t index = static_cast<int32_t>(i);
+      out.append(reinterpret_cast<const char*>(&index), 4);
+    }
+  }
+  return out;
+}
+
+nlohmann::json ObjectJson(const SynthObject& o) {
+  nlohmann::json pose = nlohmann::json::array();
+  const Eigen::Matrix<double, 3, 4> m = o.world_from_object.ToMatrix();
+  for (int r = 0; r < 3; ++r) pose.push_back({m(r, 0), m(r, 1), m(r, 2), m(r, 3)});
+  const Eigen::AlignedBox3f box = o.mesh.Bounds();
+  return {{"id", o.id}, {"name", o.name}, {"shape", ShapeKindName(o.shape.kind)},
+          {"size", {o.shape.size.x(), o.shape.size.y(), o.shape.size.z()}}, {"world_from_object", pose},
+          {"duplicate_group", o.duplicate_group}, {"first_gaussian", o.first_gaussian},
+          {"num_gaussians", o.num_gaussians},
+          {"color", {o.appearance.color_a.x(), o.appearance.color_a.y(), o.appearance.color_a.z()}},
+          {"bounds_min", {box.min().x(), box.min().y(), box.min().z()}},
+          {"bounds_max", {box.max().x(), box.max().y(), box.max().z()}},
+          {"mesh", absl::StrCat("gt/meshes/", o.id, ".ply")}};
+}
+
+}  // namespace
+
+LabelMap GroundTruthInstanceMap(const RenderResult& traced, const std::vector<uint16_t>& instance_ids) {
+  LabelMap map{traced.width, traced.height, std::vector<uint16_t>(static_cast<size_t>(traced.width) * traced.height, 0)};
+  const ContributorTrace& trace = traced.trace;
+  std::vector<std::pair<uint16_t, float>> sums;
+  for (size_t i = 0; i < trace.num_pixels(); ++i) {
+    const uint32_t pix = trace.pixels[i];
+    if (traced.alpha[pix] < 0.5f) continue;
+    sums.clear();
+    for (uint64_t k = trace.offsets[i]; k < trace.offsets[i + 1]; ++k) {
+      const uint16_t id = instance_ids[trace.entries[k].gaussian];
+      auto it = std::find_if(sums.begin(), sums.end(), [id](const auto& s) { return s.first == id; });
+      if (it == sums.end()) sums.emplace_back(id, trace.entries[k].weight);
+      else it->second += trace.entries[k].weight;
+    }
+    uint16_t best = 0;
+    float best_weight = -1.0f;
+    for (const auto& [id, weight] : sums) {
+      if (weight > best_weight) {
+        best = id;
+        best_weight = weight;
+      }
+    }
+    map.labels[pix] = best;
+  }
+  return map;
+}
 
 absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& directory,
                                const SceneWriteOptions& options) {
@@ -20,16 +85,42 @@ absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& dir
   if (ec) return absl::UnavailableError(absl::StrCat(directory, ": cannot create: ", ec.message()));
   Scene out;
   out.directory = directory;
+  ASSIGN_OR_RETURN(MaskNoiseOptions noise, MaskNoiseOptions::Level(options.mask_noise));
+  for (const char* sub : {"masks", "gt/masks", "gt/meshes"}) {
+    fs::create_directories(fs::path(directory) / sub, ec);
+    if (ec) return absl::UnavailableError(absl::StrCat(directory, "/", sub, ": cannot create: ", ec.message()));
+  }
   RETURN_IF_ERROR(WriteGaussianPly(out.Path(out.gaussians), scene.cloud));
+  // Ground truth: per-Gaussian ids, objects, meshes.
+  PlyColumns ids;
+  ids.count = static_cast<int64_t>(scene.instance_ids.size());
+  ids.names = {"instance_id"};
+  ids.types = {ScalarType::kUint16};
+  ids.columns = {std::vector<float>(scene.instance_ids.begin(), scene.instance_ids.end())};
+  RETURN_IF_ERROR(WriteFileAtomically(out.Path("gt/instances.ply"), EncodePlyBinary("vertex", ids)));
+  nlohmann::json objects = nlohmann::json::array();
+  for (const SynthObject& o : scene.objects) {
+    objects.push_back(ObjectJson(o));
+    RETURN_IF_ERROR(WriteFileAtomically(out.Path(absl::StrCat("gt/meshes/", o.id, ".ply")), EncodeMeshPly(o.mesh)));
+  }
+  RETURN_IF_ERROR(WriteFileAtomically(out.Path("gt/objects.json"), objects.dump(1)));
+  out.metadata["gt"] = {{"format", "instascene.gt/1"}, {"objects", "gt/objects.json"},
+                        {"gaussian_instances", "gt/instances.ply"}, {"masks", "gt/masks"},
+                        {"meshes", "gt/meshes"}, {"mask_noise", options.mask_noise}, {"seed", options.seed}};
   RenderOptions render;
   render.num_threads = options.num_threads;
+  render.trace.enabled = true;  // every contribution: the ground-truth masks sum weights per instance
   const int total = static_cast<int>(scene.cameras.size());
   for (int v = 0; v < total; ++v) {
     SceneView view;
     view.name = absl::StrFormat("%04d", v);
     view.image = absl::StrCat("images/", view.name, ".png");
     view.camera = scene.cameras[v];
+    view.mask = absl::StrCat("masks/", view.name, ".png");
     ASSIGN_OR_RETURN(RenderResult r, Render(scene.cloud, view.camera, render));
+    const LabelMap gt = GroundTruthInstanceMap(r, scene.instance_ids);
+    RETURN_IF_ERROR(WriteLabelMap(out.Path(absl::StrCat("gt/masks/", view.name, ".png")), gt));
+    RETURN_IF_ERROR(WriteLabelMap(out.Path(view.mask), SimulateSegmenter(gt, noise, options.seed * 1000003 + v)));
     Image image{r.width, r.height, 3, std::move(r.color)};
     RETURN_IF_ERROR(WriteImage(out.Path(view.image), image));
     out.views.push_back(std::move(view));

@@ -5,7 +5,13 @@
 
 #include "common/raster/rasterizer.h"
 #include "common/synth/cluttered_scene.h"
+#include "common/synth/mask_noise.h"
 #include "common/synth/primitives.h"
+#include "common/synth/scene_writer.h"
+#include "common/scene/scene.h"
+
+#include <filesystem>
+#include <set>
 
 namespace instascene {
 namespace {
@@ -98,6 +104,113 @@ TEST(ClutterScene, RejectsBadOptionsAndScalesTheTable) {
   ASSERT_TRUE(crowded.ok()) << crowded.status();
   EXPECT_EQ(crowded->objects.size(), 150u);
   EXPECT_FALSE(ClutterPreset("huge").ok());
+}
+
+TEST(GroundTruth, InstanceMapsAgreeWithOneHotFeatureRendering) {
+  absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("tiny"));
+  ASSERT_TRUE(scene.ok());
+  const int dim = static_cast<int>(scene->objects.size()) + 1;
+  std::vector<float> one_hot(scene->cloud.size() * dim, 0.0f);
+  for (size_t g = 0; g < scene->cloud.size(); ++g) one_hot[g * dim + scene->instance_ids[g]] = 1.0f;
+  RenderOptions options;
+  options.features = one_hot.data();
+  options.feature_dim = dim;
+  options.trace.enabled = true;
+  int labelled = 0;
+  for (int v : {0, 5, 11}) {
+    absl::StatusOr<RenderResult> r = Render(scene->cloud, scene->cameras[v], options);
+    ASSERT_TRUE(r.ok());
+    const LabelMap gt = GroundTruthInstanceMap(*r, scene->instance_ids);
+    for (size_t p = 0; p < gt.labels.size(); ++p) {
+      // Independent route: the rendered one-hot features are the per-instance weight sums.
+      const float* f = &r->features[p * dim];
+      const int best = static_cast<int>(std::max_element(f, f + dim) - f);
+      const uint16_t want = r->alpha[p] < 0.5f ? 0 : static_cast<uint16_t>(best);
+      ASSERT_EQ(gt.labels[p], want) << "view " << v << " pixel " << p;
+      labelled += want != 0;
+    }
+  }
+  EXPECT_GT(labelled, 1000);
+}
+
+LabelMap TwoTouchingSquares() {
+  LabelMap gt{64, 48, std::vector<uint16_t>(64 * 48, 0)};
+  for (int y = 10; y < 30; ++y) {
+    for (int x = 10; x < 50; ++x) gt.labels[y * 64 + x] = x < 30 ? 3 : 7;
+  }
+  gt.labels[40 * 64 + 5] = 9;  // a 1-pixel instance: below the minimum area
+  return gt;
+}
+
+TEST(MaskNoise, NoneIsGroundTruthWithRandomIds) {
+  const LabelMap gt = TwoTouchingSquares();
+  MaskNoiseOptions none = *MaskNoiseOptions::Level("none");
+  none.min_area_fraction = 0.001f;  // 3 px on this 64x48 map
+  const LabelMap noisy = SimulateSegmenter(gt, none, 5);
+  std::map<uint16_t, std::set<uint16_t>> mapping;
+  for (size_t p = 0; p < gt.labels.size(); ++p) {
+    if (gt.labels[p] == 9) {
+      EXPECT_EQ(noisy.labels[p], 0);  // dropped: below the minimum area
+      continue;
+    }
+    mapping[gt.labels[p]].insert(noisy.labels[p]);
+  }
+  EXPECT_EQ(mapping[0], std::set<uint16_t>{0});
+  ASSERT_EQ(mapping[3].size(), 1u);
+  ASSERT_EQ(mapping[7].size(), 1u);
+  EXPECT_NE(*mapping[3].begin(), *mapping[7].begin());
+  EXPECT_LE(*mapping[3].begin(), 2);  // ids are 1..K
+}
+
+TEST(MaskNoise, MergesSplitsAndMissesHappenAtTheirRates) {
+  const LabelMap gt = TwoTouchingSquares();
+  MaskNoiseOptions merge_only;
+  merge_only.merge_probability = 1.0f;
+  const LabelMap merged = SimulateSegmenter(gt, merge_only, 1);
+  EXPECT_EQ(merged.labels[20 * 64 + 15], merged.labels[20 * 64 + 45]);  // one mask over both
+  EXPECT_NE(merged.labels[20 * 64 + 15], 0);
+  MaskNoiseOptions split_only;
+  split_only.split_probability = 1.0f;
+  const LabelMap split = SimulateSegmenter(gt, split_only, 2);
+  std::set<uint16_t> ids(split.labels.begin(), split.labels.end());
+  EXPECT_EQ(ids.size(), 6u);  // background, two halves of each square, the 1-px instance
+  // Over many seeds, "high" changes the mask count more often than "low".
+  int changed_low = 0, changed_high = 0;
+  for (uint64_t seed = 0; seed < 60; ++seed) {
+    for (const char* level : {"low", "high"}) {
+      const LabelMap m = SimulateSegmenter(gt, *MaskNoiseOptions::Level(level), seed);
+      std::set<uint16_t> k(m.labels.begin(), m.labels.end());
+      (std::string(level) == "low" ? changed_low : changed_high) += k.size() != 4;
+    }
+  }
+  EXPECT_GT(changed_high, changed_low);
+  EXPECT_FALSE(MaskNoiseOptions::Level("extreme").ok());
+  // Deterministic from the seed.
+  EXPECT_EQ(SimulateSegmenter(gt, *MaskNoiseOptions::Level("high"), 9).labels,
+            SimulateSegmenter(gt, *MaskNoiseOptions::Level("high"), 9).labels);
+}
+
+TEST(SceneWriter, WritesImagesMasksAndGroundTruth) {
+  const std::string dir = ::testing::TempDir() + "/synth_writer";
+  std::filesystem::remove_all(dir);
+  absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("tiny"));
+  ASSERT_TRUE(scene.ok());
+  SceneWriteOptions options;
+  options.mask_noise = "low";
+  ASSERT_TRUE(WriteClutterScene(*scene, dir, options).ok());
+  absl::StatusOr<Scene> read = ReadScene(dir);
+  ASSERT_TRUE(read.ok()) << read.status();
+  ASSERT_EQ(read->views.size(), 12u);
+  EXPECT_EQ(read->metadata["gt"]["mask_noise"], "low");
+  ASSERT_TRUE(ReadViewImage(*read, 3).ok());
+  absl::StatusOr<LabelMap> mask = ReadViewMask(*read, 3);
+  ASSERT_TRUE(mask.ok()) << mask.status();
+  absl::StatusOr<LabelMap> gt = ReadLabelMap(dir + "/gt/masks/0003.png");
+  ASSERT_TRUE(gt.ok());
+  EXPECT_GT(std::set<uint16_t>(gt->labels.begin(), gt->labels.end()).size(), 2u);
+  EXPECT_TRUE(std::filesystem::exists(dir + "/gt/instances.ply"));
+  EXPECT_TRUE(std::filesystem::exists(dir + "/gt/objects.json"));
+  EXPECT_TRUE(std::filesystem::exists(dir + "/gt/meshes/1.ply"));
 }
 
 }  // namespace
