@@ -3,6 +3,7 @@
 #include <random>
 
 #include "common/geometry/camera.h"
+#include "common/geometry/point_index.h"
 #include "common/geometry/rigid.h"
 
 namespace instascene {
@@ -67,6 +68,38 @@ TEST(PinholeCamera, ValidateRejectsBadIntrinsics) {
   EXPECT_TRUE(cam.Validate().ok());
   cam.fx = std::numeric_limits<double>::infinity();
   EXPECT_FALSE(cam.Validate().ok());
+}
+
+}  // namespace
+}  // namespace instascene
+
+namespace instascene {
+namespace {
+
+TEST(PointIndex3, MatchesBruteForceOnRandomPoints) {
+  std::mt19937 rng(12);
+  std::uniform_real_distribution<float> u(-1, 1);
+  std::vector<Eigen::Vector3f> pts(2000);
+  for (auto& p : pts) p = {u(rng), u(rng), u(rng)};
+  PointIndex3 index(pts);
+  for (int q = 0; q < 200; ++q) {
+    const Eigen::Vector3f query(u(rng), u(rng), u(rng));
+    uint32_t best = 0;
+    float best_d = 1e30f;
+    std::vector<uint32_t> within;
+    for (uint32_t i = 0; i < pts.size(); ++i) {
+      const float d = (pts[i] - query).squaredNorm();
+      if (d < best_d) {
+        best_d = d;
+        best = i;
+      }
+      if (d <= 0.2f * 0.2f) within.push_back(i);
+    }
+    const auto [index_best, index_d] = index.Nearest(query);
+    EXPECT_EQ(index_best, best);
+    EXPECT_FLOAT_EQ(index_d, best_d);
+    EXPECT_EQ(index.WithinRadius(query, 0.2f), within);
+  }
 }
 
 }  // namespace

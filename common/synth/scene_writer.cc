@@ -6,6 +6,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "common/core/status.h"
+#include "common/raster/label_render.h"
 #include "common/raster/rasterizer.h"
 #include "common/scene/scene.h"
 #include "common/splat/gaussian_ply.h"
@@ -51,30 +52,9 @@ nlohmann::json ObjectJson(const SynthObject& o) {
 }  // namespace
 
 LabelMap GroundTruthInstanceMap(const RenderResult& traced, const std::vector<uint16_t>& instance_ids) {
-  LabelMap map{traced.width, traced.height, std::vector<uint16_t>(static_cast<size_t>(traced.width) * traced.height, 0)};
-  const ContributorTrace& trace = traced.trace;
-  std::vector<std::pair<uint16_t, float>> sums;
-  for (size_t i = 0; i < trace.num_pixels(); ++i) {
-    const uint32_t pix = trace.pixels[i];
-    if (traced.alpha[pix] < 0.5f) continue;
-    sums.clear();
-    for (uint64_t k = trace.offsets[i]; k < trace.offsets[i + 1]; ++k) {
-      const uint16_t id = instance_ids[trace.entries[k].gaussian];
-      auto it = std::find_if(sums.begin(), sums.end(), [id](const auto& s) { return s.first == id; });
-      if (it == sums.end()) sums.emplace_back(id, trace.entries[k].weight);
-      else it->second += trace.entries[k].weight;
-    }
-    uint16_t best = 0;
-    float best_weight = -1.0f;
-    for (const auto& [id, weight] : sums) {
-      if (weight > best_weight) {
-        best = id;
-        best_weight = weight;
-      }
-    }
-    map.labels[pix] = best;
-  }
-  return map;
+  const std::vector<uint32_t> labels(instance_ids.begin(), instance_ids.end());
+  const std::vector<uint32_t> map = LabelMapFromTrace(traced, labels, 0.5f);
+  return LabelMap{traced.width, traced.height, std::vector<uint16_t>(map.begin(), map.end())};
 }
 
 absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& directory,
