@@ -31,6 +31,9 @@ for mode in color depth normal alpha; do
   check "render $mode wrote png" test -s "$WORK/$mode.png"
 done
 check "render by index" "$BIN" render --scene "$WORK/s" --view 5 --out "$WORK/v5.png"
+check "eval ground truth" "$BIN" eval --scene "$WORK/s" --result "$WORK/s/gt" --json
+check "eval gt scores 1" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"miou\":1.0'"
+check_fails "eval without result" "no such file" "$BIN" eval --scene "$WORK/s" --result "$WORK/nothing"
 check "help" "$BIN" --help
 check "render help" "$BIN" render --help
 check_fails "missing scene" "no such file" "$BIN" info --scene "$WORK/nope"
@@ -49,6 +52,7 @@ if [ -d "$SHARED/data/fox_instant_ngp" ]; then
   check_fails "fox needs undistortion flag" "distortion" "$BIN" import --transforms "$SHARED/data/fox_instant_ngp/transforms_images_2.json" --ply "$WORK/s/gaussians.ply" --out "$WORK/fox"
   check "import fox" "$BIN" import --transforms "$SHARED/data/fox_instant_ngp/transforms_images_2.json" --ply "$WORK/s/gaussians.ply" --out "$WORK/fox" --assume-undistorted
   check "fox has 50 views" bash -c "'$BIN' info --scene '$WORK/fox' --json | tail -n 1 | grep -q '\"views\":50'"
+  check_fails "eval needs ground truth" "no ground truth" "$BIN" eval --scene "$WORK/fox" --result "$WORK/s/gt"
 fi
 
 echo "$passed passed, $failed failed"

@@ -156,7 +156,7 @@ absl::StatusOr<ClickEvaluation> EvaluateResultDirectory(const std::string& scene
   const nlohmann::json& gt = scene.metadata["gt"];
   ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
   ASSIGN_OR_RETURN(std::vector<uint32_t> gt_ids,
-                   ReadGaussianInstanceIds(scene.Path(gt.value("gaussian_instances", std::string("gt/instances.ply"))), cloud.size()));
+                   ReadGaussianInstanceIds(scene.Path(gt.value("gaussian_instances", std::string("gt/labels.ply"))), cloud.size()));
   ASSIGN_OR_RETURN(SegmentationResult result, ReadResult(result_dir, cloud.size()));
   std::vector<std::vector<uint32_t>> masks;
   const std::string mask_dir = gt.value("masks", std::string("gt/masks"));

@@ -6,6 +6,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "common/core/status.h"
+#include "common/eval/result.h"
 #include "common/raster/label_render.h"
 #include "common/raster/rasterizer.h"
 #include "common/scene/scene.h"
@@ -72,12 +73,12 @@ absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& dir
   }
   RETURN_IF_ERROR(WriteGaussianPly(out.Path(out.gaussians), scene.cloud));
   // Ground truth: per-Gaussian ids, objects, meshes.
-  PlyColumns ids;
-  ids.count = static_cast<int64_t>(scene.instance_ids.size());
-  ids.names = {"instance_id"};
-  ids.types = {ScalarType::kUint16};
-  ids.columns = {std::vector<float>(scene.instance_ids.begin(), scene.instance_ids.end())};
-  RETURN_IF_ERROR(WriteFileAtomically(out.Path("gt/instances.ply"), EncodePlyBinary("vertex", ids)));
+  // gt/ is itself a result directory (result.json + labels.ply): `instascene eval --result
+  // <scene>/gt` scores the ground truth (1.0 by construction).
+  SegmentationResult gt_result;
+  gt_result.stage = "ground-truth";
+  gt_result.labels.assign(scene.instance_ids.begin(), scene.instance_ids.end());
+  RETURN_IF_ERROR(WriteResult(out.Path("gt"), gt_result, scene.cloud));
   nlohmann::json objects = nlohmann::json::array();
   for (const SynthObject& o : scene.objects) {
     objects.push_back(ObjectJson(o));
@@ -85,7 +86,7 @@ absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& dir
   }
   RETURN_IF_ERROR(WriteFileAtomically(out.Path("gt/objects.json"), objects.dump(1)));
   out.metadata["gt"] = {{"format", "instascene.gt/1"}, {"objects", "gt/objects.json"},
-                        {"gaussian_instances", "gt/instances.ply"}, {"masks", "gt/masks"},
+                        {"gaussian_instances", "gt/labels.ply"}, {"masks", "gt/masks"},
                         {"meshes", "gt/meshes"}, {"mask_noise", options.mask_noise}, {"seed", options.seed}};
   RenderOptions render;
   render.num_threads = options.num_threads;

@@ -208,7 +208,8 @@ TEST(SceneWriter, WritesImagesMasksAndGroundTruth) {
   absl::StatusOr<LabelMap> gt = ReadLabelMap(dir + "/gt/masks/0003.png");
   ASSERT_TRUE(gt.ok());
   EXPECT_GT(std::set<uint16_t>(gt->labels.begin(), gt->labels.end()).size(), 2u);
-  EXPECT_TRUE(std::filesystem::exists(dir + "/gt/instances.ply"));
+  EXPECT_TRUE(std::filesystem::exists(dir + "/gt/labels.ply"));
+  EXPECT_TRUE(std::filesystem::exists(dir + "/gt/result.json"));
   EXPECT_TRUE(std::filesystem::exists(dir + "/gt/objects.json"));
   EXPECT_TRUE(std::filesystem::exists(dir + "/gt/meshes/1.ply"));
 }
