@@ -46,6 +46,8 @@ check_fails "features without channels" "no 'segfeat_" "$BIN" render --scene "$W
 if [ -d "$SHARED/data/splats" ]; then
   check "render real splat" "$BIN" render --ply "$SHARED/data/splats/playbot_lod6.ply" --orbit 45,20 --width 64 --height 48 --out "$WORK/real.png"
   check "render real splat as surfels" "$BIN" render --ply "$SHARED/data/splats/playbot_lod6.ply" --surfels --mode normal --width 64 --height 48 --out "$WORK/real_n.png"
+  check "composite of real splats" "$BIN" synth --out "$WORK/comp" --from-splats "$SHARED/data/splats/playbot_lod6.ply,$SHARED/data/splats/playbot_lod6_3dgs_order.ply" --views 6 --width 64 --height 48 --mask-noise low
+  check "composite gt evaluates to 1" bash -c "'$BIN' eval --scene '$WORK/comp' --result '$WORK/comp/gt' --json | tail -n 1 | grep -q '\"miou\":1.0'"
   check_fails "compressed ply" "compressed" "$BIN" info --ply "$SHARED/data/splats/originals/guitar.compressed.ply"
 fi
 if [ -d "$SHARED/data/fox_instant_ngp" ]; then

@@ -10,12 +10,18 @@
 #include "common/core/timer.h"
 #include "common/synth/cluttered_scene.h"
 #include "common/synth/scene_writer.h"
+#include "common/synth/splat_composite.h"
+#include "common/splat/gaussian_ply.h"
+
+#include <filesystem>
 
 namespace instascene::cli {
 
 void AddSynthCommand(CLI::App& app, Action* action) {
   struct Args {
     std::string out, preset = "small", mask_noise = "medium";
+    std::vector<std::string> from_splats;
+    double object_height = 0.5;
     int64_t seed = -1, objects = -1, views = -1, width = -1, height = -1, gaussians = -1;
     int threads = 0;
     bool json = false;
@@ -32,6 +38,10 @@ void AddSynthCommand(CLI::App& app, Action* action) {
   cmd->add_option("--gaussians", args->gaussians, "Total number of surfels");
   cmd->add_option("--mask-noise", args->mask_noise, "Simulated 2D segmenter noise: none, low, medium (default), high")
       ->check(CLI::IsMember({"none", "low", "medium", "high"}));
+  cmd->add_option("--from-splats", args->from_splats,
+                  "Compose real captures (comma-separated .ply files) instead of procedural objects")
+      ->delimiter(',');
+  cmd->add_option("--object-height", args->object_height, "With --from-splats: height each capture is scaled to");
   cmd->add_option("--threads", args->threads, "Rendering threads (0 = all cores)");
   cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
   cmd->callback([args, action] {
@@ -44,7 +54,26 @@ void AddSynthCommand(CLI::App& app, Action* action) {
       if (args->height >= 0) options.height = static_cast<int>(args->height);
       if (args->gaussians >= 0) options.gaussians = static_cast<size_t>(args->gaussians);
       Stopwatch watch;
-      ASSIGN_OR_RETURN(ClutterScene scene, GenerateClutterScene(options));
+      ClutterScene scene;
+      if (args->from_splats.empty()) {
+        ASSIGN_OR_RETURN(scene, GenerateClutterScene(options));
+      } else {
+        std::vector<GaussianCloud> clouds;
+        std::vector<std::string> names;
+        for (const std::string& path : args->from_splats) {
+          ASSIGN_OR_RETURN(GaussianCloud cloud, ReadGaussianPly(path));
+          clouds.push_back(std::move(cloud));
+          names.push_back(std::filesystem::path(path).stem().string());
+        }
+        CompositeOptions composite;
+        composite.seed = options.seed;
+        composite.views = options.views;
+        composite.width = options.width;
+        composite.height = options.height;
+        composite.object_height = static_cast<float>(args->object_height);
+        ASSIGN_OR_RETURN(scene, ComposeSplats(clouds, names, composite));
+        options.objects = static_cast<int>(clouds.size());
+      }
       ProgressBar bar("synth: rendering views");
       SceneWriteOptions write;
       write.num_threads = args->threads;

@@ -43,7 +43,8 @@ struct SynthObject {
   int id = 0;                  // instance id, 1..N
   std::string name;            // e.g. "bottle_3"
   ShapeSpec shape;
-  Rigid3d world_from_object;
+  Rigid3d world_from_object;  // x_world = world_from_object * (scale * x_object)
+  float scale = 1.0f;         // uniform scale applied before world_from_object (composites)
   Appearance appearance;
   int duplicate_group = -1;    // objects sharing a group >= 0 are identical
   TriangleMesh mesh;           // complete surface, world frame (ground truth for completion)

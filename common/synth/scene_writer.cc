@@ -35,19 +35,22 @@ std::string EncodeMeshPly(const TriangleMesh& mesh) {
   return out;
 }
 
-nlohmann::json ObjectJson(const SynthObject& o) {
+nlohmann::json ObjectJson(const SynthObject& o, const GaussianCloud& cloud) {
   nlohmann::json pose = nlohmann::json::array();
   const Eigen::Matrix<double, 3, 4> m = o.world_from_object.ToMatrix();
   for (int r = 0; r < 3; ++r) pose.push_back({m(r, 0), m(r, 1), m(r, 2), m(r, 3)});
-  const Eigen::AlignedBox3f box = o.mesh.Bounds();
+  Eigen::AlignedBox3f box = o.mesh.Bounds();
+  if (o.mesh.vertices.empty()) {  // no mesh (real captures): the bounds of its Gaussians
+    for (size_t i = o.first_gaussian; i < o.first_gaussian + o.num_gaussians; ++i) box.extend(Eigen::Vector3f(&cloud.positions[3 * i]));
+  }
   return {{"id", o.id}, {"name", o.name}, {"shape", ShapeKindName(o.shape.kind)},
-          {"size", {o.shape.size.x(), o.shape.size.y(), o.shape.size.z()}}, {"world_from_object", pose},
+          {"size", {o.shape.size.x(), o.shape.size.y(), o.shape.size.z()}}, {"world_from_object", pose}, {"scale", o.scale},
           {"duplicate_group", o.duplicate_group}, {"first_gaussian", o.first_gaussian},
           {"num_gaussians", o.num_gaussians},
           {"color", {o.appearance.color_a.x(), o.appearance.color_a.y(), o.appearance.color_a.z()}},
           {"bounds_min", {box.min().x(), box.min().y(), box.min().z()}},
           {"bounds_max", {box.max().x(), box.max().y(), box.max().z()}},
-          {"mesh", absl::StrCat("gt/meshes/", o.id, ".ply")}};
+          {"mesh", o.mesh.triangles.empty() ? nlohmann::json(nullptr) : nlohmann::json(absl::StrCat("gt/meshes/", o.id, ".ply"))}};
 }
 
 }  // namespace
@@ -81,8 +84,10 @@ absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& dir
   RETURN_IF_ERROR(WriteResult(out.Path("gt"), gt_result, scene.cloud));
   nlohmann::json objects = nlohmann::json::array();
   for (const SynthObject& o : scene.objects) {
-    objects.push_back(ObjectJson(o));
-    RETURN_IF_ERROR(WriteFileAtomically(out.Path(absl::StrCat("gt/meshes/", o.id, ".ply")), EncodeMeshPly(o.mesh)));
+    objects.push_back(ObjectJson(o, scene.cloud));
+    if (!o.mesh.triangles.empty()) {  // real-capture composites have no complete geometry
+      RETURN_IF_ERROR(WriteFileAtomically(out.Path(absl::StrCat("gt/meshes/", o.id, ".ply")), EncodeMeshPly(o.mesh)));
+    }
   }
   RETURN_IF_ERROR(WriteFileAtomically(out.Path("gt/objects.json"), objects.dump(1)));
   out.metadata["gt"] = {{"format", "instascene.gt/1"}, {"objects", "gt/objects.json"},

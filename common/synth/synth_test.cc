@@ -8,6 +8,9 @@
 #include "common/synth/mask_noise.h"
 #include "common/synth/primitives.h"
 #include "common/synth/scene_writer.h"
+#include "common/synth/splat_composite.h"
+#include "common/raster/label_render.h"
+#include "common/splat/gaussian_ply.h"
 #include "common/scene/scene.h"
 
 #include <filesystem>
@@ -212,6 +215,42 @@ TEST(SceneWriter, WritesImagesMasksAndGroundTruth) {
   EXPECT_TRUE(std::filesystem::exists(dir + "/gt/result.json"));
   EXPECT_TRUE(std::filesystem::exists(dir + "/gt/objects.json"));
   EXPECT_TRUE(std::filesystem::exists(dir + "/gt/meshes/1.ply"));
+}
+
+TEST(SplatComposite, PlacesRealCapturesWithKnownIds) {
+  const std::string dir = std::string(INSTASCENE_SHARED_DIR) + "/data/splats/";
+  if (!std::filesystem::exists(dir + "playbot_lod6.ply")) GTEST_SKIP() << "shared data missing";
+  absl::StatusOr<GaussianCloud> a = ReadGaussianPly(dir + "playbot_lod6.ply");
+  absl::StatusOr<GaussianCloud> b = ReadGaussianPly(dir + "playbot_lod6_3dgs_order.ply");
+  ASSERT_TRUE(a.ok() && b.ok());
+  CompositeOptions options;
+  options.views = 8;
+  options.width = 96;
+  options.height = 72;
+  absl::StatusOr<ClutterScene> scene = ComposeSplats({*a, *b}, {"left", "right"}, options);
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  ASSERT_EQ(scene->cloud.size(), 2 * a->size());
+  ASSERT_TRUE(scene->cloud.Validate().ok());
+  EXPECT_EQ(scene->instance_ids.front(), 1);
+  EXPECT_EQ(scene->instance_ids.back(), 2);
+  // Same capture twice: same scale; the second is a pure translation of the first, colours intact.
+  const Eigen::Vector3f shift = Eigen::Vector3f(&scene->cloud.positions[3 * a->size()]) - Eigen::Vector3f(&scene->cloud.positions[0]);
+  EXPECT_GT(shift.x(), 0.1f);
+  for (size_t i = 0; i < a->size(); i += 97) {
+    const Eigen::Vector3f d = Eigen::Vector3f(&scene->cloud.positions[3 * (a->size() + i)]) - Eigen::Vector3f(&scene->cloud.positions[3 * i]);
+    EXPECT_LT((d - shift).norm(), 1e-4f);
+    EXPECT_EQ(scene->cloud.sh[scene->cloud.sh_stride() * i + 5], a->sh[a->sh_stride() * i + 5]);
+  }
+  // Both objects are seen by the cameras.
+  std::vector<uint32_t> ids(scene->instance_ids.begin(), scene->instance_ids.end());
+  std::set<uint32_t> seen;
+  for (const PinholeCamera& c : scene->cameras) {
+    absl::StatusOr<std::vector<uint32_t>> map = RenderLabelMap(scene->cloud, c, ids);
+    ASSERT_TRUE(map.ok());
+    seen.insert(map->begin(), map->end());
+  }
+  EXPECT_TRUE(seen.count(1) && seen.count(2));
+  EXPECT_FALSE(ComposeSplats({}, {}, options).ok());
 }
 
 }  // namespace
