@@ -215,6 +215,14 @@ TEST(SceneWriter, WritesImagesMasksAndGroundTruth) {
   EXPECT_TRUE(std::filesystem::exists(dir + "/gt/result.json"));
   EXPECT_TRUE(std::filesystem::exists(dir + "/gt/objects.json"));
   EXPECT_TRUE(std::filesystem::exists(dir + "/gt/meshes/1.ply"));
+  // Rendering the per-Gaussian ground-truth labels reproduces gt/masks.
+  std::vector<uint32_t> ids(scene->instance_ids.begin(), scene->instance_ids.end());
+  for (int v : {0, 3, 11}) {
+    absl::StatusOr<LabelMap> file = ReadLabelMap(dir + "/gt/masks/" + read->views[v].name + ".png");
+    absl::StatusOr<std::vector<uint32_t>> rendered = RenderLabelMap(scene->cloud, read->views[v].camera, ids);
+    ASSERT_TRUE(file.ok() && rendered.ok());
+    EXPECT_EQ(std::vector<uint32_t>(file->labels.begin(), file->labels.end()), *rendered) << v;
+  }
 }
 
 TEST(SplatComposite, PlacesRealCapturesWithKnownIds) {
