@@ -21,6 +21,7 @@ void AddBenchCommand(CLI::App& app, Action* action);
 void AddImportCommand(CLI::App& app, Action* action);
 void AddSynthCommand(CLI::App& app, Action* action);
 void AddEvalCommand(CLI::App& app, Action* action);
+void AddDecomposeCommand(CLI::App& app, Action* action);
 
 // Prints one JSON object as the last stdout line (the --json contract).
 void PrintJsonLine(const std::string& json);

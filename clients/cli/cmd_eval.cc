@@ -48,7 +48,8 @@ void AddEvalCommand(CLI::App& app, Action* action) {
                                       {"precision_3d", eval.instances.precision}, {"recall_3d", eval.instances.recall},
                                       {"mean_best_iou_3d", eval.instances.mean_best_iou},
                                       {"predicted_instances", eval.instances.predicted},
-                                      {"ari", eval.adjusted_rand_index}})
+                                      {"ari", eval.adjusted_rand_index},
+                                      {"observed_gaussians", eval.observed_gaussians}})
                           .dump());
       }
       return absl::OkStatus();

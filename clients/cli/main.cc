@@ -23,6 +23,7 @@ int main(int argc, char** argv) {
   AddImportCommand(app, &action);
   AddInfoCommand(app, &action);
   AddRenderCommand(app, &action);
+  AddDecomposeCommand(app, &action);
   AddEvalCommand(app, &action);
   AddBenchCommand(app, &action);
   try {

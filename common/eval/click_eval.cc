@@ -142,8 +142,29 @@ absl::StatusOr<ClickEvaluation> EvaluateClicks(const Scene& scene, const Gaussia
     eval.objects.push_back(s);
   }
   eval.miou = eval.objects.empty() ? 0.0 : total / static_cast<double>(eval.objects.size());
-  eval.instances = MatchInstances(result.labels, gt_ids);
-  eval.adjusted_rand_index = AdjustedRandIndex(result.labels, gt_ids);
+  // 3D metrics over the observed Gaussians.
+  std::vector<uint8_t> observed(cloud.size(), 0);
+  RenderOptions trace_options;
+  trace_options.color = false;
+  trace_options.trace.enabled = true;
+  trace_options.trace.min_weight = options.observed_min_weight;
+  trace_options.num_threads = options.num_threads;
+  RasterWorkspace workspace;
+  trace_options.workspace = &workspace;
+  RenderResult traced;
+  for (const SceneView& v : scene.views) {
+    RETURN_IF_ERROR(RenderInto(cloud, v.camera, trace_options, &traced));
+    for (const Contribution& c : traced.trace.entries) observed[c.gaussian] = 1;
+  }
+  std::vector<uint32_t> pred_observed, gt_observed;
+  for (size_t g = 0; g < cloud.size(); ++g) {
+    if (!observed[g]) continue;
+    pred_observed.push_back(result.labels[g]);
+    gt_observed.push_back(gt_ids[g]);
+  }
+  eval.observed_gaussians = pred_observed.size();
+  eval.instances = MatchInstances(pred_observed, gt_observed);
+  eval.adjusted_rand_index = AdjustedRandIndex(pred_observed, gt_observed);
   return eval;
 }
 

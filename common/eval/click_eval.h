@@ -26,6 +26,7 @@ struct ClickEvalOptions {
   float min_alpha = 0.5f;          // pixels below this opacity are never selected
   int min_visible_pixels = 20;     // an object counts as visible in a view from this GT area on
   bool use_features = true;        // use the result's features when it has them
+  float observed_min_weight = 0.1f;  // 3D metrics count Gaussians with w above this in some view
   int num_threads = 0;
 };
 
@@ -42,8 +43,12 @@ struct ClickEvaluation {
   double miou = 0;                      // mean over objects
   bool used_features = false;
   std::vector<ObjectClickScore> objects;
+  // 3D metrics are computed over the *observed* Gaussians only: those whose blending weight exceeds
+  // observed_min_weight in at least one view. A Gaussian no view shows (the back of an object at
+  // a wall, the inside of a cup's base) cannot be segmented from 2D masks by any method.
   InstanceMatch instances;              // 3D, per-Gaussian labels vs ground truth
-  double adjusted_rand_index = 0;       // over all Gaussians (stuff = one cluster)
+  double adjusted_rand_index = 0;       // over observed Gaussians (stuff = one cluster)
+  size_t observed_gaussians = 0;
 };
 
 // gt_masks[v] is the GT instance map of view v; gt_ids the per-Gaussian GT ids; names[id] optional.

@@ -1,0 +1,134 @@
+#include "services/decomposition/decompose.h"
+
+#include <filesystem>
+
+#include <nlohmann/json.hpp>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/core/timer.h"
+#include "common/eval/result.h"
+#include "common/splat/ply.h"
+
+namespace instascene::decomposition {
+
+std::vector<uint32_t> DecompositionResult::Labels() const {
+  std::vector<uint32_t> labels(trackers.num_gaussians, 0);
+  for (size_t k = 0; k < instances.size(); ++k) {
+    for (uint32_t g : instances[k].gaussians) labels[g] = static_cast<uint32_t>(k + 1);
+  }
+  return labels;
+}
+
+absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const GaussianCloud& cloud,
+                                              const DecompositionOptions& options, const ProgressFn& progress) {
+  RETURN_IF_ERROR(options.Validate());
+  std::vector<PinholeCamera> cameras;
+  for (const SceneView& v : scene.views) {
+    if (v.mask.empty()) return absl::FailedPreconditionError(absl::StrCat("view '", v.name, "' has no mask"));
+    cameras.push_back(v.camera);
+  }
+  DecompositionResult result;
+  Stopwatch watch;
+  MaskLoader loader = [&scene](int v) -> absl::StatusOr<std::vector<uint32_t>> {
+    ASSIGN_OR_RETURN(LabelMap mask, ReadViewMask(scene, v));
+    return std::vector<uint32_t>(mask.labels.begin(), mask.labels.end());
+  };
+  auto track_progress = [&](int done, int total) {
+    if (progress) progress("tracking", done, total);
+  };
+  ASSIGN_OR_RETURN(result.trackers, BuildTrackers(cloud, cameras, loader, options, track_progress));
+  result.tracking_seconds = watch.ElapsedSeconds();
+  watch.Restart();
+  result.judgement = JudgeTrackers(result.trackers, options);
+  UndoUndersegmented(result.trackers, &result.judgement);
+  if (progress) progress("clustering", 0, 1);
+  const std::vector<MaskNode> nodes = ClusterMasks(result.trackers, result.judgement, options, &result.schedule);
+  if (progress) progress("clustering", 1, 1);
+  result.clustering_seconds = watch.ElapsedSeconds();
+  watch.Restart();
+  result.instances = BuildInstances(result.trackers, nodes, cloud, options);
+  result.undersegmented = RemedyUndersegmented(result.trackers, result.judgement, options, &result.instances);
+  result.post_seconds = watch.ElapsedSeconds();
+  if (progress) progress("post-processing", 1, 1);
+  return result;
+}
+
+absl::Status WriteDecomposition(const std::string& directory, const Scene& scene, const GaussianCloud& cloud,
+                                const DecompositionResult& result) {
+  namespace fs = std::filesystem;
+  const fs::path dir(directory);
+  std::error_code ec;
+  for (const char* sub : {"masks_filtered", "masks_sorted"}) {
+    fs::create_directories(dir / sub, ec);
+    if (ec) return absl::UnavailableError(absl::StrCat((dir / sub).string(), ": cannot create: ", ec.message()));
+  }
+  const TrackerSet& set = result.trackers;
+  // Evaluation result (one label per Gaussian).
+  SegmentationResult labels;
+  labels.stage = "decompose";
+  labels.labels = result.Labels();
+  RETURN_IF_ERROR(WriteResult(directory, labels, cloud));
+  // Full 3D masks, overlaps included.
+  PlyColumns membership;
+  membership.names = {"instance", "gaussian"};
+  membership.types = {ScalarType::kUint32, ScalarType::kUint32};
+  membership.columns.resize(2);
+  for (size_t k = 0; k < result.instances.size(); ++k) {
+    for (uint32_t g : result.instances[k].gaussians) {
+      membership.columns[0].push_back(static_cast<float>(k + 1));
+      membership.columns[1].push_back(static_cast<float>(g));
+    }
+  }
+  membership.count = static_cast<int64_t>(membership.columns[0].size());
+  RETURN_IF_ERROR(WriteFileAtomically((dir / "instances.ply").string(), EncodePlyBinary("membership", membership)));
+  // 2D clusters, under-segmented masks, per-view maps.
+  nlohmann::json instances = nlohmann::json::array();
+  std::vector<std::vector<std::pair<uint32_t, uint32_t>>> sorted_by_view(scene.views.size());  // (mask id, instance)
+  for (size_t k = 0; k < result.instances.size(); ++k) {
+    const Instance& inst = result.instances[k];
+    nlohmann::json masks = nlohmann::json::array();
+    for (size_t i = 0; i < inst.masks.size(); ++i) {
+      const Tracker& t = set.trackers[inst.masks[i]];
+      masks.push_back({{"view", scene.views[t.view].name}, {"mask", t.mask_id}, {"coverage", inst.coverage[i]}});
+      sorted_by_view[t.view].emplace_back(t.mask_id, static_cast<uint32_t>(k + 1));
+    }
+    instances.push_back({{"id", k + 1}, {"gaussians", inst.gaussians.size()}, {"masks", masks}});
+  }
+  nlohmann::json under = nlohmann::json::array();
+  std::vector<std::vector<uint32_t>> under_by_view(scene.views.size());
+  for (uint32_t u : result.undersegmented) {
+    const Tracker& t = set.trackers[u];
+    under.push_back({{"view", scene.views[t.view].name}, {"mask", t.mask_id}});
+    under_by_view[t.view].push_back(t.mask_id);
+  }
+  nlohmann::json summary = {{"format", "instascene.decomposition/1"}, {"instances", instances},
+                            {"undersegmented", under}, {"trackers", set.trackers.size()},
+                            {"observer_schedule", result.schedule},
+                            {"seconds", {{"tracking", result.tracking_seconds}, {"clustering", result.clustering_seconds},
+                                         {"post_processing", result.post_seconds}}}};
+  RETURN_IF_ERROR(WriteFileAtomically((dir / "decomposition.json").string(), summary.dump(1)));
+  for (size_t v = 0; v < scene.views.size(); ++v) {
+    ASSIGN_OR_RETURN(LabelMap mask, ReadViewMask(scene, static_cast<int>(v)));
+    // Per-view lookup tables over the 16-bit mask ids.
+    std::vector<uint16_t> instance_of(65536, 0);
+    std::vector<uint8_t> removed(65536, 0);
+    for (const auto& [mask_id, instance] : sorted_by_view[v]) {  // later instances win
+      if (mask_id < 65536) instance_of[mask_id] = static_cast<uint16_t>(std::min<uint32_t>(instance, 65535));
+    }
+    for (uint32_t mask_id : under_by_view[v]) {
+      if (mask_id < 65536) removed[mask_id] = 1;
+    }
+    LabelMap filtered = mask, sorted{mask.width, mask.height, std::vector<uint16_t>(mask.labels.size(), 0)};
+    for (size_t p = 0; p < mask.labels.size(); ++p) {
+      if (removed[mask.labels[p]]) filtered.labels[p] = 0;
+      sorted.labels[p] = instance_of[mask.labels[p]];
+    }
+    const std::string name = scene.views[v].name + ".png";
+    RETURN_IF_ERROR(WriteLabelMap((dir / "masks_filtered" / name).string(), filtered));
+    RETURN_IF_ERROR(WriteLabelMap((dir / "masks_sorted" / name).string(), sorted));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace instascene::decomposition

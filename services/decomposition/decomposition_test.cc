@@ -1,0 +1,164 @@
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <random>
+
+#include "common/eval/click_eval.h"
+#include "common/synth/scene_writer.h"
+#include "services/decomposition/decompose.h"
+#include "services/decomposition/mask_graph.h"
+#include "services/decomposition/post_process.h"
+
+namespace instascene::decomposition {
+namespace {
+
+// A hand-built tracker set: masks given as (view, mask id, Gaussian range [lo, hi)).
+struct HandMask {
+  int view;
+  uint32_t id;
+  uint32_t lo, hi;
+};
+
+TrackerSet MakeSet(int num_views, uint32_t num_gaussians, const std::vector<HandMask>& masks) {
+  TrackerSet set;
+  set.num_views = num_views;
+  set.num_gaussians = num_gaussians;
+  set.view_trackers.resize(num_views);
+  std::vector<std::vector<uint16_t>> frames(num_gaussians);
+  std::vector<std::vector<uint32_t>> owner(num_gaussians);
+  for (const HandMask& m : masks) {
+    Tracker t{m.view, m.id, {}};
+    for (uint32_t g = m.lo; g < m.hi; ++g) t.gaussians.push_back(g);
+    const uint32_t index = static_cast<uint32_t>(set.trackers.size());
+    set.view_trackers[m.view].push_back(index);
+    set.trackers.push_back(t);
+  }
+  // Every Gaussian is traced in every view; it belongs to the masks that list it.
+  for (uint32_t g = 0; g < num_gaussians; ++g) {
+    for (int v = 0; v < num_views; ++v) frames[g].push_back(static_cast<uint16_t>(v));
+  }
+  for (uint32_t t = 0; t < set.trackers.size(); ++t) {
+    for (uint32_t g : set.trackers[t].gaussians) owner[g].push_back(t);
+  }
+  set.frame_offsets.push_back(0);
+  set.mask_offsets.push_back(0);
+  for (uint32_t g = 0; g < num_gaussians; ++g) {
+    set.frames.insert(set.frames.end(), frames[g].begin(), frames[g].end());
+    set.masks.insert(set.masks.end(), owner[g].begin(), owner[g].end());
+    set.frame_offsets.push_back(set.frames.size());
+    set.mask_offsets.push_back(set.masks.size());
+  }
+  return set;
+}
+
+TEST(MaskGraph, TwoViewsOfOneObjectMerge) {
+  const TrackerSet set = MakeSet(2, 100, {{0, 1, 0, 100}, {1, 1, 0, 100}});
+  MaskJudgement j = JudgeTrackers(set, DecompositionOptions{});
+  EXPECT_FALSE(j.undersegmented[0]);
+  EXPECT_FALSE(j.undersegmented[1]);
+  EXPECT_EQ(j.contained[0], (std::vector<uint32_t>{0, 1}));
+  UndoUndersegmented(set, &j);
+  const std::vector<MaskNode> nodes = ClusterMasks(set, j, DecompositionOptions{});
+  ASSERT_EQ(nodes.size(), 1u);
+  EXPECT_EQ(nodes[0].masks.size(), 2u);
+}
+
+TEST(MaskGraph, TouchingObjectsMergedInOneViewAreUndersegmentedAndStaySeparate) {
+  // A = Gaussians 0..99, B = 100..199. Views 0 and 1 separate them; view 2 has one mask over both.
+  const TrackerSet set = MakeSet(3, 200, {{0, 1, 0, 100}, {0, 2, 100, 200}, {1, 1, 0, 100}, {1, 2, 100, 200},
+                                          {2, 1, 0, 200}});
+  MaskJudgement j = JudgeTrackers(set, DecompositionOptions{});
+  EXPECT_TRUE(j.undersegmented[4]);
+  for (int t = 0; t < 4; ++t) EXPECT_FALSE(j.undersegmented[t]) << t;
+  EXPECT_TRUE(j.visible[0].Test(2));  // A is contained in the merged mask before the undo
+  UndoUndersegmented(set, &j);
+  EXPECT_FALSE(j.visible[0].Test(2));
+  const std::vector<MaskNode> nodes = ClusterMasks(set, j, DecompositionOptions{});
+  ASSERT_EQ(nodes.size(), 2u);
+  EXPECT_EQ(nodes[0].masks, (std::vector<uint32_t>{0, 2}));
+  EXPECT_EQ(nodes[1].masks, (std::vector<uint32_t>{1, 3}));
+}
+
+TEST(MaskGraph, ObserverScheduleFollowsNumpyPercentiles) {
+  // Three trackers visible in {0,1,2}, {0,1}, {3}: the non-zero entries of V V^T (both triangles and
+  // the diagonal) are 1, 2, 2, 2, 3 -> numpy percentiles 95, 90, ..., 5 by linear interpolation;
+  // the 0th percentile is 1 (<= 1 below the median): the schedule stops there.
+  MaskJudgement j;
+  j.visible.assign(3, ViewSet(4));
+  for (int v : {0, 1, 2}) j.visible[0].Set(v);
+  for (int v : {0, 1}) j.visible[1].Set(v);
+  j.visible[2].Set(3);
+  const std::vector<double> schedule = ObserverSchedule(j, {0, 1, 2});
+  ASSERT_EQ(schedule.size(), 19u);
+  EXPECT_NEAR(schedule[0], 2.8, 1e-12);  // numpy.percentile([1, 2, 2, 2, 3], 95)
+  EXPECT_NEAR(schedule[1], 2.6, 1e-12);  // 90th
+  EXPECT_NEAR(schedule[10], 2.0, 1e-12);  // 45th
+  EXPECT_NEAR(schedule.back(), 1.2, 1e-12);  // 5th
+}
+
+TEST(PostProcess, DbscanSplitsClustersAndDropsFloaters) {
+  std::mt19937 rng(3);
+  std::normal_distribution<float> n(0.0f, 0.01f);
+  std::vector<Eigen::Vector3f> points;
+  for (int i = 0; i < 60; ++i) points.emplace_back(n(rng), n(rng), n(rng));
+  for (int i = 0; i < 60; ++i) points.emplace_back(1.0f + n(rng), n(rng), n(rng));
+  points.emplace_back(0.5f, 0.5f, 0.5f);  // floaters
+  points.emplace_back(-0.7f, 0.2f, 0.0f);
+  const std::vector<int> label = Dbscan(points, 0.05f, 4);
+  for (int i = 1; i < 60; ++i) EXPECT_EQ(label[i], label[0]);
+  for (int i = 61; i < 120; ++i) EXPECT_EQ(label[i], label[60]);
+  EXPECT_NE(label[0], label[60]);
+  EXPECT_GE(label[0], 0);
+  EXPECT_EQ(label[120], -1);
+  EXPECT_EQ(label[121], -1);
+}
+
+// End to end on small synthetic scenes; returns the evaluation of the decomposition.
+ClickEvaluation DecomposeSynthetic(const std::string& noise, uint64_t seed) {
+  const std::string dir = ::testing::TempDir() + "/decomp_" + noise + std::to_string(seed);
+  std::filesystem::remove_all(dir);
+  ClutterOptions scene_options = *ClutterPreset("small");
+  scene_options.seed = seed;
+  absl::StatusOr<ClutterScene> scene = GenerateClutterScene(scene_options);
+  EXPECT_TRUE(scene.ok());
+  SceneWriteOptions write;
+  write.mask_noise = noise;
+  write.seed = seed;
+  EXPECT_TRUE(WriteClutterScene(*scene, dir, write).ok());
+  absl::StatusOr<Scene> read = ReadScene(dir);
+  EXPECT_TRUE(read.ok());
+  absl::StatusOr<DecompositionResult> result = Decompose(*read, scene->cloud, DecompositionOptions{});
+  EXPECT_TRUE(result.ok()) << result.status();
+  EXPECT_TRUE(WriteDecomposition(dir + "/decomposition", *read, scene->cloud, *result).ok());
+  absl::StatusOr<ClickEvaluation> eval = EvaluateResultDirectory(dir, dir + "/decomposition", ClickEvalOptions{});
+  EXPECT_TRUE(eval.ok()) << eval.status();
+  return *eval;
+}
+
+// Every object visible (>= 20 GT pixels) in at least `min_views` views is recovered: some
+// instance overlaps its observed Gaussians with IoU > 0.5.
+void ExpectWellSeenObjectsRecovered(const ClickEvaluation& eval, int min_views) {
+  int checked = 0;
+  for (const ObjectClickScore& o : eval.objects) {
+    if (o.views < min_views) continue;
+    ++checked;
+    EXPECT_GT(eval.instances.best_iou.at(o.id), 0.5) << o.name << " seen in " << o.views << " views";
+  }
+  EXPECT_GE(checked, 5);
+}
+
+TEST(Decompose, RecoversEveryWellSeenObjectWithoutNoise) {
+  for (uint64_t seed : {1, 2}) {
+    const ClickEvaluation eval = DecomposeSynthetic("none", seed);
+    ExpectWellSeenObjectsRecovered(eval, 6);
+    EXPECT_GT(eval.miou, 0.7);
+    EXPECT_DOUBLE_EQ(eval.instances.precision, 1.0);
+  }
+}
+
+TEST(Decompose, RecoversEveryWellSeenObjectAtLowNoise) {
+  for (uint64_t seed : {1, 2}) ExpectWellSeenObjectsRecovered(DecomposeSynthetic("low", seed), 6);
+}
+
+}  // namespace
+}  // namespace instascene::decomposition

@@ -1,0 +1,194 @@
+#include "services/decomposition/post_process.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <deque>
+
+#include "common/core/parallel.h"
+#include "common/geometry/point_index.h"
+
+namespace instascene::decomposition {
+namespace {
+
+size_t IntersectionSize(const std::vector<uint32_t>& a, const std::vector<uint32_t>& b) {
+  size_t i = 0, k = 0, n = 0;
+  while (i < a.size() && k < b.size()) {
+    if (a[i] < b[k]) {
+      ++i;
+    } else if (b[k] < a[i]) {
+      ++k;
+    } else {
+      ++n;
+      ++i;
+      ++k;
+    }
+  }
+  return n;
+}
+
+// Sub-objects of one node (4.7 steps 1-2).
+std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node, const GaussianCloud& cloud,
+                                const DecompositionOptions& options, float eps) {
+  std::vector<Instance> out;
+  if (node.masks.size() < 2) return out;
+  // The node's Gaussians: the union of its trackers.
+  std::vector<uint32_t> points;
+  for (uint32_t t : node.masks) points.insert(points.end(), set.trackers[t].gaussians.begin(), set.trackers[t].gaussians.end());
+  std::sort(points.begin(), points.end());
+  points.erase(std::unique(points.begin(), points.end()), points.end());
+  std::vector<Eigen::Vector3f> xyz(points.size());
+  for (size_t i = 0; i < points.size(); ++i) xyz[i] = Eigen::Vector3f(&cloud.positions[3 * points[i]]);
+  const std::vector<int> cluster = Dbscan(xyz, eps, options.dbscan_min_points);
+  const int num_groups = 1 + *std::max_element(cluster.begin(), cluster.end()) + 1;  // noise is group 0
+  // Detection ratio over the node's visible frames.
+  std::vector<uint16_t> appear(points.size(), 0), detected(points.size(), 0);
+  for (size_t i = 0; i < points.size(); ++i) {
+    const uint16_t* frames = nullptr;
+    const size_t count = set.FramesOf(points[i], &frames);
+    for (size_t k = 0; k < count; ++k) appear[i] += node.visible.Test(frames[k]);
+  }
+  std::vector<uint32_t> masks_by_view = node.masks;
+  std::stable_sort(masks_by_view.begin(), masks_by_view.end(),
+                   [&](uint32_t a, uint32_t b) { return set.trackers[a].view < set.trackers[b].view; });
+  std::vector<int> last_frame(points.size(), -1);
+  for (uint32_t t : masks_by_view) {
+    const Tracker& tracker = set.trackers[t];
+    if (!node.visible.Test(tracker.view)) continue;
+    size_t i = 0;
+    for (uint32_t g : tracker.gaussians) {  // both sorted: merge walk
+      while (i < points.size() && points[i] < g) ++i;
+      if (i < points.size() && points[i] == g && last_frame[i] != tracker.view) {
+        last_frame[i] = tracker.view;
+        ++detected[i];
+      }
+    }
+  }
+  for (int group = 0; group < num_groups; ++group) {
+    Instance sub;
+    for (size_t i = 0; i < points.size(); ++i) {
+      if (cluster[i] + 1 != group) continue;
+      sub.box.extend(xyz[i]);
+      if (detected[i] / (appear[i] + 1e-6) > options.point_filter_threshold) sub.gaussians.push_back(points[i]);
+    }
+    if (sub.gaussians.empty()) continue;
+    out.push_back(std::move(sub));
+  }
+  // Each mask goes to the sub-object it overlaps most.
+  for (uint32_t t : node.masks) {
+    size_t best = 0, best_overlap = 0;
+    for (size_t s = 0; s < out.size(); ++s) {
+      const size_t overlap = IntersectionSize(set.trackers[t].gaussians, out[s].gaussians);
+      if (overlap > best_overlap) {
+        best_overlap = overlap;
+        best = s;
+      }
+    }
+    if (best_overlap == 0) continue;
+    out[best].masks.push_back(t);
+    out[best].coverage.push_back(static_cast<float>(best_overlap) / out[best].gaussians.size());
+  }
+  out.erase(std::remove_if(out.begin(), out.end(), [](const Instance& s) { return s.masks.size() < 2; }), out.end());
+  return out;
+}
+
+}  // namespace
+
+std::vector<int> Dbscan(const std::vector<Eigen::Vector3f>& points, float eps, int min_points) {
+  std::vector<int> label(points.size(), -2);  // -2 = unvisited, -1 = noise
+  if (points.empty()) return {};
+  const PointIndex3 index(points);
+  int next = 0;
+  for (size_t p = 0; p < points.size(); ++p) {
+    if (label[p] != -2) continue;
+    std::vector<uint32_t> neighbours = index.WithinRadius(points[p], eps);
+    if (static_cast<int>(neighbours.size()) < min_points) {
+      label[p] = -1;
+      continue;
+    }
+    const int cluster = next++;
+    label[p] = cluster;
+    std::deque<uint32_t> queue(neighbours.begin(), neighbours.end());
+    while (!queue.empty()) {
+      const uint32_t q = queue.front();
+      queue.pop_front();
+      if (label[q] == -1) label[q] = cluster;  // border point
+      if (label[q] != -2) continue;
+      label[q] = cluster;
+      std::vector<uint32_t> more = index.WithinRadius(points[q], eps);
+      if (static_cast<int>(more.size()) >= min_points) queue.insert(queue.end(), more.begin(), more.end());
+    }
+  }
+  return label;
+}
+
+float RobustSceneDiagonal(const GaussianCloud& cloud) {
+  if (cloud.size() == 0) return 0.0f;
+  Eigen::Vector3f lo, hi;
+  for (int a = 0; a < 3; ++a) {
+    std::vector<float> v(cloud.size());
+    for (size_t i = 0; i < cloud.size(); ++i) v[i] = cloud.positions[3 * i + a];
+    std::sort(v.begin(), v.end());
+    lo[a] = v[v.size() * 2 / 100];
+    hi[a] = v[std::min(v.size() - 1, v.size() * 98 / 100)];
+  }
+  return (hi - lo).norm();
+}
+
+std::vector<Instance> BuildInstances(const TrackerSet& set, const std::vector<MaskNode>& nodes,
+                                     const GaussianCloud& cloud, const DecompositionOptions& options) {
+  const float eps = static_cast<float>(options.dbscan_eps_relative ? options.dbscan_eps * RobustSceneDiagonal(cloud)
+                                                                   : options.dbscan_eps);
+  std::vector<std::vector<Instance>> per_node(nodes.size());
+  RunWithThreads(options.num_threads, [&] {
+    tbb::parallel_for(size_t{0}, nodes.size(), [&](size_t k) { per_node[k] = SplitNode(set, nodes[k], cloud, options, eps); });
+  });
+  std::vector<Instance> objects;
+  for (auto& list : per_node) {
+    for (Instance& s : list) objects.push_back(std::move(s));
+  }
+  // Remove contained duplicates (the dropped object's masks are not transferred).
+  std::vector<uint8_t> dropped(objects.size(), 0);
+  for (size_t a = 0; a < objects.size(); ++a) {
+    for (size_t b = a + 1; b < objects.size() && !dropped[a]; ++b) {
+      if (dropped[b] || !objects[a].box.intersects(objects[b].box)) continue;
+      const double inter = static_cast<double>(IntersectionSize(objects[a].gaussians, objects[b].gaussians));
+      if (inter / objects[a].gaussians.size() > options.overlap_ratio) {
+        dropped[a] = 1;
+      } else if (inter / objects[b].gaussians.size() > options.overlap_ratio) {
+        dropped[b] = 1;
+      }
+    }
+  }
+  std::vector<Instance> kept;
+  for (size_t a = 0; a < objects.size(); ++a) {
+    if (!dropped[a]) kept.push_back(std::move(objects[a]));
+  }
+  return kept;
+}
+
+std::vector<uint32_t> RemedyUndersegmented(const TrackerSet& set, const MaskJudgement& judgement,
+                                           const DecompositionOptions& options, std::vector<Instance>* instances) {
+  std::vector<uint32_t> remaining;
+  for (uint32_t u = 0; u < set.trackers.size(); ++u) {
+    if (!judgement.undersegmented[u]) continue;
+    const std::vector<uint32_t>& p = set.trackers[u].gaussians;
+    size_t best = 0, best_overlap = 0;
+    for (size_t k = 0; k < instances->size(); ++k) {
+      const size_t overlap = IntersectionSize((*instances)[k].gaussians, p);
+      if (overlap > best_overlap) {
+        best_overlap = overlap;
+        best = k;
+      }
+    }
+    if (best_overlap > options.remedy_ratio * p.size()) {
+      (*instances)[best].masks.push_back(u);
+      (*instances)[best].coverage.push_back(1.0f);
+    } else {
+      remaining.push_back(u);
+    }
+  }
+  return remaining;
+}
+
+}  // namespace instascene::decomposition
