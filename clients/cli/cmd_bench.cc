@@ -11,13 +11,22 @@
 #include "common/core/timer.h"
 #include "common/raster/rasterizer.h"
 #include "common/synth/cluttered_scene.h"
+#include "common/synth/scene_writer.h"
+#include "common/eval/click_eval.h"
+#include "services/decomposition/decompose.h"
+
+#include <sys/resource.h>
+
+#include <filesystem>
 
 namespace instascene::cli {
 namespace {
 
 struct BenchArgs {
   std::string what;
+  std::string preset = "medium", work;
   int64_t gaussians = 1'000'000;
+  bool gaussians_set = false, views_set = false;
   int width = 1280, height = 720, frames = 5, threads = 0, objects = 40;
   uint64_t seed = 1;
   bool json = false;
@@ -96,24 +105,80 @@ absl::Status BenchRaster(const BenchArgs& args) {
   return absl::OkStatus();
 }
 
+// Peak resident set size of this process, bytes.
+double PeakRssBytes() {
+  struct rusage usage;
+  getrusage(RUSAGE_SELF, &usage);
+  return static_cast<double>(usage.ru_maxrss) * 1024.0;
+}
+
+absl::Status BenchDecompose(const BenchArgs& args) {
+  ASSIGN_OR_RETURN(ClutterOptions options, ClutterPreset(args.preset));
+  options.seed = args.seed;
+  if (args.gaussians_set) options.gaussians = static_cast<size_t>(args.gaussians);
+  if (args.views_set) options.views = args.frames;
+  const std::string dir = args.work.empty()
+                              ? (std::filesystem::temp_directory_path() / ("instascene-bench-" + args.preset)).string()
+                              : args.work;
+  Stopwatch build;
+  ASSIGN_OR_RETURN(ClutterScene scene, GenerateClutterScene(options));
+  SceneWriteOptions write;
+  write.num_threads = args.threads;
+  RETURN_IF_ERROR(WriteClutterScene(scene, dir, write));
+  std::fprintf(stderr, "bench decompose: scene %s (%zu Gaussians, %zu views of %dx%d, medium noise) written in %.1f s\n",
+               dir.c_str(), scene.cloud.size(), scene.cameras.size(), options.width, options.height, build.ElapsedSeconds());
+  ASSIGN_OR_RETURN(Scene read, ReadScene(dir));
+  const double rss_before = PeakRssBytes();
+  decomposition::DecompositionOptions dopt;
+  dopt.num_threads = args.threads;
+  Stopwatch watch;
+  ASSIGN_OR_RETURN(decomposition::DecompositionResult result, decomposition::Decompose(read, scene.cloud, dopt));
+  const double seconds = watch.ElapsedSeconds();
+  RETURN_IF_ERROR(decomposition::WriteDecomposition(dir + "/decomposition", read, scene.cloud, result));
+  ASSIGN_OR_RETURN(ClickEvaluation eval, EvaluateResultDirectory(dir, dir + "/decomposition", ClickEvalOptions{}));
+  const double peak = PeakRssBytes();
+  std::fprintf(stderr,
+               "bench decompose: %.1f s (tracking %.1f, clustering %.2f, post-processing %.1f); %zu trackers, %zu "
+               "instances; peak RSS %.0f MB (before decomposing: %.0f MB); mIoU %.3f, 3D precision %.3f recall %.3f\n",
+               seconds, result.tracking_seconds, result.clustering_seconds, result.post_seconds,
+               result.trackers.trackers.size(), result.instances.size(), peak / 1e6, rss_before / 1e6, eval.miou,
+               eval.instances.precision, eval.instances.recall);
+  if (args.json) {
+    PrintJsonLine(nlohmann::json({{"benchmark", "decompose"}, {"preset", args.preset}, {"gaussians", scene.cloud.size()},
+                                  {"views", scene.cameras.size()}, {"seconds", seconds},
+                                  {"tracking_s", result.tracking_seconds}, {"clustering_s", result.clustering_seconds},
+                                  {"post_s", result.post_seconds}, {"trackers", result.trackers.trackers.size()},
+                                  {"instances", result.instances.size()}, {"peak_rss_mb", peak / 1e6},
+                                  {"miou", eval.miou}, {"precision_3d", eval.instances.precision},
+                                  {"recall_3d", eval.instances.recall}})
+                      .dump());
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 void AddBenchCommand(CLI::App& app, Action* action) {
   auto args = std::make_shared<BenchArgs>();
   CLI::App* cmd = app.add_subcommand("bench", "Benchmarks on synthetic scenes (medians over frames)");
-  cmd->add_option("what", args->what, "Which benchmark: raster (color+depth, and with full tracing)")
+  cmd->add_option("what", args->what, "raster (color+depth, and with tracing) or decompose (preset scene end to end)")
       ->required()
-      ->check(CLI::IsMember({"raster", "trace"}));
-  cmd->add_option("--gaussians", args->gaussians, "Scene size (default 1000000)");
+      ->check(CLI::IsMember({"raster", "trace", "decompose"}));
+  cmd->add_option("--preset", args->preset, "decompose: scene preset (default medium)");
+  cmd->add_option("--work", args->work, "decompose: where to write the generated scene (default: a temp folder)");
+  cmd->add_option_function<int64_t>("--gaussians", [args](int64_t v) { args->gaussians = v; args->gaussians_set = true; },
+                                    "Scene size (raster default 1000000; decompose: the preset's)");
   cmd->add_option("--width", args->width, "Frame width, px (default 1280)");
   cmd->add_option("--height", args->height, "Frame height, px (default 720)");
-  cmd->add_option("--frames", args->frames, "Timed frames, each from another view (default 5)")->check(CLI::Range(1, 1000));
+  cmd->add_option_function<int>("--frames", [args](int v) { args->frames = v; args->views_set = true; },
+                                "raster: timed frames, each from another view (default 5); decompose: views (preset's)")
+      ->check(CLI::Range(1, 1000));
   cmd->add_option("--objects", args->objects, "Objects in the scene (default 40)");
   cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");
   cmd->add_option("--seed", args->seed, "Scene seed");
   cmd->add_flag("--json", args->json, "Print the figures as one JSON line (last stdout line)");
   cmd->callback([args, action] {
-    *action = [args]() -> absl::Status { return BenchRaster(*args); };
+    *action = [args]() -> absl::Status { return args->what == "decompose" ? BenchDecompose(*args) : BenchRaster(*args); };
   });
 }
 
