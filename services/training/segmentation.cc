@@ -1,0 +1,95 @@
+#include "services/training/segmentation.h"
+
+#include <cmath>
+#include <filesystem>
+#include <map>
+
+#include <Eigen/Geometry>
+#include <nlohmann/json.hpp>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/splat/gaussian_ply.h"
+#include "common/splat/ply.h"
+
+namespace instascene::training {
+
+std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int dim, const std::vector<uint32_t>& coarse,
+                                        const SegmentOptions& options) {
+  const size_t n = coarse.size();
+  std::vector<double> unit(features.size());
+  for (size_t g = 0; g < n; ++g) {
+    double norm = 0;
+    for (int d = 0; d < dim; ++d) norm += double{features[g * dim + d]} * features[g * dim + d];
+    for (int d = 0; d < dim; ++d) unit[g * dim + d] = features[g * dim + d] / (std::sqrt(norm) + 1e-6);
+  }
+  std::map<uint32_t, std::vector<double>> mean;
+  std::map<uint32_t, double> count;
+  for (size_t g = 0; g < n; ++g) {
+    if (coarse[g] == 0) continue;
+    std::vector<double>& m = mean[coarse[g]];
+    m.resize(dim, 0.0);
+    for (int d = 0; d < dim; ++d) m[d] += unit[g * dim + d];
+    count[coarse[g]] += 1;
+  }
+  for (auto& [id, m] : mean) {
+    for (double& v : m) v /= count[id];
+  }
+  std::vector<uint32_t> labels(n, 0);
+  std::map<uint32_t, size_t> selected;
+  for (size_t g = 0; g < n; ++g) {
+    double best = -1e30;
+    uint32_t best_id = 0;
+    for (const auto& [id, m] : mean) {
+      double dot = 0;
+      for (int d = 0; d < dim; ++d) dot += m[d] * unit[g * dim + d];
+      if (dot > best) {
+        best = dot;
+        best_id = id;
+      }
+    }
+    if (best >= options.threshold) {
+      labels[g] = best_id;
+      ++selected[best_id];
+    }
+  }
+  for (size_t g = 0; g < n; ++g) {  // instances that select nothing keep their coarse mask
+    if (coarse[g] != 0 && selected[coarse[g]] == 0 && labels[g] == 0) labels[g] = coarse[g];
+  }
+  return labels;
+}
+
+absl::Status ExportInstances(const std::string& directory, const GaussianCloud& cloud, const std::vector<uint32_t>& labels) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  fs::create_directories(fs::path(directory) / "instances", ec);
+  if (ec) return absl::UnavailableError(absl::StrCat(directory, ": cannot create: ", ec.message()));
+  std::map<uint32_t, std::vector<uint32_t>> members;
+  for (uint32_t g = 0; g < labels.size(); ++g) {
+    if (labels[g] != 0) members[labels[g]].push_back(g);
+  }
+  nlohmann::json manifest = nlohmann::json::array();
+  for (const auto& [id, indices] : members) {
+    const GaussianCloud instance = cloud.Subset(indices);
+    const std::string file = absl::StrCat("instances/", id, ".ply");
+    RETURN_IF_ERROR(WriteGaussianPly((fs::path(directory) / file).string(), instance));
+    Eigen::AlignedBox3f box;
+    Eigen::Vector3d centroid = Eigen::Vector3d::Zero();
+    for (uint32_t g : indices) {
+      const Eigen::Vector3f p(&cloud.positions[3 * g]);
+      box.extend(p);
+      centroid += p.cast<double>();
+    }
+    centroid /= static_cast<double>(indices.size());
+    manifest.push_back({{"id", id}, {"gaussians", indices.size()}, {"ply", file},
+                        {"bounds_min", {box.min().x(), box.min().y(), box.min().z()}},
+                        {"bounds_max", {box.max().x(), box.max().y(), box.max().z()}},
+                        {"centroid", {centroid.x(), centroid.y(), centroid.z()}}});
+  }
+  GaussianCloud labelled = cloud;
+  labelled.SetExtra("instance_id", ScalarType::kUint32, std::vector<float>(labels.begin(), labels.end()));
+  RETURN_IF_ERROR(WriteGaussianPly((fs::path(directory) / "scene_labelled.ply").string(), labelled));
+  return WriteFileAtomically((fs::path(directory) / "instances.json").string(), manifest.dump(1));
+}
+
+}  // namespace instascene::training

@@ -1,0 +1,30 @@
+// services/training/segmentation.h: from trained features to instances (ALGORITHM.md 5.5):
+// per coarse 3D instance the mean of its Gaussians' normalised features (not re-normalised), every
+// Gaussian assigned to the instance whose mean it matches best if the dot product reaches tau = 0.9
+// (else background), instances that select nothing keep their coarse Gaussians; export of
+// full-attribute per-instance PLY files, a labelled scene PLY and a manifest.
+// Pure functions / file writers; thread-safe.
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "common/splat/gaussian_cloud.h"
+
+namespace instascene::training {
+
+struct SegmentOptions {
+  double threshold = 0.9;  // paper tau_seg, against the un-normalised mean
+};
+
+// labels: per Gaussian, the coarse instance id (0 = none) used to define the instances; returns
+// the final per-Gaussian labels with the same ids.
+std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int dim, const std::vector<uint32_t>& coarse,
+                                        const SegmentOptions& options);
+
+// instances/<id>.ply (every original property), scene_labelled.ply (+ instance_id), instances.json.
+absl::Status ExportInstances(const std::string& directory, const GaussianCloud& cloud, const std::vector<uint32_t>& labels);
+
+}  // namespace instascene::training

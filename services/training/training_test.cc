@@ -1,0 +1,162 @@
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <random>
+
+#include "common/eval/click_eval.h"
+#include "common/synth/scene_writer.h"
+#include "services/decomposition/decompose.h"
+#include "services/training/contrastive_loss.h"
+#include "services/training/feature_field.h"
+#include "services/training/segmentation.h"
+
+namespace instascene::training {
+namespace {
+
+// Features in tight clusters around class directions: every temperature clips to 0.5, so the
+// detached temperature has zero derivative and finite differences see exactly the analytic maths.
+std::vector<float> ClusteredFeatures(const std::vector<uint32_t>& cls, int dim, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::normal_distribution<float> noise(0.0f, 0.01f);
+  std::vector<float> x(cls.size() * dim);
+  for (size_t j = 0; j < cls.size(); ++j) {
+    for (int d = 0; d < dim; ++d) x[j * dim + d] = (d == static_cast<int>(cls[j] % dim) ? 1.5f : 0.1f) + noise(rng);
+  }
+  return x;
+}
+
+TEST(ContrastiveLoss, GradientMatchesFiniteDifferences) {
+  const int dim = 5;
+  const std::vector<uint32_t> labels = {1, 1, 2, 2, 2, 3, 0, 3};
+  for (bool negatives : {false, true}) {
+    std::vector<float> x = ClusteredFeatures(labels, dim, 3);
+    ContrastiveLossOptions options;
+    options.consider_negative = negatives;
+    options.detach_norm = false;
+    std::vector<double> grad, unused;
+    ContrastiveLoss(x, dim, labels, options, &grad);
+    for (size_t i = 0; i < x.size(); ++i) {
+      const float h = 1e-3f;
+      std::vector<float> plus = x, minus = x;
+      plus[i] += h;
+      minus[i] -= h;
+      const double fd = (ContrastiveLoss(plus, dim, labels, options, &unused) -
+                         ContrastiveLoss(minus, dim, labels, options, &unused)) / (plus[i] - minus[i]);
+      EXPECT_NEAR(grad[i], fd, 2e-3 * std::max(1.0, std::abs(fd))) << i << " negatives " << negatives;
+    }
+  }
+}
+
+TEST(ContrastiveLoss, SeparatedClassesScoreLowerThanMixedOnes) {
+  const std::vector<uint32_t> labels = {1, 1, 1, 2, 2, 2};
+  std::vector<double> grad;
+  const double separated = ContrastiveLoss(ClusteredFeatures(labels, 4, 1), 4, labels, {}, &grad);
+  std::vector<float> mixed = ClusteredFeatures({1, 2, 1, 2, 1, 2}, 4, 1);
+  const double confused = ContrastiveLoss(mixed, 4, labels, {}, &grad);
+  EXPECT_LT(separated, confused);
+  EXPECT_EQ(ContrastiveLoss(mixed, 4, {1, 1, 1, 1, 1, 1}, {}, &grad), 0.0);  // one class: no contrast
+}
+
+// Hand-built training data: 2 views of 40 pool pixels, each rendered by 1-3 Gaussians of one class.
+TrainingData HandData(int dim, std::vector<float>* features) {
+  std::mt19937 rng(5);
+  TrainingData data;
+  data.num_gaussians = 30;
+  data.labels3d.resize(30);
+  std::vector<uint32_t> cls(30);
+  for (uint32_t g = 0; g < 30; ++g) cls[g] = data.labels3d[g] = 1 + g % 3;
+  *features = ClusteredFeatures(cls, dim, 9);
+  for (int v = 0; v < 2; ++v) {
+    ViewData view;
+    view.offsets.push_back(0);
+    for (int p = 0; p < 40; ++p) {
+      const uint32_t c = 1 + rng() % 3;
+      const int k = 1 + static_cast<int>(rng() % 3);
+      for (int e = 0; e < k; ++e) {
+        view.gaussians.push_back(c - 1 + 3 * static_cast<uint32_t>(rng() % 10));
+        view.weights.push_back(0.2f + 0.25f * static_cast<float>(rng() % 3));
+      }
+      view.offsets.push_back(view.gaussians.size());
+      view.raw_label.push_back(c);
+      view.filtered_label.push_back(c);
+      view.sorted_label.push_back(c);
+    }
+    for (uint32_t g = 0; g < 30; ++g) view.visible_labelled.push_back(g);
+    data.views.push_back(view);
+  }
+  return data;
+}
+
+TEST(FeatureField, GradientOfAllTermsMatchesFiniteDifferences) {
+  const int dim = 4;
+  std::vector<float> features;
+  const TrainingData data = HandData(dim, &features);
+  TrainingOptions options;
+  options.feature_dim = dim;
+  options.samples = 64;
+  options.consider_negative = false;
+  options.detach_sample_norm = false;
+  options.lambda_single = options.lambda_multi = options.lambda_3d = 1.0;  // unit weights for the check
+  std::vector<double> grad, unused;
+  LossAndGradient(data, options, features, 1, true, 42, &grad);
+  for (size_t i = 0; i < features.size(); i += 3) {
+    const float h = 1e-3f;
+    std::vector<float> plus = features, minus = features;
+    plus[i] += h;
+    minus[i] -= h;
+    const double fd = (LossAndGradient(data, options, plus, 1, true, 42, &unused) -
+                       LossAndGradient(data, options, minus, 1, true, 42, &unused)) / (plus[i] - minus[i]);
+    EXPECT_NEAR(grad[i], fd, 3e-3 * std::max(1.0, std::abs(fd))) << "feature entry " << i;
+  }
+}
+
+TEST(Segmentation, AssignsByMeanFeatureWithThreshold) {
+  // Two coarse instances and one unlabelled Gaussian whose feature matches instance 2.
+  const std::vector<float> f = {1, 0, 1, 0.05f, 0, 1, 0.02f, 1, 0, 1, 0.7f, 0.7f};
+  const std::vector<uint32_t> coarse = {1, 1, 2, 0, 2, 0};
+  const std::vector<uint32_t> labels = SegmentByFeatures(f, 2, coarse, SegmentOptions{});
+  EXPECT_EQ(labels, (std::vector<uint32_t>{1, 1, 2, 2, 2, 0}));  // (0.7, 0.7) is below 0.9 for both
+}
+
+TEST(FeatureField, TrainingOnASyntheticSceneSeparatesInstances) {
+  const std::string dir = ::testing::TempDir() + "/training_scene";
+  std::filesystem::remove_all(dir);
+  absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("small"));
+  ASSERT_TRUE(scene.ok());
+  SceneWriteOptions write;
+  write.mask_noise = "medium";
+  ASSERT_TRUE(WriteClutterScene(*scene, dir, write).ok());
+  absl::StatusOr<Scene> read = ReadScene(dir);
+  ASSERT_TRUE(read.ok());
+  absl::StatusOr<decomposition::DecompositionResult> coarse =
+      decomposition::Decompose(*read, scene->cloud, decomposition::DecompositionOptions{});
+  ASSERT_TRUE(coarse.ok());
+  ASSERT_TRUE(decomposition::WriteDecomposition(dir + "/decomposition", *read, scene->cloud, *coarse).ok());
+  TrainingOptions options;
+  options.iterations = 300;
+  options.samples = 2048;
+  options.pixel_pool = 4096;
+  absl::StatusOr<TrainingData> data = PrepareTraining(*read, scene->cloud, dir + "/decomposition", options);
+  ASSERT_TRUE(data.ok()) << data.status();
+  absl::StatusOr<TrainingResult> trained = TrainFeatures(*data, options);
+  ASSERT_TRUE(trained.ok()) << trained.status();
+  double first = 0, last = 0;
+  for (int i = 0; i < 20; ++i) {
+    first += trained->loss[i];
+    last += trained->loss[trained->loss.size() - 1 - i];
+  }
+  EXPECT_LT(last, 0.5 * first);  // the loss falls
+  SegmentationResult result;
+  result.stage = "train";
+  result.labels = SegmentByFeatures(trained->features, options.feature_dim, data->labels3d, SegmentOptions{});
+  result.features = trained->features;
+  result.feature_dim = options.feature_dim;
+  ASSERT_TRUE(WriteResult(dir + "/trained", result, scene->cloud).ok());
+  absl::StatusOr<ClickEvaluation> features = EvaluateResultDirectory(dir, dir + "/trained", ClickEvalOptions{});
+  absl::StatusOr<ClickEvaluation> labels = EvaluateResultDirectory(dir, dir + "/decomposition", ClickEvalOptions{});
+  ASSERT_TRUE(features.ok() && labels.ok());
+  EXPECT_GT(features->miou, 0.6) << "feature click mIoU; decomposition labels give " << labels->miou;
+}
+
+}  // namespace
+}  // namespace instascene::training
