@@ -34,6 +34,15 @@ check "render by index" "$BIN" render --scene "$WORK/s" --view 5 --out "$WORK/v5
 check "eval ground truth" "$BIN" eval --scene "$WORK/s" --result "$WORK/s/gt" --json
 check "eval gt scores 1" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"miou\":1.0'"
 check_fails "eval without result" "no such file" "$BIN" eval --scene "$WORK/s" --result "$WORK/nothing"
+check "run (decompose + train + segment)" "$BIN" run --scene "$WORK/s" --out "$WORK/run" --iterations 60 --samples 512 --pixel-pool 1024 --json
+check "run wrote instances" test -s "$WORK/run/segmentation/instances.json"
+check "run wrote labelled scene" test -s "$WORK/run/segmentation/scene_labelled.ply"
+check "eval trained features" "$BIN" eval --scene "$WORK/s" --result "$WORK/run/segmentation" --json
+check "eval used features" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"mode\":\"features\"'"
+check "segment again" "$BIN" segment --scene "$WORK/s" --features "$WORK/run/segmentation" --out "$WORK/seg2" --threshold 0.8
+check "train on the decomposition" "$BIN" train --scene "$WORK/s" --decomposition "$WORK/run/decomposition" --out "$WORK/tr" --iterations 30 --samples 256 --pixel-pool 512 --supervision 3d
+check_fails "bad supervision" "supervision" "$BIN" train --scene "$WORK/s" --decomposition "$WORK/run/decomposition" --out "$WORK/tr" --supervision bogus
+check_fails "segment without features" "no features" "$BIN" segment --scene "$WORK/s" --features "$WORK/s/gt" --out "$WORK/seg3"
 check "help" "$BIN" --help
 check "render help" "$BIN" render --help
 check_fails "missing scene" "no such file" "$BIN" info --scene "$WORK/nope"

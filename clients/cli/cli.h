@@ -22,6 +22,7 @@ void AddImportCommand(CLI::App& app, Action* action);
 void AddSynthCommand(CLI::App& app, Action* action);
 void AddEvalCommand(CLI::App& app, Action* action);
 void AddDecomposeCommand(CLI::App& app, Action* action);
+void AddTrainCommands(CLI::App& app, Action* action);  // train, segment, run
 
 // Prints one JSON object as the last stdout line (the --json contract).
 void PrintJsonLine(const std::string& json);

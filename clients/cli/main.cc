@@ -24,6 +24,7 @@ int main(int argc, char** argv) {
   AddInfoCommand(app, &action);
   AddRenderCommand(app, &action);
   AddDecomposeCommand(app, &action);
+  AddTrainCommands(app, &action);
   AddEvalCommand(app, &action);
   AddBenchCommand(app, &action);
   try {
