@@ -43,6 +43,9 @@ check "segment again" "$BIN" segment --scene "$WORK/s" --features "$WORK/run/seg
 check "train on the decomposition" "$BIN" train --scene "$WORK/s" --decomposition "$WORK/run/decomposition" --out "$WORK/tr" --iterations 30 --samples 256 --pixel-pool 512 --supervision 3d
 check_fails "bad supervision" "supervision" "$BIN" train --scene "$WORK/s" --decomposition "$WORK/run/decomposition" --out "$WORK/tr" --supervision bogus
 check_fails "segment without features" "no features" "$BIN" segment --scene "$WORK/s" --features "$WORK/s/gt" --out "$WORK/seg3"
+check "query a pixel" "$BIN" query --scene "$WORK/s" --result "$WORK/run/segmentation" --view 3 --pixel 40,40 --out "$WORK/q" --json
+check "query a point" "$BIN" query --scene "$WORK/s" --result "$WORK/s/gt" --point 0,0,0.8 --json
+check_fails "query outside the image" "outside" "$BIN" query --scene "$WORK/s" --result "$WORK/s/gt" --view 3 --pixel 4000,1
 check "help" "$BIN" --help
 check "render help" "$BIN" render --help
 check_fails "missing scene" "no such file" "$BIN" info --scene "$WORK/nope"

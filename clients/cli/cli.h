@@ -23,6 +23,7 @@ void AddSynthCommand(CLI::App& app, Action* action);
 void AddEvalCommand(CLI::App& app, Action* action);
 void AddDecomposeCommand(CLI::App& app, Action* action);
 void AddTrainCommands(CLI::App& app, Action* action);  // train, segment, run
+void AddQueryCommand(CLI::App& app, Action* action);
 
 // Prints one JSON object as the last stdout line (the --json contract).
 void PrintJsonLine(const std::string& json);

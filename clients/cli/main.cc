@@ -25,6 +25,7 @@ int main(int argc, char** argv) {
   AddRenderCommand(app, &action);
   AddDecomposeCommand(app, &action);
   AddTrainCommands(app, &action);
+  AddQueryCommand(app, &action);
   AddEvalCommand(app, &action);
   AddBenchCommand(app, &action);
   try {

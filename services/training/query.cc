@@ -1,0 +1,72 @@
+#include "services/training/query.h"
+
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/raster/label_render.h"
+
+namespace instascene::training {
+
+absl::StatusOr<std::unique_ptr<QueryIndex>> QueryIndex::Build(const Scene& scene, const GaussianCloud& cloud,
+                                                              const SegmentationResult& result, int num_threads) {
+  if (result.labels.size() != cloud.size()) return absl::InvalidArgumentError("result and scene disagree on the Gaussian count");
+  auto index = std::unique_ptr<QueryIndex>(new QueryIndex());
+  index->scene_ = &scene;
+  index->labels_ = result.labels;
+  for (uint32_t g = 0; g < result.labels.size(); ++g) {
+    if (result.labels[g] != 0) index->members_[result.labels[g]].push_back(g);
+  }
+  for (size_t v = 0; v < scene.views.size(); ++v) {
+    ASSIGN_OR_RETURN(std::vector<uint32_t> map, RenderLabelMap(cloud, scene.views[v].camera, result.labels, 0.5f, num_threads));
+    std::map<uint32_t, size_t> counts;
+    for (uint32_t l : map) {
+      if (l != 0) ++counts[l];
+    }
+    for (const auto& [l, c] : counts) index->visible_[l].emplace_back(static_cast<int>(v), c);
+    index->label_maps_.push_back(std::move(map));
+  }
+  std::vector<Eigen::Vector3f> positions(cloud.size());
+  for (size_t g = 0; g < cloud.size(); ++g) positions[g] = Eigen::Vector3f(&cloud.positions[3 * g]);
+  index->points_ = std::make_unique<PointIndex3>(std::move(positions));
+  return index;
+}
+
+QueryAnswer QueryIndex::Answer(uint32_t instance) const {
+  QueryAnswer answer;
+  answer.instance = instance;
+  if (instance == 0) return answer;
+  answer.gaussians = Gaussians(instance).size();
+  auto it = visible_.find(instance);
+  if (it != visible_.end()) answer.views = it->second;
+  return answer;
+}
+
+absl::StatusOr<QueryAnswer> QueryIndex::Click(int view, int x, int y) const {
+  if (view < 0 || view >= static_cast<int>(label_maps_.size())) return absl::OutOfRangeError(absl::StrCat("no view ", view));
+  const PinholeCamera& camera = scene_->views[view].camera;
+  if (x < 0 || y < 0 || x >= camera.width || y >= camera.height) {
+    return absl::OutOfRangeError(absl::StrCat("pixel (", x, ", ", y, ") outside the ", camera.width, "x", camera.height, " image"));
+  }
+  return Answer(label_maps_[view][static_cast<size_t>(y) * camera.width + x]);
+}
+
+absl::StatusOr<QueryAnswer> QueryIndex::Point(const Eigen::Vector3f& point, float max_distance) const {
+  if (!point.allFinite()) return absl::InvalidArgumentError("query point is not finite");
+  if (points_->size() == 0) return Answer(0);
+  const auto [g, dist2] = points_->Nearest(point);
+  return Answer(dist2 <= max_distance * max_distance ? labels_[g] : 0);
+}
+
+std::vector<uint8_t> QueryIndex::Mask(uint32_t instance, int view) const {
+  std::vector<uint8_t> mask(label_maps_[view].size(), 0);
+  if (instance == 0) return mask;
+  for (size_t p = 0; p < mask.size(); ++p) mask[p] = label_maps_[view][p] == instance;
+  return mask;
+}
+
+const std::vector<uint32_t>& QueryIndex::Gaussians(uint32_t instance) const {
+  static const std::vector<uint32_t> kEmpty;
+  auto it = members_.find(instance);
+  return it == members_.end() ? kEmpty : it->second;
+}
+
+}  // namespace instascene::training

@@ -1,0 +1,52 @@
+// services/training/query.h: click queries against a segmentation result.
+//
+// The index renders every view's instance label map once (per pixel, the label with the largest
+// summed blending weight) and keeps per-instance Gaussian lists and per-view pixel counts, so a
+// click (view, pixel) is a lookup, and a 3D point query is a k-d tree nearest-neighbour search.
+// Build is not thread-safe; queries are const and safe from many threads.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "absl/status/statusor.h"
+#include "common/eval/result.h"
+#include "common/geometry/point_index.h"
+#include "common/scene/scene.h"
+
+namespace instascene::training {
+
+struct QueryAnswer {
+  uint32_t instance = 0;                        // 0 = background / nothing
+  size_t gaussians = 0;                         // Gaussians of that instance
+  std::vector<std::pair<int, size_t>> views;    // (view, pixels) where the instance is visible
+};
+
+class QueryIndex {
+ public:
+  static absl::StatusOr<std::unique_ptr<QueryIndex>> Build(const Scene& scene, const GaussianCloud& cloud,
+                                                           const SegmentationResult& result, int num_threads = 0);
+
+  // The instance under pixel (x, y) of view `view`.
+  absl::StatusOr<QueryAnswer> Click(int view, int x, int y) const;
+  // The instance of the Gaussian nearest to a 3D point, if one lies within max_distance.
+  absl::StatusOr<QueryAnswer> Point(const Eigen::Vector3f& point_in_world, float max_distance) const;
+  // The instance's mask in a view (W*H, 1 = selected).
+  std::vector<uint8_t> Mask(uint32_t instance, int view) const;
+  const std::vector<uint32_t>& Gaussians(uint32_t instance) const;
+
+ private:
+  QueryAnswer Answer(uint32_t instance) const;
+  const Scene* scene_ = nullptr;
+  std::vector<std::vector<uint32_t>> label_maps_;              // per view, W*H
+  std::map<uint32_t, std::vector<uint32_t>> members_;          // instance -> Gaussians
+  std::map<uint32_t, std::vector<std::pair<int, size_t>>> visible_;  // instance -> (view, pixels)
+  std::vector<uint32_t> labels_;
+  std::unique_ptr<PointIndex3> points_;
+};
+
+}  // namespace instascene::training
