@@ -14,6 +14,8 @@
 #include "common/synth/scene_writer.h"
 #include "common/eval/click_eval.h"
 #include "services/decomposition/decompose.h"
+#include "services/training/feature_field.h"
+#include "services/training/segmentation.h"
 
 #include <sys/resource.h>
 
@@ -27,6 +29,7 @@ struct BenchArgs {
   std::string preset = "medium", work;
   int64_t gaussians = 1'000'000;
   bool gaussians_set = false, views_set = false;
+  int iterations = 0;
   int width = 1280, height = 720, frames = 5, threads = 0, objects = 40;
   uint64_t seed = 1;
   bool json = false;
@@ -156,14 +159,64 @@ absl::Status BenchDecompose(const BenchArgs& args) {
   return absl::OkStatus();
 }
 
+absl::Status BenchTrain(const BenchArgs& args) {
+  ASSIGN_OR_RETURN(ClutterOptions options, ClutterPreset(args.preset));
+  options.seed = args.seed;
+  if (args.gaussians_set) options.gaussians = static_cast<size_t>(args.gaussians);
+  if (args.views_set) options.views = args.frames;
+  const std::string dir = args.work.empty()
+                              ? (std::filesystem::temp_directory_path() / ("instascene-bench-train-" + args.preset)).string()
+                              : args.work;
+  ASSIGN_OR_RETURN(ClutterScene scene, GenerateClutterScene(options));
+  SceneWriteOptions write;
+  write.num_threads = args.threads;
+  RETURN_IF_ERROR(WriteClutterScene(scene, dir, write));
+  ASSIGN_OR_RETURN(Scene read, ReadScene(dir));
+  decomposition::DecompositionOptions dopt;
+  dopt.num_threads = args.threads;
+  ASSIGN_OR_RETURN(decomposition::DecompositionResult coarse, decomposition::Decompose(read, scene.cloud, dopt));
+  RETURN_IF_ERROR(decomposition::WriteDecomposition(dir + "/decomposition", read, scene.cloud, coarse));
+  training::TrainingOptions topt;
+  topt.num_threads = args.threads;
+  if (args.iterations > 0) topt.iterations = args.iterations;
+  Stopwatch prepare;
+  ASSIGN_OR_RETURN(training::TrainingData data, training::PrepareTraining(read, scene.cloud, dir + "/decomposition", topt));
+  const double prepare_s = prepare.ElapsedSeconds();
+  ASSIGN_OR_RETURN(training::TrainingResult trained, training::TrainFeatures(data, topt));
+  SegmentationResult result;
+  result.stage = "segment";
+  result.labels = training::SegmentByFeatures(trained.features, topt.feature_dim, data.labels3d, training::SegmentOptions{});
+  result.features = trained.features;
+  result.feature_dim = topt.feature_dim;
+  RETURN_IF_ERROR(WriteResult(dir + "/segmentation", result, scene.cloud));
+  ASSIGN_OR_RETURN(ClickEvaluation eval, EvaluateResultDirectory(dir, dir + "/segmentation", ClickEvalOptions{}));
+  const double peak = PeakRssBytes();
+  std::fprintf(stderr,
+               "bench train: %zu Gaussians, %zu views: pixel pools traced in %.1f s; %d steps in %.1f s (%.1f steps/s); "
+               "total %.1f s; peak RSS %.0f MB (whole process); click mIoU %.3f\n",
+               scene.cloud.size(), scene.cameras.size(), prepare_s, topt.iterations, trained.seconds,
+               topt.iterations / trained.seconds, prepare_s + trained.seconds, peak / 1e6, eval.miou);
+  if (args.json) {
+    PrintJsonLine(nlohmann::json({{"benchmark", "train"}, {"preset", args.preset}, {"gaussians", scene.cloud.size()},
+                                  {"views", scene.cameras.size()}, {"iterations", topt.iterations},
+                                  {"prepare_s", prepare_s}, {"train_s", trained.seconds},
+                                  {"steps_per_s", topt.iterations / trained.seconds},
+                                  {"total_s", prepare_s + trained.seconds}, {"peak_rss_mb", peak / 1e6},
+                                  {"miou", eval.miou}})
+                      .dump());
+  }
+  return absl::OkStatus();
+}
+
 }  // namespace
 
 void AddBenchCommand(CLI::App& app, Action* action) {
   auto args = std::make_shared<BenchArgs>();
   CLI::App* cmd = app.add_subcommand("bench", "Benchmarks on synthetic scenes (medians over frames)");
-  cmd->add_option("what", args->what, "raster (color+depth, and with tracing) or decompose (preset scene end to end)")
+  cmd->add_option("what", args->what, "raster (color+depth, and with tracing), decompose or train (preset scene end to end)")
       ->required()
-      ->check(CLI::IsMember({"raster", "trace", "decompose"}));
+      ->check(CLI::IsMember({"raster", "trace", "decompose", "train"}));
+  cmd->add_option("--iterations", args->iterations, "train: optimisation steps (default: the training default)");
   cmd->add_option("--preset", args->preset, "decompose: scene preset (default medium)");
   cmd->add_option("--work", args->work, "decompose: where to write the generated scene (default: a temp folder)");
   cmd->add_option_function<int64_t>("--gaussians", [args](int64_t v) { args->gaussians = v; args->gaussians_set = true; },
@@ -178,7 +231,11 @@ void AddBenchCommand(CLI::App& app, Action* action) {
   cmd->add_option("--seed", args->seed, "Scene seed");
   cmd->add_flag("--json", args->json, "Print the figures as one JSON line (last stdout line)");
   cmd->callback([args, action] {
-    *action = [args]() -> absl::Status { return args->what == "decompose" ? BenchDecompose(*args) : BenchRaster(*args); };
+    *action = [args]() -> absl::Status {
+      if (args->what == "decompose") return BenchDecompose(*args);
+      if (args->what == "train") return BenchTrain(*args);
+      return BenchRaster(*args);
+    };
   });
 }
 
