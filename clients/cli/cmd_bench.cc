@@ -9,10 +9,10 @@
 #include "common/core/statistics.h"
 #include "common/core/status.h"
 #include "common/core/timer.h"
+#include "common/eval/click_eval.h"
 #include "common/raster/rasterizer.h"
 #include "common/synth/cluttered_scene.h"
 #include "common/synth/scene_writer.h"
-#include "common/eval/click_eval.h"
 #include "services/decomposition/decompose.h"
 #include "services/training/feature_field.h"
 #include "services/training/segmentation.h"
@@ -45,9 +45,11 @@ absl::Status BenchRaster(const BenchArgs& args) {
   options.gaussians = static_cast<size_t>(args.gaussians);
   Stopwatch build;
   ASSIGN_OR_RETURN(ClutterScene scene, GenerateClutterScene(options));
-  std::fprintf(stderr, "bench raster: scene of %zu Gaussians built in %.1f s; %d frames of %dx%d, %d threads\n",
-               scene.cloud.size(), build.ElapsedSeconds(), args.frames, args.width, args.height,
-               args.threads > 0 ? args.threads : DefaultThreadCount());
+  std::fprintf(
+      stderr,
+      "bench raster: scene of %zu Gaussians built in %.1f s; %d frames of %dx%d, %d threads\n",
+      scene.cloud.size(), build.ElapsedSeconds(), args.frames, args.width, args.height,
+      args.threads > 0 ? args.threads : DefaultThreadCount());
   RasterWorkspace workspace;  // reused across frames, as a long-running worker would
   RenderOptions plain;
   plain.depth = true;
@@ -89,20 +91,31 @@ absl::Status BenchRaster(const BenchArgs& args) {
                "%.1f M pairs/s, %.1f M blended fragments/s; %.0f trace entries per frame\n"
                "  tracker trace (w > 0.1): %.1f ms (%.2fx), %.0f entries per frame\n",
                median, Median(pre), Median(bin), Median(blend), trace_median, trace_median / median,
-               Median(trace_blend), Median(trace_assembly), pairs,
-               evaluated, blended, pairs / median / 1e3, blended / median / 1e3, entries, Median(tracker_ms),
+               Median(trace_blend), Median(trace_assembly), pairs, evaluated, blended,
+               pairs / median / 1e3, blended / median / 1e3, entries, Median(tracker_ms),
                Median(tracker_ms) / median, tracker_entries);
   if (args.json) {
-    nlohmann::json j = {{"benchmark", "raster"}, {"gaussians", scene.cloud.size()}, {"width", args.width},
-                        {"height", args.height}, {"frames", args.frames},
+    nlohmann::json j = {{"benchmark", "raster"},
+                        {"gaussians", scene.cloud.size()},
+                        {"width", args.width},
+                        {"height", args.height},
+                        {"frames", args.frames},
                         {"threads", args.threads > 0 ? args.threads : DefaultThreadCount()},
-                        {"median_ms", median}, {"trace_median_ms", trace_median},
-                        {"preprocess_ms", Median(pre)}, {"binning_ms", Median(bin)}, {"blend_ms", Median(blend)},
-                        {"gaussian_tile_pairs", pairs}, {"evaluated_fragments", evaluated},
-                        {"blended_fragments", blended}, {"pairs_per_s", pairs / median * 1e3},
-                        {"blended_fragments_per_s", blended / median * 1e3}, {"trace_entries", entries}, {"trace_blend_ms", Median(trace_blend)},
+                        {"median_ms", median},
+                        {"trace_median_ms", trace_median},
+                        {"preprocess_ms", Median(pre)},
+                        {"binning_ms", Median(bin)},
+                        {"blend_ms", Median(blend)},
+                        {"gaussian_tile_pairs", pairs},
+                        {"evaluated_fragments", evaluated},
+                        {"blended_fragments", blended},
+                        {"pairs_per_s", pairs / median * 1e3},
+                        {"blended_fragments_per_s", blended / median * 1e3},
+                        {"trace_entries", entries},
+                        {"trace_blend_ms", Median(trace_blend)},
                         {"trace_assembly_ms", Median(trace_assembly)},
-                        {"tracker_trace_median_ms", Median(tracker_ms)}, {"tracker_trace_entries", tracker_entries}};
+                        {"tracker_trace_median_ms", Median(tracker_ms)},
+                        {"tracker_trace_entries", tracker_entries}};
     PrintJsonLine(j.dump());
   }
   return absl::OkStatus();
@@ -120,39 +133,55 @@ absl::Status BenchDecompose(const BenchArgs& args) {
   options.seed = args.seed;
   if (args.gaussians_set) options.gaussians = static_cast<size_t>(args.gaussians);
   if (args.views_set) options.views = args.frames;
-  const std::string dir = args.work.empty()
-                              ? (std::filesystem::temp_directory_path() / ("instascene-bench-" + args.preset)).string()
-                              : args.work;
+  const std::string dir =
+      args.work.empty()
+          ? (std::filesystem::temp_directory_path() / ("instascene-bench-" + args.preset)).string()
+          : args.work;
   Stopwatch build;
   ASSIGN_OR_RETURN(ClutterScene scene, GenerateClutterScene(options));
   SceneWriteOptions write;
   write.num_threads = args.threads;
   RETURN_IF_ERROR(WriteClutterScene(scene, dir, write));
-  std::fprintf(stderr, "bench decompose: scene %s (%zu Gaussians, %zu views of %dx%d, medium noise) written in %.1f s\n",
-               dir.c_str(), scene.cloud.size(), scene.cameras.size(), options.width, options.height, build.ElapsedSeconds());
+  std::fprintf(stderr,
+               "bench decompose: scene %s (%zu Gaussians, %zu views of %dx%d, medium noise) "
+               "written in %.1f s\n",
+               dir.c_str(), scene.cloud.size(), scene.cameras.size(), options.width, options.height,
+               build.ElapsedSeconds());
   ASSIGN_OR_RETURN(Scene read, ReadScene(dir));
   const double rss_before = PeakRssBytes();
   decomposition::DecompositionOptions dopt;
   dopt.num_threads = args.threads;
   Stopwatch watch;
-  ASSIGN_OR_RETURN(decomposition::DecompositionResult result, decomposition::Decompose(read, scene.cloud, dopt));
+  ASSIGN_OR_RETURN(decomposition::DecompositionResult result,
+                   decomposition::Decompose(read, scene.cloud, dopt));
   const double seconds = watch.ElapsedSeconds();
-  RETURN_IF_ERROR(decomposition::WriteDecomposition(dir + "/decomposition", read, scene.cloud, result));
-  ASSIGN_OR_RETURN(ClickEvaluation eval, EvaluateResultDirectory(dir, dir + "/decomposition", ClickEvalOptions{}));
+  RETURN_IF_ERROR(
+      decomposition::WriteDecomposition(dir + "/decomposition", read, scene.cloud, result));
+  ASSIGN_OR_RETURN(ClickEvaluation eval,
+                   EvaluateResultDirectory(dir, dir + "/decomposition", ClickEvalOptions{}));
   const double peak = PeakRssBytes();
   std::fprintf(stderr,
-               "bench decompose: %.1f s (tracking %.1f, clustering %.2f, post-processing %.1f); %zu trackers, %zu "
-               "instances; peak RSS %.0f MB (before decomposing: %.0f MB); mIoU %.3f, 3D precision %.3f recall %.3f\n",
+               "bench decompose: %.1f s (tracking %.1f, clustering %.2f, post-processing %.1f); "
+               "%zu trackers, %zu "
+               "instances; peak RSS %.0f MB (before decomposing: %.0f MB); mIoU %.3f, 3D precision "
+               "%.3f recall %.3f\n",
                seconds, result.tracking_seconds, result.clustering_seconds, result.post_seconds,
-               result.trackers.trackers.size(), result.instances.size(), peak / 1e6, rss_before / 1e6, eval.miou,
-               eval.instances.precision, eval.instances.recall);
+               result.trackers.trackers.size(), result.instances.size(), peak / 1e6,
+               rss_before / 1e6, eval.miou, eval.instances.precision, eval.instances.recall);
   if (args.json) {
-    PrintJsonLine(nlohmann::json({{"benchmark", "decompose"}, {"preset", args.preset}, {"gaussians", scene.cloud.size()},
-                                  {"views", scene.cameras.size()}, {"seconds", seconds},
-                                  {"tracking_s", result.tracking_seconds}, {"clustering_s", result.clustering_seconds},
-                                  {"post_s", result.post_seconds}, {"trackers", result.trackers.trackers.size()},
-                                  {"instances", result.instances.size()}, {"peak_rss_mb", peak / 1e6},
-                                  {"miou", eval.miou}, {"precision_3d", eval.instances.precision},
+    PrintJsonLine(nlohmann::json({{"benchmark", "decompose"},
+                                  {"preset", args.preset},
+                                  {"gaussians", scene.cloud.size()},
+                                  {"views", scene.cameras.size()},
+                                  {"seconds", seconds},
+                                  {"tracking_s", result.tracking_seconds},
+                                  {"clustering_s", result.clustering_seconds},
+                                  {"post_s", result.post_seconds},
+                                  {"trackers", result.trackers.trackers.size()},
+                                  {"instances", result.instances.size()},
+                                  {"peak_rss_mb", peak / 1e6},
+                                  {"miou", eval.miou},
+                                  {"precision_3d", eval.instances.precision},
                                   {"recall_3d", eval.instances.recall}})
                       .dump());
   }
@@ -164,9 +193,11 @@ absl::Status BenchTrain(const BenchArgs& args) {
   options.seed = args.seed;
   if (args.gaussians_set) options.gaussians = static_cast<size_t>(args.gaussians);
   if (args.views_set) options.views = args.frames;
-  const std::string dir = args.work.empty()
-                              ? (std::filesystem::temp_directory_path() / ("instascene-bench-train-" + args.preset)).string()
-                              : args.work;
+  const std::string dir =
+      args.work.empty()
+          ? (std::filesystem::temp_directory_path() / ("instascene-bench-train-" + args.preset))
+                .string()
+          : args.work;
   ASSIGN_OR_RETURN(ClutterScene scene, GenerateClutterScene(options));
   SceneWriteOptions write;
   write.num_threads = args.threads;
@@ -174,34 +205,46 @@ absl::Status BenchTrain(const BenchArgs& args) {
   ASSIGN_OR_RETURN(Scene read, ReadScene(dir));
   decomposition::DecompositionOptions dopt;
   dopt.num_threads = args.threads;
-  ASSIGN_OR_RETURN(decomposition::DecompositionResult coarse, decomposition::Decompose(read, scene.cloud, dopt));
-  RETURN_IF_ERROR(decomposition::WriteDecomposition(dir + "/decomposition", read, scene.cloud, coarse));
+  ASSIGN_OR_RETURN(decomposition::DecompositionResult coarse,
+                   decomposition::Decompose(read, scene.cloud, dopt));
+  RETURN_IF_ERROR(
+      decomposition::WriteDecomposition(dir + "/decomposition", read, scene.cloud, coarse));
   training::TrainingOptions topt;
   topt.num_threads = args.threads;
   if (args.iterations > 0) topt.iterations = args.iterations;
   Stopwatch prepare;
-  ASSIGN_OR_RETURN(training::TrainingData data, training::PrepareTraining(read, scene.cloud, dir + "/decomposition", topt));
+  ASSIGN_OR_RETURN(training::TrainingData data,
+                   training::PrepareTraining(read, scene.cloud, dir + "/decomposition", topt));
   const double prepare_s = prepare.ElapsedSeconds();
   ASSIGN_OR_RETURN(training::TrainingResult trained, training::TrainFeatures(data, topt));
   SegmentationResult result;
   result.stage = "segment";
-  result.labels = training::SegmentByFeatures(trained.features, topt.feature_dim, data.labels3d, training::SegmentOptions{});
+  result.labels = training::SegmentByFeatures(trained.features, topt.feature_dim, data.labels3d,
+                                              training::SegmentOptions{});
   result.features = trained.features;
   result.feature_dim = topt.feature_dim;
   RETURN_IF_ERROR(WriteResult(dir + "/segmentation", result, scene.cloud));
-  ASSIGN_OR_RETURN(ClickEvaluation eval, EvaluateResultDirectory(dir, dir + "/segmentation", ClickEvalOptions{}));
+  ASSIGN_OR_RETURN(ClickEvaluation eval,
+                   EvaluateResultDirectory(dir, dir + "/segmentation", ClickEvalOptions{}));
   const double peak = PeakRssBytes();
   std::fprintf(stderr,
-               "bench train: %zu Gaussians, %zu views: pixel pools traced in %.1f s; %d steps in %.1f s (%.1f steps/s); "
+               "bench train: %zu Gaussians, %zu views: pixel pools traced in %.1f s; %d steps in "
+               "%.1f s (%.1f steps/s); "
                "total %.1f s; peak RSS %.0f MB (whole process); click mIoU %.3f\n",
-               scene.cloud.size(), scene.cameras.size(), prepare_s, topt.iterations, trained.seconds,
-               topt.iterations / trained.seconds, prepare_s + trained.seconds, peak / 1e6, eval.miou);
+               scene.cloud.size(), scene.cameras.size(), prepare_s, topt.iterations,
+               trained.seconds, topt.iterations / trained.seconds, prepare_s + trained.seconds,
+               peak / 1e6, eval.miou);
   if (args.json) {
-    PrintJsonLine(nlohmann::json({{"benchmark", "train"}, {"preset", args.preset}, {"gaussians", scene.cloud.size()},
-                                  {"views", scene.cameras.size()}, {"iterations", topt.iterations},
-                                  {"prepare_s", prepare_s}, {"train_s", trained.seconds},
+    PrintJsonLine(nlohmann::json({{"benchmark", "train"},
+                                  {"preset", args.preset},
+                                  {"gaussians", scene.cloud.size()},
+                                  {"views", scene.cameras.size()},
+                                  {"iterations", topt.iterations},
+                                  {"prepare_s", prepare_s},
+                                  {"train_s", trained.seconds},
                                   {"steps_per_s", topt.iterations / trained.seconds},
-                                  {"total_s", prepare_s + trained.seconds}, {"peak_rss_mb", peak / 1e6},
+                                  {"total_s", prepare_s + trained.seconds},
+                                  {"peak_rss_mb", peak / 1e6},
                                   {"miou", eval.miou}})
                       .dump());
   }
@@ -212,19 +255,34 @@ absl::Status BenchTrain(const BenchArgs& args) {
 
 void AddBenchCommand(CLI::App& app, Action* action) {
   auto args = std::make_shared<BenchArgs>();
-  CLI::App* cmd = app.add_subcommand("bench", "Benchmarks on synthetic scenes (medians over frames)");
-  cmd->add_option("what", args->what, "raster (color+depth, and with tracing), decompose or train (preset scene end to end)")
+  CLI::App* cmd =
+      app.add_subcommand("bench", "Benchmarks on synthetic scenes (medians over frames)");
+  cmd->add_option(
+         "what", args->what,
+         "raster (color+depth, and with tracing), decompose or train (preset scene end to end)")
       ->required()
       ->check(CLI::IsMember({"raster", "trace", "decompose", "train"}));
-  cmd->add_option("--iterations", args->iterations, "train: optimisation steps (default: the training default)");
+  cmd->add_option("--iterations", args->iterations,
+                  "train: optimisation steps (default: the training default)");
   cmd->add_option("--preset", args->preset, "decompose: scene preset (default medium)");
-  cmd->add_option("--work", args->work, "decompose: where to write the generated scene (default: a temp folder)");
-  cmd->add_option_function<int64_t>("--gaussians", [args](int64_t v) { args->gaussians = v; args->gaussians_set = true; },
-                                    "Scene size (raster default 1000000; decompose: the preset's)");
+  cmd->add_option("--work", args->work,
+                  "decompose: where to write the generated scene (default: a temp folder)");
+  cmd->add_option_function<int64_t>(
+      "--gaussians",
+      [args](int64_t v) {
+        args->gaussians = v;
+        args->gaussians_set = true;
+      },
+      "Scene size (raster default 1000000; decompose: the preset's)");
   cmd->add_option("--width", args->width, "Frame width, px (default 1280)");
   cmd->add_option("--height", args->height, "Frame height, px (default 720)");
-  cmd->add_option_function<int>("--frames", [args](int v) { args->frames = v; args->views_set = true; },
-                                "raster: timed frames, each from another view (default 5); decompose: views (preset's)")
+  cmd->add_option_function<int>(
+         "--frames",
+         [args](int v) {
+           args->frames = v;
+           args->views_set = true;
+         },
+         "raster: timed frames, each from another view (default 5); decompose: views (preset's)")
       ->check(CLI::Range(1, 1000));
   cmd->add_option("--objects", args->objects, "Objects in the scene (default 40)");
   cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");

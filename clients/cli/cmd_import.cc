@@ -17,45 +17,60 @@ void AddImportCommand(CLI::App& app, Action* action) {
     bool assume_undistorted = false;
   };
   auto args = std::make_shared<Args>();
-  CLI::App* cmd = app.add_subcommand("import", "Build a scene directory from COLMAP or transforms.json cameras and a .ply");
-  auto* colmap = cmd->add_option("--colmap", args->colmap, "COLMAP model folder (cameras/images .bin or .txt)");
-  auto* transforms = cmd->add_option("--transforms", args->transforms, "instant-ngp / nerfstudio transforms.json");
+  CLI::App* cmd = app.add_subcommand(
+      "import", "Build a scene directory from COLMAP or transforms.json cameras and a .ply");
+  auto* colmap = cmd->add_option("--colmap", args->colmap,
+                                 "COLMAP model folder (cameras/images .bin or .txt)");
+  auto* transforms =
+      cmd->add_option("--transforms", args->transforms, "instant-ngp / nerfstudio transforms.json");
   colmap->excludes(transforms);
   cmd->add_option("--ply", args->ply, "Trained 2DGS/3DGS .ply")->required();
-  cmd->add_option("--images", args->images, "Image folder (default: <model>/../../images for COLMAP, the JSON's folder otherwise)");
+  cmd->add_option(
+      "--images", args->images,
+      "Image folder (default: <model>/../../images for COLMAP, the JSON's folder otherwise)");
   cmd->add_option("--masks", args->masks, "Folder of per-view label maps named <image stem>.png");
   cmd->add_option("--out", args->out, "Output scene directory")->required();
-  cmd->add_flag("--assume-undistorted", args->assume_undistorted, "Accept distorted camera models, ignoring distortion (images already undistorted)");
+  cmd->add_flag("--assume-undistorted", args->assume_undistorted,
+                "Accept distorted camera models, ignoring distortion (images already undistorted)");
   cmd->callback([args, action] {
     *action = [args]() -> absl::Status {
       namespace fs = std::filesystem;
-      if (args->colmap.empty() == args->transforms.empty()) return absl::InvalidArgumentError("give exactly one of --colmap or --transforms");
+      if (args->colmap.empty() == args->transforms.empty())
+        return absl::InvalidArgumentError("give exactly one of --colmap or --transforms");
       ImportOptions options;
       options.assume_undistorted = args->assume_undistorted;
       ImportedCameras cams;
       std::string image_dir = args->images;
       if (!args->colmap.empty()) {
         ASSIGN_OR_RETURN(cams, ImportColmapModel(args->colmap, options));
-        if (image_dir.empty()) image_dir = (fs::path(args->colmap) / ".." / ".." / "images").lexically_normal().string();
+        if (image_dir.empty())
+          image_dir = (fs::path(args->colmap) / ".." / ".." / "images").lexically_normal().string();
       } else {
         ASSIGN_OR_RETURN(cams, ImportTransformsJson(args->transforms, options));
         if (image_dir.empty()) image_dir = fs::path(args->transforms).parent_path().string();
       }
-      for (const std::string& w : cams.warnings) std::fprintf(stderr, "import: warning: %s\n", w.c_str());
-      ASSIGN_OR_RETURN(GaussianCloud cloud, ReadGaussianPly(args->ply));  // validates before copying
+      for (const std::string& w : cams.warnings)
+        std::fprintf(stderr, "import: warning: %s\n", w.c_str());
+      ASSIGN_OR_RETURN(GaussianCloud cloud,
+                       ReadGaussianPly(args->ply));  // validates before copying
       Scene scene;
       scene.directory = args->out;
       std::error_code ec;
       fs::create_directories(fs::path(args->out) / "images", ec);
-      if (ec) return absl::UnavailableError(absl::StrCat(args->out, ": cannot create: ", ec.message()));
+      if (ec)
+        return absl::UnavailableError(absl::StrCat(args->out, ": cannot create: ", ec.message()));
       RETURN_IF_ERROR(WriteGaussianPly(scene.Path(scene.gaussians), cloud));
       int masks = 0;
       for (SceneView& view : cams.views) {
         const fs::path src = fs::path(image_dir) / view.image;
-        if (!fs::exists(src)) return absl::NotFoundError(absl::StrCat(src.string(), ": image of view '", view.name, "' not found"));
+        if (!fs::exists(src))
+          return absl::NotFoundError(
+              absl::StrCat(src.string(), ": image of view '", view.name, "' not found"));
         const std::string rel = absl::StrCat("images/", view.name, src.extension().string());
         fs::copy_file(src, scene.Path(rel), fs::copy_options::overwrite_existing, ec);
-        if (ec) return absl::UnavailableError(absl::StrCat(scene.Path(rel), ": copy failed: ", ec.message()));
+        if (ec)
+          return absl::UnavailableError(
+              absl::StrCat(scene.Path(rel), ": copy failed: ", ec.message()));
         view.image = rel;
         if (!args->masks.empty()) {
           const fs::path mask = fs::path(args->masks) / (view.name + ".png");
@@ -63,7 +78,8 @@ void AddImportCommand(CLI::App& app, Action* action) {
             fs::create_directories(fs::path(args->out) / "masks", ec);
             view.mask = absl::StrCat("masks/", view.name, ".png");
             fs::copy_file(mask, scene.Path(view.mask), fs::copy_options::overwrite_existing, ec);
-            if (ec) return absl::UnavailableError(absl::StrCat(scene.Path(view.mask), ": copy failed"));
+            if (ec)
+              return absl::UnavailableError(absl::StrCat(scene.Path(view.mask), ": copy failed"));
             ++masks;
           }
         }
@@ -73,8 +89,8 @@ void AddImportCommand(CLI::App& app, Action* action) {
       for (int v = 0; v < static_cast<int>(scene.views.size()); ++v) {
         RETURN_IF_ERROR(ReadViewImage(scene, v).status());  // sizes must match the cameras
       }
-      std::fprintf(stderr, "import: wrote %s: %zu views, %d masks, %zu Gaussians\n", args->out.c_str(),
-                   scene.views.size(), masks, cloud.size());
+      std::fprintf(stderr, "import: wrote %s: %zu views, %d masks, %zu Gaussians\n",
+                   args->out.c_str(), scene.views.size(), masks, cloud.size());
       return absl::OkStatus();
     };
   });

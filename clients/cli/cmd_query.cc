@@ -20,29 +20,36 @@ void AddQueryCommand(CLI::App& app, Action* action) {
     bool json = false;
   };
   auto args = std::make_shared<Args>();
-  CLI::App* cmd = app.add_subcommand("query", "Click query: the instance under a pixel (or nearest a 3D point) and its masks");
+  CLI::App* cmd = app.add_subcommand(
+      "query", "Click query: the instance under a pixel (or nearest a 3D point) and its masks");
   cmd->add_option("--scene", args->scene, "Scene directory")->required();
-  cmd->add_option("--result", args->result, "Result directory (instascene run/train/decompose)")->required();
+  cmd->add_option("--result", args->result, "Result directory (instascene run/train/decompose)")
+      ->required();
   cmd->add_option("--view", args->view, "View name or index of the click");
   cmd->add_option("--pixel", args->pixel, "Clicked pixel X,Y");
   cmd->add_option("--point", args->point, "Or a 3D point X,Y,Z (world)");
-  cmd->add_option("--max-distance", args->max_distance, "3D point query: nearest-Gaussian radius (scene units)");
+  cmd->add_option("--max-distance", args->max_distance,
+                  "3D point query: nearest-Gaussian radius (scene units)");
   cmd->add_option("--out", args->out, "Write the instance's mask in every view as PNGs here");
   cmd->add_flag("--json", args->json, "Print the answer as one JSON line");
   cmd->callback([args, action] {
     *action = [args]() -> absl::Status {
-      if (args->pixel.empty() == args->point.empty()) return absl::InvalidArgumentError("give exactly one of --pixel or --point");
+      if (args->pixel.empty() == args->point.empty())
+        return absl::InvalidArgumentError("give exactly one of --pixel or --point");
       ASSIGN_OR_RETURN(Scene scene, ReadScene(args->scene));
       ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
       ASSIGN_OR_RETURN(SegmentationResult result, ReadResult(args->result, cloud.size()));
       Stopwatch build;
-      ASSIGN_OR_RETURN(std::unique_ptr<training::QueryIndex> index, training::QueryIndex::Build(scene, cloud, result));
+      ASSIGN_OR_RETURN(std::unique_ptr<training::QueryIndex> index,
+                       training::QueryIndex::Build(scene, cloud, result));
       const double build_ms = build.ElapsedMs();
-      std::vector<std::string> parts = absl::StrSplit(args->pixel.empty() ? args->point : args->pixel, ',');
+      std::vector<std::string> parts =
+          absl::StrSplit(args->pixel.empty() ? args->point : args->pixel, ',');
       std::vector<double> values;
       for (const std::string& p : parts) {
         double v = 0;
-        if (!absl::SimpleAtod(p, &v)) return absl::InvalidArgumentError(absl::StrCat("not a number: '", p, "'"));
+        if (!absl::SimpleAtod(p, &v))
+          return absl::InvalidArgumentError(absl::StrCat("not a number: '", p, "'"));
         values.push_back(v);
       }
       Stopwatch click;
@@ -50,27 +57,38 @@ void AddQueryCommand(CLI::App& app, Action* action) {
       if (!args->pixel.empty()) {
         if (values.size() != 2) return absl::InvalidArgumentError("--pixel must be X,Y");
         ASSIGN_OR_RETURN(int view, ResolveView(scene, args->view));
-        ASSIGN_OR_RETURN(answer, index->Click(view, static_cast<int>(values[0]), static_cast<int>(values[1])));
+        ASSIGN_OR_RETURN(
+            answer, index->Click(view, static_cast<int>(values[0]), static_cast<int>(values[1])));
       } else {
         if (values.size() != 3) return absl::InvalidArgumentError("--point must be X,Y,Z");
-        ASSIGN_OR_RETURN(answer, index->Point(Eigen::Vector3d(values[0], values[1], values[2]).cast<float>(), args->max_distance));
+        ASSIGN_OR_RETURN(
+            answer, index->Point(Eigen::Vector3d(values[0], values[1], values[2]).cast<float>(),
+                                 args->max_distance));
       }
       const double click_ms = click.ElapsedMs();
       if (!args->out.empty() && answer.instance != 0) {
         std::filesystem::create_directories(args->out);
         for (const auto& [v, pixels] : answer.views) {
           std::vector<uint8_t> mask = index->Mask(answer.instance, v);
-          LabelMap png{scene.views[v].camera.width, scene.views[v].camera.height, std::vector<uint16_t>(mask.begin(), mask.end())};
-          RETURN_IF_ERROR(WriteLabelMap((std::filesystem::path(args->out) / (scene.views[v].name + ".png")).string(), png));
+          LabelMap png{scene.views[v].camera.width, scene.views[v].camera.height,
+                       std::vector<uint16_t>(mask.begin(), mask.end())};
+          RETURN_IF_ERROR(WriteLabelMap(
+              (std::filesystem::path(args->out) / (scene.views[v].name + ".png")).string(), png));
         }
       }
-      std::printf("instance %u: %zu Gaussians, visible in %zu views (index built in %.0f ms, query %.3f ms)\n",
-                  answer.instance, answer.gaussians, answer.views.size(), build_ms, click_ms);
+      std::printf(
+          "instance %u: %zu Gaussians, visible in %zu views (index built in %.0f ms, query %.3f "
+          "ms)\n",
+          answer.instance, answer.gaussians, answer.views.size(), build_ms, click_ms);
       if (args->json) {
         nlohmann::json views = nlohmann::json::array();
-        for (const auto& [v, pixels] : answer.views) views.push_back({{"view", scene.views[v].name}, {"pixels", pixels}});
-        PrintJsonLine(nlohmann::json({{"instance", answer.instance}, {"gaussians", answer.gaussians}, {"views", views},
-                                      {"query_ms", click_ms}, {"index_ms", build_ms}})
+        for (const auto& [v, pixels] : answer.views)
+          views.push_back({{"view", scene.views[v].name}, {"pixels", pixels}});
+        PrintJsonLine(nlohmann::json({{"instance", answer.instance},
+                                      {"gaussians", answer.gaussians},
+                                      {"views", views},
+                                      {"query_ms", click_ms},
+                                      {"index_ms", build_ms}})
                           .dump());
       }
       return absl::OkStatus();

@@ -25,7 +25,8 @@ absl::StatusOr<Eigen::Vector3d> ParseAxis(const std::string& text) {
   if (axis == "x") return Eigen::Vector3d(sign, 0, 0);
   if (axis == "y") return Eigen::Vector3d(0, sign, 0);
   if (axis == "z") return Eigen::Vector3d(0, 0, sign);
-  return absl::InvalidArgumentError(absl::StrCat("--up must be one of x, y, z, -x, -y, -z; got '", text, "'"));
+  return absl::InvalidArgumentError(
+      absl::StrCat("--up must be one of x, y, z, -x, -y, -z; got '", text, "'"));
 }
 
 // Robust centre and radius of a cloud: the 2nd-98th percentile box of the positions.
@@ -45,13 +46,15 @@ void RobustBounds(const GaussianCloud& cloud, Eigen::Vector3d* center, double* r
 }  // namespace
 
 // Shared by render and the demo: converts a render result to the requested RGB visualisation.
-absl::StatusOr<std::vector<float>> Visualize(const RenderResult& r, const std::string& mode, int feature_dim) {
+absl::StatusOr<std::vector<float>> Visualize(const RenderResult& r, const std::string& mode,
+                                             int feature_dim) {
   if (mode == "color") return r.color;
   if (mode == "depth") return ColorizeDepth(r.median_depth, r.alpha);
   if (mode == "normal") return NormalsToRgb(r.normal);
   if (mode == "alpha") return GrayToRgb(r.alpha);
   if (mode == "features") return FeaturesToRgb(r.features, feature_dim);
-  return absl::InvalidArgumentError(absl::StrCat("unknown --mode '", mode, "' (color, depth, normal, alpha, features)"));
+  return absl::InvalidArgumentError(
+      absl::StrCat("unknown --mode '", mode, "' (color, depth, normal, alpha, features)"));
 }
 
 void AddRenderCommand(CLI::App& app, Action* action) {
@@ -64,27 +67,36 @@ void AddRenderCommand(CLI::App& app, Action* action) {
     std::vector<float> background = {0, 0, 0};
   };
   auto args = std::make_shared<Args>();
-  CLI::App* cmd = app.add_subcommand("render", "Render a scene view, or a bare .ply from an orbit camera, to PNG");
+  CLI::App* cmd = app.add_subcommand(
+      "render", "Render a scene view, or a bare .ply from an orbit camera, to PNG");
   auto* scene_opt = cmd->add_option("--scene", args->scene, "Scene directory");
   cmd->add_option("--view", args->view, "View name or index (with --scene)");
-  auto* ply_opt = cmd->add_option("--ply", args->ply, "Render this .ply without a scene (orbit camera)");
+  auto* ply_opt =
+      cmd->add_option("--ply", args->ply, "Render this .ply without a scene (orbit camera)");
   scene_opt->excludes(ply_opt);
   cmd->add_option("--out", args->out, "Output PNG")->required();
-  cmd->add_option("--mode", args->mode, "color, depth (median), normal, alpha or features (PCA of --feature-prefix channels)");
-  cmd->add_option("--orbit", args->orbit, "Bare .ply: azimuth,elevation in degrees around the robust centre");
-  cmd->add_option("--distance", args->distance, "Bare .ply: camera distance in units of the robust radius");
+  cmd->add_option(
+      "--mode", args->mode,
+      "color, depth (median), normal, alpha or features (PCA of --feature-prefix channels)");
+  cmd->add_option("--orbit", args->orbit,
+                  "Bare .ply: azimuth,elevation in degrees around the robust centre");
+  cmd->add_option("--distance", args->distance,
+                  "Bare .ply: camera distance in units of the robust radius");
   cmd->add_option("--up", args->up, "Bare .ply: world up axis (3DGS captures are usually -y)");
   cmd->add_option("--width", args->width, "Bare .ply: image width, px");
   cmd->add_option("--height", args->height, "Bare .ply: image height, px");
   cmd->add_option("--fov", args->fov, "Bare .ply: horizontal field of view, degrees");
   cmd->add_option("--background", args->background, "Background RGB in [0,1]")->expected(3);
-  cmd->add_option("--feature-prefix", args->feature_prefix, "Extra channels rendered by --mode features");
-  cmd->add_flag("--surfels", args->surfels, "Render a 3DGS cloud as 2DGS surfels (drop the smallest axis)");
+  cmd->add_option("--feature-prefix", args->feature_prefix,
+                  "Extra channels rendered by --mode features");
+  cmd->add_flag("--surfels", args->surfels,
+                "Render a 3DGS cloud as 2DGS surfels (drop the smallest axis)");
   cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");
   cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
   cmd->callback([args, action] {
     *action = [args]() -> absl::Status {
-      if (args->scene.empty() == args->ply.empty()) return absl::InvalidArgumentError("give exactly one of --scene or --ply");
+      if (args->scene.empty() == args->ply.empty())
+        return absl::InvalidArgumentError("give exactly one of --scene or --ply");
       GaussianCloud cloud;
       PinholeCamera camera;
       if (!args->scene.empty()) {
@@ -94,17 +106,20 @@ void AddRenderCommand(CLI::App& app, Action* action) {
         camera = scene.views[view].camera;
       } else {
         ASSIGN_OR_RETURN(cloud, ReadGaussianPly(args->ply));
-        if (cloud.size() == 0) return absl::InvalidArgumentError(absl::StrCat(args->ply, ": no Gaussians"));
+        if (cloud.size() == 0)
+          return absl::InvalidArgumentError(absl::StrCat(args->ply, ": no Gaussians"));
         std::vector<std::string> parts = absl::StrSplit(args->orbit, ',');
         double az = 0, el = 0;
-        if (parts.size() != 2 || !absl::SimpleAtod(parts[0], &az) || !absl::SimpleAtod(parts[1], &el)) {
+        if (parts.size() != 2 || !absl::SimpleAtod(parts[0], &az) ||
+            !absl::SimpleAtod(parts[1], &el)) {
           return absl::InvalidArgumentError("--orbit must be AZIMUTH,ELEVATION in degrees");
         }
         ASSIGN_OR_RETURN(Eigen::Vector3d up, ParseAxis(args->up));
         Eigen::Vector3d center;
         double radius = 1;
         RobustBounds(cloud, &center, &radius);
-        camera = OrbitCamera(center, up, args->distance * radius, az, el, args->width, args->height, args->fov);
+        camera = OrbitCamera(center, up, args->distance * radius, az, el, args->width, args->height,
+                             args->fov);
       }
       if (args->surfels) cloud = ToSurfels(cloud);
       RenderOptions options;
@@ -116,18 +131,24 @@ void AddRenderCommand(CLI::App& app, Action* action) {
       int dim = 0;
       if (args->mode == "features") {
         ASSIGN_OR_RETURN(features, cloud.GatherExtraGroup(args->feature_prefix, &dim));
-        if (dim == 0) return absl::InvalidArgumentError(absl::StrCat("the cloud has no '", args->feature_prefix, "*' channels"));
+        if (dim == 0)
+          return absl::InvalidArgumentError(
+              absl::StrCat("the cloud has no '", args->feature_prefix, "*' channels"));
         options.features = features.data();
         options.feature_dim = dim;
       }
       ASSIGN_OR_RETURN(RenderResult r, Render(cloud, camera, options));
       ASSIGN_OR_RETURN(std::vector<float> rgb, Visualize(r, args->mode, dim));
       RETURN_IF_ERROR(WriteImage(args->out, Image{r.width, r.height, 3, std::move(rgb)}));
-      std::fprintf(stderr, "render: %s (%dx%d, %zu Gaussians, %s) in %.1f ms\n", args->out.c_str(), r.width,
-                   r.height, cloud.size(), args->mode.c_str(), r.stats.total_ms);
+      std::fprintf(stderr, "render: %s (%dx%d, %zu Gaussians, %s) in %.1f ms\n", args->out.c_str(),
+                   r.width, r.height, cloud.size(), args->mode.c_str(), r.stats.total_ms);
       if (args->json) {
-        PrintJsonLine(nlohmann::json({{"out", args->out}, {"width", r.width}, {"height", r.height},
-                                      {"gaussians", cloud.size()}, {"ms", r.stats.total_ms}}).dump());
+        PrintJsonLine(nlohmann::json({{"out", args->out},
+                                      {"width", r.width},
+                                      {"height", r.height},
+                                      {"gaussians", cloud.size()},
+                                      {"ms", r.stats.total_ms}})
+                          .dump());
       }
       return absl::OkStatus();
     };
@@ -146,7 +167,8 @@ void AddInfoCommand(CLI::App& app, Action* action) {
   cmd->add_flag("--json", args->json, "Print the description as one JSON line");
   cmd->callback([args, action] {
     *action = [args]() -> absl::Status {
-      if (args->scene.empty() == args->ply.empty()) return absl::InvalidArgumentError("give exactly one of --scene or --ply");
+      if (args->scene.empty() == args->ply.empty())
+        return absl::InvalidArgumentError("give exactly one of --scene or --ply");
       nlohmann::json j;
       GaussianCloud cloud;
       if (!args->scene.empty()) {
@@ -177,7 +199,8 @@ void AddInfoCommand(CLI::App& app, Action* action) {
       for (const ExtraChannel& e : cloud.extras) extras.push_back(e.name);
       j["extra_channels"] = extras;
       Eigen::AlignedBox3f box;
-      for (size_t i = 0; i < cloud.size(); ++i) box.extend(Eigen::Vector3f(&cloud.positions[3 * i]));
+      for (size_t i = 0; i < cloud.size(); ++i)
+        box.extend(Eigen::Vector3f(&cloud.positions[3 * i]));
       if (!box.isEmpty()) {
         j["bounds_min"] = {box.min().x(), box.min().y(), box.min().z()};
         j["bounds_max"] = {box.max().x(), box.max().y(), box.max().z()};

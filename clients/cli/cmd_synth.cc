@@ -8,10 +8,10 @@
 #include "clients/cli/progress.h"
 #include "common/core/status.h"
 #include "common/core/timer.h"
+#include "common/splat/gaussian_ply.h"
 #include "common/synth/cluttered_scene.h"
 #include "common/synth/scene_writer.h"
 #include "common/synth/splat_composite.h"
-#include "common/splat/gaussian_ply.h"
 
 #include <filesystem>
 
@@ -27,7 +27,8 @@ void AddSynthCommand(CLI::App& app, Action* action) {
     bool json = false;
   };
   auto args = std::make_shared<Args>();
-  CLI::App* cmd = app.add_subcommand("synth", "Generate a synthetic cluttered scene with exact ground truth");
+  CLI::App* cmd =
+      app.add_subcommand("synth", "Generate a synthetic cluttered scene with exact ground truth");
   cmd->add_option("--out", args->out, "Output scene directory")->required();
   cmd->add_option("--preset", args->preset, "Size preset: tiny, small (default), medium, large");
   cmd->add_option("--seed", args->seed, "Random seed (default 1)");
@@ -36,12 +37,15 @@ void AddSynthCommand(CLI::App& app, Action* action) {
   cmd->add_option("--width", args->width, "Image width, px");
   cmd->add_option("--height", args->height, "Image height, px");
   cmd->add_option("--gaussians", args->gaussians, "Total number of surfels");
-  cmd->add_option("--mask-noise", args->mask_noise, "Simulated 2D segmenter noise: none, low, medium (default), high")
+  cmd->add_option("--mask-noise", args->mask_noise,
+                  "Simulated 2D segmenter noise: none, low, medium (default), high")
       ->check(CLI::IsMember({"none", "low", "medium", "high"}));
-  cmd->add_option("--from-splats", args->from_splats,
-                  "Compose real captures (comma-separated .ply files) instead of procedural objects")
+  cmd->add_option(
+         "--from-splats", args->from_splats,
+         "Compose real captures (comma-separated .ply files) instead of procedural objects")
       ->delimiter(',');
-  cmd->add_option("--object-height", args->object_height, "With --from-splats: height each capture is scaled to");
+  cmd->add_option("--object-height", args->object_height,
+                  "With --from-splats: height each capture is scaled to");
   cmd->add_option("--threads", args->threads, "Rendering threads (0 = all cores)");
   cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
   cmd->callback([args, action] {
@@ -81,12 +85,15 @@ void AddSynthCommand(CLI::App& app, Action* action) {
       write.seed = options.seed;
       write.progress = [&bar](int done, int total) { bar.Update(done, total); };
       RETURN_IF_ERROR(WriteClutterScene(scene, args->out, write));
-      std::fprintf(stderr, "synth: wrote %s: %zu Gaussians, %d objects, %zu views of %dx%d in %.1f s\n",
+      std::fprintf(stderr,
+                   "synth: wrote %s: %zu Gaussians, %d objects, %zu views of %dx%d in %.1f s\n",
                    args->out.c_str(), scene.cloud.size(), options.objects, scene.cameras.size(),
                    options.width, options.height, watch.ElapsedSeconds());
       if (args->json) {
-        nlohmann::json j = {{"scene", args->out}, {"gaussians", scene.cloud.size()},
-                            {"objects", options.objects}, {"views", scene.cameras.size()},
+        nlohmann::json j = {{"scene", args->out},
+                            {"gaussians", scene.cloud.size()},
+                            {"objects", options.objects},
+                            {"views", scene.cameras.size()},
                             {"seconds", watch.ElapsedSeconds()}};
         PrintJsonLine(j.dump());
       }

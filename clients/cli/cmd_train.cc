@@ -26,12 +26,16 @@ struct TrainArgs {
 
 void AddTrainingOptions(CLI::App* cmd, TrainArgs* args) {
   cmd->add_option("--iterations", args->options.iterations, "Optimisation steps (default 1500)");
-  cmd->add_option("--samples", args->options.samples, "Samples per loss term and step (default 4096)");
-  cmd->add_option("--pixel-pool", args->options.pixel_pool, "Traced pixels cached per view (default 8192)");
-  cmd->add_option("--supervision", args->supervision, "Loss terms: noisy2d, 3d, 3d+filtered2d, full (paper Table 2)")
+  cmd->add_option("--samples", args->options.samples,
+                  "Samples per loss term and step (default 4096)");
+  cmd->add_option("--pixel-pool", args->options.pixel_pool,
+                  "Traced pixels cached per view (default 8192)");
+  cmd->add_option("--supervision", args->supervision,
+                  "Loss terms: noisy2d, 3d, 3d+filtered2d, full (paper Table 2)")
       ->check(CLI::IsMember({"noisy2d", "3d", "3d+filtered2d", "full"}));
   cmd->add_option("--threshold", args->threshold, "Segmentation threshold tau (default 0.9)");
-  cmd->add_option("--method", args->method, "contrastive (the paper's feature field) or vote (training-free baseline)")
+  cmd->add_option("--method", args->method,
+                  "contrastive (the paper's feature field) or vote (training-free baseline)")
       ->check(CLI::IsMember({"contrastive", "vote"}));
   cmd->add_option("--seed", args->options.seed, "Random seed");
   cmd->add_option("--threads", args->options.num_threads, "Threads (0 = all cores)");
@@ -45,19 +49,22 @@ absl::Status TrainAndSegment(const TrainArgs& args, const Scene& scene, const Ga
     Stopwatch watch;
     SegmentationResult result;
     result.stage = "vote";
-    ASSIGN_OR_RETURN(result.labels, training::VoteLabels(scene, cloud, decomposition_dir, args.options.num_threads));
+    ASSIGN_OR_RETURN(result.labels, training::VoteLabels(scene, cloud, decomposition_dir,
+                                                         args.options.num_threads));
     RETURN_IF_ERROR(WriteResult(args.out, result, cloud));
     RETURN_IF_ERROR(training::ExportInstances(args.out, cloud, result.labels));
-    std::fprintf(stderr, "vote: labels by weighted 2D-mask voting in %.1f s; wrote %s\n", watch.ElapsedSeconds(), args.out.c_str());
+    std::fprintf(stderr, "vote: labels by weighted 2D-mask voting in %.1f s; wrote %s\n",
+                 watch.ElapsedSeconds(), args.out.c_str());
     (*summary)["out"] = args.out;
     return absl::OkStatus();
   }
   training::TrainingOptions options = args.options;
   ASSIGN_OR_RETURN(options.supervision, training::ParseSupervision(args.supervision));
   ProgressBar prepare_bar("train: tracing pixel pools");
-  ASSIGN_OR_RETURN(training::TrainingData data,
-                   training::PrepareTraining(scene, cloud, decomposition_dir, options,
-                                             [&](int done, int total) { prepare_bar.Update(done, total); }));
+  ASSIGN_OR_RETURN(
+      training::TrainingData data,
+      training::PrepareTraining(scene, cloud, decomposition_dir, options,
+                                [&](int done, int total) { prepare_bar.Update(done, total); }));
   ProgressBar bar("train: steps");
   ASSIGN_OR_RETURN(training::TrainingResult trained,
                    training::TrainFeatures(data, options, [&](int step, int total, double) {
@@ -75,9 +82,11 @@ absl::Status TrainAndSegment(const TrainArgs& args, const Scene& scene, const Ga
   RETURN_IF_ERROR(training::ExportInstances(args.out, cloud, result.labels));
   size_t labelled = 0;
   for (uint32_t l : result.labels) labelled += l != 0;
-  std::fprintf(stderr, "train: %d steps in %.1f s (final loss %.3g); %zu of %zu Gaussians labelled; wrote %s\n",
-               options.iterations, trained.seconds, trained.loss.empty() ? 0.0 : trained.loss.back(), labelled,
-               cloud.size(), args.out.c_str());
+  std::fprintf(
+      stderr,
+      "train: %d steps in %.1f s (final loss %.3g); %zu of %zu Gaussians labelled; wrote %s\n",
+      options.iterations, trained.seconds, trained.loss.empty() ? 0.0 : trained.loss.back(),
+      labelled, cloud.size(), args.out.c_str());
   (*summary)["train_s"] = trained.seconds;
   (*summary)["labelled"] = labelled;
   (*summary)["out"] = args.out;
@@ -88,10 +97,13 @@ absl::Status TrainAndSegment(const TrainArgs& args, const Scene& scene, const Ga
 
 void AddTrainCommands(CLI::App& app, Action* action) {
   auto train = std::make_shared<TrainArgs>();
-  CLI::App* cmd = app.add_subcommand("train", "Train the spatial contrastive feature field on a decomposition, then segment");
+  CLI::App* cmd = app.add_subcommand(
+      "train", "Train the spatial contrastive feature field on a decomposition, then segment");
   cmd->add_option("--scene", train->scene, "Scene directory")->required();
-  cmd->add_option("--decomposition", train->decomposition, "Output of instascene decompose")->required();
-  cmd->add_option("--out", train->out, "Result directory (features, labels, instances/*.ply)")->required();
+  cmd->add_option("--decomposition", train->decomposition, "Output of instascene decompose")
+      ->required();
+  cmd->add_option("--out", train->out, "Result directory (features, labels, instances/*.ply)")
+      ->required();
   AddTrainingOptions(cmd, train.get());
   cmd->callback([train, action] {
     *action = [train]() -> absl::Status {
@@ -109,9 +121,12 @@ void AddTrainCommands(CLI::App& app, Action* action) {
     double threshold = 0.9;
   };
   auto segment = std::make_shared<SegmentArgs>();
-  CLI::App* seg = app.add_subcommand("segment", "Re-segment trained features (instances from their coarse labels, tau rule)");
+  CLI::App* seg = app.add_subcommand(
+      "segment", "Re-segment trained features (instances from their coarse labels, tau rule)");
   seg->add_option("--scene", segment->scene, "Scene directory")->required();
-  seg->add_option("--features", segment->features, "A result directory with features (instascene train)")->required();
+  seg->add_option("--features", segment->features,
+                  "A result directory with features (instascene train)")
+      ->required();
   seg->add_option("--out", segment->out, "Result directory")->required();
   seg->add_option("--threshold", segment->threshold, "Segmentation threshold tau (default 0.9)");
   seg->callback([segment, action] {
@@ -119,10 +134,13 @@ void AddTrainCommands(CLI::App& app, Action* action) {
       ASSIGN_OR_RETURN(Scene scene, ReadScene(segment->scene));
       ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
       ASSIGN_OR_RETURN(SegmentationResult in, ReadResult(segment->features, cloud.size()));
-      if (in.feature_dim == 0) return absl::InvalidArgumentError(absl::StrCat(segment->features, ": result has no features"));
+      if (in.feature_dim == 0)
+        return absl::InvalidArgumentError(
+            absl::StrCat(segment->features, ": result has no features"));
       SegmentationResult out = in;
       out.stage = "segment";
-      out.labels = training::SegmentByFeatures(in.features, in.feature_dim, in.labels, training::SegmentOptions{segment->threshold});
+      out.labels = training::SegmentByFeatures(in.features, in.feature_dim, in.labels,
+                                               training::SegmentOptions{segment->threshold});
       RETURN_IF_ERROR(WriteResult(segment->out, out, cloud));
       RETURN_IF_ERROR(training::ExportInstances(segment->out, cloud, out.labels));
       std::fprintf(stderr, "segment: wrote %s\n", segment->out.c_str());
@@ -131,32 +149,41 @@ void AddTrainCommands(CLI::App& app, Action* action) {
   });
 
   auto run = std::make_shared<TrainArgs>();
-  CLI::App* r = app.add_subcommand("run", "All stages offline: decompose, train, segment (results under --out)");
-  r->add_option("--scene", run->scene, "Scene directory (images, masks, gaussians.ply)")->required();
-  r->add_option("--out", run->out, "Output directory: decomposition/ and segmentation/")->required();
+  CLI::App* r = app.add_subcommand(
+      "run", "All stages offline: decompose, train, segment (results under --out)");
+  r->add_option("--scene", run->scene, "Scene directory (images, masks, gaussians.ply)")
+      ->required();
+  r->add_option("--out", run->out, "Output directory: decomposition/ and segmentation/")
+      ->required();
   AddTrainingOptions(r, run.get());
   r->callback([run, action] {
     *action = [run]() -> absl::Status {
       Stopwatch watch;
       ASSIGN_OR_RETURN(Scene scene, ReadScene(run->scene));
       ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
-      const std::string decomposition_dir = (std::filesystem::path(run->out) / "decomposition").string();
+      const std::string decomposition_dir =
+          (std::filesystem::path(run->out) / "decomposition").string();
       ProgressBar bar("run: tracking");
       decomposition::DecompositionOptions dopt;
       dopt.num_threads = run->options.num_threads;
       ASSIGN_OR_RETURN(decomposition::DecompositionResult coarse,
-                       decomposition::Decompose(scene, cloud, dopt, [&](const std::string& stage, int done, int total) {
-                         if (stage == "tracking") bar.Update(done, total);
-                       }));
+                       decomposition::Decompose(scene, cloud, dopt,
+                                                [&](const std::string& stage, int done, int total) {
+                                                  if (stage == "tracking") bar.Update(done, total);
+                                                }));
       RETURN_IF_ERROR(decomposition::WriteDecomposition(decomposition_dir, scene, cloud, coarse));
-      std::fprintf(stderr, "run: %zu coarse instances from %zu masks\n", coarse.instances.size(), coarse.trackers.trackers.size());
+      std::fprintf(stderr, "run: %zu coarse instances from %zu masks\n", coarse.instances.size(),
+                   coarse.trackers.trackers.size());
       TrainArgs args = *run;
       args.out = (std::filesystem::path(run->out) / "segmentation").string();
-      nlohmann::json summary = {{"instances", coarse.instances.size()}, {"decomposition", decomposition_dir}};
+      nlohmann::json summary = {{"instances", coarse.instances.size()},
+                                {"decomposition", decomposition_dir}};
       RETURN_IF_ERROR(TrainAndSegment(args, scene, cloud, decomposition_dir, &summary));
       summary["seconds"] = watch.ElapsedSeconds();
-      std::fprintf(stderr, "run: done in %.1f s; results in %s (evaluate with instascene eval --result %s)\n",
-                   watch.ElapsedSeconds(), run->out.c_str(), args.out.c_str());
+      std::fprintf(
+          stderr,
+          "run: done in %.1f s; results in %s (evaluate with instascene eval --result %s)\n",
+          watch.ElapsedSeconds(), run->out.c_str(), args.out.c_str());
       if (run->json) PrintJsonLine(summary.dump());
       return absl::OkStatus();
     };

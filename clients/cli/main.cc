@@ -15,7 +15,8 @@ void PrintJsonLine(const std::string& json) {
 
 int main(int argc, char** argv) {
   using namespace instascene::cli;
-  CLI::App app{"instascene: decompose captured Gaussian-splat scenes into complete object instances"};
+  CLI::App app{
+      "instascene: decompose captured Gaussian-splat scenes into complete object instances"};
   app.require_subcommand(1);
   app.set_version_flag("--version", "instascene 0.1.0");
   Action action;

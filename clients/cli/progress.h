@@ -13,7 +13,8 @@ namespace instascene::cli {
 
 class ProgressBar {
  public:
-  explicit ProgressBar(std::string label) : label_(std::move(label)), tty_(isatty(STDERR_FILENO) != 0) {}
+  explicit ProgressBar(std::string label)
+      : label_(std::move(label)), tty_(isatty(STDERR_FILENO) != 0) {}
   void Update(int done, int total) {
     const int percent = total > 0 ? 100 * done / total : 100;
     if (!tty_ && percent / 10 == last_decile_ && done != total) return;
@@ -21,9 +22,10 @@ class ProgressBar {
     const int width = 30, filled = width * percent / 100;
     const double elapsed = watch_.ElapsedSeconds();
     const double eta = done > 0 ? elapsed * (total - done) / done : 0.0;
-    std::fprintf(stderr, "%s%s [%s%s] %d/%d %3d%% %.1fs eta %.1fs%s", tty_ ? "\r" : "", label_.c_str(),
-                 std::string(filled, '#').c_str(), std::string(width - filled, '.').c_str(), done, total,
-                 percent, elapsed, eta, tty_ && done != total ? "" : "\n");
+    std::fprintf(stderr, "%s%s [%s%s] %d/%d %3d%% %.1fs eta %.1fs%s", tty_ ? "\r" : "",
+                 label_.c_str(), std::string(filled, '#').c_str(),
+                 std::string(width - filled, '.').c_str(), done, total, percent, elapsed, eta,
+                 tty_ && done != total ? "" : "\n");
     std::fflush(stderr);
   }
 

@@ -1,7 +1,7 @@
 // common/core/status.h: error handling for every InstaScene library.
 //
-// Errors are values (absl::Status / absl::StatusOr); these macros propagate them. CHECK-style aborts
-// are reserved for programmer errors no request can trigger. Thread-safe: stateless.
+// Errors are values (absl::Status / absl::StatusOr); these macros propagate them. CHECK-style
+// aborts are reserved for programmer errors no request can trigger. Thread-safe: stateless.
 #pragma once
 
 #include <utility>
@@ -14,17 +14,17 @@
 #define INSTASCENE_CONCAT(a, b) INSTASCENE_CONCAT_INNER(a, b)
 
 // Returns from the current function if `expr` (an absl::Status) is not OK.
-#define RETURN_IF_ERROR(expr)                          \
-  do {                                                 \
-    ::absl::Status _instascene_status = (expr);        \
+#define RETURN_IF_ERROR(expr)                                \
+  do {                                                       \
+    ::absl::Status _instascene_status = (expr);              \
     if (!_instascene_status.ok()) return _instascene_status; \
   } while (0)
 
 // `lhs = value of expr` where expr is an absl::StatusOr<T>; returns its status on error.
 #define ASSIGN_OR_RETURN(lhs, expr) \
   ASSIGN_OR_RETURN_IMPL(INSTASCENE_CONCAT(_instascene_statusor_, __LINE__), lhs, expr)
-#define ASSIGN_OR_RETURN_IMPL(tmp, lhs, expr) \
-  auto tmp = (expr);                          \
+#define ASSIGN_OR_RETURN_IMPL(tmp, lhs, expr)    \
+  auto tmp = (expr);                             \
   if (!tmp.ok()) return std::move(tmp).status(); \
   lhs = std::move(tmp).value()
 

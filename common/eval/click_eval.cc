@@ -14,8 +14,8 @@ namespace {
 
 // What one view contributes: a predicted per-pixel map for each object selection.
 struct ViewRender {
-  std::vector<uint32_t> labels;     // label mode
-  std::vector<float> features;      // feature mode: normalised per pixel, W*H*D
+  std::vector<uint32_t> labels;  // label mode
+  std::vector<float> features;   // feature mode: normalised per pixel, W*H*D
   std::vector<float> alpha;
 };
 
@@ -31,20 +31,23 @@ std::vector<float> NormalizedRows(const std::vector<float>& values, int dim) {
 }
 
 absl::StatusOr<ViewRender> RenderView(const GaussianCloud& cloud, const PinholeCamera& camera,
-                                      const SegmentationResult& result, const std::vector<float>& unit_features,
-                                      bool features, const ClickEvalOptions& options) {
+                                      const SegmentationResult& result,
+                                      const std::vector<float>& unit_features, bool features,
+                                      const ClickEvalOptions& options) {
   ViewRender view;
   if (features) {
     RenderOptions render;
     render.color = false;
-    render.features = unit_features.data();  // splatted features are the normalised ones (ALGORITHM 5.1)
+    render.features =
+        unit_features.data();  // splatted features are the normalised ones (ALGORITHM 5.1)
     render.feature_dim = result.feature_dim;
     render.num_threads = options.num_threads;
     ASSIGN_OR_RETURN(RenderResult r, Render(cloud, camera, render));
     view.features = NormalizedRows(r.features, result.feature_dim);
     view.alpha = std::move(r.alpha);
   } else {
-    ASSIGN_OR_RETURN(view.labels, RenderLabelMap(cloud, camera, result.labels, options.min_alpha, options.num_threads));
+    ASSIGN_OR_RETURN(view.labels, RenderLabelMap(cloud, camera, result.labels, options.min_alpha,
+                                                 options.num_threads));
   }
   return view;
 }
@@ -53,26 +56,34 @@ absl::StatusOr<ViewRender> RenderView(const GaussianCloud& cloud, const PinholeC
 
 absl::StatusOr<ClickEvaluation> EvaluateClicks(const Scene& scene, const GaussianCloud& cloud,
                                                const std::vector<std::vector<uint32_t>>& gt_masks,
-                                               const std::vector<uint32_t>& gt_ids, const SegmentationResult& result,
-                                               const std::vector<std::string>& names, const ClickEvalOptions& options) {
-  if (gt_masks.size() != scene.views.size()) return absl::InvalidArgumentError("one GT mask per view is required");
+                                               const std::vector<uint32_t>& gt_ids,
+                                               const SegmentationResult& result,
+                                               const std::vector<std::string>& names,
+                                               const ClickEvalOptions& options) {
+  if (gt_masks.size() != scene.views.size())
+    return absl::InvalidArgumentError("one GT mask per view is required");
   if (result.labels.size() != cloud.size() || gt_ids.size() != cloud.size()) {
-    return absl::InvalidArgumentError("labels, GT ids and the cloud disagree on the Gaussian count");
+    return absl::InvalidArgumentError(
+        "labels, GT ids and the cloud disagree on the Gaussian count");
   }
   ClickEvaluation eval;
   eval.used_features = options.use_features && result.feature_dim > 0;
   const int dim = result.feature_dim;
-  const std::vector<float> unit_features = eval.used_features ? NormalizedRows(result.features, dim) : std::vector<float>{};
+  const std::vector<float> unit_features =
+      eval.used_features ? NormalizedRows(result.features, dim) : std::vector<float>{};
   // Objects, their visible views and reference views.
   std::map<uint32_t, std::vector<std::pair<int, size_t>>> visible;  // id -> (view, GT area)
   for (size_t v = 0; v < gt_masks.size(); ++v) {
     std::map<uint32_t, size_t> area;
-    for (uint32_t id : gt_masks[v]) if (id != 0) ++area[id];
+    for (uint32_t id : gt_masks[v])
+      if (id != 0) ++area[id];
     for (const auto& [id, a] : area) {
-      if (a >= static_cast<size_t>(options.min_visible_pixels)) visible[id].emplace_back(static_cast<int>(v), a);
+      if (a >= static_cast<size_t>(options.min_visible_pixels))
+        visible[id].emplace_back(static_cast<int>(v), a);
     }
   }
-  for (uint32_t id : gt_ids) if (id != 0) visible.try_emplace(id);  // never-visible objects score 0
+  for (uint32_t id : gt_ids)
+    if (id != 0) visible.try_emplace(id);  // never-visible objects score 0
   std::map<uint32_t, ObjectClickScore> scores;
   std::map<uint32_t, std::vector<float>> reference_feature;
   std::map<int, std::vector<uint32_t>> by_reference_view;
@@ -81,12 +92,16 @@ absl::StatusOr<ClickEvaluation> EvaluateClicks(const Scene& scene, const Gaussia
     s.id = id;
     s.name = id < names.size() ? names[id] : absl::StrCat("object_", id);
     if (views.empty()) continue;
-    s.reference_view = std::max_element(views.begin(), views.end(), [](const auto& a, const auto& b) { return a.second < b.second; })->first;
+    s.reference_view =
+        std::max_element(views.begin(), views.end(), [](const auto& a, const auto& b) {
+          return a.second < b.second;
+        })->first;
     by_reference_view[s.reference_view].push_back(id);
   }
   // Pass 1: the selection made in each reference view.
   for (const auto& [v, ids] : by_reference_view) {
-    ASSIGN_OR_RETURN(ViewRender view, RenderView(cloud, scene.views[v].camera, result, unit_features, eval.used_features, options));
+    ASSIGN_OR_RETURN(ViewRender view, RenderView(cloud, scene.views[v].camera, result,
+                                                 unit_features, eval.used_features, options));
     for (uint32_t id : ids) {
       const std::vector<uint32_t>& gt = gt_masks[v];
       if (eval.used_features) {
@@ -102,17 +117,23 @@ absl::StatusOr<ClickEvaluation> EvaluateClicks(const Scene& scene, const Gaussia
         for (double m : mean) ref.push_back(static_cast<float>(m / norm));
       } else {
         std::map<uint32_t, size_t> votes;
-        for (size_t p = 0; p < gt.size(); ++p) if (gt[p] == id) ++votes[view.labels[p]];
-        scores[id].selected_label = std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) { return a.second < b.second; })->first;
+        for (size_t p = 0; p < gt.size(); ++p)
+          if (gt[p] == id) ++votes[view.labels[p]];
+        scores[id].selected_label =
+            std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) {
+              return a.second < b.second;
+            })->first;
       }
     }
   }
   // Pass 2: IoU in every view where each object is visible.
   std::map<int, std::vector<uint32_t>> objects_in_view;
-  for (const auto& [id, views] : visible) for (const auto& [v, a] : views) objects_in_view[v].push_back(id);
+  for (const auto& [id, views] : visible)
+    for (const auto& [v, a] : views) objects_in_view[v].push_back(id);
   std::map<uint32_t, double> iou_sum;
   for (const auto& [v, ids] : objects_in_view) {
-    ASSIGN_OR_RETURN(ViewRender view, RenderView(cloud, scene.views[v].camera, result, unit_features, eval.used_features, options));
+    ASSIGN_OR_RETURN(ViewRender view, RenderView(cloud, scene.views[v].camera, result,
+                                                 unit_features, eval.used_features, options));
     const std::vector<uint32_t>& gt = gt_masks[v];
     for (uint32_t id : ids) {
       size_t inter = 0, uni = 0;
@@ -168,29 +189,36 @@ absl::StatusOr<ClickEvaluation> EvaluateClicks(const Scene& scene, const Gaussia
   return eval;
 }
 
-absl::StatusOr<ClickEvaluation> EvaluateResultDirectory(const std::string& scene_dir, const std::string& result_dir,
+absl::StatusOr<ClickEvaluation> EvaluateResultDirectory(const std::string& scene_dir,
+                                                        const std::string& result_dir,
                                                         const ClickEvalOptions& options) {
   ASSIGN_OR_RETURN(Scene scene, ReadScene(scene_dir));
   if (!scene.metadata.contains("gt") || !scene.metadata["gt"].is_object()) {
-    return absl::FailedPreconditionError(absl::StrCat(scene_dir, ": scene has no ground truth (\"gt\" in scene.json)"));
+    return absl::FailedPreconditionError(
+        absl::StrCat(scene_dir, ": scene has no ground truth (\"gt\" in scene.json)"));
   }
   const nlohmann::json& gt = scene.metadata["gt"];
   ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
-  ASSIGN_OR_RETURN(std::vector<uint32_t> gt_ids,
-                   ReadGaussianInstanceIds(scene.Path(gt.value("gaussian_instances", std::string("gt/labels.ply"))), cloud.size()));
+  ASSIGN_OR_RETURN(
+      std::vector<uint32_t> gt_ids,
+      ReadGaussianInstanceIds(
+          scene.Path(gt.value("gaussian_instances", std::string("gt/labels.ply"))), cloud.size()));
   ASSIGN_OR_RETURN(SegmentationResult result, ReadResult(result_dir, cloud.size()));
   std::vector<std::vector<uint32_t>> masks;
   const std::string mask_dir = gt.value("masks", std::string("gt/masks"));
   for (const SceneView& v : scene.views) {
-    ASSIGN_OR_RETURN(LabelMap m, ReadLabelMap(scene.Path(absl::StrCat(mask_dir, "/", v.name, ".png"))));
+    ASSIGN_OR_RETURN(LabelMap m,
+                     ReadLabelMap(scene.Path(absl::StrCat(mask_dir, "/", v.name, ".png"))));
     if (m.width != v.camera.width || m.height != v.camera.height) {
-      return absl::InvalidArgumentError(absl::StrCat("GT mask of view '", v.name, "' does not match its camera size"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("GT mask of view '", v.name, "' does not match its camera size"));
     }
     masks.emplace_back(m.labels.begin(), m.labels.end());
   }
   std::vector<std::string> names;
   if (gt.contains("objects")) {
-    ASSIGN_OR_RETURN(std::string text, ReadFileBounded(scene.Path(gt["objects"].get<std::string>()), size_t{64} << 20));
+    ASSIGN_OR_RETURN(std::string text, ReadFileBounded(scene.Path(gt["objects"].get<std::string>()),
+                                                       size_t{64} << 20));
     nlohmann::json objects = nlohmann::json::parse(text, nullptr, false);
     if (objects.is_array()) {
       for (const auto& o : objects) {

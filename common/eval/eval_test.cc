@@ -39,8 +39,10 @@ double PairCountingAri(const std::vector<uint32_t>& a, const std::vector<uint32_
 }
 
 TEST(Metrics, AdjustedRandIndexMatchesPairCounting) {
-  EXPECT_NEAR(AdjustedRandIndex({0, 0, 1, 1}, {0, 0, 1, 2}), 0.5714285714285714, 1e-12);  // sklearn's example
-  EXPECT_DOUBLE_EQ(AdjustedRandIndex({3, 3, 5, 5, 7}, {1, 1, 0, 0, 9}), 1.0);  // same partition, other ids
+  EXPECT_NEAR(AdjustedRandIndex({0, 0, 1, 1}, {0, 0, 1, 2}), 0.5714285714285714,
+              1e-12);  // sklearn's example
+  EXPECT_DOUBLE_EQ(AdjustedRandIndex({3, 3, 5, 5, 7}, {1, 1, 0, 0, 9}),
+                   1.0);  // same partition, other ids
   std::mt19937 rng(4);
   for (int trial = 0; trial < 20; ++trial) {
     std::vector<uint32_t> a(80), b(80);
@@ -85,7 +87,8 @@ TEST(Metrics, PsnrByHand) {
 double BruteSsim(const Image& a, const Image& b) {
   double kernel[11][11], sum = 0;
   for (int i = 0; i < 11; ++i)
-    for (int j = 0; j < 11; ++j) sum += kernel[i][j] = std::exp(-((i - 5) * (i - 5) + (j - 5) * (j - 5)) / (2 * 1.5 * 1.5));
+    for (int j = 0; j < 11; ++j)
+      sum += kernel[i][j] = std::exp(-((i - 5) * (i - 5) + (j - 5) * (j - 5)) / (2 * 1.5 * 1.5));
   double total = 0;
   for (int c = 0; c < a.channels; ++c) {
     for (int y = 0; y < a.height; ++y) {
@@ -193,7 +196,8 @@ TEST_F(ClickProtocol, GroundTruthScoresOne) {
   gt.labels = *ids_;
   const std::string result_dir = *dir_ + "_gt_result";
   ASSERT_TRUE(WriteResult(result_dir, gt, *cloud_).ok());
-  absl::StatusOr<ClickEvaluation> eval = EvaluateResultDirectory(*dir_, result_dir, ClickEvalOptions{});
+  absl::StatusOr<ClickEvaluation> eval =
+      EvaluateResultDirectory(*dir_, result_dir, ClickEvalOptions{});
   ASSERT_TRUE(eval.ok()) << eval.status();
   EXPECT_FALSE(eval->used_features);
   EXPECT_EQ(eval->objects.size(), 5u);
@@ -245,18 +249,23 @@ TEST_F(ClickProtocol, MergedObjectScoresWhatItShould) {
       }
     }
     std::map<uint32_t, size_t> votes;
-    for (size_t p = 0; p < gt_masks[ref].size(); ++p) if (gt_masks[ref][p] == id) ++votes[pred_maps[ref][p]];
-    const uint32_t selected = std::max_element(votes.begin(), votes.end(), [](auto& a, auto& b) { return a.second < b.second; })->first;
+    for (size_t p = 0; p < gt_masks[ref].size(); ++p)
+      if (gt_masks[ref][p] == id) ++votes[pred_maps[ref][p]];
+    const uint32_t selected = std::max_element(votes.begin(), votes.end(), [](auto& a, auto& b) {
+                                return a.second < b.second;
+                              })->first;
     EXPECT_EQ(selected, id == 2 ? 1u : id);
     for (size_t v = 0; v < gt_masks.size(); ++v) {
-      if (std::count(gt_masks[v].begin(), gt_masks[v].end(), id) < options.min_visible_pixels) continue;
+      if (std::count(gt_masks[v].begin(), gt_masks[v].end(), id) < options.min_visible_pixels)
+        continue;
       sum += MaskIou(pred_maps[v], selected, gt_masks[v], id);
       ++views;
     }
     expected_total += sum / views;
   }
   std::vector<std::string> names;
-  absl::StatusOr<ClickEvaluation> eval = EvaluateClicks(*scene, *cloud_, gt_masks, *ids_, merged, names, options);
+  absl::StatusOr<ClickEvaluation> eval =
+      EvaluateClicks(*scene, *cloud_, gt_masks, *ids_, merged, names, options);
   ASSERT_TRUE(eval.ok()) << eval.status();
   EXPECT_NEAR(eval->miou, expected_total / 5.0, 1e-12);
   EXPECT_LT(eval->miou, 0.9);

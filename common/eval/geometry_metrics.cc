@@ -9,7 +9,8 @@
 namespace instascene {
 
 PointCloudComparison ComparePointClouds(const std::vector<Eigen::Vector3f>& predicted,
-                                        const std::vector<Eigen::Vector3f>& ground_truth, double tau) {
+                                        const std::vector<Eigen::Vector3f>& ground_truth,
+                                        double tau) {
   PointCloudComparison out;
   if (predicted.empty() || ground_truth.empty()) return out;
   const PointIndex3 pred_index(predicted), gt_index(ground_truth);
@@ -28,11 +29,14 @@ PointCloudComparison ComparePointClouds(const std::vector<Eigen::Vector3f>& pred
   out.chamfer = 0.5 * (to_gt / predicted.size() + to_pred / ground_truth.size());
   out.precision = static_cast<double>(close_pred) / predicted.size();
   out.recall = static_cast<double>(close_gt) / ground_truth.size();
-  out.f1 = out.precision + out.recall > 0 ? 2 * out.precision * out.recall / (out.precision + out.recall) : 0.0;
+  out.f1 = out.precision + out.recall > 0
+               ? 2 * out.precision * out.recall / (out.precision + out.recall)
+               : 0.0;
   return out;
 }
 
-std::vector<uint8_t> VoxelizeClosedMesh(const TriangleMesh& mesh, const Eigen::AlignedBox3f& box, int resolution) {
+std::vector<uint8_t> VoxelizeClosedMesh(const TriangleMesh& mesh, const Eigen::AlignedBox3f& box,
+                                        int resolution) {
   const int r = resolution;
   std::vector<uint8_t> inside(static_cast<size_t>(r) * r * r, 0);
   const Eigen::Vector3f cell = box.sizes() / static_cast<float>(r);
@@ -43,14 +47,19 @@ std::vector<uint8_t> VoxelizeClosedMesh(const TriangleMesh& mesh, const Eigen::A
   auto row_z = [&](int k) { return box.min().z() + (k + kOffset) * cell.z(); };
   std::vector<std::vector<double>> hits(static_cast<size_t>(r) * r);
   for (const auto& t : mesh.triangles) {
-    const Eigen::Vector3d a = mesh.vertices[t[0]].cast<double>(), b = mesh.vertices[t[1]].cast<double>(),
+    const Eigen::Vector3d a = mesh.vertices[t[0]].cast<double>(),
+                          b = mesh.vertices[t[1]].cast<double>(),
                           c = mesh.vertices[t[2]].cast<double>();
     const double ymin = std::min({a.y(), b.y(), c.y()}), ymax = std::max({a.y(), b.y(), c.y()});
     const double zmin = std::min({a.z(), b.z(), c.z()}), zmax = std::max({a.z(), b.z(), c.z()});
-    const int j0 = std::max(0, static_cast<int>(std::floor((ymin - box.min().y()) / cell.y() - kOffset)));
-    const int j1 = std::min(r - 1, static_cast<int>(std::ceil((ymax - box.min().y()) / cell.y() - kOffset)));
-    const int k0 = std::max(0, static_cast<int>(std::floor((zmin - box.min().z()) / cell.z() - kOffset)));
-    const int k1 = std::min(r - 1, static_cast<int>(std::ceil((zmax - box.min().z()) / cell.z() - kOffset)));
+    const int j0 =
+        std::max(0, static_cast<int>(std::floor((ymin - box.min().y()) / cell.y() - kOffset)));
+    const int j1 =
+        std::min(r - 1, static_cast<int>(std::ceil((ymax - box.min().y()) / cell.y() - kOffset)));
+    const int k0 =
+        std::max(0, static_cast<int>(std::floor((zmin - box.min().z()) / cell.z() - kOffset)));
+    const int k1 =
+        std::min(r - 1, static_cast<int>(std::ceil((zmax - box.min().z()) / cell.z() - kOffset)));
     for (int j = j0; j <= j1; ++j) {
       for (int k = k0; k <= k1; ++k) {
         const double py = row_y(j), pz = row_z(k);
@@ -60,7 +69,8 @@ std::vector<uint8_t> VoxelizeClosedMesh(const TriangleMesh& mesh, const Eigen::A
         const double u = ((py - a.y()) * (c.z() - a.z()) - (c.y() - a.y()) * (pz - a.z())) / d;
         const double v = ((b.y() - a.y()) * (pz - a.z()) - (py - a.y()) * (b.z() - a.z())) / d;
         if (u < 0 || v < 0 || u + v > 1) continue;
-        hits[static_cast<size_t>(j) * r + k].push_back(a.x() + u * (b.x() - a.x()) + v * (c.x() - a.x()));
+        hits[static_cast<size_t>(j) * r + k].push_back(a.x() + u * (b.x() - a.x()) +
+                                                       v * (c.x() - a.x()));
       }
     }
   }
@@ -87,7 +97,8 @@ double VolumeIou(const TriangleMesh& a, const TriangleMesh& b, int resolution) {
   const Eigen::Vector3f pad = box.sizes() / static_cast<float>(resolution);
   box.min() -= pad;
   box.max() += pad;
-  const std::vector<uint8_t> va = VoxelizeClosedMesh(a, box, resolution), vb = VoxelizeClosedMesh(b, box, resolution);
+  const std::vector<uint8_t> va = VoxelizeClosedMesh(a, box, resolution),
+                             vb = VoxelizeClosedMesh(b, box, resolution);
   size_t inter = 0, uni = 0;
   for (size_t i = 0; i < va.size(); ++i) {
     inter += va[i] && vb[i];
@@ -106,16 +117,20 @@ std::vector<Eigen::Vector3f> SampleSurface(const TriangleMesh& mesh, size_t coun
   std::uniform_real_distribution<double> uni(0, 1);
   out.reserve(count);
   for (size_t s = 0; s < count; ++s) {
-    const size_t t = std::min(static_cast<size_t>(std::lower_bound(cdf.begin(), cdf.end(), uni(rng) * total) - cdf.begin()),
-                              mesh.triangles.size() - 1);
+    const size_t t =
+        std::min(static_cast<size_t>(std::lower_bound(cdf.begin(), cdf.end(), uni(rng) * total) -
+                                     cdf.begin()),
+                 mesh.triangles.size() - 1);
     double r1 = uni(rng), r2 = uni(rng);
     if (r1 + r2 > 1) {
       r1 = 1 - r1;
       r2 = 1 - r2;
     }
     const auto& tri = mesh.triangles[t];
-    out.push_back(((1 - r1 - r2) * mesh.vertices[tri[0]].cast<double>() + r1 * mesh.vertices[tri[1]].cast<double>() +
-                   r2 * mesh.vertices[tri[2]].cast<double>()).cast<float>());
+    out.push_back(((1 - r1 - r2) * mesh.vertices[tri[0]].cast<double>() +
+                   r1 * mesh.vertices[tri[1]].cast<double>() +
+                   r2 * mesh.vertices[tri[2]].cast<double>())
+                      .cast<float>());
   }
   return out;
 }

@@ -20,12 +20,15 @@ absl::StatusOr<PlyColumns> ReadVertexColumns(const std::string& path) {
 
 }  // namespace
 
-absl::Status WriteResult(const std::string& directory, const SegmentationResult& result, const GaussianCloud& cloud) {
+absl::Status WriteResult(const std::string& directory, const SegmentationResult& result,
+                         const GaussianCloud& cloud) {
   const size_t n = result.labels.size();
   if (n != cloud.size()) {
-    return absl::InvalidArgumentError(absl::StrCat("result has ", n, " labels for ", cloud.size(), " Gaussians"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("result has ", n, " labels for ", cloud.size(), " Gaussians"));
   }
-  if (result.feature_dim < 0 || result.features.size() != n * static_cast<size_t>(result.feature_dim)) {
+  if (result.feature_dim < 0 ||
+      result.features.size() != n * static_cast<size_t>(result.feature_dim)) {
     return absl::InvalidArgumentError("result features do not match labels x feature_dim");
   }
   std::error_code ec;
@@ -37,7 +40,8 @@ absl::Status WriteResult(const std::string& directory, const SegmentationResult&
   labels.names = {"instance_id"};
   labels.types = {ScalarType::kUint32};
   labels.columns = {std::vector<float>(result.labels.begin(), result.labels.end())};
-  RETURN_IF_ERROR(WriteFileAtomically((dir / "labels.ply").string(), EncodePlyBinary("vertex", labels)));
+  RETURN_IF_ERROR(
+      WriteFileAtomically((dir / "labels.ply").string(), EncodePlyBinary("vertex", labels)));
   nlohmann::json j = result.metadata;
   j["format"] = kResultFormat;
   j["stage"] = result.stage;
@@ -54,7 +58,8 @@ absl::Status WriteResult(const std::string& directory, const SegmentationResult&
       for (size_t i = 0; i < n; ++i) column[i] = result.features[i * result.feature_dim + d];
       features.columns.push_back(std::move(column));
     }
-    RETURN_IF_ERROR(WriteFileAtomically((dir / "features.ply").string(), EncodePlyBinary("vertex", features)));
+    RETURN_IF_ERROR(
+        WriteFileAtomically((dir / "features.ply").string(), EncodePlyBinary("vertex", features)));
     j["features"] = "features.ply";
   }
   std::map<uint32_t, std::pair<size_t, Eigen::AlignedBox3f>> instances;
@@ -70,22 +75,28 @@ absl::Status WriteResult(const std::string& directory, const SegmentationResult&
   nlohmann::json list = nlohmann::json::array();
   for (const auto& [id, entry] : instances) {
     const Eigen::Vector3d c = sums[id] / static_cast<double>(entry.first);
-    list.push_back({{"id", id}, {"gaussians", entry.first}, {"centroid", {c.x(), c.y(), c.z()}},
-                    {"bounds_min", {entry.second.min().x(), entry.second.min().y(), entry.second.min().z()}},
-                    {"bounds_max", {entry.second.max().x(), entry.second.max().y(), entry.second.max().z()}}});
+    list.push_back(
+        {{"id", id},
+         {"gaussians", entry.first},
+         {"centroid", {c.x(), c.y(), c.z()}},
+         {"bounds_min", {entry.second.min().x(), entry.second.min().y(), entry.second.min().z()}},
+         {"bounds_max", {entry.second.max().x(), entry.second.max().y(), entry.second.max().z()}}});
   }
   j["instances"] = list;
   return WriteFileAtomically((dir / "result.json").string(), j.dump(1));
 }
 
-absl::StatusOr<SegmentationResult> ReadResult(const std::string& directory, size_t expected_gaussians) {
+absl::StatusOr<SegmentationResult> ReadResult(const std::string& directory,
+                                              size_t expected_gaussians) {
   const std::filesystem::path dir(directory);
   const std::string json_path = (dir / "result.json").string();
   ASSIGN_OR_RETURN(std::string text, ReadFileBounded(json_path, size_t{256} << 20));
   nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
-  if (j.is_discarded() || !j.is_object()) return absl::InvalidArgumentError(absl::StrCat(json_path, ": not a JSON object"));
+  if (j.is_discarded() || !j.is_object())
+    return absl::InvalidArgumentError(absl::StrCat(json_path, ": not a JSON object"));
   if (j.value("format", std::string()) != kResultFormat) {
-    return absl::InvalidArgumentError(absl::StrCat(json_path, ": \"format\" must be \"", kResultFormat, "\""));
+    return absl::InvalidArgumentError(
+        absl::StrCat(json_path, ": \"format\" must be \"", kResultFormat, "\""));
   }
   SegmentationResult result;
   result.stage = j.value("stage", std::string("unknown"));
@@ -93,44 +104,52 @@ absl::StatusOr<SegmentationResult> ReadResult(const std::string& directory, size
   if (labels_file.find("..") != std::string::npos || labels_file.empty() || labels_file[0] == '/') {
     return absl::InvalidArgumentError(absl::StrCat(json_path, ": unsafe labels path"));
   }
-  ASSIGN_OR_RETURN(std::vector<uint32_t> labels, ReadGaussianInstanceIds((dir / labels_file).string(), expected_gaussians));
+  ASSIGN_OR_RETURN(std::vector<uint32_t> labels,
+                   ReadGaussianInstanceIds((dir / labels_file).string(), expected_gaussians));
   result.labels = std::move(labels);
   if (j.contains("features") && j["features"].is_string()) {
     const std::string path = (dir / j["features"].get<std::string>()).string();
     ASSIGN_OR_RETURN(PlyColumns cols, ReadVertexColumns(path));
     if (static_cast<size_t>(cols.count) != expected_gaussians) {
-      return absl::InvalidArgumentError(absl::StrCat(path, ": ", cols.count, " rows for ", expected_gaussians, " Gaussians"));
+      return absl::InvalidArgumentError(
+          absl::StrCat(path, ": ", cols.count, " rows for ", expected_gaussians, " Gaussians"));
     }
     const int dim = static_cast<int>(cols.names.size());
     for (int d = 0; d < dim; ++d) {
-      if (cols.Find(absl::StrCat("f_", d)) != d) return absl::InvalidArgumentError(absl::StrCat(path, ": properties must be f_0..f_D-1"));
+      if (cols.Find(absl::StrCat("f_", d)) != d)
+        return absl::InvalidArgumentError(absl::StrCat(path, ": properties must be f_0..f_D-1"));
     }
     result.feature_dim = dim;
     result.features.resize(expected_gaussians * dim);
     for (int d = 0; d < dim; ++d) {
-      for (size_t i = 0; i < expected_gaussians; ++i) result.features[i * dim + d] = cols.columns[d][i];
+      for (size_t i = 0; i < expected_gaussians; ++i)
+        result.features[i * dim + d] = cols.columns[d][i];
     }
   }
   for (auto it = j.begin(); it != j.end(); ++it) {
-    if (it.key() != "format" && it.key() != "stage" && it.key() != "labels" && it.key() != "features") {
+    if (it.key() != "format" && it.key() != "stage" && it.key() != "labels" &&
+        it.key() != "features") {
       result.metadata[it.key()] = it.value();
     }
   }
   return result;
 }
 
-absl::StatusOr<std::vector<uint32_t>> ReadGaussianInstanceIds(const std::string& path, size_t expected_gaussians) {
+absl::StatusOr<std::vector<uint32_t>> ReadGaussianInstanceIds(const std::string& path,
+                                                              size_t expected_gaussians) {
   ASSIGN_OR_RETURN(PlyColumns cols, ReadVertexColumns(path));
   const int c = cols.Find("instance_id");
   if (c < 0) return absl::InvalidArgumentError(absl::StrCat(path, ": no 'instance_id' property"));
   if (static_cast<size_t>(cols.count) != expected_gaussians) {
-    return absl::InvalidArgumentError(absl::StrCat(path, ": ", cols.count, " labels for ", expected_gaussians, " Gaussians"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": ", cols.count, " labels for ", expected_gaussians, " Gaussians"));
   }
   std::vector<uint32_t> ids(cols.count);
   for (int64_t i = 0; i < cols.count; ++i) {
     const float v = cols.columns[c][i];
     if (!(v >= 0.0f) || v != std::floor(v)) {
-      return absl::InvalidArgumentError(absl::StrCat(path, ": element #", i, " has invalid instance_id ", v));
+      return absl::InvalidArgumentError(
+          absl::StrCat(path, ": element #", i, " has invalid instance_id ", v));
     }
     ids[i] = static_cast<uint32_t>(v);
   }

@@ -23,20 +23,23 @@ namespace instascene {
 inline constexpr char kResultFormat[] = "instascene.result/1";
 
 struct SegmentationResult {
-  std::string stage = "unknown";        // producer: "ground-truth", "decompose", "segment", ...
-  std::vector<uint32_t> labels;         // per Gaussian: instance id, 0 = none
-  std::vector<float> features;          // optional per-Gaussian features, N x feature_dim
+  std::string stage = "unknown";  // producer: "ground-truth", "decompose", "segment", ...
+  std::vector<uint32_t> labels;   // per Gaussian: instance id, 0 = none
+  std::vector<float> features;    // optional per-Gaussian features, N x feature_dim
   int feature_dim = 0;
   nlohmann::json metadata = nlohmann::json::object();  // extra keys kept in result.json
 };
 
 // Writes the result directory (files atomically). `cloud` supplies positions for the instance
 // summaries and must have labels.size() Gaussians.
-absl::Status WriteResult(const std::string& directory, const SegmentationResult& result, const GaussianCloud& cloud);
+absl::Status WriteResult(const std::string& directory, const SegmentationResult& result,
+                         const GaussianCloud& cloud);
 // Reads a result directory; fails unless it has exactly `expected_gaussians` labels.
-absl::StatusOr<SegmentationResult> ReadResult(const std::string& directory, size_t expected_gaussians);
+absl::StatusOr<SegmentationResult> ReadResult(const std::string& directory,
+                                              size_t expected_gaussians);
 
 // Per-Gaussian ground-truth instance ids of a synthetic scene (gt/instances.ply).
-absl::StatusOr<std::vector<uint32_t>> ReadGaussianInstanceIds(const std::string& path, size_t expected_gaussians);
+absl::StatusOr<std::vector<uint32_t>> ReadGaussianInstanceIds(const std::string& path,
+                                                              size_t expected_gaussians);
 
 }  // namespace instascene

@@ -14,8 +14,8 @@ absl::Status PinholeCamera::Validate() const {
         absl::StrCat("camera size ", width, "x", height, " outside 1..", kMaxSizePx));
   }
   if (!(std::isfinite(fx) && std::isfinite(fy) && fx > 0.0 && fy > 0.0)) {
-    return absl::InvalidArgumentError(absl::StrCat("camera focal length (", fx, ", ", fy,
-                                                   ") must be positive and finite"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("camera focal length (", fx, ", ", fy, ") must be positive and finite"));
   }
   if (!(std::isfinite(cx) && std::isfinite(cy))) {
     return absl::InvalidArgumentError("camera principal point is not finite");
@@ -42,12 +42,13 @@ PinholeCamera PinholeCamera::Scaled(double factor) const {
   return scaled;
 }
 
-PinholeCamera OrbitCamera(const Eigen::Vector3d& center_in_world, const Eigen::Vector3d& up_in_world,
-                          double distance, double azimuth_deg, double elevation_deg, int width,
-                          int height, double fov_x_deg) {
+PinholeCamera OrbitCamera(const Eigen::Vector3d& center_in_world,
+                          const Eigen::Vector3d& up_in_world, double distance, double azimuth_deg,
+                          double elevation_deg, int width, int height, double fov_x_deg) {
   const Eigen::Vector3d up = up_in_world.normalized();
   // Any unit vector orthogonal to up defines azimuth 0.
-  Eigen::Vector3d ref = std::abs(up.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
+  Eigen::Vector3d ref =
+      std::abs(up.x()) < 0.9 ? Eigen::Vector3d::UnitX() : Eigen::Vector3d::UnitY();
   const Eigen::Vector3d axis0 = (ref - ref.dot(up) * up).normalized();
   const Eigen::Vector3d axis1 = up.cross(axis0);
   constexpr double kDeg = std::numbers::pi / 180.0;

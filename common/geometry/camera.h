@@ -23,15 +23,16 @@ struct PinholeCamera {
   double cy = 0.0;  // principal point y, px
   Rigid3d camera_from_world;
 
-  // OK when sizes are positive and bounded (<= 16384 px), focal lengths positive and finite, and the
-  // principal point finite.
+  // OK when sizes are positive and bounded (<= 16384 px), focal lengths positive and finite, and
+  // the principal point finite.
   absl::Status Validate() const;
 
   Eigen::Vector3d CenterInWorld() const { return camera_from_world.Inverse().translation; }
 
   // Pixel coordinates (COLMAP convention) of a point in camera coordinates; z must be positive.
   Eigen::Vector2d ProjectFromCamera(const Eigen::Vector3d& x_in_camera) const {
-    return {fx * x_in_camera.x() / x_in_camera.z() + cx, fy * x_in_camera.y() / x_in_camera.z() + cy};
+    return {fx * x_in_camera.x() / x_in_camera.z() + cx,
+            fy * x_in_camera.y() / x_in_camera.z() + cy};
   }
   // Unit ray direction in world coordinates through the centre of pixel (col, row).
   Eigen::Vector3d PixelRayInWorld(int col, int row) const;
@@ -40,10 +41,11 @@ struct PinholeCamera {
   PinholeCamera Scaled(double factor) const;
 };
 
-// A camera on a sphere around `center_in_world` at `distance`, at azimuth/elevation (degrees) measured
-// in the plane orthogonal to `up_in_world`, looking at the centre; fov_x_deg sets fx from the width.
-PinholeCamera OrbitCamera(const Eigen::Vector3d& center_in_world, const Eigen::Vector3d& up_in_world,
-                          double distance, double azimuth_deg, double elevation_deg, int width,
-                          int height, double fov_x_deg);
+// A camera on a sphere around `center_in_world` at `distance`, at azimuth/elevation (degrees)
+// measured in the plane orthogonal to `up_in_world`, looking at the centre; fov_x_deg sets fx from
+// the width.
+PinholeCamera OrbitCamera(const Eigen::Vector3d& center_in_world,
+                          const Eigen::Vector3d& up_in_world, double distance, double azimuth_deg,
+                          double elevation_deg, int width, int height, double fov_x_deg);
 
 }  // namespace instascene

@@ -12,7 +12,9 @@ absl::StatusOr<Rigid3d> RigidFromMatrix(const Eigen::Matrix<double, 3, 4>& matri
   if (!matrix.allFinite()) return absl::InvalidArgumentError("pose has NaN or Inf entries");
   Rigid3d rigid{matrix.leftCols<3>(), matrix.col(3)};
   const double orthogonality =
-      (rigid.rotation * rigid.rotation.transpose() - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff();
+      (rigid.rotation * rigid.rotation.transpose() - Eigen::Matrix3d::Identity())
+          .cwiseAbs()
+          .maxCoeff();
   if (orthogonality > 1e-4 || rigid.rotation.determinant() < 0.0) {
     return absl::InvalidArgumentError(
         "pose rotation is not a proper rotation (orthonormal with determinant +1)");

@@ -1,6 +1,7 @@
 // common/geometry/rigid.h: rigid transforms named target_from_source (COLMAP convention).
 //
-// A Rigid3d maps points: x_in_target = rotation * x_in_source + translation. Value type, thread-safe.
+// A Rigid3d maps points: x_in_target = rotation * x_in_source + translation. Value type,
+// thread-safe.
 #pragma once
 
 #include <Eigen/Core>

@@ -22,7 +22,8 @@ struct TriangleMesh {
 
   float TriangleArea(size_t t) const {
     const auto& tri = triangles[t];
-    return 0.5f * (vertices[tri[1]] - vertices[tri[0]]).cross(vertices[tri[2]] - vertices[tri[0]]).norm();
+    return 0.5f *
+           (vertices[tri[1]] - vertices[tri[0]]).cross(vertices[tri[2]] - vertices[tri[0]]).norm();
   }
   float SurfaceArea() const {
     double area = 0;
@@ -40,8 +41,12 @@ struct TriangleMesh {
     const uint32_t base = static_cast<uint32_t>(vertices.size());
     const bool keep_uv = uvs.size() == vertices.size() && other.uvs.size() == other.vertices.size();
     vertices.insert(vertices.end(), other.vertices.begin(), other.vertices.end());
-    if (keep_uv) uvs.insert(uvs.end(), other.uvs.begin(), other.uvs.end()); else uvs.clear();
-    for (const auto& t : other.triangles) triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
+    if (keep_uv)
+      uvs.insert(uvs.end(), other.uvs.begin(), other.uvs.end());
+    else
+      uvs.clear();
+    for (const auto& t : other.triangles)
+      triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
   }
   Eigen::AlignedBox3f Bounds() const {
     Eigen::AlignedBox3f box;

@@ -9,8 +9,8 @@
 
 namespace instascene {
 
-std::vector<uint32_t> LabelMapFromTrace(const RenderResult& traced, const std::vector<uint32_t>& labels,
-                                        float min_alpha) {
+std::vector<uint32_t> LabelMapFromTrace(const RenderResult& traced,
+                                        const std::vector<uint32_t>& labels, float min_alpha) {
   std::vector<uint32_t> map(static_cast<size_t>(traced.width) * traced.height, 0);
   const ContributorTrace& trace = traced.trace;
   std::vector<std::pair<uint32_t, float>> sums;  // few labels per pixel: a flat list beats a map
@@ -20,7 +20,8 @@ std::vector<uint32_t> LabelMapFromTrace(const RenderResult& traced, const std::v
     sums.clear();
     for (uint64_t k = trace.offsets[i]; k < trace.offsets[i + 1]; ++k) {
       const uint32_t id = labels[trace.entries[k].gaussian];
-      auto it = std::find_if(sums.begin(), sums.end(), [id](const auto& s) { return s.first == id; });
+      auto it =
+          std::find_if(sums.begin(), sums.end(), [id](const auto& s) { return s.first == id; });
       if (it == sums.end()) {
         sums.emplace_back(id, trace.entries[k].weight);
       } else {
@@ -40,12 +41,13 @@ std::vector<uint32_t> LabelMapFromTrace(const RenderResult& traced, const std::v
   return map;
 }
 
-absl::StatusOr<std::vector<uint32_t>> RenderLabelMap(const GaussianCloud& cloud, const PinholeCamera& camera,
-                                                     const std::vector<uint32_t>& labels, float min_alpha,
-                                                     int num_threads) {
+absl::StatusOr<std::vector<uint32_t>> RenderLabelMap(const GaussianCloud& cloud,
+                                                     const PinholeCamera& camera,
+                                                     const std::vector<uint32_t>& labels,
+                                                     float min_alpha, int num_threads) {
   if (labels.size() != cloud.size()) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("label count ", labels.size(), " differs from the Gaussian count ", cloud.size()));
+    return absl::InvalidArgumentError(absl::StrCat(
+        "label count ", labels.size(), " differs from the Gaussian count ", cloud.size()));
   }
   RenderOptions options;
   options.color = false;

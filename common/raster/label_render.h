@@ -16,12 +16,14 @@
 namespace instascene {
 
 // From a render with a full contributor trace (min_weight 0, all pixels).
-std::vector<uint32_t> LabelMapFromTrace(const RenderResult& traced, const std::vector<uint32_t>& labels,
+std::vector<uint32_t> LabelMapFromTrace(const RenderResult& traced,
+                                        const std::vector<uint32_t>& labels,
                                         float min_alpha = 0.5f);
 
 // Renders the cloud (2DGS/3DGS as its scale count says) and returns the W*H label map.
-absl::StatusOr<std::vector<uint32_t>> RenderLabelMap(const GaussianCloud& cloud, const PinholeCamera& camera,
-                                                     const std::vector<uint32_t>& labels, float min_alpha = 0.5f,
-                                                     int num_threads = 0);
+absl::StatusOr<std::vector<uint32_t>> RenderLabelMap(const GaussianCloud& cloud,
+                                                     const PinholeCamera& camera,
+                                                     const std::vector<uint32_t>& labels,
+                                                     float min_alpha = 0.5f, int num_threads = 0);
 
 }  // namespace instascene

@@ -8,9 +8,9 @@
 namespace instascene {
 namespace {
 
-constexpr float kCutoff = 3.0f;            // 3 sigma bounding box
-constexpr float kFilterSize = 0.707106f;   // sqrt(2)/2 px low-pass filter radius
-constexpr float kDilation = 0.3f;          // Inria 3DGS covariance dilation, px^2
+constexpr float kCutoff = 3.0f;           // 3 sigma bounding box
+constexpr float kFilterSize = 0.707106f;  // sqrt(2)/2 px low-pass filter radius
+constexpr float kDilation = 0.3f;         // Inria 3DGS covariance dilation, px^2
 
 inline float Sigmoid(float x) { return 1.0f / (1.0f + std::exp(-x)); }
 
@@ -18,9 +18,15 @@ void QuaternionToMatrix(const float* q_raw, float r[9]) {
   const float norm = std::sqrt(q_raw[0] * q_raw[0] + q_raw[1] * q_raw[1] + q_raw[2] * q_raw[2] +
                                q_raw[3] * q_raw[3]);
   const float w = q_raw[0] / norm, x = q_raw[1] / norm, y = q_raw[2] / norm, z = q_raw[3] / norm;
-  r[0] = 1 - 2 * (y * y + z * z); r[1] = 2 * (x * y - w * z);     r[2] = 2 * (x * z + w * y);
-  r[3] = 2 * (x * y + w * z);     r[4] = 1 - 2 * (x * x + z * z); r[5] = 2 * (y * z - w * x);
-  r[6] = 2 * (x * z - w * y);     r[7] = 2 * (y * z + w * x);     r[8] = 1 - 2 * (x * x + y * y);
+  r[0] = 1 - 2 * (y * y + z * z);
+  r[1] = 2 * (x * y - w * z);
+  r[2] = 2 * (x * z + w * y);
+  r[3] = 2 * (x * y + w * z);
+  r[4] = 1 - 2 * (x * x + z * z);
+  r[5] = 2 * (y * z - w * x);
+  r[6] = 2 * (x * z - w * y);
+  r[7] = 2 * (y * z + w * x);
+  r[8] = 1 - 2 * (x * x + y * y);
 }
 
 // Rotates a world vector into the camera frame.
@@ -34,16 +40,21 @@ inline void RotateToView(const ProjectionParams& p, const float v[3], float out[
 bool Finish(const GaussianCloud& cloud, size_t i, const ProjectionParams& p, float radius,
             ProjectedSplat* out) {
   const float* pos = &cloud.positions[3 * i];
-  const int32_t tx0 = std::clamp(static_cast<int>((out->mean_px[0] - radius) / kTileSize), 0, p.tiles_x);
-  const int32_t ty0 = std::clamp(static_cast<int>((out->mean_px[1] - radius) / kTileSize), 0, p.tiles_y);
-  const int32_t tx1 = std::clamp(static_cast<int>((out->mean_px[0] + radius + kTileSize - 1) / kTileSize), 0, p.tiles_x);
-  const int32_t ty1 = std::clamp(static_cast<int>((out->mean_px[1] + radius + kTileSize - 1) / kTileSize), 0, p.tiles_y);
+  const int32_t tx0 =
+      std::clamp(static_cast<int>((out->mean_px[0] - radius) / kTileSize), 0, p.tiles_x);
+  const int32_t ty0 =
+      std::clamp(static_cast<int>((out->mean_px[1] - radius) / kTileSize), 0, p.tiles_y);
+  const int32_t tx1 = std::clamp(
+      static_cast<int>((out->mean_px[0] + radius + kTileSize - 1) / kTileSize), 0, p.tiles_x);
+  const int32_t ty1 = std::clamp(
+      static_cast<int>((out->mean_px[1] + radius + kTileSize - 1) / kTileSize), 0, p.tiles_y);
   if ((tx1 - tx0) * (ty1 - ty0) == 0) return false;
   out->tiles[0] = tx0;
   out->tiles[1] = tx1;
   out->tiles[2] = ty0;
   out->tiles[3] = ty1;
-  float dir[3] = {pos[0] - p.camera_center[0], pos[1] - p.camera_center[1], pos[2] - p.camera_center[2]};
+  float dir[3] = {pos[0] - p.camera_center[0], pos[1] - p.camera_center[1],
+                  pos[2] - p.camera_center[2]};
   const float len = std::sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
   for (float& d : dir) d /= len;
   EvalShColor(p.sh_degree, &cloud.sh[static_cast<size_t>(cloud.sh_stride()) * i], dir[0], dir[1],
@@ -59,10 +70,14 @@ inline void SetWindow(float x_lo, float x_hi, float y_lo, float y_hi, const Proj
                       ProjectedSplat* out) {
   constexpr float kSlack = 0.05f;
   int32_t* window = out->window;
-  window[0] = static_cast<int32_t>(std::clamp(std::ceil(x_lo - kSlack), 0.0f, static_cast<float>(p.width)));
-  window[1] = static_cast<int32_t>(std::clamp(std::floor(x_hi + kSlack) + 1.0f, 0.0f, static_cast<float>(p.width)));
-  window[2] = static_cast<int32_t>(std::clamp(std::ceil(y_lo - kSlack), 0.0f, static_cast<float>(p.height)));
-  window[3] = static_cast<int32_t>(std::clamp(std::floor(y_hi + kSlack) + 1.0f, 0.0f, static_cast<float>(p.height)));
+  window[0] =
+      static_cast<int32_t>(std::clamp(std::ceil(x_lo - kSlack), 0.0f, static_cast<float>(p.width)));
+  window[1] = static_cast<int32_t>(
+      std::clamp(std::floor(x_hi + kSlack) + 1.0f, 0.0f, static_cast<float>(p.width)));
+  window[2] = static_cast<int32_t>(
+      std::clamp(std::ceil(y_lo - kSlack), 0.0f, static_cast<float>(p.height)));
+  window[3] = static_cast<int32_t>(
+      std::clamp(std::floor(y_hi + kSlack) + 1.0f, 0.0f, static_cast<float>(p.height)));
   int32_t* tiles = out->tiles;
   if (window[0] >= window[1] || window[2] >= window[3]) {
     tiles[1] = tiles[0];  // nothing to blend anywhere
@@ -91,7 +106,8 @@ ProjectionParams MakeProjectionParams(const PinholeCamera& camera, const RenderO
   p.cx = static_cast<float>(camera.cx - 0.5);
   p.cy = static_cast<float>(camera.cy - 0.5);
   for (int r = 0; r < 3; ++r) {
-    for (int c = 0; c < 3; ++c) p.rotation[3 * r + c] = static_cast<float>(camera.camera_from_world.rotation(r, c));
+    for (int c = 0; c < 3; ++c)
+      p.rotation[3 * r + c] = static_cast<float>(camera.camera_from_world.rotation(r, c));
     p.translation[r] = static_cast<float>(camera.camera_from_world.translation[r]);
   }
   const Eigen::Vector3d center = camera.CenterInWorld();
@@ -196,7 +212,8 @@ bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams&
     y_hi = p.height;
   }
   SetWindow(static_cast<float>(std::max(x_lo, -1e6)), static_cast<float>(std::min(x_hi, 1e6)),
-            static_cast<float>(std::max(y_lo, -1e6)), static_cast<float>(std::min(y_hi, 1e6)), p, out);
+            static_cast<float>(std::max(y_lo, -1e6)), static_cast<float>(std::min(y_hi, 1e6)), p,
+            out);
   return true;
 }
 

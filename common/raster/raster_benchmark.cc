@@ -41,12 +41,18 @@ void BM_RenderColorDepth(benchmark::State& state) {
   RenderResult result;
   uint64_t blended = 0;
   for (auto _ : state) {
-    if (!RenderInto(scene.cloud, scene.cameras[1], options, &result).ok()) state.SkipWithError("render failed");
+    if (!RenderInto(scene.cloud, scene.cameras[1], options, &result).ok())
+      state.SkipWithError("render failed");
     blended = result.stats.blended_fragments;
   }
-  state.counters["blended_fragments/s"] = benchmark::Counter(static_cast<double>(blended), benchmark::Counter::kIsIterationInvariantRate);
+  state.counters["blended_fragments/s"] = benchmark::Counter(
+      static_cast<double>(blended), benchmark::Counter::kIsIterationInvariantRate);
 }
-BENCHMARK(BM_RenderColorDepth)->Args({300000, 1})->Args({300000, 2})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RenderColorDepth)
+    ->Args({300000, 1})
+    ->Args({300000, 2})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 // The same frame with every contribution traced.
 void BM_RenderTraced(benchmark::State& state) {
@@ -58,16 +64,22 @@ void BM_RenderTraced(benchmark::State& state) {
   options.trace.min_weight = static_cast<float>(state.range(1)) / 10.0f;
   RenderResult result;
   for (auto _ : state) {
-    if (!RenderInto(scene.cloud, scene.cameras[1], options, &result).ok()) state.SkipWithError("render failed");
+    if (!RenderInto(scene.cloud, scene.cameras[1], options, &result).ok())
+      state.SkipWithError("render failed");
   }
   state.counters["entries"] = static_cast<double>(result.trace.entries.size());
 }
-BENCHMARK(BM_RenderTraced)->Args({300000, 0})->Args({300000, 1})->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK(BM_RenderTraced)
+    ->Args({300000, 0})
+    ->Args({300000, 1})
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 // Per-Gaussian preprocessing (2DGS transform, bounding box, window, SH colour), single thread.
 void BM_ProjectSurfel(benchmark::State& state) {
   const ClutterScene& scene = Scene(300000, 640, 480);
-  const ProjectionParams params = MakeProjectionParams(scene.cameras[1], RenderOptions{}, scene.cloud.sh_degree);
+  const ProjectionParams params =
+      MakeProjectionParams(scene.cameras[1], RenderOptions{}, scene.cloud.sh_degree);
   ProjectedSplat out;
   size_t i = 0;
   for (auto _ : state) {

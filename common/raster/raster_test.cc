@@ -33,10 +33,12 @@ GaussianCloud RandomScene(size_t n, int num_scales, int sh_degree, uint32_t seed
     cloud.positions[3 * i] = 3.0f * uni(rng) - 1.5f;
     cloud.positions[3 * i + 1] = 2.2f * uni(rng) - 1.1f;
     cloud.positions[3 * i + 2] = i % 37 == 0 ? 0.1f * uni(rng) : 1.5f + 4.0f * uni(rng);
-    for (int k = 0; k < num_scales; ++k) cloud.log_scales[num_scales * i + k] = -4.0f + 2.5f * uni(rng);
+    for (int k = 0; k < num_scales; ++k)
+      cloud.log_scales[num_scales * i + k] = -4.0f + 2.5f * uni(rng);
     for (int k = 0; k < 4; ++k) cloud.rotations[4 * i + k] = normal(rng);
     cloud.opacity_logits[i] = 2.0f * normal(rng);
-    for (int k = 0; k < cloud.sh_stride(); ++k) cloud.sh[cloud.sh_stride() * i + k] = 0.5f * normal(rng);
+    for (int k = 0; k < cloud.sh_stride(); ++k)
+      cloud.sh[cloud.sh_stride() * i + k] = 0.5f * normal(rng);
   }
   return cloud;
 }
@@ -106,7 +108,8 @@ TEST_P(RasterVsReference, RandomScenesMatchBruteForce) {
 }
 
 INSTANTIATE_TEST_SUITE_P(ModelsAndShDegrees, RasterVsReference,
-                         ::testing::Combine(::testing::Values(2, 3), ::testing::Values(0, 1, 2, 3)));
+                         ::testing::Combine(::testing::Values(2, 3),
+                                            ::testing::Values(0, 1, 2, 3)));
 
 TEST(Raster, SingleFrontalSurfelMatchesClosedForm) {
   // A surfel facing the camera on the optical axis, centred on pixel (16, 16) of a 33x33 image.

@@ -23,7 +23,8 @@ using raster_internal::TileCounters;
 using raster_internal::TileState;
 using raster_internal::TileTrace;
 
-using BlendFn = void (*)(const FrameContext&, int, TileState&, RenderResult&, TileCounters&, TileTrace*);
+using BlendFn = void (*)(const FrameContext&, int, TileState&, RenderResult&, TileCounters&,
+                         TileTrace*);
 
 template <bool kSurfel>
 BlendFn PickBlend(bool trace, bool features) {
@@ -45,12 +46,14 @@ void AssembleTrace(const ProjectionParams& p, const std::vector<TileTrace>& tile
   } else {
     trace->pixels = trace_options.pixels;
     slot.assign(num_pixels, -1);
-    for (size_t i = 0; i < trace->pixels.size(); ++i) slot[trace->pixels[i]] = static_cast<int64_t>(i);
+    for (size_t i = 0; i < trace->pixels.size(); ++i)
+      slot[trace->pixels[i]] = static_cast<int64_t>(i);
   }
   // Calls fn(local pixel, CSR row) for every traced in-image pixel of tile t.
   auto for_each_pixel = [&](size_t t, auto&& fn) {
     const int tx = static_cast<int>(t % p.tiles_x), ty = static_cast<int>(t / p.tiles_x);
-    const int x1 = std::min(kTileSize, p.width - tx * kTileSize), y1 = std::min(kTileSize, p.height - ty * kTileSize);
+    const int x1 = std::min(kTileSize, p.width - tx * kTileSize),
+              y1 = std::min(kTileSize, p.height - ty * kTileSize);
     for (int ly = 0; ly < y1; ++ly) {
       for (int lx = 0; lx < x1; ++lx) {
         const size_t pix = static_cast<size_t>(ty * kTileSize + ly) * p.width + tx * kTileSize + lx;
@@ -72,7 +75,8 @@ void AssembleTrace(const ProjectionParams& p, const std::vector<TileTrace>& tile
     const TileTrace& tile = tiles[t];
     uint64_t cursor[raster_internal::kTilePixels];
     for_each_pixel(t, [&](int local, size_t row) { cursor[local] = offsets[row]; });
-    for (size_t e = 0; e < tile.entries.size(); ++e) trace->entries[cursor[tile.pixels[e]]++] = tile.entries[e];
+    for (size_t e = 0; e < tile.entries.size(); ++e)
+      trace->entries[cursor[tile.pixels[e]]++] = tile.entries[e];
   });
 }
 
@@ -197,13 +201,14 @@ absl::Status RenderInto(const GaussianCloud& cloud, const PinholeCamera& camera,
     Stopwatch phase;
     std::vector<ProjectedSplat>& splats = ws->splats;
     splats.resize(n);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096), [&](const tbb::blocked_range<size_t>& r) {
-      for (size_t i = r.begin(); i < r.end(); ++i) {
-        const bool ok = surfel ? ProjectSurfel(cloud, i, params, &splats[i])
-                               : ProjectEllipsoid(cloud, i, params, &splats[i]);
-        out.visible[i] = ok ? 1 : 0;
-      }
-    });
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096),
+                      [&](const tbb::blocked_range<size_t>& r) {
+                        for (size_t i = r.begin(); i < r.end(); ++i) {
+                          const bool ok = surfel ? ProjectSurfel(cloud, i, params, &splats[i])
+                                                 : ProjectEllipsoid(cloud, i, params, &splats[i]);
+                          out.visible[i] = ok ? 1 : 0;
+                        }
+                      });
     out.stats.preprocess_ms = phase.ElapsedMs();
     phase.Restart();
 
@@ -224,7 +229,8 @@ absl::Status RenderInto(const GaussianCloud& cloud, const PinholeCamera& camera,
     FrameContext ctx{&options, &params, &splats, &keys, &offsets, &trace_mask, {}};
     const Eigen::Matrix3d world_from_camera = camera.camera_from_world.rotation.transpose();
     for (int r = 0; r < 3; ++r) {
-      for (int c = 0; c < 3; ++c) ctx.world_from_camera[3 * r + c] = static_cast<float>(world_from_camera(r, c));
+      for (int c = 0; c < 3; ++c)
+        ctx.world_from_camera[3 * r + c] = static_cast<float>(world_from_camera(r, c));
     }
     const bool trace = options.trace.enabled;
     const bool features = options.feature_dim > 0;
@@ -232,12 +238,13 @@ absl::Status RenderInto(const GaussianCloud& cloud, const PinholeCamera& camera,
     std::vector<TileTrace>& tile_traces = ws->tile_traces;
     tile_traces.resize(trace ? num_tiles : 0);
     std::vector<TileCounters> counters(num_tiles);
-    tbb::parallel_for(tbb::blocked_range<int>(0, num_tiles, 1), [&](const tbb::blocked_range<int>& r) {
-      thread_local TileState state;
-      for (int t = r.begin(); t < r.end(); ++t) {
-        blend(ctx, t, state, out, counters[t], trace ? &tile_traces[t] : nullptr);
-      }
-    });
+    tbb::parallel_for(tbb::blocked_range<int>(0, num_tiles, 1),
+                      [&](const tbb::blocked_range<int>& r) {
+                        thread_local TileState state;
+                        for (int t = r.begin(); t < r.end(); ++t) {
+                          blend(ctx, t, state, out, counters[t], trace ? &tile_traces[t] : nullptr);
+                        }
+                      });
     for (const TileCounters& c : counters) {
       out.stats.evaluated_fragments += c.evaluated;
       out.stats.blended_fragments += c.blended;

@@ -1,11 +1,11 @@
 // common/raster/rasterizer.h: the CPU Gaussian-splat rasterizer with contributor tracing.
 //
-// Renders a GaussianCloud from a PinholeCamera exactly as the 2DGS CUDA rasterizer does (ALGORITHM.md
-// section 2: 16x16 tiles, per-tile front-to-back order by centre depth, 3-sigma cutoff, low-pass
-// filter, alpha clamp 0.99, skip alpha < 1/255, stop at T < 1e-4, median-depth rule), or as the
-// Inria 3DGS rasterizer for 3-scale clouds. Tiles run in parallel with TBB; every tile is computed
-// by one task from the same inputs, so results are bit-identical for any thread count.
-// Thread-safe: Render has no shared mutable state.
+// Renders a GaussianCloud from a PinholeCamera exactly as the 2DGS CUDA rasterizer does
+// (ALGORITHM.md section 2: 16x16 tiles, per-tile front-to-back order by centre depth, 3-sigma
+// cutoff, low-pass filter, alpha clamp 0.99, skip alpha < 1/255, stop at T < 1e-4, median-depth
+// rule), or as the Inria 3DGS rasterizer for 3-scale clouds. Tiles run in parallel with TBB; every
+// tile is computed by one task from the same inputs, so results are bit-identical for any thread
+// count. Thread-safe: Render has no shared mutable state.
 #pragma once
 
 #include <cstdint>

@@ -14,8 +14,8 @@ namespace instascene {
 struct RasterWorkspace;  // rasterizer.h
 
 enum class SplatModel {
-  kAuto,         // kSurfel2d for 2-scale clouds, kEllipsoid3d for 3-scale clouds
-  kSurfel2d,     // 2DGS ray-splat intersection (ALGORITHM.md 2); needs a 2-scale cloud (see ToSurfels)
+  kAuto,      // kSurfel2d for 2-scale clouds, kEllipsoid3d for 3-scale clouds
+  kSurfel2d,  // 2DGS ray-splat intersection (ALGORITHM.md 2); needs a 2-scale cloud (see ToSurfels)
   kEllipsoid3d,  // Inria 3DGS EWA splatting with 0.3 px dilation; needs a 3-scale cloud
 };
 
@@ -30,9 +30,9 @@ struct TraceOptions {
 
 struct RenderOptions {
   SplatModel model = SplatModel::kAuto;
-  bool color = true;     // RGB from SH (+ background)
-  bool depth = false;    // expected depth and median depth
-  bool normal = false;   // accumulated normal, world frame (not normalised, as 2DGS)
+  bool color = true;    // RGB from SH (+ background)
+  bool depth = false;   // expected depth and median depth
+  bool normal = false;  // accumulated normal, world frame (not normalised, as 2DGS)
   float background[3] = {0.0f, 0.0f, 0.0f};  // RGB added with the final transmittance
   int max_sh_degree = 3;                     // evaluate SH up to min(this, cloud degree)
   float scale_modifier = 1.0f;               // multiplies every scale
@@ -41,7 +41,7 @@ struct RenderOptions {
   const float* features = nullptr;
   int feature_dim = 0;
   TraceOptions trace;
-  int num_threads = 0;  // 0 = all cores; results never depend on it
+  int num_threads = 0;                   // 0 = all cores; results never depend on it
   RasterWorkspace* workspace = nullptr;  // optional reusable scratch (not owned)
 
   absl::Status Validate() const;
@@ -49,9 +49,9 @@ struct RenderOptions {
 
 // One entry of a pixel's contributor list.
 struct Contribution {
-  uint32_t gaussian = 0;      // index into the GaussianCloud
-  float weight = 0.0f;        // w = alpha * T, this Gaussian's blending weight at the pixel
-  float transmittance = 0.0f; // T before this Gaussian
+  uint32_t gaussian = 0;       // index into the GaussianCloud
+  float weight = 0.0f;         // w = alpha * T, this Gaussian's blending weight at the pixel
+  float transmittance = 0.0f;  // T before this Gaussian
 };
 
 // Compressed per-pixel lists (CSR): entries[offsets[i] .. offsets[i+1]) belong to pixels[i].
@@ -64,11 +64,12 @@ struct ContributorTrace {
 };
 
 struct RasterStats {
-  uint64_t visible_gaussians = 0;      // Gaussians projected onto at least one tile
-  uint64_t gaussian_tile_pairs = 0;    // entries of all per-tile lists
-  uint64_t evaluated_fragments = 0;    // (pixel, Gaussian) pairs whose alpha was computed
-  uint64_t blended_fragments = 0;      // (pixel, Gaussian) pairs actually composited
-  double preprocess_ms = 0.0, binning_ms = 0.0, blend_ms = 0.0, trace_assembly_ms = 0.0, total_ms = 0.0;
+  uint64_t visible_gaussians = 0;    // Gaussians projected onto at least one tile
+  uint64_t gaussian_tile_pairs = 0;  // entries of all per-tile lists
+  uint64_t evaluated_fragments = 0;  // (pixel, Gaussian) pairs whose alpha was computed
+  uint64_t blended_fragments = 0;    // (pixel, Gaussian) pairs actually composited
+  double preprocess_ms = 0.0, binning_ms = 0.0, blend_ms = 0.0, trace_assembly_ms = 0.0,
+         total_ms = 0.0;
 };
 
 struct RenderResult {
@@ -81,8 +82,8 @@ struct RenderResult {
   std::vector<float> normal;        // HxWx3 world frame, when options.normal
   std::vector<float> features;      // HxWxD when features are given
   std::vector<uint32_t> num_contributors;  // HxW Gaussians blended into each pixel
-  std::vector<uint8_t> visible;     // per Gaussian: 1 if it touched a tile (2DGS "radii > 0")
-  ContributorTrace trace;           // when options.trace.enabled
+  std::vector<uint8_t> visible;  // per Gaussian: 1 if it touched a tile (2DGS "radii > 0")
+  ContributorTrace trace;        // when options.trace.enabled
   RasterStats stats;
 };
 

@@ -57,8 +57,16 @@ using v8i = int32_t __attribute__((vector_size(32)));
 inline constexpr v8i kLaneIndex = {0, 1, 2, 3, 4, 5, 6, 7};
 inline v8f Splat(float v) { return v8f{v, v, v, v, v, v, v, v}; }
 inline v8i SplatI(int32_t v) { return v8i{v, v, v, v, v, v, v, v}; }
-inline v8f Load(const float* p) { v8f v; std::memcpy(&v, p, sizeof(v)); return v; }
-inline v8i LoadI(const int32_t* p) { v8i v; std::memcpy(&v, p, sizeof(v)); return v; }
+inline v8f Load(const float* p) {
+  v8f v;
+  std::memcpy(&v, p, sizeof(v));
+  return v;
+}
+inline v8i LoadI(const int32_t* p) {
+  v8i v;
+  std::memcpy(&v, p, sizeof(v));
+  return v;
+}
 inline void Store(float* p, v8f v) { std::memcpy(p, &v, sizeof(v)); }
 inline void StoreI(int32_t* p, v8i v) { std::memcpy(p, &v, sizeof(v)); }
 inline int SumLanes(v8i v) { return v[0] + v[1] + v[2] + v[3] + v[4] + v[5] + v[6] + v[7]; }
@@ -133,8 +141,8 @@ struct alignas(64) TileState {
 
 // Blends one tile; with tracing, `tile_trace` receives the tile's contributions.
 template <bool kSurfel, bool kTrace, bool kFeatures>
-void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& out, TileCounters& counters,
-               TileTrace* tile_trace) {
+void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& out,
+               TileCounters& counters, TileTrace* tile_trace) {
   const ProjectionParams& p = *ctx.params;
   const RenderOptions& opt = *ctx.options;
   const int tx = tile % p.tiles_x, ty = tile / p.tiles_x;
@@ -143,7 +151,8 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
   const int tile_pixels = (px1 - px0) * (py1 - py0);
   const int dim = opt.feature_dim;
   std::fill_n(st.T, TileState::kPadded, 1.0f);
-  for (float* a : {st.r, st.g, st.b, st.depth, st.median, st.nx, st.ny, st.nz}) std::fill_n(a, TileState::kPadded, 0.0f);
+  for (float* a : {st.r, st.g, st.b, st.depth, st.median, st.nx, st.ny, st.nz})
+    std::fill_n(a, TileState::kPadded, 0.0f);
   std::fill_n(st.done, TileState::kPadded, 0);
   std::fill_n(st.row_done, kTileSize, 0u);
   std::fill_n(st.contributors, TileState::kPadded, 0);
@@ -188,7 +197,8 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
       const int row = (y - py0) * kTileSize - px0;  // + x = local pixel index
       // 2DGS: l = y Tw - Tv is constant along the row (stored relative to the origin pixel).
       const float ry = static_cast<float>(y - s.origin_px[1]);
-      const v8f l0 = Splat(ry * tw0 + s.tv[0]), l1 = Splat(ry * tw1 + s.tv[1]), l2 = Splat(ry * tw2 + s.tv[2]);
+      const v8f l0 = Splat(ry * tw0 + s.tv[0]), l1 = Splat(ry * tw1 + s.tv[1]),
+                l2 = Splat(ry * tw2 + s.tv[2]);
       const float dy_s = my - static_cast<float>(y);
       const v8f dy = Splat(dy_s), dy2 = Splat(dy_s * dy_s);
       uint32_t row_blend_bits = 0;
@@ -213,7 +223,8 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
           power = Splat(-0.5f) * (use3d ? rho3d : rho2d);
           geometric_ok = (pz != Splat(0.0f)) & (depth >= Splat(near)) & (power <= Splat(0.0f));
         } else {
-          power = Splat(-0.5f) * (Splat(s.tu[0]) * dx * dx + Splat(s.tu[2]) * dy2) - Splat(s.tu[1]) * dx * dy;
+          power = Splat(-0.5f) * (Splat(s.tu[0]) * dx * dx + Splat(s.tu[2]) * dy2) -
+                  Splat(s.tu[1]) * dx * dy;
           depth = v_depth;
           geometric_ok = power <= Splat(0.0f);
         }
@@ -262,7 +273,8 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
             for (int c = 0; c < dim; ++c) e[c] += w * f[c];
           }
           if constexpr (kTrace) {
-            if (w > opt.trace.min_weight && (trace_mask == nullptr || trace_mask[y * p.width + x])) {
+            if (w > opt.trace.min_weight &&
+                (trace_mask == nullptr || trace_mask[y * p.width + x])) {
               tile_trace->entries.push_back({gid, w, st.row_transmittance[dx_lane]});
               tile_trace->pixels.push_back(static_cast<uint16_t>(i));
               ++tile_trace->counts[i];
@@ -297,11 +309,13 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
       }
       if (opt.normal) {
         for (int c = 0; c < 3; ++c) {
-          out.normal[3 * pix + c] = R[3 * c] * st.nx[i] + R[3 * c + 1] * st.ny[i] + R[3 * c + 2] * st.nz[i];
+          out.normal[3 * pix + c] =
+              R[3 * c] * st.nx[i] + R[3 * c + 1] * st.ny[i] + R[3 * c + 2] * st.nz[i];
         }
       }
       if constexpr (kFeatures) {
-        std::memcpy(&out.features[pix * dim], &st.features[static_cast<size_t>(i) * dim], sizeof(float) * dim);
+        std::memcpy(&out.features[pix * dim], &st.features[static_cast<size_t>(i) * dim],
+                    sizeof(float) * dim);
       }
     }
   }

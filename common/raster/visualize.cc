@@ -30,7 +30,8 @@ std::vector<float> ColorizeDepth(const std::vector<float>& depth, const std::vec
 std::vector<float> NormalsToRgb(const std::vector<float>& normal) {
   std::vector<float> rgb(normal.size(), 0.0f);
   for (size_t i = 0; i + 2 < normal.size(); i += 3) {
-    const float n = std::sqrt(normal[i] * normal[i] + normal[i + 1] * normal[i + 1] + normal[i + 2] * normal[i + 2]);
+    const float n = std::sqrt(normal[i] * normal[i] + normal[i + 1] * normal[i + 1] +
+                              normal[i + 2] * normal[i + 2]);
     if (n < 1e-6f) continue;
     for (int c = 0; c < 3; ++c) rgb[i + c] = 0.5f * (normal[i + c] / n + 1.0f);
   }
@@ -47,7 +48,8 @@ std::vector<float> FeaturesToRgb(const std::vector<float>& features, int dim) {
   const size_t n = dim > 0 ? features.size() / dim : 0;
   std::vector<float> rgb(3 * n, 0.0f);
   if (n == 0) return rgb;
-  Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> f(features.data(), n, dim);
+  Eigen::Map<const Eigen::Matrix<float, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>> f(
+      features.data(), n, dim);
   const Eigen::RowVectorXd mean = f.cast<double>().colwise().mean();
   const Eigen::MatrixXd centered = f.cast<double>().rowwise() - mean;
   const Eigen::MatrixXd cov = centered.transpose() * centered / static_cast<double>(n);
@@ -57,7 +59,8 @@ std::vector<float> FeaturesToRgb(const std::vector<float>& features, int dim) {
   const Eigen::MatrixXd proj = centered * basis;
   for (int c = 0; c < k; ++c) {
     const double lo = proj.col(c).minCoeff(), hi = proj.col(c).maxCoeff();
-    for (size_t i = 0; i < n; ++i) rgb[3 * i + c] = static_cast<float>((proj(i, c) - lo) / std::max(hi - lo, 1e-12));
+    for (size_t i = 0; i < n; ++i)
+      rgb[3 * i + c] = static_cast<float>((proj(i, c) - lo) / std::max(hi - lo, 1e-12));
   }
   return rgb;
 }

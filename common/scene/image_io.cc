@@ -15,14 +15,18 @@ namespace {
 
 constexpr int kMaxImageSide = 16384;
 
-absl::Status OiioError(const std::string& path, const std::string& what, const std::string& detail) {
-  return absl::InvalidArgumentError(absl::StrCat(path, ": ", what, detail.empty() ? "" : ": ", detail));
+absl::Status OiioError(const std::string& path, const std::string& what,
+                       const std::string& detail) {
+  return absl::InvalidArgumentError(
+      absl::StrCat(path, ": ", what, detail.empty() ? "" : ": ", detail));
 }
 
 // Temp name that keeps the extension (OIIO picks the format from it).
 std::string TempPath(const std::string& path) {
   std::filesystem::path p(path);
-  return (p.parent_path() / absl::StrCat(".", p.stem().string(), ".tmp", ::getpid(), p.extension().string())).string();
+  return (p.parent_path() /
+          absl::StrCat(".", p.stem().string(), ".tmp", ::getpid(), p.extension().string()))
+      .string();
 }
 
 absl::Status WritePixels(const std::string& path, int width, int height, int channels,
@@ -46,14 +50,17 @@ absl::Status WritePixels(const std::string& path, int width, int height, int cha
 }  // namespace
 
 absl::StatusOr<Image> ReadImage(const std::string& path) {
-  if (!std::filesystem::is_regular_file(path)) return absl::NotFoundError(absl::StrCat(path, ": no such file"));
+  if (!std::filesystem::is_regular_file(path))
+    return absl::NotFoundError(absl::StrCat(path, ": no such file"));
   auto in = OIIO::ImageInput::open(path);
   if (!in) return OiioError(path, "cannot decode image", OIIO::geterror());
   const OIIO::ImageSpec& spec = in->spec();
-  if (spec.width <= 0 || spec.height <= 0 || spec.width > kMaxImageSide || spec.height > kMaxImageSide ||
-      spec.nchannels <= 0 || spec.nchannels > 4) {
-    return OiioError(path, absl::StrCat("unsupported image size ", spec.width, "x", spec.height, "x",
-                                        spec.nchannels), "");
+  if (spec.width <= 0 || spec.height <= 0 || spec.width > kMaxImageSide ||
+      spec.height > kMaxImageSide || spec.nchannels <= 0 || spec.nchannels > 4) {
+    return OiioError(
+        path,
+        absl::StrCat("unsupported image size ", spec.width, "x", spec.height, "x", spec.nchannels),
+        "");
   }
   Image image;
   image.width = spec.width;
@@ -61,26 +68,33 @@ absl::StatusOr<Image> ReadImage(const std::string& path) {
   image.channels = spec.nchannels;
   image.pixels.resize(static_cast<size_t>(spec.width) * spec.height * spec.nchannels);
   if (!in->read_image(0, 0, 0, spec.nchannels, OIIO::TypeDesc::FLOAT, image.pixels.data())) {
-    return absl::DataLossError(absl::StrCat(path, ": truncated or corrupt image: ", in->geterror()));
+    return absl::DataLossError(
+        absl::StrCat(path, ": truncated or corrupt image: ", in->geterror()));
   }
   return image;
 }
 
 absl::Status WriteImage(const std::string& path, const Image& image, int bits) {
   const size_t n = static_cast<size_t>(image.width) * image.height * image.channels;
-  if (image.pixels.size() != n || n == 0) return absl::InvalidArgumentError(absl::StrCat(path, ": image buffer size mismatch"));
+  if (image.pixels.size() != n || n == 0)
+    return absl::InvalidArgumentError(absl::StrCat(path, ": image buffer size mismatch"));
   if (bits == 16) {
     std::vector<uint16_t> data(n);
-    for (size_t i = 0; i < n; ++i) data[i] = static_cast<uint16_t>(std::clamp(image.pixels[i], 0.0f, 1.0f) * 65535.0f + 0.5f);
-    return WritePixels(path, image.width, image.height, image.channels, OIIO::TypeDesc::UINT16, data.data());
+    for (size_t i = 0; i < n; ++i)
+      data[i] = static_cast<uint16_t>(std::clamp(image.pixels[i], 0.0f, 1.0f) * 65535.0f + 0.5f);
+    return WritePixels(path, image.width, image.height, image.channels, OIIO::TypeDesc::UINT16,
+                       data.data());
   }
   std::vector<uint8_t> data(n);
-  for (size_t i = 0; i < n; ++i) data[i] = static_cast<uint8_t>(std::clamp(image.pixels[i], 0.0f, 1.0f) * 255.0f + 0.5f);
-  return WritePixels(path, image.width, image.height, image.channels, OIIO::TypeDesc::UINT8, data.data());
+  for (size_t i = 0; i < n; ++i)
+    data[i] = static_cast<uint8_t>(std::clamp(image.pixels[i], 0.0f, 1.0f) * 255.0f + 0.5f);
+  return WritePixels(path, image.width, image.height, image.channels, OIIO::TypeDesc::UINT8,
+                     data.data());
 }
 
 absl::StatusOr<LabelMap> ReadLabelMap(const std::string& path) {
-  if (!std::filesystem::is_regular_file(path)) return absl::NotFoundError(absl::StrCat(path, ": no such file"));
+  if (!std::filesystem::is_regular_file(path))
+    return absl::NotFoundError(absl::StrCat(path, ": no such file"));
   auto in = OIIO::ImageInput::open(path);
   if (!in) return OiioError(path, "cannot decode label map", OIIO::geterror());
   const OIIO::ImageSpec& spec = in->spec();
@@ -88,9 +102,11 @@ absl::StatusOr<LabelMap> ReadLabelMap(const std::string& path) {
     return OiioError(path, absl::StrCat("label map must have 1 channel, has ", spec.nchannels), "");
   }
   if (spec.format != OIIO::TypeDesc::UINT8 && spec.format != OIIO::TypeDesc::UINT16) {
-    return OiioError(path, absl::StrCat("label map must be 8- or 16-bit integer, is ", spec.format.c_str()), "");
+    return OiioError(
+        path, absl::StrCat("label map must be 8- or 16-bit integer, is ", spec.format.c_str()), "");
   }
-  if (spec.width <= 0 || spec.height <= 0 || spec.width > kMaxImageSide || spec.height > kMaxImageSide) {
+  if (spec.width <= 0 || spec.height <= 0 || spec.width > kMaxImageSide ||
+      spec.height > kMaxImageSide) {
     return OiioError(path, "unsupported label map size", "");
   }
   LabelMap map;
@@ -98,7 +114,8 @@ absl::StatusOr<LabelMap> ReadLabelMap(const std::string& path) {
   map.height = spec.height;
   map.labels.resize(static_cast<size_t>(spec.width) * spec.height);
   if (!in->read_image(0, 0, 0, 1, OIIO::TypeDesc::UINT16, map.labels.data())) {
-    return absl::DataLossError(absl::StrCat(path, ": truncated or corrupt label map: ", in->geterror()));
+    return absl::DataLossError(
+        absl::StrCat(path, ": truncated or corrupt label map: ", in->geterror()));
   }
   if (spec.format == OIIO::TypeDesc::UINT8) {
     // OIIO rescales 8-bit to the 16-bit range (v * 257); undo it to keep the ids.
@@ -108,10 +125,12 @@ absl::StatusOr<LabelMap> ReadLabelMap(const std::string& path) {
 }
 
 absl::Status WriteLabelMap(const std::string& path, const LabelMap& labels) {
-  if (labels.labels.size() != static_cast<size_t>(labels.width) * labels.height || labels.labels.empty()) {
+  if (labels.labels.size() != static_cast<size_t>(labels.width) * labels.height ||
+      labels.labels.empty()) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": label buffer size mismatch"));
   }
-  return WritePixels(path, labels.width, labels.height, 1, OIIO::TypeDesc::UINT16, labels.labels.data());
+  return WritePixels(path, labels.width, labels.height, 1, OIIO::TypeDesc::UINT16,
+                     labels.labels.data());
 }
 
 }  // namespace instascene

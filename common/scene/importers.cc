@@ -31,11 +31,16 @@ struct ColmapModel {
 
 // COLMAP's camera models, by model id.
 constexpr ColmapModel kModels[] = {
-    {"SIMPLE_PINHOLE", 3, false, false}, {"PINHOLE", 4, false, false},
-    {"SIMPLE_RADIAL", 4, true, false},   {"RADIAL", 5, true, false},
-    {"OPENCV", 8, true, false},          {"OPENCV_FISHEYE", 8, true, true},
-    {"FULL_OPENCV", 12, true, false},    {"FOV", 5, true, true},
-    {"SIMPLE_RADIAL_FISHEYE", 4, true, true}, {"RADIAL_FISHEYE", 5, true, true},
+    {"SIMPLE_PINHOLE", 3, false, false},
+    {"PINHOLE", 4, false, false},
+    {"SIMPLE_RADIAL", 4, true, false},
+    {"RADIAL", 5, true, false},
+    {"OPENCV", 8, true, false},
+    {"OPENCV_FISHEYE", 8, true, true},
+    {"FULL_OPENCV", 12, true, false},
+    {"FOV", 5, true, true},
+    {"SIMPLE_RADIAL_FISHEYE", 4, true, true},
+    {"RADIAL_FISHEYE", 5, true, true},
     {"THIN_PRISM_FISHEYE", 12, true, true},
 };
 constexpr int kNumModels = sizeof(kModels) / sizeof(kModels[0]);
@@ -52,8 +57,9 @@ absl::Status ToPinhole(const ColmapCamera& cam, int camera_id, const ImportOptio
                        PinholeCamera* out) {
   const ColmapModel& model = kModels[cam.model_id];
   if (model.fisheye) {
-    return absl::InvalidArgumentError(absl::StrCat("camera ", camera_id, ": fisheye model ", model.name,
-                                                   " is not supported; undistort the images first"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("camera ", camera_id, ": fisheye model ", model.name,
+                     " is not supported; undistort the images first"));
   }
   if (model.distorted && !options.assume_undistorted) {
     return absl::InvalidArgumentError(absl::StrCat(
@@ -74,7 +80,8 @@ absl::Status ToPinhole(const ColmapCamera& cam, int camera_id, const ImportOptio
 // Bounds-checked little-endian reader over a whole file.
 class BinaryReader {
  public:
-  BinaryReader(const std::string& data, std::string source) : data_(data), source_(std::move(source)) {}
+  BinaryReader(const std::string& data, std::string source)
+      : data_(data), source_(std::move(source)) {}
   template <typename T>
   absl::Status Read(T* value) {
     if (data_.size() - pos_ < sizeof(T)) return Truncated();
@@ -121,10 +128,13 @@ absl::StatusOr<std::map<int, ColmapCamera>> ReadCamerasBin(const std::string& pa
     RETURN_IF_ERROR(in.Read(&w));
     RETURN_IF_ERROR(in.Read(&h));
     if (model < 0 || model >= kNumModels) {
-      return absl::InvalidArgumentError(absl::StrCat(path, ": camera ", id, " has unknown model id ", model));
+      return absl::InvalidArgumentError(
+          absl::StrCat(path, ": camera ", id, " has unknown model id ", model));
     }
-    if (w > 16384 || h > 16384) return absl::InvalidArgumentError(absl::StrCat(path, ": camera ", id, " size out of range"));
-    ColmapCamera cam{model, static_cast<int>(w), static_cast<int>(h), std::vector<double>(kModels[model].num_params)};
+    if (w > 16384 || h > 16384)
+      return absl::InvalidArgumentError(absl::StrCat(path, ": camera ", id, " size out of range"));
+    ColmapCamera cam{model, static_cast<int>(w), static_cast<int>(h),
+                     std::vector<double>(kModels[model].num_params)};
     for (double& p : cam.params) RETURN_IF_ERROR(in.Read(&p));
     cameras[static_cast<int>(id)] = cam;
   }
@@ -189,10 +199,13 @@ absl::StatusOr<std::map<int, ColmapCamera>> ReadCamerasTxt(const std::string& pa
       return absl::InvalidArgumentError(absl::StrCat(path, ": malformed camera line ", l + 1));
     }
     cam.model_id = ModelIdFromName(model_name);
-    if (cam.model_id < 0) return absl::InvalidArgumentError(absl::StrCat(path, ": unknown camera model ", model_name));
+    if (cam.model_id < 0)
+      return absl::InvalidArgumentError(absl::StrCat(path, ": unknown camera model ", model_name));
     cam.params.resize(kModels[cam.model_id].num_params);
     for (double& p : cam.params) {
-      if (!(in >> p)) return absl::InvalidArgumentError(absl::StrCat(path, ": camera ", id, " has too few parameters"));
+      if (!(in >> p))
+        return absl::InvalidArgumentError(
+            absl::StrCat(path, ": camera ", id, " has too few parameters"));
     }
     cameras[id] = cam;
   }
@@ -203,13 +216,17 @@ absl::StatusOr<std::vector<ColmapImage>> ReadImagesTxt(const std::string& path) 
   ASSIGN_OR_RETURN(std::vector<std::string> lines, TextLines(path, true));
   std::vector<ColmapImage> images;
   for (size_t l = 0; l < lines.size(); l += 2) {
-    if (lines[l].empty()) { --l; continue; }  // tolerate stray empty lines between records
+    if (lines[l].empty()) {
+      --l;
+      continue;
+    }  // tolerate stray empty lines between records
     std::istringstream in(lines[l]);
     int image_id = 0;
     ColmapImage image;
     if (!(in >> image_id >> image.q[0] >> image.q[1] >> image.q[2] >> image.q[3] >> image.t[0] >>
           image.t[1] >> image.t[2] >> image.camera_id >> image.name)) {
-      return absl::InvalidArgumentError(absl::StrCat(path, ": malformed image line: '", lines[l], "'"));
+      return absl::InvalidArgumentError(
+          absl::StrCat(path, ": malformed image line: '", lines[l], "'"));
     }
     images.push_back(std::move(image));
   }
@@ -217,12 +234,14 @@ absl::StatusOr<std::vector<ColmapImage>> ReadImagesTxt(const std::string& path) 
 }
 
 void SortByName(std::vector<SceneView>* views) {
-  std::sort(views->begin(), views->end(), [](const SceneView& a, const SceneView& b) { return a.name < b.name; });
+  std::sort(views->begin(), views->end(),
+            [](const SceneView& a, const SceneView& b) { return a.name < b.name; });
 }
 
 }  // namespace
 
-absl::StatusOr<ImportedCameras> ImportColmapModel(const std::string& model_dir, const ImportOptions& options) {
+absl::StatusOr<ImportedCameras> ImportColmapModel(const std::string& model_dir,
+                                                  const ImportOptions& options) {
   namespace fs = std::filesystem;
   const bool binary = fs::exists(fs::path(model_dir) / "cameras.bin");
   std::map<int, ColmapCamera> cameras;
@@ -238,18 +257,20 @@ absl::StatusOr<ImportedCameras> ImportColmapModel(const std::string& model_dir, 
   for (const ColmapImage& image : images) {
     auto it = cameras.find(image.camera_id);
     if (it == cameras.end()) {
-      return absl::InvalidArgumentError(absl::StrCat(model_dir, ": image '", image.name,
-                                                     "' refers to missing camera ", image.camera_id));
+      return absl::InvalidArgumentError(absl::StrCat(
+          model_dir, ": image '", image.name, "' refers to missing camera ", image.camera_id));
     }
     SceneView view;
     view.name = fs::path(image.name).stem().string();
     view.image = image.name;
     RETURN_IF_ERROR(Annotate(ToPinhole(it->second, it->first, options, &view.camera), model_dir));
-    view.camera.camera_from_world.rotation = RotationFromQuaternionWxyz(image.q[0], image.q[1], image.q[2], image.q[3]);
+    view.camera.camera_from_world.rotation =
+        RotationFromQuaternionWxyz(image.q[0], image.q[1], image.q[2], image.q[3]);
     view.camera.camera_from_world.translation = Eigen::Vector3d(image.t[0], image.t[1], image.t[2]);
     if (!view.camera.camera_from_world.translation.allFinite() ||
         !view.camera.camera_from_world.rotation.allFinite()) {
-      return absl::InvalidArgumentError(absl::StrCat(model_dir, ": image '", image.name, "' has a non-finite pose"));
+      return absl::InvalidArgumentError(
+          absl::StrCat(model_dir, ": image '", image.name, "' has a non-finite pose"));
     }
     out.views.push_back(std::move(view));
   }
@@ -257,11 +278,13 @@ absl::StatusOr<ImportedCameras> ImportColmapModel(const std::string& model_dir, 
   return out;
 }
 
-absl::StatusOr<ImportedCameras> ImportTransformsJson(const std::string& path, const ImportOptions& options) {
+absl::StatusOr<ImportedCameras> ImportTransformsJson(const std::string& path,
+                                                     const ImportOptions& options) {
   namespace fs = std::filesystem;
   ASSIGN_OR_RETURN(std::string text, ReadFileBounded(path, size_t{256} << 20));
   json root = json::parse(text, nullptr, false);
-  if (root.is_discarded() || !root.is_object()) return absl::InvalidArgumentError(absl::StrCat(path, ": not a JSON object"));
+  if (root.is_discarded() || !root.is_object())
+    return absl::InvalidArgumentError(absl::StrCat(path, ": not a JSON object"));
   if (!root.contains("frames") || !root["frames"].is_array()) {
     return absl::InvalidArgumentError(absl::StrCat(path, ": no \"frames\" array"));
   }
@@ -275,7 +298,9 @@ absl::StatusOr<ImportedCameras> ImportTransformsJson(const std::string& path, co
     };
     // Per-frame values override the top-level ones (nerfstudio allows both).
     auto number = [&](const char* key, double* value) {
-      const json* src = frame.contains(key) ? &frame[key] : root.contains(key) ? &root[key] : nullptr;
+      const json* src = frame.contains(key)  ? &frame[key]
+                        : root.contains(key) ? &root[key]
+                                             : nullptr;
       if (src == nullptr || !src->is_number()) return false;
       *value = src->get<double>();
       return true;
@@ -286,7 +311,10 @@ absl::StatusOr<ImportedCameras> ImportTransformsJson(const std::string& path, co
     std::string file = frame["file_path"].get<std::string>();
     if (!fs::exists(base / file)) {
       for (const char* ext : {".png", ".jpg", ".jpeg"}) {  // NeRF synthetic omits extensions
-        if (fs::exists(base / (file + ext))) { file += ext; break; }
+        if (fs::exists(base / (file + ext))) {
+          file += ext;
+          break;
+        }
       }
     }
     double w = 0, h = 0, fl_x = 0, fl_y = 0, cx = 0, cy = 0, angle = 0;
@@ -317,7 +345,8 @@ absl::StatusOr<ImportedCameras> ImportTransformsJson(const std::string& path, co
     Eigen::Matrix<double, 3, 4> gl_world_from_camera;
     try {
       for (int r = 0; r < 3; ++r) {
-        for (int c = 0; c < 4; ++c) gl_world_from_camera(r, c) = frame["transform_matrix"][r].at(c).get<double>();
+        for (int c = 0; c < 4; ++c)
+          gl_world_from_camera(r, c) = frame["transform_matrix"][r].at(c).get<double>();
       }
     } catch (const json::exception& e) {
       return fail(absl::StrCat("bad \"transform_matrix\": ", e.what()));
@@ -344,7 +373,8 @@ absl::StatusOr<ImportedCameras> ImportTransformsJson(const std::string& path, co
     out.warnings.push_back(absl::StrCat(skipped, " of ", root["frames"].size(),
                                         " frames skipped: image file missing"));
   }
-  if (out.views.empty()) return absl::InvalidArgumentError(absl::StrCat(path, ": no frame has an existing image"));
+  if (out.views.empty())
+    return absl::InvalidArgumentError(absl::StrCat(path, ": no frame has an existing image"));
   SortByName(&out.views);
   return out;
 }

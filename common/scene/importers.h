@@ -19,8 +19,8 @@ struct ImportOptions {
 };
 
 struct ImportedCameras {
-  std::vector<SceneView> views;        // image = file name relative to the image folder
-  std::vector<std::string> warnings;   // e.g. frames skipped because their image is missing
+  std::vector<SceneView> views;       // image = file name relative to the image folder
+  std::vector<std::string> warnings;  // e.g. frames skipped because their image is missing
 };
 
 // Reads <model_dir>/{cameras,images}.bin, or the .txt pair when the .bin files are absent.

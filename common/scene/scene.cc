@@ -40,10 +40,12 @@ absl::StatusOr<SceneView> ParseView(const json& j, size_t index) {
     view.camera.cx = j.at("cx").get<double>();
     view.camera.cy = j.at("cy").get<double>();
     const json& m = j.at("camera_from_world");
-    if (!m.is_array() || m.size() != 3) return fail("camera_from_world must be 3 rows of 4 numbers");
+    if (!m.is_array() || m.size() != 3)
+      return fail("camera_from_world must be 3 rows of 4 numbers");
     Eigen::Matrix<double, 3, 4> matrix;
     for (int r = 0; r < 3; ++r) {
-      if (!m[r].is_array() || m[r].size() != 4) return fail("camera_from_world must be 3 rows of 4 numbers");
+      if (!m[r].is_array() || m[r].size() != 4)
+        return fail("camera_from_world must be 3 rows of 4 numbers");
       for (int c = 0; c < 4; ++c) matrix(r, c) = m[r][c].get<double>();
     }
     absl::StatusOr<Rigid3d> pose = RigidFromMatrix(matrix);
@@ -56,7 +58,8 @@ absl::StatusOr<SceneView> ParseView(const json& j, size_t index) {
     return fail(absl::StrCat("invalid view name '", view.name, "'"));
   }
   for (const std::string* path : {&view.image, &view.mask}) {
-    if (!path->empty() && !IsSafeRelativePath(*path)) return fail(absl::StrCat("unsafe path '", *path, "'"));
+    if (!path->empty() && !IsSafeRelativePath(*path))
+      return fail(absl::StrCat("unsafe path '", *path, "'"));
   }
   if (absl::Status s = view.camera.Validate(); !s.ok()) return fail(std::string(s.message()));
   return view;
@@ -90,17 +93,21 @@ absl::StatusOr<Scene> ParseSceneJson(absl::string_view text, absl::string_view s
     if (!root["gaussians"].is_string()) return fail("\"gaussians\" must be a string");
     scene.gaussians = root["gaussians"].get<std::string>();
   }
-  if (!IsSafeRelativePath(scene.gaussians)) return fail(absl::StrCat("unsafe path '", scene.gaussians, "'"));
-  if (!root.contains("views") || !root["views"].is_array()) return fail("\"views\" must be an array");
+  if (!IsSafeRelativePath(scene.gaussians))
+    return fail(absl::StrCat("unsafe path '", scene.gaussians, "'"));
+  if (!root.contains("views") || !root["views"].is_array())
+    return fail("\"views\" must be an array");
   std::set<std::string> names;
   for (size_t i = 0; i < root["views"].size(); ++i) {
     absl::StatusOr<SceneView> view = ParseView(root["views"][i], i);
     if (!view.ok()) return Annotate(view.status(), source);
-    if (!names.insert(view->name).second) return fail(absl::StrCat("duplicate view name '", view->name, "'"));
+    if (!names.insert(view->name).second)
+      return fail(absl::StrCat("duplicate view name '", view->name, "'"));
     scene.views.push_back(*std::move(view));
   }
   for (auto it = root.begin(); it != root.end(); ++it) {
-    if (it.key() != "format" && it.key() != "gaussians" && it.key() != "views") scene.metadata[it.key()] = it.value();
+    if (it.key() != "format" && it.key() != "gaussians" && it.key() != "views")
+      scene.metadata[it.key()] = it.value();
   }
   return scene;
 }
@@ -114,9 +121,17 @@ std::string SceneToJson(const Scene& scene) {
     const PinholeCamera& c = v.camera;
     json m = json::array();
     const Eigen::Matrix<double, 3, 4> matrix = c.camera_from_world.ToMatrix();
-    for (int r = 0; r < 3; ++r) m.push_back({matrix(r, 0), matrix(r, 1), matrix(r, 2), matrix(r, 3)});
-    views.push_back({{"name", v.name}, {"image", v.image}, {"mask", v.mask}, {"width", c.width},
-                     {"height", c.height}, {"fx", c.fx}, {"fy", c.fy}, {"cx", c.cx}, {"cy", c.cy},
+    for (int r = 0; r < 3; ++r)
+      m.push_back({matrix(r, 0), matrix(r, 1), matrix(r, 2), matrix(r, 3)});
+    views.push_back({{"name", v.name},
+                     {"image", v.image},
+                     {"mask", v.mask},
+                     {"width", c.width},
+                     {"height", c.height},
+                     {"fx", c.fx},
+                     {"fy", c.fy},
+                     {"cx", c.cx},
+                     {"cy", c.cy},
                      {"camera_from_world", m}});
   }
   root["views"] = views;
@@ -134,7 +149,8 @@ absl::StatusOr<Scene> ReadScene(const std::string& directory) {
 absl::Status WriteScene(const Scene& scene) {
   std::error_code ec;
   std::filesystem::create_directories(scene.directory, ec);
-  if (ec) return absl::UnavailableError(absl::StrCat(scene.directory, ": cannot create: ", ec.message()));
+  if (ec)
+    return absl::UnavailableError(absl::StrCat(scene.directory, ": cannot create: ", ec.message()));
   return WriteFileAtomically(scene.Path("scene.json"), SceneToJson(scene));
 }
 
@@ -142,13 +158,14 @@ absl::StatusOr<int> ResolveView(const Scene& scene, absl::string_view name_or_in
   const int by_name = scene.FindView(name_or_index);
   if (by_name >= 0) return by_name;
   int index = -1;
-  auto r = std::from_chars(name_or_index.data(), name_or_index.data() + name_or_index.size(), index);
+  auto r =
+      std::from_chars(name_or_index.data(), name_or_index.data() + name_or_index.size(), index);
   if (r.ec == std::errc() && r.ptr == name_or_index.data() + name_or_index.size() && index >= 0 &&
       index < static_cast<int>(scene.views.size())) {
     return index;
   }
-  return absl::NotFoundError(absl::StrCat("no view named '", name_or_index, "' (and not an index below ",
-                                          scene.views.size(), ")"));
+  return absl::NotFoundError(absl::StrCat("no view named '", name_or_index,
+                                          "' (and not an index below ", scene.views.size(), ")"));
 }
 
 absl::StatusOr<GaussianCloud> ReadSceneGaussians(const Scene& scene) {
@@ -160,9 +177,9 @@ absl::StatusOr<Image> ReadViewImage(const Scene& scene, int view) {
   if (v.image.empty()) return absl::NotFoundError(absl::StrCat("view '", v.name, "' has no image"));
   ASSIGN_OR_RETURN(Image image, ReadImage(scene.Path(v.image)));
   if (image.width != v.camera.width || image.height != v.camera.height) {
-    return absl::InvalidArgumentError(absl::StrCat(scene.Path(v.image), ": image is ", image.width, "x",
-                                                   image.height, " but view '", v.name, "' camera is ",
-                                                   v.camera.width, "x", v.camera.height));
+    return absl::InvalidArgumentError(
+        absl::StrCat(scene.Path(v.image), ": image is ", image.width, "x", image.height,
+                     " but view '", v.name, "' camera is ", v.camera.width, "x", v.camera.height));
   }
   return image;
 }
@@ -172,9 +189,9 @@ absl::StatusOr<LabelMap> ReadViewMask(const Scene& scene, int view) {
   if (v.mask.empty()) return absl::NotFoundError(absl::StrCat("view '", v.name, "' has no mask"));
   ASSIGN_OR_RETURN(LabelMap mask, ReadLabelMap(scene.Path(v.mask)));
   if (mask.width != v.camera.width || mask.height != v.camera.height) {
-    return absl::InvalidArgumentError(absl::StrCat(scene.Path(v.mask), ": mask is ", mask.width, "x",
-                                                   mask.height, " but view '", v.name, "' camera is ",
-                                                   v.camera.width, "x", v.camera.height));
+    return absl::InvalidArgumentError(
+        absl::StrCat(scene.Path(v.mask), ": mask is ", mask.width, "x", mask.height, " but view '",
+                     v.name, "' camera is ", v.camera.width, "x", v.camera.height));
   }
   return mask;
 }

@@ -32,8 +32,8 @@ struct SceneView {
 };
 
 struct Scene {
-  std::string directory;                   // where scene.json lives
-  std::string gaussians = "gaussians.ply"; // relative path of the splat model
+  std::string directory;                    // where scene.json lives
+  std::string gaussians = "gaussians.ply";  // relative path of the splat model
   std::vector<SceneView> views;
   nlohmann::json metadata = nlohmann::json::object();  // other top-level keys, kept verbatim
 

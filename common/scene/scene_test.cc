@@ -44,7 +44,9 @@ TEST(SceneJson, RoundTripKeepsViewsAndMetadata) {
   EXPECT_EQ(back->views[1].name, "b");
   EXPECT_EQ(back->views[1].mask, "masks/b.png");
   EXPECT_LT((back->views[1].camera.camera_from_world.ToMatrix() -
-             scene.views[1].camera.camera_from_world.ToMatrix()).norm(), 1e-12);
+             scene.views[1].camera.camera_from_world.ToMatrix())
+                .norm(),
+            1e-12);
   EXPECT_EQ(back->metadata["gt"]["instances"], "gt/instances.json");
   EXPECT_EQ(*ResolveView(*back, "b"), 1);
   EXPECT_EQ(*ResolveView(*back, "0"), 0);
@@ -62,8 +64,10 @@ TEST(SceneJson, RejectsMalformedManifests) {
       R"({"name":"v","width":4,"height":4,"fx":2,"fy":2,"cx":2,"cy":2,"camera_from_world":[[1,0,0,0],[0,1,0,0],[0,0,1,0]]})";
   ExpectBadScene("{", "not valid JSON");
   ExpectBadScene(R"({"format":"other","views":[]})", "format");
-  ExpectBadScene(R"({"format":"instascene.scene/1","views":[)" + view + "," + view + "]}", "duplicate view");
-  ExpectBadScene(R"({"format":"instascene.scene/1","gaussians":"../x.ply","views":[]})", "unsafe path");
+  ExpectBadScene(R"({"format":"instascene.scene/1","views":[)" + view + "," + view + "]}",
+                 "duplicate view");
+  ExpectBadScene(R"({"format":"instascene.scene/1","gaussians":"../x.ply","views":[]})",
+                 "unsafe path");
   ExpectBadScene(R"({"format":"instascene.scene/1","views":[{"name":"v"}]})", "views[0]");
   std::string scaled = view;
   scaled.replace(scaled.find("[[1,0,0,0]"), 10, "[[2,0,0,0]");
@@ -76,11 +80,13 @@ TEST(SceneJson, RejectsMalformedManifests) {
 TEST(ImageIo, ImagesAndLabelMapsRoundTrip) {
   const std::string dir = FreshDir("images");
   Image image{4, 3, 3, std::vector<float>(36)};
-  for (size_t i = 0; i < image.pixels.size(); ++i) image.pixels[i] = static_cast<float>(i % 17) / 16.0f;
+  for (size_t i = 0; i < image.pixels.size(); ++i)
+    image.pixels[i] = static_cast<float>(i % 17) / 16.0f;
   ASSERT_TRUE(WriteImage(dir + "/a.png", image).ok());
   absl::StatusOr<Image> back = ReadImage(dir + "/a.png");
   ASSERT_TRUE(back.ok()) << back.status();
-  for (size_t i = 0; i < image.pixels.size(); ++i) EXPECT_NEAR(back->pixels[i], image.pixels[i], 1.0 / 255);
+  for (size_t i = 0; i < image.pixels.size(); ++i)
+    EXPECT_NEAR(back->pixels[i], image.pixels[i], 1.0 / 255);
   LabelMap labels{5, 2, {0, 1, 2, 300, 65535, 7, 7, 0, 9, 1000}};
   ASSERT_TRUE(WriteLabelMap(dir + "/m16.png", labels).ok());
   absl::StatusOr<LabelMap> labels_back = ReadLabelMap(dir + "/m16.png");
@@ -108,19 +114,24 @@ TEST(Scene, ViewImageSizeMustMatchCamera) {
   scene.directory = FreshDir("sizes");
   scene.views = {MakeView("a", 0)};
   fs::create_directories(scene.directory + "/images");
-  ASSERT_TRUE(WriteImage(scene.Path("images/a.png"), Image{31, 24, 3, std::vector<float>(31 * 24 * 3)}).ok());
+  ASSERT_TRUE(
+      WriteImage(scene.Path("images/a.png"), Image{31, 24, 3, std::vector<float>(31 * 24 * 3)})
+          .ok());
   absl::StatusOr<Image> image = ReadViewImage(scene, 0);
   ASSERT_FALSE(image.ok());
   EXPECT_NE(image.status().message().find("31x24"), std::string::npos) << image.status();
 }
 
 // Writes a tiny COLMAP model in the binary or text format.
-void WriteColmap(const std::string& dir, bool binary, int model_id, const std::vector<double>& params) {
+void WriteColmap(const std::string& dir, bool binary, int model_id,
+                 const std::vector<double>& params) {
   const char* kNames[] = {"SIMPLE_PINHOLE", "PINHOLE", "SIMPLE_RADIAL"};
   const double q[4] = {0.9238795, 0, 0.3826834, 0}, t[3] = {0.5, -1, 2};
   if (binary) {
     std::string cams, imgs;
-    auto put = [](std::string* s, const auto& v) { s->append(reinterpret_cast<const char*>(&v), sizeof(v)); };
+    auto put = [](std::string* s, const auto& v) {
+      s->append(reinterpret_cast<const char*>(&v), sizeof(v));
+    };
     put(&cams, uint64_t{1});
     put(&cams, uint32_t{3});
     put(&cams, int32_t{model_id});
@@ -149,8 +160,8 @@ void WriteColmap(const std::string& dir, bool binary, int model_id, const std::v
     std::ofstream imgs(dir + "/images.txt");
     imgs << "# Image list\n";
     for (const char* name : {"b.png", "a.png"}) {
-      imgs << "1 " << q[0] << " " << q[1] << " " << q[2] << " " << q[3] << " " << t[0] << " " << t[1]
-           << " " << t[2] << " 3 " << name << "\n1.0 2.0 -1\n";
+      imgs << "1 " << q[0] << " " << q[1] << " " << q[2] << " " << q[3] << " " << t[0] << " "
+           << t[1] << " " << t[2] << " 3 " << name << "\n1.0 2.0 -1\n";
     }
   }
 }
@@ -189,7 +200,8 @@ TEST(Importers, ColmapDistortedModelNeedsExplicitUndistortion) {
 }
 
 TEST(Importers, RealInstantNgpFoxSkipsMissingFrames) {
-  const std::string path = std::string(INSTASCENE_SHARED_DIR) + "/data/fox_instant_ngp/transforms.json";
+  const std::string path =
+      std::string(INSTASCENE_SHARED_DIR) + "/data/fox_instant_ngp/transforms.json";
   if (!fs::exists(path)) GTEST_SKIP() << "shared data missing";
   absl::StatusOr<ImportedCameras> strict = ImportTransformsJson(path);
   ASSERT_FALSE(strict.ok());
@@ -199,7 +211,8 @@ TEST(Importers, RealInstantNgpFoxSkipsMissingFrames) {
   // The original file points at the full-size images, of which the repository keeps none here.
   EXPECT_FALSE(ImportTransformsJson(path, options).ok());
   absl::StatusOr<ImportedCameras> fox = ImportTransformsJson(
-      std::string(INSTASCENE_SHARED_DIR) + "/data/fox_instant_ngp/transforms_images_2.json", options);
+      std::string(INSTASCENE_SHARED_DIR) + "/data/fox_instant_ngp/transforms_images_2.json",
+      options);
   ASSERT_TRUE(fox.ok()) << fox.status();
   EXPECT_EQ(fox->views.size(), 50u);
   EXPECT_EQ(fox->views.front().name, "0001");

@@ -13,7 +13,8 @@
 namespace instascene {
 namespace {
 
-absl::Status CheckFinite(const std::vector<float>& values, int per_gaussian, absl::string_view what) {
+absl::Status CheckFinite(const std::vector<float>& values, int per_gaussian,
+                         absl::string_view what) {
   for (size_t i = 0; i < values.size(); ++i) {
     if (!std::isfinite(values[i])) {
       return absl::InvalidArgumentError(absl::StrCat("Gaussian #", i / per_gaussian, ": ", what,
@@ -45,8 +46,8 @@ absl::Status GaussianCloud::Validate() const {
   }
   if (positions.size() != 3 * n || log_scales.size() != num_scales * n ||
       rotations.size() != 4 * n || sh.size() != static_cast<size_t>(sh_stride()) * n) {
-    return absl::InvalidArgumentError(absl::StrCat("attribute arrays disagree on the count of ", n,
-                                                   " Gaussians"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("attribute arrays disagree on the count of ", n, " Gaussians"));
   }
   if (auto s = CheckFinite(positions, 3, "position"); !s.ok()) return s;
   if (auto s = CheckFinite(log_scales, num_scales, "log-scale"); !s.ok()) return s;
@@ -61,9 +62,8 @@ absl::Status GaussianCloud::Validate() const {
   }
   for (const ExtraChannel& e : extras) {
     if (e.values.size() != n) {
-      return absl::InvalidArgumentError(absl::StrCat("extra channel '", e.name, "' has ",
-                                                     e.values.size(), " values for ", n,
-                                                     " Gaussians"));
+      return absl::InvalidArgumentError(absl::StrCat(
+          "extra channel '", e.name, "' has ", e.values.size(), " values for ", n, " Gaussians"));
     }
     if (auto s = CheckFinite(e.values, 1, absl::StrCat("extra '", e.name, "'")); !s.ok()) return s;
   }
@@ -120,7 +120,8 @@ absl::StatusOr<std::vector<float>> GaussianCloud::GatherExtraGroup(absl::string_
   return out;
 }
 
-void GaussianCloud::SetExtraGroup(absl::string_view prefix, int dim, const std::vector<float>& values) {
+void GaussianCloud::SetExtraGroup(absl::string_view prefix, int dim,
+                                  const std::vector<float>& values) {
   const size_t n = size();
   for (int d = 0; d < dim; ++d) {
     std::vector<float> column(n);
@@ -158,7 +159,7 @@ GaussianCloud ToSurfels(const GaussianCloud& cloud) {
     const float* s = &cloud.log_scales[3 * i];
     const float* q = &cloud.rotations[4 * i];
     const int k = static_cast<int>(std::min_element(s, s + 3) - s);  // smallest axis = normal
-    const int a = (k + 1) % 3;                                        // cyclic order keeps det +1
+    const int a = (k + 1) % 3;                                       // cyclic order keeps det +1
     const int b = (k + 2) % 3;
     const Eigen::Matrix3d r = RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]);
     Eigen::Matrix3d surfel;

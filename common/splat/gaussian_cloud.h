@@ -7,8 +7,8 @@
 
 #include <cstdint>
 #include <string>
-#include "absl/strings/string_view.h"
 #include <vector>
+#include "absl/strings/string_view.h"
 
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
@@ -27,8 +27,8 @@ struct ExtraChannel {
 };
 
 struct GaussianCloud {
-  int num_scales = 2;  // 2 = 2DGS surfel, 3 = 3DGS ellipsoid
-  int sh_degree = 0;   // 0..3
+  int num_scales = 2;                 // 2 = 2DGS surfel, 3 = 3DGS ellipsoid
+  int sh_degree = 0;                  // 0..3
   std::vector<float> positions;       // 3 per Gaussian: x, y, z in world units
   std::vector<float> log_scales;      // num_scales per Gaussian, natural log of the std-dev
   std::vector<float> rotations;       // 4 per Gaussian: quaternion w, x, y, z (not normalised)

@@ -38,8 +38,9 @@ absl::StatusOr<GaussianCloud> ParseGaussianPly(absl::string_view data, absl::str
   for (const PlyElement& e : header.elements) {
     if (e.name == "chunk") {
       return absl::InvalidArgumentError(absl::StrCat(
-          source, ": SuperSplat compressed PLY (element 'chunk') is not supported; decompress it "
-                  "to the standard 3DGS layout first"));
+          source,
+          ": SuperSplat compressed PLY (element 'chunk') is not supported; decompress it "
+          "to the standard 3DGS layout first"));
     }
   }
   ASSIGN_OR_RETURN(PlyColumns cols, ReadPlyElement(data, header, "vertex", source));
@@ -62,8 +63,8 @@ absl::StatusOr<GaussianCloud> ParseGaussianPly(absl::string_view data, absl::str
       }
     }
     if (count != max_index + 1) {
-      return absl::InvalidArgumentError(absl::StrCat(source, ": properties '", prefix,
-                                                     "*' are not numbered 0..", max_index));
+      return absl::InvalidArgumentError(
+          absl::StrCat(source, ": properties '", prefix, "*' are not numbered 0..", max_index));
     }
     return count;
   };
@@ -80,8 +81,8 @@ absl::StatusOr<GaussianCloud> ParseGaussianPly(absl::string_view data, absl::str
         source, ": ", num_rest, " f_rest_* properties; expected 0, 9, 24 or 45 (SH degree 0-3)"));
   }
   if (num_scales != 2 && num_scales != 3) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(source, ": ", num_scales, " scale_* properties; expected 2 (2DGS) or 3 (3DGS)"));
+    return absl::InvalidArgumentError(absl::StrCat(
+        source, ": ", num_scales, " scale_* properties; expected 2 (2DGS) or 3 (3DGS)"));
   }
   if (num_rot != 4) {
     return absl::InvalidArgumentError(
@@ -122,14 +123,16 @@ absl::StatusOr<GaussianCloud> ParseGaussianPly(absl::string_view data, absl::str
   const int coeffs = NumShCoeffs(sh_degree);
   for (size_t i = 0; i < n; ++i) {
     for (int a = 0; a < 3; ++a) cloud.positions[3 * i + a] = cols.columns[pos[a]][i];
-    for (int a = 0; a < num_scales; ++a) cloud.log_scales[num_scales * i + a] = cols.columns[scale[a]][i];
+    for (int a = 0; a < num_scales; ++a)
+      cloud.log_scales[num_scales * i + a] = cols.columns[scale[a]][i];
     for (int a = 0; a < 4; ++a) cloud.rotations[4 * i + a] = cols.columns[rot[a]][i];
     cloud.opacity_logits[i] = cols.columns[opacity][i];
     float* sh = &cloud.sh[static_cast<size_t>(cloud.sh_stride()) * i];
     for (int c = 0; c < 3; ++c) {
       sh[c] = cols.columns[dc[c]][i];
       // Channel-major on disk: f_rest_{c * (coeffs - 1) + k - 1} is coefficient k of channel c.
-      for (int k = 1; k < coeffs; ++k) sh[3 * k + c] = cols.columns[rest[c * (coeffs - 1) + k - 1]][i];
+      for (int k = 1; k < coeffs; ++k)
+        sh[3 * k + c] = cols.columns[rest[c * (coeffs - 1) + k - 1]][i];
     }
   }
   for (ExtraChannel& e : cloud.extras) e.values = std::move(cols.columns[cols.Find(e.name)]);

@@ -29,13 +29,13 @@ bool ParseScalarType(absl::string_view s, ScalarType* type) {
     ScalarType type;
   };
   static constexpr Entry kTypes[] = {
-      {"char", ScalarType::kInt8},     {"int8", ScalarType::kInt8},
-      {"uchar", ScalarType::kUint8},   {"uint8", ScalarType::kUint8},
-      {"short", ScalarType::kInt16},   {"int16", ScalarType::kInt16},
-      {"ushort", ScalarType::kUint16}, {"uint16", ScalarType::kUint16},
-      {"int", ScalarType::kInt32},     {"int32", ScalarType::kInt32},
-      {"uint", ScalarType::kUint32},   {"uint32", ScalarType::kUint32},
-      {"float", ScalarType::kFloat32}, {"float32", ScalarType::kFloat32},
+      {"char", ScalarType::kInt8},      {"int8", ScalarType::kInt8},
+      {"uchar", ScalarType::kUint8},    {"uint8", ScalarType::kUint8},
+      {"short", ScalarType::kInt16},    {"int16", ScalarType::kInt16},
+      {"ushort", ScalarType::kUint16},  {"uint16", ScalarType::kUint16},
+      {"int", ScalarType::kInt32},      {"int32", ScalarType::kInt32},
+      {"uint", ScalarType::kUint32},    {"uint32", ScalarType::kUint32},
+      {"float", ScalarType::kFloat32},  {"float32", ScalarType::kFloat32},
       {"double", ScalarType::kFloat64}, {"float64", ScalarType::kFloat64},
   };
   for (const Entry& e : kTypes) {
@@ -58,14 +58,46 @@ double DecodeBinary(const char* p, ScalarType type, bool big_endian) {
     for (int i = 0; i < n / 2; ++i) std::swap(buf[i], buf[n - 1 - i]);
   }
   switch (type) {
-    case ScalarType::kInt8: { int8_t v; std::memcpy(&v, buf, 1); return v; }
-    case ScalarType::kUint8: { uint8_t v; std::memcpy(&v, buf, 1); return v; }
-    case ScalarType::kInt16: { int16_t v; std::memcpy(&v, buf, 2); return v; }
-    case ScalarType::kUint16: { uint16_t v; std::memcpy(&v, buf, 2); return v; }
-    case ScalarType::kInt32: { int32_t v; std::memcpy(&v, buf, 4); return v; }
-    case ScalarType::kUint32: { uint32_t v; std::memcpy(&v, buf, 4); return v; }
-    case ScalarType::kFloat32: { float v; std::memcpy(&v, buf, 4); return v; }
-    case ScalarType::kFloat64: { double v; std::memcpy(&v, buf, 8); return v; }
+    case ScalarType::kInt8: {
+      int8_t v;
+      std::memcpy(&v, buf, 1);
+      return v;
+    }
+    case ScalarType::kUint8: {
+      uint8_t v;
+      std::memcpy(&v, buf, 1);
+      return v;
+    }
+    case ScalarType::kInt16: {
+      int16_t v;
+      std::memcpy(&v, buf, 2);
+      return v;
+    }
+    case ScalarType::kUint16: {
+      uint16_t v;
+      std::memcpy(&v, buf, 2);
+      return v;
+    }
+    case ScalarType::kInt32: {
+      int32_t v;
+      std::memcpy(&v, buf, 4);
+      return v;
+    }
+    case ScalarType::kUint32: {
+      uint32_t v;
+      std::memcpy(&v, buf, 4);
+      return v;
+    }
+    case ScalarType::kFloat32: {
+      float v;
+      std::memcpy(&v, buf, 4);
+      return v;
+    }
+    case ScalarType::kFloat64: {
+      double v;
+      std::memcpy(&v, buf, 8);
+      return v;
+    }
   }
   return 0.0;
 }
@@ -145,9 +177,12 @@ uint64_t MinInstanceBytes(const PlyElement& element, PlyFormat format) {
 
 std::string DescribeFormat(PlyFormat f) {
   switch (f) {
-    case PlyFormat::kAscii: return "ascii";
-    case PlyFormat::kBinaryLittleEndian: return "binary_little_endian";
-    case PlyFormat::kBinaryBigEndian: return "binary_big_endian";
+    case PlyFormat::kAscii:
+      return "ascii";
+    case PlyFormat::kBinaryLittleEndian:
+      return "binary_little_endian";
+    case PlyFormat::kBinaryBigEndian:
+      return "binary_big_endian";
   }
   return "?";
 }
@@ -156,24 +191,40 @@ std::string DescribeFormat(PlyFormat f) {
 
 int ScalarTypeSize(ScalarType type) {
   switch (type) {
-    case ScalarType::kInt8: case ScalarType::kUint8: return 1;
-    case ScalarType::kInt16: case ScalarType::kUint16: return 2;
-    case ScalarType::kInt32: case ScalarType::kUint32: case ScalarType::kFloat32: return 4;
-    case ScalarType::kFloat64: return 8;
+    case ScalarType::kInt8:
+    case ScalarType::kUint8:
+      return 1;
+    case ScalarType::kInt16:
+    case ScalarType::kUint16:
+      return 2;
+    case ScalarType::kInt32:
+    case ScalarType::kUint32:
+    case ScalarType::kFloat32:
+      return 4;
+    case ScalarType::kFloat64:
+      return 8;
   }
   return 0;
 }
 
 absl::string_view ScalarTypeName(ScalarType type) {
   switch (type) {
-    case ScalarType::kInt8: return "char";
-    case ScalarType::kUint8: return "uchar";
-    case ScalarType::kInt16: return "short";
-    case ScalarType::kUint16: return "ushort";
-    case ScalarType::kInt32: return "int";
-    case ScalarType::kUint32: return "uint";
-    case ScalarType::kFloat32: return "float";
-    case ScalarType::kFloat64: return "double";
+    case ScalarType::kInt8:
+      return "char";
+    case ScalarType::kUint8:
+      return "uchar";
+    case ScalarType::kInt16:
+      return "short";
+    case ScalarType::kUint16:
+      return "ushort";
+    case ScalarType::kInt32:
+      return "int";
+    case ScalarType::kUint32:
+      return "uint";
+    case ScalarType::kFloat32:
+      return "float";
+    case ScalarType::kFloat64:
+      return "double";
   }
   return "?";
 }
@@ -191,7 +242,8 @@ absl::StatusOr<PlyHeader> ParsePlyHeader(absl::string_view data, absl::string_vi
     return absl::InvalidArgumentError(absl::StrCat(source, ": PLY header line ", line, ": ", what));
   };
   if (!absl::StartsWith(data, "ply\n") && !absl::StartsWith(data, "ply\r\n")) {
-    return absl::InvalidArgumentError(absl::StrCat(source, ": not a PLY file (missing 'ply' magic)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(source, ": not a PLY file (missing 'ply' magic)"));
   }
   const absl::string_view kEnd = "end_header";
   size_t end = data.find(kEnd);
@@ -202,7 +254,8 @@ absl::StatusOr<PlyHeader> ParsePlyHeader(absl::string_view data, absl::string_vi
   }
   size_t newline = data.find('\n', end);
   if (newline == absl::string_view::npos) {
-    return absl::InvalidArgumentError(absl::StrCat(source, ": PLY header not terminated by newline"));
+    return absl::InvalidArgumentError(
+        absl::StrCat(source, ": PLY header not terminated by newline"));
   }
   PlyHeader header;
   header.data_offset = newline + 1;
@@ -219,10 +272,14 @@ absl::StatusOr<PlyHeader> ParsePlyHeader(absl::string_view data, absl::string_vi
     }
     if (tok[0] == "format") {
       if (tok.size() != 3) return error(line_no, "malformed 'format' line");
-      if (tok[1] == "ascii") header.format = PlyFormat::kAscii;
-      else if (tok[1] == "binary_little_endian") header.format = PlyFormat::kBinaryLittleEndian;
-      else if (tok[1] == "binary_big_endian") header.format = PlyFormat::kBinaryBigEndian;
-      else return error(line_no, absl::StrCat("unknown format '", tok[1], "'"));
+      if (tok[1] == "ascii")
+        header.format = PlyFormat::kAscii;
+      else if (tok[1] == "binary_little_endian")
+        header.format = PlyFormat::kBinaryLittleEndian;
+      else if (tok[1] == "binary_big_endian")
+        header.format = PlyFormat::kBinaryBigEndian;
+      else
+        return error(line_no, absl::StrCat("unknown format '", tok[1], "'"));
       have_format = true;
     } else if (tok[0] == "element") {
       int64_t count = -1;
@@ -265,7 +322,8 @@ absl::StatusOr<PlyHeader> ParsePlyHeader(absl::string_view data, absl::string_vi
       return error(line_no, absl::StrCat("unknown keyword '", tok[0], "'"));
     }
   }
-  if (!have_format) return absl::InvalidArgumentError(absl::StrCat(source, ": PLY header has no format line"));
+  if (!have_format)
+    return absl::InvalidArgumentError(absl::StrCat(source, ": PLY header has no format line"));
   return header;
 }
 
@@ -276,8 +334,7 @@ absl::StatusOr<PlyColumns> ReadPlyElement(absl::string_view data, const PlyHeade
   for (const PlyElement& element : header.elements) {
     // Bound the element count by the bytes left before allocating anything.
     const uint64_t min_bytes = MinInstanceBytes(element, header.format);
-    if (min_bytes > 0 &&
-        static_cast<uint64_t>(element.count) > cursor.remaining() / min_bytes) {
+    if (min_bytes > 0 && static_cast<uint64_t>(element.count) > cursor.remaining() / min_bytes) {
       return absl::InvalidArgumentError(absl::StrCat(
           source, ": truncated ", DescribeFormat(header.format), " PLY: header declares ",
           element.count, " '", element.name, "' elements (at least ", min_bytes,
@@ -299,9 +356,8 @@ absl::StatusOr<PlyColumns> ReadPlyElement(absl::string_view data, const PlyHeade
       int column = 0;
       for (const PlyProperty& p : element.properties) {
         auto fail = [&](absl::string_view what) {
-          return absl::InvalidArgumentError(absl::StrCat(source, ": element '", element.name,
-                                                         "' #", i, " property '", p.name,
-                                                         "': ", what));
+          return absl::InvalidArgumentError(absl::StrCat(source, ": element '", element.name, "' #",
+                                                         i, " property '", p.name, "': ", what));
         };
         double v = 0.0;
         if (p.is_list) {
@@ -318,7 +374,8 @@ absl::StatusOr<PlyColumns> ReadPlyElement(absl::string_view data, const PlyHeade
         }
         if (!cursor.Read(p.type, &v)) return fail("truncated data or malformed value");
         if (IsIntegerType(p.type) && std::abs(v) > kMaxExactInteger) {
-          return fail(absl::StrCat("integer value ", v, " exceeds 2^24 and cannot be kept exactly"));
+          return fail(
+              absl::StrCat("integer value ", v, " exceeds 2^24 and cannot be kept exactly"));
         }
         if (std::isfinite(v) && std::abs(v) > std::numeric_limits<float>::max()) {
           return fail(absl::StrCat("value ", v, " overflows float"));
@@ -390,7 +447,8 @@ std::string EncodePlyBinary(const std::string& element_name, const PlyColumns& c
   absl::StrAppend(&out, "element ", element_name, " ", columns.count, "\n");
   size_t stride = 0;
   for (size_t p = 0; p < columns.names.size(); ++p) {
-    absl::StrAppend(&out, "property ", ScalarTypeName(columns.types[p]), " ", columns.names[p], "\n");
+    absl::StrAppend(&out, "property ", ScalarTypeName(columns.types[p]), " ", columns.names[p],
+                    "\n");
     stride += ScalarTypeSize(columns.types[p]);
   }
   out += "end_header\n";
@@ -402,14 +460,44 @@ std::string EncodePlyBinary(const std::string& element_name, const PlyColumns& c
     for (size_t p = 0; p < columns.names.size(); ++p) {
       const float v = columns.columns[p][i];
       switch (columns.types[p]) {
-        case ScalarType::kInt8: { int8_t x = static_cast<int8_t>(v); std::memcpy(dst, &x, 1); break; }
-        case ScalarType::kUint8: { uint8_t x = static_cast<uint8_t>(v); std::memcpy(dst, &x, 1); break; }
-        case ScalarType::kInt16: { int16_t x = static_cast<int16_t>(v); std::memcpy(dst, &x, 2); break; }
-        case ScalarType::kUint16: { uint16_t x = static_cast<uint16_t>(v); std::memcpy(dst, &x, 2); break; }
-        case ScalarType::kInt32: { int32_t x = static_cast<int32_t>(v); std::memcpy(dst, &x, 4); break; }
-        case ScalarType::kUint32: { uint32_t x = static_cast<uint32_t>(v); std::memcpy(dst, &x, 4); break; }
-        case ScalarType::kFloat32: std::memcpy(dst, &v, 4); break;
-        case ScalarType::kFloat64: { double x = v; std::memcpy(dst, &x, 8); break; }
+        case ScalarType::kInt8: {
+          int8_t x = static_cast<int8_t>(v);
+          std::memcpy(dst, &x, 1);
+          break;
+        }
+        case ScalarType::kUint8: {
+          uint8_t x = static_cast<uint8_t>(v);
+          std::memcpy(dst, &x, 1);
+          break;
+        }
+        case ScalarType::kInt16: {
+          int16_t x = static_cast<int16_t>(v);
+          std::memcpy(dst, &x, 2);
+          break;
+        }
+        case ScalarType::kUint16: {
+          uint16_t x = static_cast<uint16_t>(v);
+          std::memcpy(dst, &x, 2);
+          break;
+        }
+        case ScalarType::kInt32: {
+          int32_t x = static_cast<int32_t>(v);
+          std::memcpy(dst, &x, 4);
+          break;
+        }
+        case ScalarType::kUint32: {
+          uint32_t x = static_cast<uint32_t>(v);
+          std::memcpy(dst, &x, 4);
+          break;
+        }
+        case ScalarType::kFloat32:
+          std::memcpy(dst, &v, 4);
+          break;
+        case ScalarType::kFloat64: {
+          double x = v;
+          std::memcpy(dst, &x, 8);
+          break;
+        }
       }
       dst += ScalarTypeSize(columns.types[p]);
     }

@@ -9,8 +9,8 @@
 
 #include <cstdint>
 #include <string>
-#include "absl/strings/string_view.h"
 #include <vector>
+#include "absl/strings/string_view.h"
 
 #include "absl/status/statusor.h"
 
@@ -44,9 +44,9 @@ struct PlyHeader {
 
 // Limits that keep the parser allocation-bounded on hostile input.
 struct PlyLimits {
-  size_t max_header_bytes = 1 << 20;   // header text
-  int max_properties = 4096;           // per element
-  int64_t max_list_length = 1 << 20;   // entries of one list
+  size_t max_header_bytes = 1 << 20;  // header text
+  int max_properties = 4096;          // per element
+  int64_t max_list_length = 1 << 20;  // entries of one list
 };
 
 // Parses the header of `data` (the whole file). `source` names the file in error messages.

@@ -64,7 +64,8 @@ TEST_P(PlyRoundTrip, WriteThenReadIsIdentity) {
 }
 
 INSTANTIATE_TEST_SUITE_P(ScalesAndDegrees, PlyRoundTrip,
-                         ::testing::Combine(::testing::Values(2, 3), ::testing::Values(0, 1, 2, 3)));
+                         ::testing::Combine(::testing::Values(2, 3),
+                                            ::testing::Values(0, 1, 2, 3)));
 
 TEST(GaussianPly, WritesAtomicallyToDisk) {
   const std::string path = ::testing::TempDir() + "/roundtrip.ply";
@@ -89,7 +90,8 @@ TEST(GaussianPly, WritesAtomicallyToDisk) {
 std::string TinyHeader(absl::string_view format, int count) {
   return absl::StrCat("ply\nformat ", format,
                       " 1.0\ncomment test\nelement camera 1\nproperty list uchar float k\n"
-                      "element vertex ", count,
+                      "element vertex ",
+                      count,
                       "\nproperty double rot_1\nproperty float opacity\nproperty float x\n"
                       "property float y\nproperty float z\nproperty float scale_1\n"
                       "property float scale_0\nproperty float rot_0\nproperty float rot_2\n"
@@ -165,10 +167,12 @@ TEST(GaussianPly, BadInputGivesPreciseErrors) {
   ExpectError(bad_type, "unknown property type");
   ExpectError(TinyHeader("ascii", 1) + "2 0 0\n0 nan 1 2 3 -1 -2 1 0 0 0.3 0.2 0.1 4\n",
               "Gaussian #0");
-  ExpectError(TinyHeader("ascii", 2) + "0\n0 1 1 2 3 -1 -2 1 0 0 0.3 0.2 0.1 4\n"
-                                       "0 1 1 2 3 -1 -2 0 0 0 0.3 0.2 0.1 4\n",
+  ExpectError(TinyHeader("ascii", 2) +
+                  "0\n0 1 1 2 3 -1 -2 1 0 0 0.3 0.2 0.1 4\n"
+                  "0 1 1 2 3 -1 -2 0 0 0 0.3 0.2 0.1 4\n",
               "Gaussian #1: zero-norm quaternion");
-  ExpectError(TinyHeader("ascii", 1) + "0\n0 1 1 2 3 -1 -2 1 0 0 0.3 abc 0.1 4\n", "#0 property 'f_dc_1'");
+  ExpectError(TinyHeader("ascii", 1) + "0\n0 1 1 2 3 -1 -2 1 0 0 0.3 abc 0.1 4\n",
+              "#0 property 'f_dc_1'");
   ExpectError(TinyHeader("ascii", 1) + "0\n0 1 1 2 3 -1 -2 1 0 0 0.3 0.2 0.1 1e30\n", "'label'");
 }
 
@@ -215,7 +219,8 @@ TEST(Sh, BasisIsOrthonormalOnTheSphere) {
     const double z = 1.0 - (2.0 * p + 1.0) / kPoints;
     const double r = std::sqrt(1.0 - z * z);
     const double phi = p * std::numbers::pi * (3.0 - std::sqrt(5.0));
-    const float x = static_cast<float>(r * std::cos(phi)), y = static_cast<float>(r * std::sin(phi));
+    const float x = static_cast<float>(r * std::cos(phi)),
+                y = static_cast<float>(r * std::sin(phi));
     double basis[16];
     for (int k = 0; k < 16; ++k) {
       std::fill(coeffs.begin(), coeffs.end(), 0.0f);
@@ -226,7 +231,8 @@ TEST(Sh, BasisIsOrthonormalOnTheSphere) {
       basis[k] = rgb[0] - 0.5 - 100.0 * kShC0;
     }
     for (int i = 0; i < 16; ++i) {
-      for (int j = 0; j < 16; ++j) gram[i][j] += basis[i] * basis[j] * 4.0 * std::numbers::pi / kPoints;
+      for (int j = 0; j < 16; ++j)
+        gram[i][j] += basis[i] * basis[j] * 4.0 * std::numbers::pi / kPoints;
     }
   }
   for (int i = 0; i < 16; ++i) {

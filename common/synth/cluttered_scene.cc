@@ -24,7 +24,9 @@ struct Layout {
 
 struct Rng {
   std::mt19937_64 engine;
-  float Uniform(float lo, float hi) { return std::uniform_real_distribution<float>(lo, hi)(engine); }
+  float Uniform(float lo, float hi) {
+    return std::uniform_real_distribution<float>(lo, hi)(engine);
+  }
   int Int(int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(engine); }
 };
 
@@ -34,12 +36,24 @@ Eigen::Vector3f RandomColor(Rng& rng) {
   const float c = v * s, x = c * (1 - std::abs(std::fmod(h, 2.0f) - 1)), m = v - c;
   Eigen::Vector3f rgb;
   switch (static_cast<int>(h)) {
-    case 0: rgb = {c, x, 0}; break;
-    case 1: rgb = {x, c, 0}; break;
-    case 2: rgb = {0, c, x}; break;
-    case 3: rgb = {0, x, c}; break;
-    case 4: rgb = {x, 0, c}; break;
-    default: rgb = {c, 0, x}; break;
+    case 0:
+      rgb = {c, x, 0};
+      break;
+    case 1:
+      rgb = {x, c, 0};
+      break;
+    case 2:
+      rgb = {0, c, x};
+      break;
+    case 3:
+      rgb = {0, x, c};
+      break;
+    case 4:
+      rgb = {x, 0, c};
+      break;
+    default:
+      rgb = {c, 0, x};
+      break;
   }
   return rgb + Eigen::Vector3f::Constant(m);
 }
@@ -49,13 +63,27 @@ ShapeSpec RandomShape(Rng& rng) {
   s.kind = static_cast<ShapeKind>(rng.Int(0, 7));
   const float r = rng.Uniform(0.035f, 0.10f);
   switch (s.kind) {
-    case ShapeKind::kBox: s.size = {rng.Uniform(0.06f, 0.2f), rng.Uniform(0.05f, 0.14f), rng.Uniform(0.04f, 0.22f)}; break;
-    case ShapeKind::kSphere: s.size = {r, r, 2 * r}; break;
-    case ShapeKind::kTorus: s.size = {r, 0.35f * r, 0.7f * r}; break;
-    case ShapeKind::kBottle: s.size = {0.7f * r, 0, rng.Uniform(0.16f, 0.28f)}; break;
-    case ShapeKind::kCup: s.size = {0.8f * r, 0, rng.Uniform(0.07f, 0.12f)}; break;
-    case ShapeKind::kBowl: s.size = {1.3f * r, 0, 0.6f * r}; break;
-    default: s.size = {r, 0, rng.Uniform(0.06f, 0.2f)}; break;
+    case ShapeKind::kBox:
+      s.size = {rng.Uniform(0.06f, 0.2f), rng.Uniform(0.05f, 0.14f), rng.Uniform(0.04f, 0.22f)};
+      break;
+    case ShapeKind::kSphere:
+      s.size = {r, r, 2 * r};
+      break;
+    case ShapeKind::kTorus:
+      s.size = {r, 0.35f * r, 0.7f * r};
+      break;
+    case ShapeKind::kBottle:
+      s.size = {0.7f * r, 0, rng.Uniform(0.16f, 0.28f)};
+      break;
+    case ShapeKind::kCup:
+      s.size = {0.8f * r, 0, rng.Uniform(0.07f, 0.12f)};
+      break;
+    case ShapeKind::kBowl:
+      s.size = {1.3f * r, 0, 0.6f * r};
+      break;
+    default:
+      s.size = {r, 0, rng.Uniform(0.06f, 0.2f)};
+      break;
   }
   return s;
 }
@@ -78,15 +106,18 @@ struct StuffPart {
 };
 
 std::vector<StuffPart> MakeStuff(const Layout& layout) {
-  const float kTableHalfX = layout.half_x(), kTableHalfY = layout.half_y(), kWallY = layout.wall_y();
+  const float kTableHalfX = layout.half_x(), kTableHalfY = layout.half_y(),
+              kWallY = layout.wall_y();
   std::vector<StuffPart> parts;
   Appearance floor{{0.55f, 0.45f, 0.35f}, {0.45f, 0.36f, 0.27f}, TexturePattern::kChecker, 8.0f};
   TriangleMesh floor_mesh = MakeRectangle(4.0f * layout.scale, 4.0f * layout.scale, 8, 8);
   parts.push_back({floor_mesh, floor});
-  Appearance wall{{0.85f, 0.85f, 0.8f}, {0.75f, 0.78f, 0.8f}, TexturePattern::kNoise, 6.0f, 0.0f, 7};
+  Appearance wall{
+      {0.85f, 0.85f, 0.8f}, {0.75f, 0.78f, 0.8f}, TexturePattern::kNoise, 6.0f, 0.0f, 7};
   TriangleMesh wall_mesh = MakeRectangle(4.0f * layout.scale, 2.2f, 8, 4);
-  Rigid3d wall_pose{Eigen::AngleAxisd(std::numbers::pi / 2, Eigen::Vector3d::UnitX()).toRotationMatrix(),
-                    Eigen::Vector3d(0, kWallY + 0.02, 1.1)};
+  Rigid3d wall_pose{
+      Eigen::AngleAxisd(std::numbers::pi / 2, Eigen::Vector3d::UnitX()).toRotationMatrix(),
+      Eigen::Vector3d(0, kWallY + 0.02, 1.1)};
   wall_mesh.Transform(wall_pose);
   parts.push_back({wall_mesh, wall});
   Appearance wood{{0.6f, 0.42f, 0.25f}, {0.5f, 0.34f, 0.2f}, TexturePattern::kStripes, 14.0f};
@@ -95,7 +126,8 @@ std::vector<StuffPart> MakeStuff(const Layout& layout) {
   for (int lx : {-1, 1}) {
     for (int ly : {-1, 1}) {
       TriangleMesh leg = MakeShapeMesh({ShapeKind::kBox, {0.05f, 0.05f, kTableTopZ - 0.04f}});
-      leg.Transform({Eigen::Matrix3d::Identity(), Eigen::Vector3d(lx * (kTableHalfX - 0.05), ly * (kTableHalfY - 0.05), 0)});
+      leg.Transform({Eigen::Matrix3d::Identity(),
+                     Eigen::Vector3d(lx * (kTableHalfX - 0.05), ly * (kTableHalfY - 0.05), 0)});
       table.Append(leg);
     }
   }
@@ -108,8 +140,10 @@ struct Placement {
   float radius;
 };
 
-bool Fits(const Layout& layout, const std::vector<Placement>& placed, const Eigen::Vector2f& xy, float radius) {
-  const float kTableHalfX = layout.half_x(), kTableHalfY = layout.half_y(), kWallY = layout.wall_y();
+bool Fits(const Layout& layout, const std::vector<Placement>& placed, const Eigen::Vector2f& xy,
+          float radius) {
+  const float kTableHalfX = layout.half_x(), kTableHalfY = layout.half_y(),
+              kWallY = layout.wall_y();
   if (std::abs(xy.x()) > kTableHalfX - radius - 0.01f || xy.y() < -kTableHalfY + radius + 0.01f ||
       xy.y() > kWallY - radius - 0.005f) {
     return false;
@@ -129,9 +163,11 @@ absl::Status ClutterOptions::Validate() const {
     return absl::InvalidArgumentError("image size must be in 16..8192");
   }
   if (gaussians < static_cast<size_t>(200 * objects) || gaussians > 50'000'000) {
-    return absl::InvalidArgumentError(absl::StrCat("gaussians must be in ", 200 * objects, "..5e7 (200 per object)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("gaussians must be in ", 200 * objects, "..5e7 (200 per object)"));
   }
-  if (!(stuff_fraction >= 0.05f && stuff_fraction <= 0.9f)) return absl::InvalidArgumentError("stuff_fraction must be in 0.05..0.9");
+  if (!(stuff_fraction >= 0.05f && stuff_fraction <= 0.9f))
+    return absl::InvalidArgumentError("stuff_fraction must be in 0.05..0.9");
   if (sh_degree < 0 || sh_degree > 1) return absl::InvalidArgumentError("sh_degree must be 0 or 1");
   return absl::OkStatus();
 }
@@ -139,15 +175,28 @@ absl::Status ClutterOptions::Validate() const {
 absl::StatusOr<ClutterOptions> ClutterPreset(const std::string& name) {
   ClutterOptions o;
   if (name == "tiny") {
-    o.objects = 5; o.views = 12; o.width = 96; o.height = 72; o.gaussians = 8000;
+    o.objects = 5;
+    o.views = 12;
+    o.width = 96;
+    o.height = 72;
+    o.gaussians = 8000;
   } else if (name == "small" || name.empty()) {
     // the defaults
   } else if (name == "medium") {
-    o.objects = 20; o.views = 100; o.width = 640; o.height = 480; o.gaussians = 300'000;
+    o.objects = 20;
+    o.views = 100;
+    o.width = 640;
+    o.height = 480;
+    o.gaussians = 300'000;
   } else if (name == "large") {
-    o.objects = 40; o.views = 200; o.width = 1280; o.height = 720; o.gaussians = 1'000'000;
+    o.objects = 40;
+    o.views = 200;
+    o.width = 1280;
+    o.height = 720;
+    o.gaussians = 1'000'000;
   } else {
-    return absl::InvalidArgumentError(absl::StrCat("unknown preset '", name, "' (tiny, small, medium, large)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("unknown preset '", name, "' (tiny, small, medium, large)"));
   }
   return o;
 }
@@ -156,7 +205,8 @@ absl::StatusOr<ClutterScene> GenerateClutterScene(const ClutterOptions& options)
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   Rng rng{std::mt19937_64(options.seed)};
   const Layout layout(options.objects);
-  const float kTableHalfX = layout.half_x(), kTableHalfY = layout.half_y(), kWallY = layout.wall_y();
+  const float kTableHalfX = layout.half_x(), kTableHalfY = layout.half_y(),
+              kWallY = layout.wall_y();
   ClutterScene scene;
   scene.focus = Eigen::Vector3d(0, 0.05, kTableTopZ + 0.08);
 
@@ -173,14 +223,16 @@ absl::StatusOr<ClutterScene> GenerateClutterScene(const ClutterOptions& options)
     obj.appearance = is_dup ? dup_look : RandomAppearance(rng, options.sh_degree);
     obj.duplicate_group = is_dup ? 0 : -1;
     // Some neighbours share a colour (but keep their own pattern).
-    if (!is_dup && k > dup && rng.Uniform(0, 1) < 0.25f) obj.appearance.color_a = scene.objects.back().appearance.color_a;
+    if (!is_dup && k > dup && rng.Uniform(0, 1) < 0.25f)
+      obj.appearance.color_a = scene.objects.back().appearance.color_a;
     const float radius = obj.shape.FootprintRadius();
     Eigen::Vector2f xy;
     bool ok = false;
     for (int attempt = 0; attempt < 400 && !ok; ++attempt) {
       if (is_dup && k > 0) {  // a touching row
         xy = placed.back().xy + Eigen::Vector2f(placed.back().radius + radius + 0.003f, 0);
-      } else if (!placed.empty() && attempt < 200 && rng.Uniform(0, 1) < 0.6f) {  // touch a neighbour
+      } else if (!placed.empty() && attempt < 200 &&
+                 rng.Uniform(0, 1) < 0.6f) {  // touch a neighbour
         const Placement& n = placed[rng.Int(0, static_cast<int>(placed.size()) - 1)];
         const float a = rng.Uniform(0, 2 * std::numbers::pi_v<float>);
         xy = n.xy + (n.radius + radius + 0.003f) * Eigen::Vector2f(std::cos(a), std::sin(a));
@@ -216,8 +268,10 @@ absl::StatusOr<ClutterScene> GenerateClutterScene(const ClutterOptions& options)
   for (const SynthObject& o : scene.objects) object_area += o.mesh.SurfaceArea();
   size_t used = 0;
   for (size_t p = 0; p < stuff.size(); ++p) {
-    const size_t count = p + 1 == stuff.size() ? stuff_budget - used
-                                               : static_cast<size_t>(stuff_budget * stuff[p].mesh.SurfaceArea() / stuff_area);
+    const size_t count =
+        p + 1 == stuff.size()
+            ? stuff_budget - used
+            : static_cast<size_t>(stuff_budget * stuff[p].mesh.SurfaceArea() / stuff_area);
     AppendSurfels(stuff[p].mesh, count, stuff[p].appearance, sampling, rng.engine, &scene.cloud);
     used += count;
     scene.stuff_mesh.Append(stuff[p].mesh);
@@ -227,9 +281,10 @@ absl::StatusOr<ClutterScene> GenerateClutterScene(const ClutterOptions& options)
   size_t object_used = 0;
   for (size_t k = 0; k < scene.objects.size(); ++k) {
     SynthObject& obj = scene.objects[k];
-    const size_t count = k + 1 == scene.objects.size()
-                             ? object_budget - object_used
-                             : static_cast<size_t>(object_budget * obj.mesh.SurfaceArea() / object_area);
+    const size_t count =
+        k + 1 == scene.objects.size()
+            ? object_budget - object_used
+            : static_cast<size_t>(object_budget * obj.mesh.SurfaceArea() / object_area);
     obj.first_gaussian = scene.cloud.size();
     obj.num_gaussians = count;
     AppendSurfels(obj.mesh, count, obj.appearance, sampling, rng.engine, &scene.cloud);
@@ -244,9 +299,12 @@ absl::StatusOr<ClutterScene> GenerateClutterScene(const ClutterOptions& options)
     const float azimuth = -160.0f + 140.0f * t + rng.Uniform(-4.0f, 4.0f);
     const float elevation = 22.0f + 14.0f * ring + rng.Uniform(-3.0f, 3.0f);
     const float distance = layout.scale * rng.Uniform(0.95f, 1.25f);
-    const Eigen::Vector3d target = scene.focus + Eigen::Vector3d(rng.Uniform(-0.04f, 0.04f), rng.Uniform(-0.04f, 0.04f), rng.Uniform(-0.02f, 0.02f));
-    scene.cameras.push_back(OrbitCamera(target, Eigen::Vector3d::UnitZ(), distance, azimuth, elevation,
-                                        options.width, options.height, options.fov_x_deg));
+    const Eigen::Vector3d target =
+        scene.focus + Eigen::Vector3d(rng.Uniform(-0.04f, 0.04f), rng.Uniform(-0.04f, 0.04f),
+                                      rng.Uniform(-0.02f, 0.02f));
+    scene.cameras.push_back(OrbitCamera(target, Eigen::Vector3d::UnitZ(), distance, azimuth,
+                                        elevation, options.width, options.height,
+                                        options.fov_x_deg));
   }
   return scene;
 }

@@ -22,15 +22,15 @@ namespace instascene {
 
 struct ClutterOptions {
   uint64_t seed = 1;
-  int objects = 8;             // number of object instances (>= 1)
-  int views = 24;              // number of cameras
-  int width = 160;             // image size, px
+  int objects = 8;  // number of object instances (>= 1)
+  int views = 24;   // number of cameras
+  int width = 160;  // image size, px
   int height = 120;
-  size_t gaussians = 20000;    // total surfels (objects + stuff)
-  float stuff_fraction = 0.3f; // share of surfels on floor, wall and table
-  int duplicates = 3;          // identical objects side by side (0 or 1 = none)
-  int sh_degree = 1;           // 0 or 1
-  float fov_x_deg = 60.0f;     // horizontal field of view of every camera
+  size_t gaussians = 20000;     // total surfels (objects + stuff)
+  float stuff_fraction = 0.3f;  // share of surfels on floor, wall and table
+  int duplicates = 3;           // identical objects side by side (0 or 1 = none)
+  int sh_degree = 1;            // 0 or 1
+  float fov_x_deg = 60.0f;      // horizontal field of view of every camera
 
   absl::Status Validate() const;
 };
@@ -40,25 +40,25 @@ struct ClutterOptions {
 absl::StatusOr<ClutterOptions> ClutterPreset(const std::string& name);
 
 struct SynthObject {
-  int id = 0;                  // instance id, 1..N
-  std::string name;            // e.g. "bottle_3"
+  int id = 0;        // instance id, 1..N
+  std::string name;  // e.g. "bottle_3"
   ShapeSpec shape;
   Rigid3d world_from_object;  // x_world = world_from_object * (scale * x_object)
   float scale = 1.0f;         // uniform scale applied before world_from_object (composites)
   Appearance appearance;
-  int duplicate_group = -1;    // objects sharing a group >= 0 are identical
-  TriangleMesh mesh;           // complete surface, world frame (ground truth for completion)
-  size_t first_gaussian = 0;   // its surfels are [first_gaussian, first_gaussian + num_gaussians)
+  int duplicate_group = -1;   // objects sharing a group >= 0 are identical
+  TriangleMesh mesh;          // complete surface, world frame (ground truth for completion)
+  size_t first_gaussian = 0;  // its surfels are [first_gaussian, first_gaussian + num_gaussians)
   size_t num_gaussians = 0;
 };
 
 struct ClutterScene {
-  GaussianCloud cloud;                   // 2DGS surfels
-  std::vector<uint16_t> instance_ids;    // per Gaussian: 0 = stuff, else object id
+  GaussianCloud cloud;                 // 2DGS surfels
+  std::vector<uint16_t> instance_ids;  // per Gaussian: 0 = stuff, else object id
   std::vector<SynthObject> objects;
-  TriangleMesh stuff_mesh;               // floor, wall, table (world frame)
+  TriangleMesh stuff_mesh;  // floor, wall, table (world frame)
   std::vector<PinholeCamera> cameras;
-  Eigen::Vector3d focus;                 // point the cameras look at
+  Eigen::Vector3d focus;  // point the cameras look at
 };
 
 absl::StatusOr<ClutterScene> GenerateClutterScene(const ClutterOptions& options);

@@ -13,8 +13,8 @@
 namespace instascene {
 namespace {
 
-// One 4-neighbour dilation (grow) or erosion (shrink) step of label `id` in `map`; pixels an erosion
-// frees become 0, a dilation only claims pixels that are 0.
+// One 4-neighbour dilation (grow) or erosion (shrink) step of label `id` in `map`; pixels an
+// erosion frees become 0, a dilation only claims pixels that are 0.
 void MorphStep(LabelMap& map, uint16_t id, bool grow) {
   const int w = map.width, h = map.height;
   std::vector<uint16_t> next = map.labels;
@@ -42,16 +42,26 @@ absl::StatusOr<MaskNoiseOptions> MaskNoiseOptions::Level(const std::string& leve
   MaskNoiseOptions o;
   if (level == "none") return o;
   if (level == "low") {
-    o.merge_probability = 0.05f; o.split_probability = 0.03f; o.miss_probability = 0.1f;
-    o.jitter_px = 1; o.spurious_per_view = 0.1f;
+    o.merge_probability = 0.05f;
+    o.split_probability = 0.03f;
+    o.miss_probability = 0.1f;
+    o.jitter_px = 1;
+    o.spurious_per_view = 0.1f;
   } else if (level == "medium") {
-    o.merge_probability = 0.15f; o.split_probability = 0.08f; o.miss_probability = 0.25f;
-    o.jitter_px = 2; o.spurious_per_view = 0.4f;
+    o.merge_probability = 0.15f;
+    o.split_probability = 0.08f;
+    o.miss_probability = 0.25f;
+    o.jitter_px = 2;
+    o.spurious_per_view = 0.4f;
   } else if (level == "high") {
-    o.merge_probability = 0.3f; o.split_probability = 0.15f; o.miss_probability = 0.45f;
-    o.jitter_px = 3; o.spurious_per_view = 1.0f;
+    o.merge_probability = 0.3f;
+    o.split_probability = 0.15f;
+    o.miss_probability = 0.45f;
+    o.jitter_px = 3;
+    o.spurious_per_view = 1.0f;
   } else {
-    return absl::InvalidArgumentError(absl::StrCat("unknown mask noise level '", level, "' (none, low, medium, high)"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("unknown mask noise level '", level, "' (none, low, medium, high)"));
   }
   return o;
 }
@@ -89,12 +99,17 @@ LabelMap SimulateSegmenter(const LabelMap& gt, const MaskNoiseOptions& o, uint64
   for (const auto& [a, b] : touching) {  // 1. under-segmentation
     if (uni(rng) < o.merge_probability && root(a) != root(b)) merged_into[root(b)] = root(a);
   }
-  uint16_t next_label = gt.labels.empty() ? 1 : static_cast<uint16_t>(*std::max_element(gt.labels.begin(), gt.labels.end()) + 1);
-  std::map<uint16_t, std::array<double, 4>> split_line;  // instance -> (cx, cy, nx, ny), new label in [3]
+  uint16_t next_label =
+      gt.labels.empty()
+          ? 1
+          : static_cast<uint16_t>(*std::max_element(gt.labels.begin(), gt.labels.end()) + 1);
+  std::map<uint16_t, std::array<double, 4>>
+      split_line;                     // instance -> (cx, cy, nx, ny), new label in [3]
   for (const auto& [id, a] : area) {  // 2. over-segmentation
     if (a < 50 || uni(rng) >= o.split_probability) continue;
     const double angle = uni(rng) * 3.14159265358979;
-    split_line[id] = {centroid[id].first / a, centroid[id].second / a, std::cos(angle), std::sin(angle)};
+    split_line[id] = {centroid[id].first / a, centroid[id].second / a, std::cos(angle),
+                      std::sin(angle)};
   }
   std::map<uint16_t, uint16_t> split_label;
   for (auto& [id, line] : split_line) split_label[id] = next_label++;
@@ -113,12 +128,14 @@ LabelMap SimulateSegmenter(const LabelMap& gt, const MaskNoiseOptions& o, uint64
   }
   // 3. misses of small instances.
   std::map<uint16_t, size_t> new_area;
-  for (uint16_t v : map.labels) if (v != 0) ++new_area[v];
+  for (uint16_t v : map.labels)
+    if (v != 0) ++new_area[v];
   std::set<uint16_t> missed;
   for (const auto& [id, a] : new_area) {
     if (a < o.miss_area_fraction * n && uni(rng) < o.miss_probability) missed.insert(id);
   }
-  for (uint16_t& v : map.labels) if (missed.count(v)) v = 0;
+  for (uint16_t& v : map.labels)
+    if (missed.count(v)) v = 0;
   // 4. boundary jitter.
   if (o.jitter_px > 0) {
     for (const auto& [id, a] : new_area) {
@@ -138,15 +155,18 @@ LabelMap SimulateSegmenter(const LabelMap& gt, const MaskNoiseOptions& o, uint64
       for (int x = 0; x < w; ++x) {
         uint16_t& v = map.labels[static_cast<size_t>(y) * w + x];
         const double dx = (x - cx) / rx, dy = (y - cy) / ry;
-        if (v == 0 && gt.labels[static_cast<size_t>(y) * w + x] == 0 && dx * dx + dy * dy <= 1.0) v = id;
+        if (v == 0 && gt.labels[static_cast<size_t>(y) * w + x] == 0 && dx * dx + dy * dy <= 1.0)
+          v = id;
       }
     }
   }
   // 6. minimum area, then random ids 1..K.
   std::map<uint16_t, size_t> final_area;
-  for (uint16_t v : map.labels) if (v != 0) ++final_area[v];
+  for (uint16_t v : map.labels)
+    if (v != 0) ++final_area[v];
   std::vector<uint16_t> kept;
-  for (const auto& [id, a] : final_area) if (a >= o.min_area_fraction * n && a >= 1) kept.push_back(id);
+  for (const auto& [id, a] : final_area)
+    if (a >= o.min_area_fraction * n && a >= 1) kept.push_back(id);
   std::vector<uint16_t> ids(kept.size());
   std::iota(ids.begin(), ids.end(), uint16_t{1});
   std::shuffle(ids.begin(), ids.end(), rng);

@@ -9,7 +9,8 @@ namespace {
 
 constexpr float kPi = std::numbers::pi_v<float>;
 
-std::vector<Eigen::Vector2f> Arc(Eigen::Vector2f center, float radius, float from_rad, float to_rad, int steps) {
+std::vector<Eigen::Vector2f> Arc(Eigen::Vector2f center, float radius, float from_rad, float to_rad,
+                                 int steps) {
   std::vector<Eigen::Vector2f> points;
   for (int i = 0; i <= steps; ++i) {
     const float a = from_rad + (to_rad - from_rad) * static_cast<float>(i) / steps;
@@ -28,12 +29,12 @@ TriangleMesh MakeBox(const Eigen::Vector3f& size) {
   const Eigen::Vector3f h = 0.5f * size;
   // Each face: origin corner and two edge vectors (counter-clockwise seen from outside).
   const Eigen::Vector3f faces[6][3] = {
-      {{-h.x(), -h.y(), 0}, {0, 2 * h.y(), 0}, {2 * h.x(), 0, 0}},              // bottom (-z)
-      {{-h.x(), -h.y(), size.z()}, {2 * h.x(), 0, 0}, {0, 2 * h.y(), 0}},       // top (+z)
-      {{-h.x(), -h.y(), 0}, {2 * h.x(), 0, 0}, {0, 0, size.z()}},               // -y
-      {{h.x(), h.y(), 0}, {-2 * h.x(), 0, 0}, {0, 0, size.z()}},                // +y
-      {{-h.x(), h.y(), 0}, {0, -2 * h.y(), 0}, {0, 0, size.z()}},               // -x
-      {{h.x(), -h.y(), 0}, {0, 2 * h.y(), 0}, {0, 0, size.z()}},                // +x
+      {{-h.x(), -h.y(), 0}, {0, 2 * h.y(), 0}, {2 * h.x(), 0, 0}},         // bottom (-z)
+      {{-h.x(), -h.y(), size.z()}, {2 * h.x(), 0, 0}, {0, 2 * h.y(), 0}},  // top (+z)
+      {{-h.x(), -h.y(), 0}, {2 * h.x(), 0, 0}, {0, 0, size.z()}},          // -y
+      {{h.x(), h.y(), 0}, {-2 * h.x(), 0, 0}, {0, 0, size.z()}},           // +y
+      {{-h.x(), h.y(), 0}, {0, -2 * h.y(), 0}, {0, 0, size.z()}},          // -x
+      {{h.x(), -h.y(), 0}, {0, 2 * h.y(), 0}, {0, 0, size.z()}},           // +x
   };
   constexpr int kCells = 4;
   for (int f = 0; f < 6; ++f) {
@@ -59,36 +60,52 @@ TriangleMesh MakeBox(const Eigen::Vector3f& size) {
 
 std::string ShapeKindName(ShapeKind kind) {
   switch (kind) {
-    case ShapeKind::kBox: return "box";
-    case ShapeKind::kSphere: return "sphere";
-    case ShapeKind::kCylinder: return "cylinder";
-    case ShapeKind::kCone: return "cone";
-    case ShapeKind::kTorus: return "torus";
-    case ShapeKind::kBottle: return "bottle";
-    case ShapeKind::kCup: return "cup";
-    case ShapeKind::kBowl: return "bowl";
+    case ShapeKind::kBox:
+      return "box";
+    case ShapeKind::kSphere:
+      return "sphere";
+    case ShapeKind::kCylinder:
+      return "cylinder";
+    case ShapeKind::kCone:
+      return "cone";
+    case ShapeKind::kTorus:
+      return "torus";
+    case ShapeKind::kBottle:
+      return "bottle";
+    case ShapeKind::kCup:
+      return "cup";
+    case ShapeKind::kBowl:
+      return "bowl";
   }
   return "?";
 }
 
 float ShapeSpec::FootprintRadius() const {
   switch (kind) {
-    case ShapeKind::kBox: return 0.5f * std::hypot(size.x(), size.y());
-    case ShapeKind::kTorus: return size.x() + size.y();
-    default: return size.x();
+    case ShapeKind::kBox:
+      return 0.5f * std::hypot(size.x(), size.y());
+    case ShapeKind::kTorus:
+      return size.x() + size.y();
+    default:
+      return size.x();
   }
 }
 
 float ShapeSpec::Height() const {
   switch (kind) {
-    case ShapeKind::kBox: return size.z();
-    case ShapeKind::kSphere: return 2.0f * size.x();
-    case ShapeKind::kTorus: return 2.0f * size.y();
-    default: return size.z();
+    case ShapeKind::kBox:
+      return size.z();
+    case ShapeKind::kSphere:
+      return 2.0f * size.x();
+    case ShapeKind::kTorus:
+      return 2.0f * size.y();
+    default:
+      return size.z();
   }
 }
 
-TriangleMesh MakeLathe(const std::vector<Eigen::Vector2f>& profile, int segments, bool closed_loop) {
+TriangleMesh MakeLathe(const std::vector<Eigen::Vector2f>& profile, int segments,
+                       bool closed_loop) {
   TriangleMesh mesh;
   const int k = static_cast<int>(profile.size());
   std::vector<float> arc(k, 0.0f);
@@ -97,7 +114,8 @@ TriangleMesh MakeLathe(const std::vector<Eigen::Vector2f>& profile, int segments
   for (int i = 0; i < k; ++i) {
     for (int j = 0; j <= segments; ++j) {
       const float a = 2.0f * kPi * static_cast<float>(j) / segments;
-      mesh.vertices.emplace_back(profile[i].x() * std::cos(a), profile[i].x() * std::sin(a), profile[i].y());
+      mesh.vertices.emplace_back(profile[i].x() * std::cos(a), profile[i].x() * std::sin(a),
+                                 profile[i].y());
       mesh.uvs.emplace_back(static_cast<float>(j) / segments, arc[i] / total);
     }
   }
@@ -175,7 +193,8 @@ TriangleMesh MakeShapeMesh(const ShapeSpec& spec, int segments) {
     }
     case ShapeKind::kCup: {
       const float wall = 0.08f * r;
-      return MakeLathe({{0, 0}, {r, 0}, {r, h}, {r - wall, h}, {r - wall, wall}, {0, wall}}, segments, false);
+      return MakeLathe({{0, 0}, {r, 0}, {r, h}, {r - wall, h}, {r - wall, wall}, {0, wall}},
+                       segments, false);
     }
     case ShapeKind::kBowl: {
       // Outer quarter-ellipse from the foot to the rim, inner one back down.
@@ -187,7 +206,8 @@ TriangleMesh MakeShapeMesh(const ShapeSpec& spec, int segments) {
       }
       for (int i = 8; i >= 0; --i) {
         const float a = 0.5f * kPi * static_cast<float>(i) / 8.0f;
-        profile.emplace_back(std::max(0.0f, (r - wall) * std::sin(a)), wall + (h - wall) * (1.0f - std::cos(a)));
+        profile.emplace_back(std::max(0.0f, (r - wall) * std::sin(a)),
+                             wall + (h - wall) * (1.0f - std::cos(a)));
       }
       profile.back().x() = 0.0f;
       return MakeLathe(profile, segments, false);

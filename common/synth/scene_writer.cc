@@ -21,10 +21,12 @@ namespace {
 
 // Binary little-endian triangle-mesh PLY (vertex x y z, face vertex_indices).
 std::string EncodeMeshPly(const TriangleMesh& mesh) {
-  std::string out = absl::StrCat("ply\nformat binary_little_endian 1.0\nelement vertex ", mesh.vertices.size(),
-                                 "\nproperty float x\nproperty float y\nproperty float z\nelement face ",
-                                 mesh.triangles.size(), "\nproperty list uchar int vertex_indices\nend_header\n");
-  for (const Eigen::Vector3f& v : mesh.vertices) out.append(reinterpret_cast<const char*>(v.data()), 12);
+  std::string out =
+      absl::StrCat("ply\nformat binary_little_endian 1.0\nelement vertex ", mesh.vertices.size(),
+                   "\nproperty float x\nproperty float y\nproperty float z\nelement face ",
+                   mesh.triangles.size(), "\nproperty list uchar int vertex_indices\nend_header\n");
+  for (const Eigen::Vector3f& v : mesh.vertices)
+    out.append(reinterpret_cast<const char*>(v.data()), 12);
   for (const auto& t : mesh.triangles) {
     out.push_back(3);
     for (uint32_t i : t) {
@@ -41,21 +43,30 @@ nlohmann::json ObjectJson(const SynthObject& o, const GaussianCloud& cloud) {
   for (int r = 0; r < 3; ++r) pose.push_back({m(r, 0), m(r, 1), m(r, 2), m(r, 3)});
   Eigen::AlignedBox3f box = o.mesh.Bounds();
   if (o.mesh.vertices.empty()) {  // no mesh (real captures): the bounds of its Gaussians
-    for (size_t i = o.first_gaussian; i < o.first_gaussian + o.num_gaussians; ++i) box.extend(Eigen::Vector3f(&cloud.positions[3 * i]));
+    for (size_t i = o.first_gaussian; i < o.first_gaussian + o.num_gaussians; ++i)
+      box.extend(Eigen::Vector3f(&cloud.positions[3 * i]));
   }
-  return {{"id", o.id}, {"name", o.name}, {"shape", ShapeKindName(o.shape.kind)},
-          {"size", {o.shape.size.x(), o.shape.size.y(), o.shape.size.z()}}, {"world_from_object", pose}, {"scale", o.scale},
-          {"duplicate_group", o.duplicate_group}, {"first_gaussian", o.first_gaussian},
+  return {{"id", o.id},
+          {"name", o.name},
+          {"shape", ShapeKindName(o.shape.kind)},
+          {"size", {o.shape.size.x(), o.shape.size.y(), o.shape.size.z()}},
+          {"world_from_object", pose},
+          {"scale", o.scale},
+          {"duplicate_group", o.duplicate_group},
+          {"first_gaussian", o.first_gaussian},
           {"num_gaussians", o.num_gaussians},
           {"color", {o.appearance.color_a.x(), o.appearance.color_a.y(), o.appearance.color_a.z()}},
           {"bounds_min", {box.min().x(), box.min().y(), box.min().z()}},
           {"bounds_max", {box.max().x(), box.max().y(), box.max().z()}},
-          {"mesh", o.mesh.triangles.empty() ? nlohmann::json(nullptr) : nlohmann::json(absl::StrCat("gt/meshes/", o.id, ".ply"))}};
+          {"mesh", o.mesh.triangles.empty()
+                       ? nlohmann::json(nullptr)
+                       : nlohmann::json(absl::StrCat("gt/meshes/", o.id, ".ply"))}};
 }
 
 }  // namespace
 
-LabelMap GroundTruthInstanceMap(const RenderResult& traced, const std::vector<uint16_t>& instance_ids) {
+LabelMap GroundTruthInstanceMap(const RenderResult& traced,
+                                const std::vector<uint16_t>& instance_ids) {
   const std::vector<uint32_t> labels(instance_ids.begin(), instance_ids.end());
   const std::vector<uint32_t> map = LabelMapFromTrace(traced, labels, 0.5f);
   return LabelMap{traced.width, traced.height, std::vector<uint16_t>(map.begin(), map.end())};
@@ -72,7 +83,9 @@ absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& dir
   ASSIGN_OR_RETURN(MaskNoiseOptions noise, MaskNoiseOptions::Level(options.mask_noise));
   for (const char* sub : {"masks", "gt/masks", "gt/meshes"}) {
     fs::create_directories(fs::path(directory) / sub, ec);
-    if (ec) return absl::UnavailableError(absl::StrCat(directory, "/", sub, ": cannot create: ", ec.message()));
+    if (ec)
+      return absl::UnavailableError(
+          absl::StrCat(directory, "/", sub, ": cannot create: ", ec.message()));
   }
   RETURN_IF_ERROR(WriteGaussianPly(out.Path(out.gaussians), scene.cloud));
   // Ground truth: per-Gaussian ids, objects, meshes.
@@ -86,16 +99,22 @@ absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& dir
   for (const SynthObject& o : scene.objects) {
     objects.push_back(ObjectJson(o, scene.cloud));
     if (!o.mesh.triangles.empty()) {  // real-capture composites have no complete geometry
-      RETURN_IF_ERROR(WriteFileAtomically(out.Path(absl::StrCat("gt/meshes/", o.id, ".ply")), EncodeMeshPly(o.mesh)));
+      RETURN_IF_ERROR(WriteFileAtomically(out.Path(absl::StrCat("gt/meshes/", o.id, ".ply")),
+                                          EncodeMeshPly(o.mesh)));
     }
   }
   RETURN_IF_ERROR(WriteFileAtomically(out.Path("gt/objects.json"), objects.dump(1)));
-  out.metadata["gt"] = {{"format", "instascene.gt/1"}, {"objects", "gt/objects.json"},
-                        {"gaussian_instances", "gt/labels.ply"}, {"masks", "gt/masks"},
-                        {"meshes", "gt/meshes"}, {"mask_noise", options.mask_noise}, {"seed", options.seed}};
+  out.metadata["gt"] = {{"format", "instascene.gt/1"},
+                        {"objects", "gt/objects.json"},
+                        {"gaussian_instances", "gt/labels.ply"},
+                        {"masks", "gt/masks"},
+                        {"meshes", "gt/meshes"},
+                        {"mask_noise", options.mask_noise},
+                        {"seed", options.seed}};
   RenderOptions render;
   render.num_threads = options.num_threads;
-  render.trace.enabled = true;  // every contribution: the ground-truth masks sum weights per instance
+  render.trace.enabled =
+      true;  // every contribution: the ground-truth masks sum weights per instance
   const int total = static_cast<int>(scene.cameras.size());
   for (int v = 0; v < total; ++v) {
     SceneView view;
@@ -106,7 +125,8 @@ absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& dir
     ASSIGN_OR_RETURN(RenderResult r, Render(scene.cloud, view.camera, render));
     const LabelMap gt = GroundTruthInstanceMap(r, scene.instance_ids);
     RETURN_IF_ERROR(WriteLabelMap(out.Path(absl::StrCat("gt/masks/", view.name, ".png")), gt));
-    RETURN_IF_ERROR(WriteLabelMap(out.Path(view.mask), SimulateSegmenter(gt, noise, options.seed * 1000003 + v)));
+    RETURN_IF_ERROR(WriteLabelMap(out.Path(view.mask),
+                                  SimulateSegmenter(gt, noise, options.seed * 1000003 + v)));
     Image image{r.width, r.height, 3, std::move(r.color)};
     RETURN_IF_ERROR(WriteImage(out.Path(view.image), image));
     out.views.push_back(std::move(view));

@@ -25,13 +25,14 @@ namespace instascene {
 struct SceneWriteOptions {
   std::string mask_noise = "medium";  // none, low, medium, high (MaskNoiseOptions::Level)
   uint64_t seed = 1;                  // noise seed (view v uses seed * 1000003 + v)
-  int num_threads = 0;  // rasterizer threads (0 = all)
+  int num_threads = 0;                // rasterizer threads (0 = all)
   std::function<void(int done, int total)> progress;  // called after each view
 };
 
 // Ground-truth instance map of one view: per pixel, the instance id with the largest summed
 // blending weight (0 when that is stuff, or alpha < 0.5).
-LabelMap GroundTruthInstanceMap(const RenderResult& traced, const std::vector<uint16_t>& instance_ids);
+LabelMap GroundTruthInstanceMap(const RenderResult& traced,
+                                const std::vector<uint16_t>& instance_ids);
 
 absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& directory,
                                const SceneWriteOptions& options = {});

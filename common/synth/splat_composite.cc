@@ -20,14 +20,17 @@ std::pair<float, float> RobustRange(const GaussianCloud& cloud, int axis) {
 }  // namespace
 
 absl::StatusOr<ClutterScene> ComposeSplats(const std::vector<GaussianCloud>& input,
-                                           const std::vector<std::string>& names, const CompositeOptions& options) {
+                                           const std::vector<std::string>& names,
+                                           const CompositeOptions& options) {
   if (input.empty()) return absl::InvalidArgumentError("no splats to compose");
-  if (names.size() != input.size()) return absl::InvalidArgumentError("one name per splat is required");
+  if (names.size() != input.size())
+    return absl::InvalidArgumentError("one name per splat is required");
   if (input.size() > 1000) return absl::InvalidArgumentError("at most 1000 splats per composite");
   bool any_surfel = false, any_ellipsoid = false;
   int sh_degree = 0;
   for (size_t k = 0; k < input.size(); ++k) {
-    if (input[k].size() < 10) return absl::InvalidArgumentError(absl::StrCat(names[k], ": fewer than 10 Gaussians"));
+    if (input[k].size() < 10)
+      return absl::InvalidArgumentError(absl::StrCat(names[k], ": fewer than 10 Gaussians"));
     any_surfel |= input[k].num_scales == 2;
     any_ellipsoid |= input[k].num_scales == 3;
     sh_degree = std::max(sh_degree, input[k].sh_degree);
@@ -70,7 +73,8 @@ absl::StatusOr<ClutterScene> ComposeSplats(const std::vector<GaussianCloud>& inp
     obj.first_gaussian = scene.cloud.size();
     obj.num_gaussians = source.size();
     obj.scale = p.scale;
-    obj.world_from_object = {Eigen::Matrix3d::Identity(), (offset - p.scale * p.bottom_center).cast<double>()};
+    obj.world_from_object = {Eigen::Matrix3d::Identity(),
+                             (offset - p.scale * p.bottom_center).cast<double>()};
     const size_t base = scene.cloud.size(), n = source.size();
     scene.cloud.positions.resize(3 * (base + n));
     scene.cloud.log_scales.resize(scene.cloud.num_scales * (base + n));
@@ -84,7 +88,8 @@ absl::StatusOr<ClutterScene> ComposeSplats(const std::vector<GaussianCloud>& inp
       const Eigen::Vector3f placed = p.scale * (pos - p.bottom_center) + offset;
       for (int a = 0; a < 3; ++a) scene.cloud.positions[3 * (base + i) + a] = placed[a];
       for (int a = 0; a < scene.cloud.num_scales; ++a) {
-        scene.cloud.log_scales[scene.cloud.num_scales * (base + i) + a] = source.log_scales[source.num_scales * i + a] + log_scale;
+        scene.cloud.log_scales[scene.cloud.num_scales * (base + i) + a] =
+            source.log_scales[source.num_scales * i + a] + log_scale;
       }
       std::copy_n(&source.rotations[4 * i], 4, &scene.cloud.rotations[4 * (base + i)]);
       scene.cloud.opacity_logits[base + i] = source.opacity_logits[i];
@@ -102,8 +107,9 @@ absl::StatusOr<ClutterScene> ComposeSplats(const std::vector<GaussianCloud>& inp
     const float azimuth = 360.0f * static_cast<float>(v) / options.views + 6.0f * (uni(rng) - 0.5f);
     const float elevation = 8.0f + 12.0f * (v % 3) + 4.0f * (uni(rng) - 0.5f);
     const double distance = 0.8 * extent / tan_half * (1.0 + 0.15 * uni(rng));
-    scene.cameras.push_back(OrbitCamera(scene.focus, Eigen::Vector3d(0, -1, 0), distance, azimuth, elevation,
-                                        options.width, options.height, options.fov_x_deg));
+    scene.cameras.push_back(OrbitCamera(scene.focus, Eigen::Vector3d(0, -1, 0), distance, azimuth,
+                                        elevation, options.width, options.height,
+                                        options.fov_x_deg));
   }
   return scene;
 }

@@ -30,6 +30,7 @@ struct CompositeOptions {
 
 // `names` label the objects (e.g. file stems). Fails on empty input or clouds without Gaussians.
 absl::StatusOr<ClutterScene> ComposeSplats(const std::vector<GaussianCloud>& clouds,
-                                           const std::vector<std::string>& names, const CompositeOptions& options);
+                                           const std::vector<std::string>& names,
+                                           const CompositeOptions& options);
 
 }  // namespace instascene

@@ -14,14 +14,16 @@ namespace {
 // Smooth 2D value noise in [0, 1].
 float ValueNoise(float x, float y, uint32_t seed) {
   auto hash = [seed](int ix, int iy) {
-    uint32_t h = static_cast<uint32_t>(ix) * 374761393u + static_cast<uint32_t>(iy) * 668265263u + seed * 2246822519u;
+    uint32_t h = static_cast<uint32_t>(ix) * 374761393u + static_cast<uint32_t>(iy) * 668265263u +
+                 seed * 2246822519u;
     h = (h ^ (h >> 13)) * 1274126177u;
     return static_cast<float>((h ^ (h >> 16)) & 0xffffff) / 16777215.0f;
   };
   const int ix = static_cast<int>(std::floor(x)), iy = static_cast<int>(std::floor(y));
   const float fx = x - ix, fy = y - iy;
   const float sx = fx * fx * (3 - 2 * fx), sy = fy * fy * (3 - 2 * fy);
-  const float a = hash(ix, iy), b = hash(ix + 1, iy), c = hash(ix, iy + 1), d = hash(ix + 1, iy + 1);
+  const float a = hash(ix, iy), b = hash(ix + 1, iy), c = hash(ix, iy + 1),
+              d = hash(ix + 1, iy + 1);
   return (a + (b - a) * sx) + ((c + (d - c) * sx) - (a + (b - a) * sx)) * sy;
 }
 
@@ -31,15 +33,25 @@ Eigen::Vector3f ShadeUv(const Appearance& ap, const Eigen::Vector2f& uv) {
   const float u = uv.x() * ap.frequency, v = uv.y() * ap.frequency;
   float t = 0.0f;
   switch (ap.pattern) {
-    case TexturePattern::kSolid: t = 0.0f; break;
-    case TexturePattern::kStripes: t = std::fmod(std::floor(v), 2.0f) == 0.0f ? 0.0f : 1.0f; break;
-    case TexturePattern::kChecker: t = (static_cast<int>(std::floor(u)) + static_cast<int>(std::floor(v))) % 2 == 0 ? 0.0f : 1.0f; break;
+    case TexturePattern::kSolid:
+      t = 0.0f;
+      break;
+    case TexturePattern::kStripes:
+      t = std::fmod(std::floor(v), 2.0f) == 0.0f ? 0.0f : 1.0f;
+      break;
+    case TexturePattern::kChecker:
+      t = (static_cast<int>(std::floor(u)) + static_cast<int>(std::floor(v))) % 2 == 0 ? 0.0f
+                                                                                       : 1.0f;
+      break;
     case TexturePattern::kDots: {
       const float du = u - std::floor(u) - 0.5f, dv = v - std::floor(v) - 0.5f;
       t = du * du + dv * dv < 0.09f ? 1.0f : 0.0f;
       break;
     }
-    case TexturePattern::kNoise: t = ValueNoise(u, v, ap.noise_seed) * 0.6f + ValueNoise(3 * u, 3 * v, ap.noise_seed + 1) * 0.4f; break;
+    case TexturePattern::kNoise:
+      t = ValueNoise(u, v, ap.noise_seed) * 0.6f +
+          ValueNoise(3 * u, 3 * v, ap.noise_seed + 1) * 0.4f;
+      break;
   }
   return (1.0f - t) * ap.color_a + t * ap.color_b;
 }
@@ -71,12 +83,17 @@ void AppendSurfels(const TriangleMesh& mesh, size_t count, const Appearance& app
   for (size_t s = 0; s < count; ++s) {
     // Stratified: sample s draws from the s-th equal slice of the area CDF.
     const double target = (static_cast<double>(s) + uni(rng)) / count * total;
-    const size_t t = std::min<size_t>(std::lower_bound(cdf.begin(), cdf.end(), target) - cdf.begin(), num_tris - 1);
+    const size_t t = std::min<size_t>(
+        std::lower_bound(cdf.begin(), cdf.end(), target) - cdf.begin(), num_tris - 1);
     const auto& tri = mesh.triangles[t];
     double r1 = uni(rng), r2 = uni(rng);
-    if (r1 + r2 > 1.0) { r1 = 1.0 - r1; r2 = 1.0 - r2; }
+    if (r1 + r2 > 1.0) {
+      r1 = 1.0 - r1;
+      r2 = 1.0 - r2;
+    }
     const float b1 = static_cast<float>(r1), b2 = static_cast<float>(r2), b0 = 1.0f - b1 - b2;
-    const Eigen::Vector3f p = b0 * mesh.vertices[tri[0]] + b1 * mesh.vertices[tri[1]] + b2 * mesh.vertices[tri[2]];
+    const Eigen::Vector3f p =
+        b0 * mesh.vertices[tri[0]] + b1 * mesh.vertices[tri[1]] + b2 * mesh.vertices[tri[2]];
     const Eigen::Vector3f e1 = mesh.vertices[tri[1]] - mesh.vertices[tri[0]];
     const Eigen::Vector3f n = e1.cross(mesh.vertices[tri[2]] - mesh.vertices[tri[0]]).normalized();
     const Eigen::Vector3f tu = e1.normalized();
@@ -85,7 +102,8 @@ void AppendSurfels(const TriangleMesh& mesh, size_t count, const Appearance& app
     frame << tu.cast<double>(), tv.cast<double>(), n.cast<double>();
     const Eigen::Vector4d q = QuaternionWxyzFromRotation(frame);
     Eigen::Vector2f uv = Eigen::Vector2f::Zero();
-    if (mesh.uvs.size() == mesh.vertices.size()) uv = b0 * mesh.uvs[tri[0]] + b1 * mesh.uvs[tri[1]] + b2 * mesh.uvs[tri[2]];
+    if (mesh.uvs.size() == mesh.vertices.size())
+      uv = b0 * mesh.uvs[tri[0]] + b1 * mesh.uvs[tri[1]] + b2 * mesh.uvs[tri[2]];
     const float shade = 0.45f + 0.55f * std::abs(n.dot(light));
     const Eigen::Vector3f rgb = (ShadeUv(appearance, uv) * shade).cwiseMin(1.0f);
     const size_t i = base + s;

@@ -31,7 +31,7 @@ struct Appearance {
 Eigen::Vector3f ShadeUv(const Appearance& appearance, const Eigen::Vector2f& uv);
 
 struct SurfelSampling {
-  float opacity = 0.95f;       // surfel opacity
+  float opacity = 0.95f;      // surfel opacity
   float scale_factor = 1.1f;  // surfel sigma = scale_factor * sqrt(area / count)
   Eigen::Vector3f light_dir = Eigen::Vector3f(0.3f, -0.4f, 0.87f);  // baked diffuse light (world)
 };

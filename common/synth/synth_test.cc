@@ -3,15 +3,15 @@
 #include <map>
 #include <numbers>
 
+#include "common/raster/label_render.h"
 #include "common/raster/rasterizer.h"
+#include "common/scene/scene.h"
+#include "common/splat/gaussian_ply.h"
 #include "common/synth/cluttered_scene.h"
 #include "common/synth/mask_noise.h"
 #include "common/synth/primitives.h"
 #include "common/synth/scene_writer.h"
 #include "common/synth/splat_composite.h"
-#include "common/raster/label_render.h"
-#include "common/splat/gaussian_ply.h"
-#include "common/scene/scene.h"
 
 #include <filesystem>
 #include <set>
@@ -24,7 +24,9 @@ namespace {
 double SignedVolume(const TriangleMesh& mesh) {
   double v = 0;
   for (const auto& t : mesh.triangles) {
-    v += mesh.vertices[t[0]].cast<double>().dot(mesh.vertices[t[1]].cast<double>().cross(mesh.vertices[t[2]].cast<double>())) / 6.0;
+    v += mesh.vertices[t[0]].cast<double>().dot(
+             mesh.vertices[t[1]].cast<double>().cross(mesh.vertices[t[2]].cast<double>())) /
+         6.0;
   }
   return v;
 }
@@ -32,10 +34,14 @@ double SignedVolume(const TriangleMesh& mesh) {
 TEST(Primitives, ClosedMeshesHaveTheAnalyticVolume) {
   const double pi = std::numbers::pi;
   EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kBox, {0.2f, 0.3f, 0.4f}})), 0.024, 1e-6);
-  EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kCylinder, {0.1f, 0, 0.2f}}, 256)), pi * 0.01 * 0.2, 2e-5);
-  EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kCone, {0.1f, 0, 0.3f}}, 256)), pi * 0.01 * 0.1, 2e-5);
-  EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kSphere, {0.1f, 0, 0}}, 256)), 4.0 / 3 * pi * 1e-3, 2e-5);
-  EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kTorus, {0.1f, 0.03f, 0}}, 256)), 2 * pi * pi * 0.1 * 0.0009, 2e-5);
+  EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kCylinder, {0.1f, 0, 0.2f}}, 256)),
+              pi * 0.01 * 0.2, 2e-5);
+  EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kCone, {0.1f, 0, 0.3f}}, 256)),
+              pi * 0.01 * 0.1, 2e-5);
+  EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kSphere, {0.1f, 0, 0}}, 256)),
+              4.0 / 3 * pi * 1e-3, 2e-5);
+  EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kTorus, {0.1f, 0.03f, 0}}, 256)),
+              2 * pi * pi * 0.1 * 0.0009, 2e-5);
   for (ShapeKind k : {ShapeKind::kBottle, ShapeKind::kCup, ShapeKind::kBowl}) {
     const TriangleMesh m = MakeShapeMesh({k, {0.05f, 0, 0.15f}});
     EXPECT_GT(SignedVolume(m), 0.0) << ShapeKindName(k);
@@ -60,7 +66,8 @@ TEST(ClutterScene, DeterministicWithGroundTruthIds) {
   for (uint16_t id : a->instance_ids) ++counts[id];
   for (const SynthObject& o : a->objects) {
     EXPECT_EQ(counts[o.id], o.num_gaussians);
-    for (size_t i = o.first_gaussian; i < o.first_gaussian + o.num_gaussians; ++i) ASSERT_EQ(a->instance_ids[i], o.id);
+    for (size_t i = o.first_gaussian; i < o.first_gaussian + o.num_gaussians; ++i)
+      ASSERT_EQ(a->instance_ids[i], o.id);
   }
   // The first three are identical bottles standing in a touching row.
   EXPECT_EQ(a->objects[0].duplicate_group, 0);
@@ -87,7 +94,8 @@ TEST(ClutterScene, EveryObjectIsVisibleAndSurfacesAreOpaque) {
     for (size_t p = 0; p < r->alpha.size(); ++p) {
       alpha_sum += r->alpha[p];
       const float id = r->features[p] / std::max(r->alpha[p], 1e-6f);
-      if (r->alpha[p] > 0.9f && std::abs(id - std::round(id)) < 0.01f) ++seen[static_cast<int>(std::round(id))];
+      if (r->alpha[p] > 0.9f && std::abs(id - std::round(id)) < 0.01f)
+        ++seen[static_cast<int>(std::round(id))];
     }
   }
   // The table, floor and wall fill the views: nearly every pixel is opaque.
@@ -219,7 +227,8 @@ TEST(SceneWriter, WritesImagesMasksAndGroundTruth) {
   std::vector<uint32_t> ids(scene->instance_ids.begin(), scene->instance_ids.end());
   for (int v : {0, 3, 11}) {
     absl::StatusOr<LabelMap> file = ReadLabelMap(dir + "/gt/masks/" + read->views[v].name + ".png");
-    absl::StatusOr<std::vector<uint32_t>> rendered = RenderLabelMap(scene->cloud, read->views[v].camera, ids);
+    absl::StatusOr<std::vector<uint32_t>> rendered =
+        RenderLabelMap(scene->cloud, read->views[v].camera, ids);
     ASSERT_TRUE(file.ok() && rendered.ok());
     EXPECT_EQ(std::vector<uint32_t>(file->labels.begin(), file->labels.end()), *rendered) << v;
   }
@@ -242,10 +251,12 @@ TEST(SplatComposite, PlacesRealCapturesWithKnownIds) {
   EXPECT_EQ(scene->instance_ids.front(), 1);
   EXPECT_EQ(scene->instance_ids.back(), 2);
   // Same capture twice: same scale; the second is a pure translation of the first, colours intact.
-  const Eigen::Vector3f shift = Eigen::Vector3f(&scene->cloud.positions[3 * a->size()]) - Eigen::Vector3f(&scene->cloud.positions[0]);
+  const Eigen::Vector3f shift = Eigen::Vector3f(&scene->cloud.positions[3 * a->size()]) -
+                                Eigen::Vector3f(&scene->cloud.positions[0]);
   EXPECT_GT(shift.x(), 0.1f);
   for (size_t i = 0; i < a->size(); i += 97) {
-    const Eigen::Vector3f d = Eigen::Vector3f(&scene->cloud.positions[3 * (a->size() + i)]) - Eigen::Vector3f(&scene->cloud.positions[3 * i]);
+    const Eigen::Vector3f d = Eigen::Vector3f(&scene->cloud.positions[3 * (a->size() + i)]) -
+                              Eigen::Vector3f(&scene->cloud.positions[3 * i]);
     EXPECT_LT((d - shift).norm(), 1e-4f);
     EXPECT_EQ(scene->cloud.sh[scene->cloud.sh_stride() * i + 5], a->sh[a->sh_stride() * i + 5]);
   }

@@ -21,11 +21,13 @@ std::vector<uint32_t> DecompositionResult::Labels() const {
 }
 
 absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const GaussianCloud& cloud,
-                                              const DecompositionOptions& options, const ProgressFn& progress) {
+                                              const DecompositionOptions& options,
+                                              const ProgressFn& progress) {
   RETURN_IF_ERROR(options.Validate());
   std::vector<PinholeCamera> cameras;
   for (const SceneView& v : scene.views) {
-    if (v.mask.empty()) return absl::FailedPreconditionError(absl::StrCat("view '", v.name, "' has no mask"));
+    if (v.mask.empty())
+      return absl::FailedPreconditionError(absl::StrCat("view '", v.name, "' has no mask"));
     cameras.push_back(v.camera);
   }
   DecompositionResult result;
@@ -43,25 +45,29 @@ absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const Gaussian
   result.judgement = JudgeTrackers(result.trackers, options);
   UndoUndersegmented(result.trackers, &result.judgement);
   if (progress) progress("clustering", 0, 1);
-  const std::vector<MaskNode> nodes = ClusterMasks(result.trackers, result.judgement, options, &result.schedule);
+  const std::vector<MaskNode> nodes =
+      ClusterMasks(result.trackers, result.judgement, options, &result.schedule);
   if (progress) progress("clustering", 1, 1);
   result.clustering_seconds = watch.ElapsedSeconds();
   watch.Restart();
   result.instances = BuildInstances(result.trackers, nodes, cloud, options);
-  result.undersegmented = RemedyUndersegmented(result.trackers, result.judgement, options, &result.instances);
+  result.undersegmented =
+      RemedyUndersegmented(result.trackers, result.judgement, options, &result.instances);
   result.post_seconds = watch.ElapsedSeconds();
   if (progress) progress("post-processing", 1, 1);
   return result;
 }
 
-absl::Status WriteDecomposition(const std::string& directory, const Scene& scene, const GaussianCloud& cloud,
-                                const DecompositionResult& result) {
+absl::Status WriteDecomposition(const std::string& directory, const Scene& scene,
+                                const GaussianCloud& cloud, const DecompositionResult& result) {
   namespace fs = std::filesystem;
   const fs::path dir(directory);
   std::error_code ec;
   for (const char* sub : {"masks_filtered", "masks_sorted"}) {
     fs::create_directories(dir / sub, ec);
-    if (ec) return absl::UnavailableError(absl::StrCat((dir / sub).string(), ": cannot create: ", ec.message()));
+    if (ec)
+      return absl::UnavailableError(
+          absl::StrCat((dir / sub).string(), ": cannot create: ", ec.message()));
   }
   const TrackerSet& set = result.trackers;
   // Evaluation result (one label per Gaussian).
@@ -81,16 +87,20 @@ absl::Status WriteDecomposition(const std::string& directory, const Scene& scene
     }
   }
   membership.count = static_cast<int64_t>(membership.columns[0].size());
-  RETURN_IF_ERROR(WriteFileAtomically((dir / "instances.ply").string(), EncodePlyBinary("membership", membership)));
+  RETURN_IF_ERROR(WriteFileAtomically((dir / "instances.ply").string(),
+                                      EncodePlyBinary("membership", membership)));
   // 2D clusters, under-segmented masks, per-view maps.
   nlohmann::json instances = nlohmann::json::array();
-  std::vector<std::vector<std::pair<uint32_t, uint32_t>>> sorted_by_view(scene.views.size());  // (mask id, instance)
+  std::vector<std::vector<std::pair<uint32_t, uint32_t>>> sorted_by_view(
+      scene.views.size());  // (mask id, instance)
   for (size_t k = 0; k < result.instances.size(); ++k) {
     const Instance& inst = result.instances[k];
     nlohmann::json masks = nlohmann::json::array();
     for (size_t i = 0; i < inst.masks.size(); ++i) {
       const Tracker& t = set.trackers[inst.masks[i]];
-      masks.push_back({{"view", scene.views[t.view].name}, {"mask", t.mask_id}, {"coverage", inst.coverage[i]}});
+      masks.push_back({{"view", scene.views[t.view].name},
+                       {"mask", t.mask_id},
+                       {"coverage", inst.coverage[i]}});
       sorted_by_view[t.view].emplace_back(t.mask_id, static_cast<uint32_t>(k + 1));
     }
     instances.push_back({{"id", k + 1}, {"gaussians", inst.gaussians.size()}, {"masks", masks}});
@@ -102,11 +112,15 @@ absl::Status WriteDecomposition(const std::string& directory, const Scene& scene
     under.push_back({{"view", scene.views[t.view].name}, {"mask", t.mask_id}});
     under_by_view[t.view].push_back(t.mask_id);
   }
-  nlohmann::json summary = {{"format", "instascene.decomposition/1"}, {"instances", instances},
-                            {"undersegmented", under}, {"trackers", set.trackers.size()},
+  nlohmann::json summary = {{"format", "instascene.decomposition/1"},
+                            {"instances", instances},
+                            {"undersegmented", under},
+                            {"trackers", set.trackers.size()},
                             {"observer_schedule", result.schedule},
-                            {"seconds", {{"tracking", result.tracking_seconds}, {"clustering", result.clustering_seconds},
-                                         {"post_processing", result.post_seconds}}}};
+                            {"seconds",
+                             {{"tracking", result.tracking_seconds},
+                              {"clustering", result.clustering_seconds},
+                              {"post_processing", result.post_seconds}}}};
   RETURN_IF_ERROR(WriteFileAtomically((dir / "decomposition.json").string(), summary.dump(1)));
   for (size_t v = 0; v < scene.views.size(); ++v) {
     ASSIGN_OR_RETURN(LabelMap mask, ReadViewMask(scene, static_cast<int>(v)));
@@ -114,12 +128,14 @@ absl::Status WriteDecomposition(const std::string& directory, const Scene& scene
     std::vector<uint16_t> instance_of(65536, 0);
     std::vector<uint8_t> removed(65536, 0);
     for (const auto& [mask_id, instance] : sorted_by_view[v]) {  // later instances win
-      if (mask_id < 65536) instance_of[mask_id] = static_cast<uint16_t>(std::min<uint32_t>(instance, 65535));
+      if (mask_id < 65536)
+        instance_of[mask_id] = static_cast<uint16_t>(std::min<uint32_t>(instance, 65535));
     }
     for (uint32_t mask_id : under_by_view[v]) {
       if (mask_id < 65536) removed[mask_id] = 1;
     }
-    LabelMap filtered = mask, sorted{mask.width, mask.height, std::vector<uint16_t>(mask.labels.size(), 0)};
+    LabelMap filtered = mask,
+             sorted{mask.width, mask.height, std::vector<uint16_t>(mask.labels.size(), 0)};
     for (size_t p = 0; p < mask.labels.size(); ++p) {
       if (removed[mask.labels[p]]) filtered.labels[p] = 0;
       sorted.labels[p] = instance_of[mask.labels[p]];

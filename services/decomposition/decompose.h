@@ -2,10 +2,12 @@
 // trackers -> judgement -> undo -> iterative clustering -> DBSCAN / filtering -> remedy -> export.
 //
 // Output directory (docs/DECOMPOSITION.md):
-//   result.json, labels.ply        the result format of `instascene eval` (one instance per Gaussian;
+//   result.json, labels.ply        the result format of `instascene eval` (one instance per
+//   Gaussian;
 //                                  where 3D masks overlap, the later instance wins)
-//   instances.ply                  element membership: (instance, gaussian) pairs, the full 3D masks
-//   decomposition.json             instances with their 2D clusters (view, mask id, coverage), the
+//   instances.ply                  element membership: (instance, gaussian) pairs, the full 3D
+//   masks decomposition.json             instances with their 2D clusters (view, mask id,
+//   coverage), the
 //                                  remaining under-segmented masks, the schedule, timings
 //   masks_filtered/<view>.png      the input masks with under-segmented masks set to 0
 //   masks_sorted/<view>.png        globally consistent instance maps: instance index + 1, 0 = none
@@ -39,9 +41,10 @@ struct DecompositionResult {
 using ProgressFn = std::function<void(const std::string& stage, int done, int total)>;
 
 absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const GaussianCloud& cloud,
-                                              const DecompositionOptions& options, const ProgressFn& progress = nullptr);
+                                              const DecompositionOptions& options,
+                                              const ProgressFn& progress = nullptr);
 
-absl::Status WriteDecomposition(const std::string& directory, const Scene& scene, const GaussianCloud& cloud,
-                                const DecompositionResult& result);
+absl::Status WriteDecomposition(const std::string& directory, const Scene& scene,
+                                const GaussianCloud& cloud, const DecompositionResult& result);
 
 }  // namespace instascene::decomposition

@@ -65,8 +65,8 @@ TEST(MaskGraph, TwoViewsOfOneObjectMerge) {
 
 TEST(MaskGraph, TouchingObjectsMergedInOneViewAreUndersegmentedAndStaySeparate) {
   // A = Gaussians 0..99, B = 100..199. Views 0 and 1 separate them; view 2 has one mask over both.
-  const TrackerSet set = MakeSet(3, 200, {{0, 1, 0, 100}, {0, 2, 100, 200}, {1, 1, 0, 100}, {1, 2, 100, 200},
-                                          {2, 1, 0, 200}});
+  const TrackerSet set = MakeSet(
+      3, 200, {{0, 1, 0, 100}, {0, 2, 100, 200}, {1, 1, 0, 100}, {1, 2, 100, 200}, {2, 1, 0, 200}});
   MaskJudgement j = JudgeTrackers(set, DecompositionOptions{});
   EXPECT_TRUE(j.undersegmented[4]);
   for (int t = 0; t < 4; ++t) EXPECT_FALSE(j.undersegmented[t]) << t;
@@ -80,9 +80,9 @@ TEST(MaskGraph, TouchingObjectsMergedInOneViewAreUndersegmentedAndStaySeparate) 
 }
 
 TEST(MaskGraph, ObserverScheduleFollowsNumpyPercentiles) {
-  // Three trackers visible in {0,1,2}, {0,1}, {3}: the non-zero entries of V V^T (both triangles and
-  // the diagonal) are 1, 2, 2, 2, 3 -> numpy percentiles 95, 90, ..., 5 by linear interpolation;
-  // the 0th percentile is 1 (<= 1 below the median): the schedule stops there.
+  // Three trackers visible in {0,1,2}, {0,1}, {3}: the non-zero entries of V V^T (both triangles
+  // and the diagonal) are 1, 2, 2, 2, 3 -> numpy percentiles 95, 90, ..., 5 by linear
+  // interpolation; the 0th percentile is 1 (<= 1 below the median): the schedule stops there.
   MaskJudgement j;
   j.visible.assign(3, ViewSet(4));
   for (int v : {0, 1, 2}) j.visible[0].Set(v);
@@ -90,9 +90,9 @@ TEST(MaskGraph, ObserverScheduleFollowsNumpyPercentiles) {
   j.visible[2].Set(3);
   const std::vector<double> schedule = ObserverSchedule(j, {0, 1, 2});
   ASSERT_EQ(schedule.size(), 19u);
-  EXPECT_NEAR(schedule[0], 2.8, 1e-12);  // numpy.percentile([1, 2, 2, 2, 3], 95)
-  EXPECT_NEAR(schedule[1], 2.6, 1e-12);  // 90th
-  EXPECT_NEAR(schedule[10], 2.0, 1e-12);  // 45th
+  EXPECT_NEAR(schedule[0], 2.8, 1e-12);      // numpy.percentile([1, 2, 2, 2, 3], 95)
+  EXPECT_NEAR(schedule[1], 2.6, 1e-12);      // 90th
+  EXPECT_NEAR(schedule[10], 2.0, 1e-12);     // 45th
   EXPECT_NEAR(schedule.back(), 1.2, 1e-12);  // 5th
 }
 
@@ -114,7 +114,8 @@ TEST(PostProcess, DbscanSplitsClustersAndDropsFloaters) {
 }
 
 // Textbook O(n^2) DBSCAN core-point clustering: the reference for the grid implementation.
-std::vector<int> BruteCoreClusters(const std::vector<Eigen::Vector3f>& p, float eps, int min_points) {
+std::vector<int> BruteCoreClusters(const std::vector<Eigen::Vector3f>& p, float eps,
+                                   int min_points) {
   const size_t n = p.size();
   std::vector<uint8_t> core(n, 0);
   for (size_t i = 0; i < n; ++i) {
@@ -151,7 +152,8 @@ TEST(PostProcess, GridDbscanMatchesBruteForceOnCorePoints) {
     for (int c = 0; c < 5; ++c) {  // blobs of varying density plus uniform clutter
       const Eigen::Vector3f center(u(rng), u(rng), u(rng));
       const float spread = 0.02f + 0.05f * u(rng);
-      for (int i = 0; i < 80; ++i) p.push_back(center + spread * Eigen::Vector3f(u(rng) - 0.5f, u(rng) - 0.5f, u(rng) - 0.5f));
+      for (int i = 0; i < 80; ++i)
+        p.push_back(center + spread * Eigen::Vector3f(u(rng) - 0.5f, u(rng) - 0.5f, u(rng) - 0.5f));
     }
     for (int i = 0; i < 100; ++i) p.emplace_back(u(rng), u(rng), u(rng));
     const float eps = 0.03f + 0.02f * trial;
@@ -182,10 +184,12 @@ ClickEvaluation DecomposeSynthetic(const std::string& noise, uint64_t seed) {
   EXPECT_TRUE(WriteClutterScene(*scene, dir, write).ok());
   absl::StatusOr<Scene> read = ReadScene(dir);
   EXPECT_TRUE(read.ok());
-  absl::StatusOr<DecompositionResult> result = Decompose(*read, scene->cloud, DecompositionOptions{});
+  absl::StatusOr<DecompositionResult> result =
+      Decompose(*read, scene->cloud, DecompositionOptions{});
   EXPECT_TRUE(result.ok()) << result.status();
   EXPECT_TRUE(WriteDecomposition(dir + "/decomposition", *read, scene->cloud, *result).ok());
-  absl::StatusOr<ClickEvaluation> eval = EvaluateResultDirectory(dir, dir + "/decomposition", ClickEvalOptions{});
+  absl::StatusOr<ClickEvaluation> eval =
+      EvaluateResultDirectory(dir, dir + "/decomposition", ClickEvalOptions{});
   EXPECT_TRUE(eval.ok()) << eval.status();
   return *eval;
 }
@@ -197,7 +201,8 @@ void ExpectWellSeenObjectsRecovered(const ClickEvaluation& eval, int min_views) 
   for (const ObjectClickScore& o : eval.objects) {
     if (o.views < min_views) continue;
     ++checked;
-    EXPECT_GT(eval.instances.best_iou.at(o.id), 0.5) << o.name << " seen in " << o.views << " views";
+    EXPECT_GT(eval.instances.best_iou.at(o.id), 0.5)
+        << o.name << " seen in " << o.views << " views";
   }
   EXPECT_GE(checked, 5);
 }

@@ -34,53 +34,57 @@ MaskJudgement JudgeTrackers(const TrackerSet& set, const DecompositionOptions& o
   j.contained.assign(m, {});
   j.undersegmented.assign(m, 0);
   RunWithThreads(options.num_threads, [&] {
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, m, 16), [&](const tbb::blocked_range<size_t>& range) {
-      std::vector<uint32_t> counts(m, 0);  // per container tracker: members of P labelled with it
-      std::vector<uint32_t> touched;
-      for (size_t t = range.begin(); t < range.end(); ++t) {
-        const Tracker& tracker = set.trackers[t];
-        touched.clear();
-        for (uint32_t g : tracker.gaussians) {
-          for (uint64_t k = set.mask_offsets[g]; k < set.mask_offsets[g + 1]; ++k) {
-            const uint32_t u = set.masks[k];
-            if (counts[u]++ == 0) touched.push_back(u);
-          }
-        }
-        // Trackers are ordered by view, so sorting groups the touched masks frame by frame.
-        std::sort(touched.begin(), touched.end());
-        const double size = static_cast<double>(tracker.gaussians.size());
-        int visible_num = 0, split_num = 0;
-        for (size_t b = 0; b < touched.size();) {
-          const int view = set.trackers[touched[b]].view;
-          size_t e = b;
-          uint64_t nonzero = 0;
-          uint32_t best = touched[b];
-          for (; e < touched.size() && set.trackers[touched[e]].view == view; ++e) {
-            nonzero += counts[touched[e]];
-            if (counts[touched[e]] > counts[best]) best = touched[e];
-          }
-          if (view == tracker.view) {  // the own frame always counts: P is contained in itself
-            ++visible_num;
-            j.visible[t].Set(view);
-            j.contained[t].push_back(static_cast<uint32_t>(t));
-          } else if ((size - static_cast<double>(nonzero)) / size <= options.mask_visible_threshold) {
-            ++visible_num;
-            if (counts[best] / static_cast<double>(nonzero) > options.contained_threshold) {
-              j.visible[t].Set(view);
-              j.contained[t].push_back(best);
-            } else {
-              ++split_num;
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, m, 16), [&](const tbb::blocked_range<size_t>& range) {
+          std::vector<uint32_t> counts(m,
+                                       0);  // per container tracker: members of P labelled with it
+          std::vector<uint32_t> touched;
+          for (size_t t = range.begin(); t < range.end(); ++t) {
+            const Tracker& tracker = set.trackers[t];
+            touched.clear();
+            for (uint32_t g : tracker.gaussians) {
+              for (uint64_t k = set.mask_offsets[g]; k < set.mask_offsets[g + 1]; ++k) {
+                const uint32_t u = set.masks[k];
+                if (counts[u]++ == 0) touched.push_back(u);
+              }
             }
+            // Trackers are ordered by view, so sorting groups the touched masks frame by frame.
+            std::sort(touched.begin(), touched.end());
+            const double size = static_cast<double>(tracker.gaussians.size());
+            int visible_num = 0, split_num = 0;
+            for (size_t b = 0; b < touched.size();) {
+              const int view = set.trackers[touched[b]].view;
+              size_t e = b;
+              uint64_t nonzero = 0;
+              uint32_t best = touched[b];
+              for (; e < touched.size() && set.trackers[touched[e]].view == view; ++e) {
+                nonzero += counts[touched[e]];
+                if (counts[touched[e]] > counts[best]) best = touched[e];
+              }
+              if (view == tracker.view) {  // the own frame always counts: P is contained in itself
+                ++visible_num;
+                j.visible[t].Set(view);
+                j.contained[t].push_back(static_cast<uint32_t>(t));
+              } else if ((size - static_cast<double>(nonzero)) / size <=
+                         options.mask_visible_threshold) {
+                ++visible_num;
+                if (counts[best] / static_cast<double>(nonzero) > options.contained_threshold) {
+                  j.visible[t].Set(view);
+                  j.contained[t].push_back(best);
+                } else {
+                  ++split_num;
+                }
+              }
+              b = e;
+            }
+            if (visible_num == 0 ||
+                split_num / static_cast<double>(visible_num) > options.undersegment_threshold) {
+              j.undersegmented[t] = 1;
+            }
+            std::sort(j.contained[t].begin(), j.contained[t].end());
+            for (uint32_t u : touched) counts[u] = 0;
           }
-          b = e;
-        }
-        if (visible_num == 0 || split_num / static_cast<double>(visible_num) > options.undersegment_threshold) {
-          j.undersegmented[t] = 1;
-        }
-        std::sort(j.contained[t].begin(), j.contained[t].end());
-        for (uint32_t u : touched) counts[u] = 0;
-      }
-    });
+        });
   });
   return j;
 }
@@ -149,7 +153,8 @@ uint32_t Find(std::vector<uint32_t>& parent, uint32_t x) {
 
 }  // namespace
 
-std::vector<MaskNode> ClusterMasks(const TrackerSet& set, const MaskJudgement& j, const DecompositionOptions& options,
+std::vector<MaskNode> ClusterMasks(const TrackerSet& set, const MaskJudgement& j,
+                                   const DecompositionOptions& options,
                                    std::vector<double>* schedule_out) {
   std::vector<uint32_t> initial;
   for (uint32_t t = 0; t < set.trackers.size(); ++t) {
@@ -170,25 +175,28 @@ std::vector<MaskNode> ClusterMasks(const TrackerSet& set, const MaskJudgement& j
     // Each node finds its partners b > a independently; the union-find below is serial.
     std::vector<std::vector<uint32_t>> partners(n);
     RunWithThreads(options.num_threads, [&] {
-      tbb::parallel_for(tbb::blocked_range<uint32_t>(0, static_cast<uint32_t>(n), 64), [&](const tbb::blocked_range<uint32_t>& r) {
-        std::vector<uint32_t> support(n, 0), touched;
-        for (uint32_t a = r.begin(); a < r.end(); ++a) {
-          touched.clear();
-          for (uint32_t c : nodes[a].contained) {
-            for (uint32_t b : by_container[c]) {
-              if (b <= a) continue;
-              if (support[b]++ == 0) touched.push_back(b);
-            }
-          }
-          std::sort(touched.begin(), touched.end());
-          for (uint32_t b : touched) {
-            const double observer = nodes[a].visible.CountCommon(nodes[b].visible);
-            const double rate = support[b] / (observer + 1e-7);
-            if (rate >= options.view_consensus_threshold && observer >= threshold) partners[a].push_back(b);
-            support[b] = 0;
-          }
-        }
-      });
+      tbb::parallel_for(tbb::blocked_range<uint32_t>(0, static_cast<uint32_t>(n), 64),
+                        [&](const tbb::blocked_range<uint32_t>& r) {
+                          std::vector<uint32_t> support(n, 0), touched;
+                          for (uint32_t a = r.begin(); a < r.end(); ++a) {
+                            touched.clear();
+                            for (uint32_t c : nodes[a].contained) {
+                              for (uint32_t b : by_container[c]) {
+                                if (b <= a) continue;
+                                if (support[b]++ == 0) touched.push_back(b);
+                              }
+                            }
+                            std::sort(touched.begin(), touched.end());
+                            for (uint32_t b : touched) {
+                              const double observer =
+                                  nodes[a].visible.CountCommon(nodes[b].visible);
+                              const double rate = support[b] / (observer + 1e-7);
+                              if (rate >= options.view_consensus_threshold && observer >= threshold)
+                                partners[a].push_back(b);
+                              support[b] = 0;
+                            }
+                          }
+                        });
     });
     std::vector<uint32_t> parent(n);
     std::iota(parent.begin(), parent.end(), 0u);

@@ -27,9 +27,10 @@ struct ViewSet {
 };
 
 struct MaskJudgement {
-  std::vector<ViewSet> visible;                  // per tracker: frames where it is visible and contained
-  std::vector<std::vector<uint32_t>> contained;  // per tracker: trackers (masks) that contain it, sorted
-  std::vector<uint8_t> undersegmented;           // per tracker
+  std::vector<ViewSet> visible;  // per tracker: frames where it is visible and contained
+  std::vector<std::vector<uint32_t>>
+      contained;                        // per tracker: trackers (masks) that contain it, sorted
+  std::vector<uint8_t> undersegmented;  // per tracker
 };
 
 // 4.2-4.3: judge every tracker against every frame it could be seen in.
@@ -39,18 +40,21 @@ MaskJudgement JudgeTrackers(const TrackerSet& trackers, const DecompositionOptio
 void UndoUndersegmented(const TrackerSet& trackers, MaskJudgement* judgement);
 
 // 4.5: observer thresholds, from the non-zero entries of V V^T over the given trackers (numpy
-// linear-interpolation percentiles 95, 90, ..., 0; values <= 1 become 1 above the median, stop below).
-std::vector<double> ObserverSchedule(const MaskJudgement& judgement, const std::vector<uint32_t>& nodes);
+// linear-interpolation percentiles 95, 90, ..., 0; values <= 1 become 1 above the median, stop
+// below).
+std::vector<double> ObserverSchedule(const MaskJudgement& judgement,
+                                     const std::vector<uint32_t>& nodes);
 
 // A cluster of masks.
 struct MaskNode {
-  std::vector<uint32_t> masks;      // tracker ids, in merge order
+  std::vector<uint32_t> masks;  // tracker ids, in merge order
   ViewSet visible;
   std::vector<uint32_t> contained;  // sorted tracker ids of containers
 };
 
 // 4.6: iterative view-consensus clustering of the non-under-segmented trackers.
 std::vector<MaskNode> ClusterMasks(const TrackerSet& trackers, const MaskJudgement& judgement,
-                                   const DecompositionOptions& options, std::vector<double>* schedule_out = nullptr);
+                                   const DecompositionOptions& options,
+                                   std::vector<double>* schedule_out = nullptr);
 
 }  // namespace instascene::decomposition

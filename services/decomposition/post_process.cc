@@ -28,19 +28,23 @@ size_t IntersectionSize(const std::vector<uint32_t>& a, const std::vector<uint32
 }
 
 // Sub-objects of one node (4.7 steps 1-2).
-std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node, const GaussianCloud& cloud,
-                                const DecompositionOptions& options, float eps) {
+std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node,
+                                const GaussianCloud& cloud, const DecompositionOptions& options,
+                                float eps) {
   std::vector<Instance> out;
   if (node.masks.size() < 2) return out;
   // The node's Gaussians: the union of its trackers.
   std::vector<uint32_t> points;
-  for (uint32_t t : node.masks) points.insert(points.end(), set.trackers[t].gaussians.begin(), set.trackers[t].gaussians.end());
+  for (uint32_t t : node.masks)
+    points.insert(points.end(), set.trackers[t].gaussians.begin(), set.trackers[t].gaussians.end());
   std::sort(points.begin(), points.end());
   points.erase(std::unique(points.begin(), points.end()), points.end());
   std::vector<Eigen::Vector3f> xyz(points.size());
-  for (size_t i = 0; i < points.size(); ++i) xyz[i] = Eigen::Vector3f(&cloud.positions[3 * points[i]]);
+  for (size_t i = 0; i < points.size(); ++i)
+    xyz[i] = Eigen::Vector3f(&cloud.positions[3 * points[i]]);
   const std::vector<int> cluster = Dbscan(xyz, eps, options.dbscan_min_points);
-  const int num_groups = 1 + *std::max_element(cluster.begin(), cluster.end()) + 1;  // noise is group 0
+  const int num_groups =
+      1 + *std::max_element(cluster.begin(), cluster.end()) + 1;  // noise is group 0
   // Detection ratio over the node's visible frames.
   std::vector<uint16_t> appear(points.size(), 0), detected(points.size(), 0);
   for (size_t i = 0; i < points.size(); ++i) {
@@ -49,8 +53,9 @@ std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node, con
     for (size_t k = 0; k < count; ++k) appear[i] += node.visible.Test(frames[k]);
   }
   std::vector<uint32_t> masks_by_view = node.masks;
-  std::stable_sort(masks_by_view.begin(), masks_by_view.end(),
-                   [&](uint32_t a, uint32_t b) { return set.trackers[a].view < set.trackers[b].view; });
+  std::stable_sort(masks_by_view.begin(), masks_by_view.end(), [&](uint32_t a, uint32_t b) {
+    return set.trackers[a].view < set.trackers[b].view;
+  });
   std::vector<int> last_frame(points.size(), -1);
   for (uint32_t t : masks_by_view) {
     const Tracker& tracker = set.trackers[t];
@@ -69,7 +74,8 @@ std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node, con
     for (size_t i = 0; i < points.size(); ++i) {
       if (cluster[i] + 1 != group) continue;
       sub.box.extend(xyz[i]);
-      if (detected[i] / (appear[i] + 1e-6) > options.point_filter_threshold) sub.gaussians.push_back(points[i]);
+      if (detected[i] / (appear[i] + 1e-6) > options.point_filter_threshold)
+        sub.gaussians.push_back(points[i]);
     }
     if (sub.gaussians.empty()) continue;
     out.push_back(std::move(sub));
@@ -88,7 +94,9 @@ std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node, con
     out[best].masks.push_back(t);
     out[best].coverage.push_back(static_cast<float>(best_overlap) / out[best].gaussians.size());
   }
-  out.erase(std::remove_if(out.begin(), out.end(), [](const Instance& s) { return s.masks.size() < 2; }), out.end());
+  out.erase(
+      std::remove_if(out.begin(), out.end(), [](const Instance& s) { return s.masks.size() < 2; }),
+      out.end());
   return out;
 }
 
@@ -106,12 +114,14 @@ std::vector<int> Dbscan(const std::vector<Eigen::Vector3f>& points, float eps, i
   if (n == 0) return label;
   const float cell = eps / std::sqrt(3.0f), eps2 = eps * eps;
   auto key_of = [&](const Eigen::Vector3f& p) {
-    return Eigen::Vector3i(static_cast<int>(std::floor(p.x() / cell)), static_cast<int>(std::floor(p.y() / cell)),
+    return Eigen::Vector3i(static_cast<int>(std::floor(p.x() / cell)),
+                           static_cast<int>(std::floor(p.y() / cell)),
                            static_cast<int>(std::floor(p.z() / cell)));
   };
   struct KeyHash {
     size_t operator()(const Eigen::Vector3i& k) const {
-      return static_cast<size_t>(k.x()) * 73856093u ^ static_cast<size_t>(k.y()) * 19349663u ^ static_cast<size_t>(k.z()) * 83492791u;
+      return static_cast<size_t>(k.x()) * 73856093u ^ static_cast<size_t>(k.y()) * 19349663u ^
+             static_cast<size_t>(k.z()) * 83492791u;
     }
   };
   std::unordered_map<Eigen::Vector3i, uint32_t, KeyHash> cell_of_key;
@@ -223,12 +233,16 @@ float RobustSceneDiagonal(const GaussianCloud& cloud) {
 }
 
 std::vector<Instance> BuildInstances(const TrackerSet& set, const std::vector<MaskNode>& nodes,
-                                     const GaussianCloud& cloud, const DecompositionOptions& options) {
-  const float eps = static_cast<float>(options.dbscan_eps_relative ? options.dbscan_eps * RobustSceneDiagonal(cloud)
-                                                                   : options.dbscan_eps);
+                                     const GaussianCloud& cloud,
+                                     const DecompositionOptions& options) {
+  const float eps = static_cast<float>(options.dbscan_eps_relative
+                                           ? options.dbscan_eps * RobustSceneDiagonal(cloud)
+                                           : options.dbscan_eps);
   std::vector<std::vector<Instance>> per_node(nodes.size());
   RunWithThreads(options.num_threads, [&] {
-    tbb::parallel_for(size_t{0}, nodes.size(), [&](size_t k) { per_node[k] = SplitNode(set, nodes[k], cloud, options, eps); });
+    tbb::parallel_for(size_t{0}, nodes.size(), [&](size_t k) {
+      per_node[k] = SplitNode(set, nodes[k], cloud, options, eps);
+    });
   });
   std::vector<Instance> objects;
   for (auto& list : per_node) {
@@ -239,7 +253,8 @@ std::vector<Instance> BuildInstances(const TrackerSet& set, const std::vector<Ma
   for (size_t a = 0; a < objects.size(); ++a) {
     for (size_t b = a + 1; b < objects.size() && !dropped[a]; ++b) {
       if (dropped[b] || !objects[a].box.intersects(objects[b].box)) continue;
-      const double inter = static_cast<double>(IntersectionSize(objects[a].gaussians, objects[b].gaussians));
+      const double inter =
+          static_cast<double>(IntersectionSize(objects[a].gaussians, objects[b].gaussians));
       if (inter / objects[a].gaussians.size() > options.overlap_ratio) {
         dropped[a] = 1;
       } else if (inter / objects[b].gaussians.size() > options.overlap_ratio) {
@@ -255,7 +270,8 @@ std::vector<Instance> BuildInstances(const TrackerSet& set, const std::vector<Ma
 }
 
 std::vector<uint32_t> RemedyUndersegmented(const TrackerSet& set, const MaskJudgement& judgement,
-                                           const DecompositionOptions& options, std::vector<Instance>* instances) {
+                                           const DecompositionOptions& options,
+                                           std::vector<Instance>* instances) {
   std::vector<uint32_t> remaining;
   for (uint32_t u = 0; u < set.trackers.size(); ++u) {
     if (!judgement.undersegmented[u]) continue;

@@ -35,7 +35,9 @@ std::vector<Instance> BuildInstances(const TrackerSet& trackers, const std::vect
 
 // 4.8: under-segmented masks whose tracker lies > remedy_ratio inside one instance join that
 // instance's 2D cluster; returns the masks that remain under-segmented.
-std::vector<uint32_t> RemedyUndersegmented(const TrackerSet& trackers, const MaskJudgement& judgement,
-                                           const DecompositionOptions& options, std::vector<Instance>* instances);
+std::vector<uint32_t> RemedyUndersegmented(const TrackerSet& trackers,
+                                           const MaskJudgement& judgement,
+                                           const DecompositionOptions& options,
+                                           std::vector<Instance>* instances);
 
 }  // namespace instascene::decomposition

@@ -14,14 +14,16 @@ namespace instascene::decomposition {
 
 absl::Status DecompositionOptions::Validate() const {
   auto in01 = [](double v) { return v >= 0.0 && v <= 1.0; };
-  if (!in01(mask_visible_threshold) || !in01(contained_threshold) || !in01(undersegment_threshold) ||
-      !in01(view_consensus_threshold) || !in01(point_filter_threshold) || !in01(overlap_ratio) || !in01(remedy_ratio)) {
+  if (!in01(mask_visible_threshold) || !in01(contained_threshold) ||
+      !in01(undersegment_threshold) || !in01(view_consensus_threshold) ||
+      !in01(point_filter_threshold) || !in01(overlap_ratio) || !in01(remedy_ratio)) {
     return absl::InvalidArgumentError("decomposition thresholds must lie in [0, 1]");
   }
   if (!(tracker_min_weight >= 0.0f && tracker_min_weight < 1.0f)) {
     return absl::InvalidArgumentError("tracker_min_weight must lie in [0, 1)");
   }
-  if (min_tracker_gaussians < 1) return absl::InvalidArgumentError("min_tracker_gaussians must be >= 1");
+  if (min_tracker_gaussians < 1)
+    return absl::InvalidArgumentError("min_tracker_gaussians must be >= 1");
   if (!(dbscan_eps > 0.0) || dbscan_min_points < 1) {
     return absl::InvalidArgumentError("dbscan_eps must be > 0 and dbscan_min_points >= 1");
   }
@@ -33,25 +35,29 @@ namespace {
 // What one view contributes, computed independently of the others.
 struct ViewTrackers {
   std::vector<Tracker> trackers;
-  std::vector<uint32_t> traced;                             // sorted unique Gaussians
-  std::vector<std::pair<uint32_t, uint32_t>> gaussian_mask;  // (Gaussian, local tracker), one per Gaussian
+  std::vector<uint32_t> traced;  // sorted unique Gaussians
+  std::vector<std::pair<uint32_t, uint32_t>>
+      gaussian_mask;  // (Gaussian, local tracker), one per Gaussian
 };
 
-absl::StatusOr<ViewTrackers> TrackView(const GaussianCloud& cloud, const PinholeCamera& camera, int view,
-                                       const MaskLoader& load_mask, const DecompositionOptions& options) {
+absl::StatusOr<ViewTrackers> TrackView(const GaussianCloud& cloud, const PinholeCamera& camera,
+                                       int view, const MaskLoader& load_mask,
+                                       const DecompositionOptions& options) {
   ASSIGN_OR_RETURN(std::vector<uint32_t> labels, load_mask(view));
   if (labels.size() != static_cast<size_t>(camera.width) * camera.height) {
-    return absl::InvalidArgumentError(absl::StrCat("mask of view ", view, " has ", labels.size(), " pixels, its camera ",
-                                                   camera.width, "x", camera.height));
+    return absl::InvalidArgumentError(absl::StrCat("mask of view ", view, " has ", labels.size(),
+                                                   " pixels, its camera ", camera.width, "x",
+                                                   camera.height));
   }
   RenderOptions render_options;
   render_options.color = false;
   render_options.trace.enabled = true;
-  render_options.trace.min_weight = options.tracker_rule == TrackerRule::kWeight ? options.tracker_min_weight : 0.0f;
+  render_options.trace.min_weight =
+      options.tracker_rule == TrackerRule::kWeight ? options.tracker_min_weight : 0.0f;
   ASSIGN_OR_RETURN(RenderResult render, Render(cloud, camera, render_options));
   const ContributorTrace& trace = render.trace;
   ViewTrackers out;
-  std::vector<uint8_t> seen(cloud.size(), 0);  // cheaper than sorting every traced entry
+  std::vector<uint8_t> seen(cloud.size(), 0);        // cheaper than sorting every traced entry
   std::vector<std::pair<uint32_t, uint32_t>> pairs;  // (mask label, Gaussian)
   for (size_t i = 0; i < trace.num_pixels(); ++i) {
     const uint32_t label = labels[trace.pixels[i]];
@@ -86,7 +92,8 @@ absl::StatusOr<ViewTrackers> TrackView(const GaussianCloud& cloud, const Pinhole
   }
   // One mask per Gaussian and frame: the highest mask id (visited last) wins.
   auto& gm = out.gaussian_mask;
-  std::stable_sort(gm.begin(), gm.end(), [](const auto& a, const auto& b) { return a.first < b.first; });
+  std::stable_sort(gm.begin(), gm.end(),
+                   [](const auto& a, const auto& b) { return a.first < b.first; });
   size_t kept = 0;
   for (size_t k = 0; k < gm.size(); ++k) {
     if (k + 1 < gm.size() && gm[k + 1].first == gm[k].first) continue;
@@ -98,8 +105,10 @@ absl::StatusOr<ViewTrackers> TrackView(const GaussianCloud& cloud, const Pinhole
 
 }  // namespace
 
-absl::StatusOr<TrackerSet> BuildTrackers(const GaussianCloud& cloud, const std::vector<PinholeCamera>& cameras,
-                                         const MaskLoader& load_mask, const DecompositionOptions& options,
+absl::StatusOr<TrackerSet> BuildTrackers(const GaussianCloud& cloud,
+                                         const std::vector<PinholeCamera>& cameras,
+                                         const MaskLoader& load_mask,
+                                         const DecompositionOptions& options,
                                          const std::function<void(int, int)>& progress) {
   RETURN_IF_ERROR(options.Validate());
   if (cameras.size() > 65535) return absl::InvalidArgumentError("at most 65535 views");
@@ -149,7 +158,8 @@ absl::StatusOr<TrackerSet> BuildTrackers(const GaussianCloud& cloud, const std::
   std::vector<uint64_t> mask_cursor(set.mask_offsets.begin(), set.mask_offsets.end() - 1);
   for (int v = 0; v < num_views; ++v) {  // views ascending: each list is sorted by frame
     for (uint32_t g : views[v]->traced) set.frames[frame_cursor[g]++] = static_cast<uint16_t>(v);
-    for (const auto& [g, t] : views[v]->gaussian_mask) set.masks[mask_cursor[g]++] = first_tracker[v] + t;
+    for (const auto& [g, t] : views[v]->gaussian_mask)
+      set.masks[mask_cursor[g]++] = first_tracker[v] + t;
     views[v] = ViewTrackers{};  // release memory early
   }
   return set;

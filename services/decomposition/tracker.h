@@ -28,7 +28,7 @@ struct Tracker {
 struct TrackerSet {
   int num_views = 0;
   size_t num_gaussians = 0;
-  std::vector<Tracker> trackers;              // global mask index = position; views ascending, then mask ids
+  std::vector<Tracker> trackers;  // global mask index = position; views ascending, then mask ids
   std::vector<std::vector<uint32_t>> view_trackers;  // per view: its tracker indices
   // Per Gaussian g: frames it is traced in: frames[frame_offsets[g] .. frame_offsets[g + 1]).
   std::vector<uint64_t> frame_offsets;
@@ -46,8 +46,9 @@ struct TrackerSet {
 // Supplies the label map of view v (W*H ids, 0 = none) when the tracker needs it.
 using MaskLoader = std::function<absl::StatusOr<std::vector<uint32_t>>(int view)>;
 
-absl::StatusOr<TrackerSet> BuildTrackers(const GaussianCloud& cloud, const std::vector<PinholeCamera>& cameras,
-                                         const MaskLoader& load_mask, const DecompositionOptions& options,
-                                         const std::function<void(int done, int total)>& progress = nullptr);
+absl::StatusOr<TrackerSet> BuildTrackers(
+    const GaussianCloud& cloud, const std::vector<PinholeCamera>& cameras,
+    const MaskLoader& load_mask, const DecompositionOptions& options,
+    const std::function<void(int done, int total)>& progress = nullptr);
 
 }  // namespace instascene::decomposition

@@ -51,7 +51,8 @@ double ContrastiveLoss(const std::vector<float>& x, int dim, const std::vector<u
     phi[y[s]] += std::sqrt(dist);
   }
   for (int c = 0; c < K; ++c) {
-    phi[c] = std::clamp(10.0 * phi[c] / (count[c] * std::log(count[c] + options.temperature_lambda)), 0.5, 1.0);
+    phi[c] = std::clamp(
+        10.0 * phi[c] / (count[c] * std::log(count[c] + options.temperature_lambda)), 0.5, 1.0);
   }
   // Loss and gradients w.r.t. x^ (direct) and u.
   double loss = 0;
@@ -80,11 +81,13 @@ double ContrastiveLoss(const std::vector<float>& x, int dim, const std::vector<u
       grad_xhat[s * dim + d] += grad_u[y[s] * dim + d] / count[y[s]];
       along += grad_xhat[s * dim + d] * xhat[s * dim + d];
     }
-    // d x^_i / d x_j = delta_ij / (|x| + e) - x_i x_j / (|x| (|x| + e)^2) = (delta_ij - x^_i x^_j (|x| + e) / |x|) / (|x| + e)
+    // d x^_i / d x_j = delta_ij / (|x| + e) - x_i x_j / (|x| (|x| + e)^2) = (delta_ij - x^_i x^_j
+    // (|x| + e) / |x|) / (|x| + e)
     const double norm = 1.0 / inv_norm[s] - 1e-9;
     const double scale = options.detach_norm || norm <= 0 ? 0.0 : (1.0 / inv_norm[s]) / norm;
     for (int d = 0; d < dim; ++d) {
-      (*grad)[valid[s] * dim + d] = (grad_xhat[s * dim + d] - scale * along * xhat[s * dim + d]) * inv_norm[s];
+      (*grad)[valid[s] * dim + d] =
+          (grad_xhat[s * dim + d] - scale * along * xhat[s * dim + d]) * inv_norm[s];
     }
   }
   return loss;

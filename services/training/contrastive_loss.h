@@ -15,7 +15,8 @@
 namespace instascene::training {
 
 struct ContrastiveLossOptions {
-  bool consider_negative = false;  // label 0 is its own class (else samples with label 0 are ignored)
+  bool consider_negative =
+      false;  // label 0 is its own class (else samples with label 0 are ignored)
   double temperature_lambda = 1000.0;  // ln(n_c + lambda) in the temperature
   bool detach_norm = true;  // as the authors' code; false = the true gradient through |x| (tests)
 };

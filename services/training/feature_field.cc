@@ -43,7 +43,8 @@ void Normalize(const float* f, int dim, double eps, float* out) {
 }
 
 // Samples `count` indices with replacement from `candidates`.
-std::vector<uint32_t> SampleWithReplacement(const std::vector<uint32_t>& candidates, int count, std::mt19937_64& rng) {
+std::vector<uint32_t> SampleWithReplacement(const std::vector<uint32_t>& candidates, int count,
+                                            std::mt19937_64& rng) {
   std::vector<uint32_t> out;
   if (candidates.empty()) return out;
   std::uniform_int_distribution<size_t> pick(0, candidates.size() - 1);
@@ -55,8 +56,8 @@ std::vector<uint32_t> SampleWithReplacement(const std::vector<uint32_t>& candida
 // A rendered-pixel term: samples (view, pool pixel) pairs, renders their features from the cached
 // lists, applies the loss and scatters lambda * w * dL/dE into grad_hat (dL/df^).
 double PixelTerm(const TrainingData& data, const std::vector<std::pair<int, uint32_t>>& samples,
-                 const std::vector<uint32_t>& labels, const std::vector<float>& unit, int dim, bool negatives,
-                 bool detach, double lambda, std::vector<double>* grad_hat) {
+                 const std::vector<uint32_t>& labels, const std::vector<float>& unit, int dim,
+                 bool negatives, bool detach, double lambda, std::vector<double>* grad_hat) {
   if (samples.empty()) return 0.0;
   std::vector<float> x(samples.size() * dim, 0.0f);
   for (size_t j = 0; j < samples.size(); ++j) {
@@ -90,26 +91,34 @@ absl::StatusOr<Supervision> ParseSupervision(const std::string& name) {
   if (name == "3d") return Supervision::k3d;
   if (name == "3d+filtered2d") return Supervision::k3dFiltered2d;
   if (name == "full") return Supervision::kFull;
-  return absl::InvalidArgumentError(absl::StrCat("unknown supervision '", name, "' (noisy2d, 3d, 3d+filtered2d, full)"));
+  return absl::InvalidArgumentError(
+      absl::StrCat("unknown supervision '", name, "' (noisy2d, 3d, 3d+filtered2d, full)"));
 }
 
 absl::Status TrainingOptions::Validate() const {
-  if (feature_dim < 2 || feature_dim > 64) return absl::InvalidArgumentError("feature_dim must be in 2..64");
+  if (feature_dim < 2 || feature_dim > 64)
+    return absl::InvalidArgumentError("feature_dim must be in 2..64");
   if (iterations < 0 || samples < 1 || pixel_pool < 1) {
-    return absl::InvalidArgumentError("iterations >= 0, samples >= 1 and pixel_pool >= 1 are required");
+    return absl::InvalidArgumentError(
+        "iterations >= 0, samples >= 1 and pixel_pool >= 1 are required");
   }
   if (!(learning_rate > 0)) return absl::InvalidArgumentError("learning_rate must be positive");
-  if (multi_view_every < 1 || multi_view_window < 1) return absl::InvalidArgumentError("multi-view settings must be >= 1");
+  if (multi_view_every < 1 || multi_view_window < 1)
+    return absl::InvalidArgumentError("multi-view settings must be >= 1");
   return absl::OkStatus();
 }
 
 absl::StatusOr<TrainingData> PrepareTraining(const Scene& scene, const GaussianCloud& cloud,
-                                             const std::string& decomposition_dir, const TrainingOptions& options,
+                                             const std::string& decomposition_dir,
+                                             const TrainingOptions& options,
                                              const std::function<void(int, int)>& progress) {
   RETURN_IF_ERROR(options.Validate());
   TrainingData data;
   data.num_gaussians = cloud.size();
-  ASSIGN_OR_RETURN(data.labels3d, ReadGaussianInstanceIds((std::filesystem::path(decomposition_dir) / "labels.ply").string(), cloud.size()));
+  ASSIGN_OR_RETURN(
+      data.labels3d,
+      ReadGaussianInstanceIds((std::filesystem::path(decomposition_dir) / "labels.ply").string(),
+                              cloud.size()));
   const int num_views = static_cast<int>(scene.views.size());
   data.views.resize(num_views);
   std::vector<absl::Status> status(num_views);
@@ -121,17 +130,21 @@ absl::StatusOr<TrainingData> PrepareTraining(const Scene& scene, const GaussianC
         const SceneView& view = scene.views[v];
         ASSIGN_OR_RETURN(LabelMap raw, ReadViewMask(scene, v));
         const std::filesystem::path dir(decomposition_dir);
-        ASSIGN_OR_RETURN(LabelMap filtered, ReadLabelMap((dir / "masks_filtered" / (view.name + ".png")).string()));
-        ASSIGN_OR_RETURN(LabelMap sorted, ReadLabelMap((dir / "masks_sorted" / (view.name + ".png")).string()));
+        ASSIGN_OR_RETURN(LabelMap filtered,
+                         ReadLabelMap((dir / "masks_filtered" / (view.name + ".png")).string()));
+        ASSIGN_OR_RETURN(LabelMap sorted,
+                         ReadLabelMap((dir / "masks_sorted" / (view.name + ".png")).string()));
         const size_t pixels = static_cast<size_t>(view.camera.width) * view.camera.height;
         if (filtered.labels.size() != pixels || sorted.labels.size() != pixels) {
-          return absl::InvalidArgumentError(absl::StrCat("decomposition maps of view '", view.name, "' do not match its camera"));
+          return absl::InvalidArgumentError(
+              absl::StrCat("decomposition maps of view '", view.name, "' do not match its camera"));
         }
         std::vector<uint32_t> all(pixels);
         std::iota(all.begin(), all.end(), 0u);
         std::vector<uint32_t> pool;
         std::mt19937_64 rng(options.seed * 7919 + static_cast<uint64_t>(v));
-        std::sample(all.begin(), all.end(), std::back_inserter(pool), options.pixel_pool, rng);  // sorted output
+        std::sample(all.begin(), all.end(), std::back_inserter(pool), options.pixel_pool,
+                    rng);  // sorted output
         RenderOptions render;
         render.color = false;
         render.trace.enabled = true;
@@ -165,8 +178,9 @@ absl::StatusOr<TrainingData> PrepareTraining(const Scene& scene, const GaussianC
   return data;
 }
 
-double LossAndGradient(const TrainingData& data, const TrainingOptions& options, const std::vector<float>& features,
-                       int view, bool with_multi_view, uint64_t seed, std::vector<double>* grad) {
+double LossAndGradient(const TrainingData& data, const TrainingOptions& options,
+                       const std::vector<float>& features, int view, bool with_multi_view,
+                       uint64_t seed, std::vector<double>* grad) {
   const int dim = options.feature_dim;
   const size_t n = data.num_gaussians;
   std::mt19937_64 rng(seed);
@@ -178,7 +192,8 @@ double LossAndGradient(const TrainingData& data, const TrainingOptions& options,
   const ViewData& v = data.views[view];
   // (a) single view.
   if (options.supervision != Supervision::k3d) {
-    const std::vector<uint32_t>& labels = options.supervision == Supervision::kNoisy2d ? v.raw_label : v.filtered_label;
+    const std::vector<uint32_t>& labels =
+        options.supervision == Supervision::kNoisy2d ? v.raw_label : v.filtered_label;
     std::vector<uint32_t> valid;
     for (uint32_t p = 0; p < labels.size(); ++p) {
       if (options.consider_negative || labels[p] > 0) valid.push_back(p);
@@ -196,7 +211,8 @@ double LossAndGradient(const TrainingData& data, const TrainingOptions& options,
   if (options.supervision == Supervision::kFull && with_multi_view) {
     const int num_views = static_cast<int>(data.views.size());
     const int window = std::min(options.multi_view_window, num_views);
-    const int start = num_views > window ? std::uniform_int_distribution<int>(0, num_views - window - 1)(rng) : 0;
+    const int start =
+        num_views > window ? std::uniform_int_distribution<int>(0, num_views - window - 1)(rng) : 0;
     std::vector<std::pair<int, uint32_t>> pool;
     for (int w = start; w < start + window; ++w) {
       for (uint32_t p = 0; p < data.views[w].sorted_label.size(); ++p) {
@@ -209,15 +225,17 @@ double LossAndGradient(const TrainingData& data, const TrainingOptions& options,
       std::vector<uint32_t> sample_labels;
       for (int i = 0; i < options.samples; ++i) {
         samples.push_back(pool[pick(rng)]);
-        sample_labels.push_back(data.views[samples.back().first].sorted_label[samples.back().second]);
+        sample_labels.push_back(
+            data.views[samples.back().first].sorted_label[samples.back().second]);
       }
-      loss += PixelTerm(data, samples, sample_labels, unit, dim, false, options.detach_sample_norm, options.lambda_multi,
-                        &grad_hat);
+      loss += PixelTerm(data, samples, sample_labels, unit, dim, false, options.detach_sample_norm,
+                        options.lambda_multi, &grad_hat);
     }
   }
   // (c) 3D: visible Gaussians with a coarse instance label.
   if (options.supervision != Supervision::kNoisy2d) {
-    const std::vector<uint32_t> picked = SampleWithReplacement(v.visible_labelled, options.samples, rng);
+    const std::vector<uint32_t> picked =
+        SampleWithReplacement(v.visible_labelled, options.samples, rng);
     if (!picked.empty()) {
       std::vector<float> x(picked.size() * dim);
       std::vector<uint32_t> labels(picked.size());
@@ -232,8 +250,8 @@ double LossAndGradient(const TrainingData& data, const TrainingOptions& options,
       for (size_t j = 0; j < picked.size(); ++j) {
         std::vector<double> scaled(dim);
         for (int d = 0; d < dim; ++d) scaled[d] = options.lambda_3d * gx[j * dim + d];
-        AddNormalizationBackward(&features[static_cast<size_t>(picked[j]) * dim], scaled.data(), dim, kThreeDEps,
-                                 &(*grad)[static_cast<size_t>(picked[j]) * dim]);
+        AddNormalizationBackward(&features[static_cast<size_t>(picked[j]) * dim], scaled.data(),
+                                 dim, kThreeDEps, &(*grad)[static_cast<size_t>(picked[j]) * dim]);
       }
     }
   }
@@ -247,8 +265,9 @@ double LossAndGradient(const TrainingData& data, const TrainingOptions& options,
   return loss;
 }
 
-absl::StatusOr<TrainingResult> TrainFeatures(const TrainingData& data, const TrainingOptions& options,
-                                             const std::function<void(int, int, double)>& progress) {
+absl::StatusOr<TrainingResult> TrainFeatures(
+    const TrainingData& data, const TrainingOptions& options,
+    const std::function<void(int, int, double)>& progress) {
   RETURN_IF_ERROR(options.Validate());
   if (data.views.empty()) return absl::InvalidArgumentError("no training views");
   const int dim = options.feature_dim;
@@ -259,7 +278,8 @@ absl::StatusOr<TrainingResult> TrainFeatures(const TrainingData& data, const Tra
   std::mt19937_64 rng(options.seed);
   std::uniform_real_distribution<float> uni(0.0f, 1.0f);
   for (float& f : result.features) f = uni(rng);
-  for (size_t g = 0; g < data.num_gaussians; ++g) Normalize(&result.features[g * dim], dim, 0.0, &result.features[g * dim]);
+  for (size_t g = 0; g < data.num_gaussians; ++g)
+    Normalize(&result.features[g * dim], dim, 0.0, &result.features[g * dim]);
   std::vector<double> m(total, 0.0), v(total, 0.0), grad;
   std::vector<int> stack;  // shuffled views, refilled when empty
   constexpr double kBeta1 = 0.9, kBeta2 = 0.999, kEps = 1e-15;
@@ -271,18 +291,20 @@ absl::StatusOr<TrainingResult> TrainFeatures(const TrainingData& data, const Tra
     }
     const int view = stack.back();
     stack.pop_back();
-    const double loss = LossAndGradient(data, options, result.features, view, step % options.multi_view_every == 0,
-                                        rng(), &grad);
+    const double loss = LossAndGradient(data, options, result.features, view,
+                                        step % options.multi_view_every == 0, rng(), &grad);
     result.loss.push_back(loss);
     const double c1 = 1.0 - std::pow(kBeta1, step), c2 = 1.0 - std::pow(kBeta2, step);
     RunWithThreads(options.num_threads, [&] {
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, total, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
-        for (size_t i = r.begin(); i < r.end(); ++i) {
-          m[i] = kBeta1 * m[i] + (1 - kBeta1) * grad[i];
-          v[i] = kBeta2 * v[i] + (1 - kBeta2) * grad[i] * grad[i];
-          result.features[i] -= static_cast<float>(options.learning_rate * (m[i] / c1) / (std::sqrt(v[i] / c2) + kEps));
-        }
-      });
+      tbb::parallel_for(
+          tbb::blocked_range<size_t>(0, total, 1 << 14), [&](const tbb::blocked_range<size_t>& r) {
+            for (size_t i = r.begin(); i < r.end(); ++i) {
+              m[i] = kBeta1 * m[i] + (1 - kBeta1) * grad[i];
+              v[i] = kBeta2 * v[i] + (1 - kBeta2) * grad[i] * grad[i];
+              result.features[i] -= static_cast<float>(options.learning_rate * (m[i] / c1) /
+                                                       (std::sqrt(v[i] / c2) + kEps));
+            }
+          });
     });
     if (progress) progress(step, options.iterations, loss);
   }

@@ -22,27 +22,28 @@ namespace instascene::training {
 
 // The rows of the paper's Table 2.
 enum class Supervision {
-  kNoisy2d,         // single-view term on the raw 2D masks only
-  k3d,              // 3D term only
-  k3dFiltered2d,    // 3D + single-view on the filtered masks
-  kFull,            // 3D + filtered single-view + cross-view on the consistent instance maps
+  kNoisy2d,       // single-view term on the raw 2D masks only
+  k3d,            // 3D term only
+  k3dFiltered2d,  // 3D + single-view on the filtered masks
+  kFull,          // 3D + filtered single-view + cross-view on the consistent instance maps
 };
-absl::StatusOr<Supervision> ParseSupervision(const std::string& name);  // noisy2d, 3d, 3d+filtered2d, full
+absl::StatusOr<Supervision> ParseSupervision(
+    const std::string& name);  // noisy2d, 3d, 3d+filtered2d, full
 
 struct TrainingOptions {
-  int feature_dim = 16;             // D
-  int iterations = 1500;            // optimisation steps (paper: 10000 on a GPU; see docs/RESULTS.md)
-  int samples = 4096;               // samples per term and step (paper: 32768)
-  float learning_rate = 0.025f;     // Adam, eps 1e-15, betas 0.9 / 0.999
-  double lambda_single = 0.5e-6;    // 1e-6 x the 0.5 branch weight of the code
+  int feature_dim = 16;           // D
+  int iterations = 1500;          // optimisation steps (paper: 10000 on a GPU; see docs/RESULTS.md)
+  int samples = 4096;             // samples per term and step (paper: 32768)
+  float learning_rate = 0.025f;   // Adam, eps 1e-15, betas 0.9 / 0.999
+  double lambda_single = 0.5e-6;  // 1e-6 x the 0.5 branch weight of the code
   double lambda_multi = 1e-6;
   double lambda_3d = 2.5e-6;
-  int multi_view_every = 10;        // the cross-view term runs every this many steps
-  int multi_view_window = 5;        // consecutive views (name order) pooled by the cross-view term
-  bool consider_negative = true;    // single-view term: unlabelled pixels form a background class
+  int multi_view_every = 10;      // the cross-view term runs every this many steps
+  int multi_view_window = 5;      // consecutive views (name order) pooled by the cross-view term
+  bool consider_negative = true;  // single-view term: unlabelled pixels form a background class
   Supervision supervision = Supervision::kFull;
-  int pixel_pool = 8192;            // traced pixels cached per view
-  bool detach_sample_norm = true;   // as the authors' code (ContrastiveLossOptions::detach_norm)
+  int pixel_pool = 8192;           // traced pixels cached per view
+  bool detach_sample_norm = true;  // as the authors' code (ContrastiveLossOptions::detach_norm)
   uint64_t seed = 1;
   int num_threads = 0;
 
@@ -51,11 +52,11 @@ struct TrainingOptions {
 
 // Per-view cached supervision.
 struct ViewData {
-  std::vector<uint64_t> offsets;          // pool pixel -> contributor range
-  std::vector<uint32_t> gaussians;        // contributors
-  std::vector<float> weights;             // their blending weights
+  std::vector<uint64_t> offsets;                                  // pool pixel -> contributor range
+  std::vector<uint32_t> gaussians;                                // contributors
+  std::vector<float> weights;                                     // their blending weights
   std::vector<uint32_t> raw_label, filtered_label, sorted_label;  // per pool pixel
-  std::vector<uint32_t> visible_labelled; // Gaussians visible in the view with a 3D label
+  std::vector<uint32_t> visible_labelled;  // Gaussians visible in the view with a 3D label
 };
 
 struct TrainingData {
@@ -65,23 +66,25 @@ struct TrainingData {
 };
 
 // Reads the decomposition outputs (labels.ply, masks_filtered/, masks_sorted/) and the scene masks.
-absl::StatusOr<TrainingData> PrepareTraining(const Scene& scene, const GaussianCloud& cloud,
-                                             const std::string& decomposition_dir, const TrainingOptions& options,
-                                             const std::function<void(int, int)>& progress = nullptr);
+absl::StatusOr<TrainingData> PrepareTraining(
+    const Scene& scene, const GaussianCloud& cloud, const std::string& decomposition_dir,
+    const TrainingOptions& options, const std::function<void(int, int)>& progress = nullptr);
 
 struct TrainingResult {
-  std::vector<float> features;      // raw (unnormalised), N x D
-  std::vector<double> loss;         // per step
+  std::vector<float> features;  // raw (unnormalised), N x D
+  std::vector<double> loss;     // per step
   double seconds = 0;
 };
 
-absl::StatusOr<TrainingResult> TrainFeatures(const TrainingData& data, const TrainingOptions& options,
-                                             const std::function<void(int step, int total, double loss)>& progress = nullptr);
+absl::StatusOr<TrainingResult> TrainFeatures(
+    const TrainingData& data, const TrainingOptions& options,
+    const std::function<void(int step, int total, double loss)>& progress = nullptr);
 
 // The training loss and its gradient for given features (exposed for the gradient test): one step's
 // terms for view `view` (single-view and 3D, plus cross-view when `with_multi_view`), with fixed
 // sample indices drawn from `seed`.
-double LossAndGradient(const TrainingData& data, const TrainingOptions& options, const std::vector<float>& features,
-                       int view, bool with_multi_view, uint64_t seed, std::vector<double>* grad);
+double LossAndGradient(const TrainingData& data, const TrainingOptions& options,
+                       const std::vector<float>& features, int view, bool with_multi_view,
+                       uint64_t seed, std::vector<double>* grad);
 
 }  // namespace instascene::training

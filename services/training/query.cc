@@ -6,9 +6,12 @@
 
 namespace instascene::training {
 
-absl::StatusOr<std::unique_ptr<QueryIndex>> QueryIndex::Build(const Scene& scene, const GaussianCloud& cloud,
-                                                              const SegmentationResult& result, int num_threads) {
-  if (result.labels.size() != cloud.size()) return absl::InvalidArgumentError("result and scene disagree on the Gaussian count");
+absl::StatusOr<std::unique_ptr<QueryIndex>> QueryIndex::Build(const Scene& scene,
+                                                              const GaussianCloud& cloud,
+                                                              const SegmentationResult& result,
+                                                              int num_threads) {
+  if (result.labels.size() != cloud.size())
+    return absl::InvalidArgumentError("result and scene disagree on the Gaussian count");
   auto index = std::unique_ptr<QueryIndex>(new QueryIndex());
   index->scene_ = &scene;
   index->labels_ = result.labels;
@@ -16,7 +19,8 @@ absl::StatusOr<std::unique_ptr<QueryIndex>> QueryIndex::Build(const Scene& scene
     if (result.labels[g] != 0) index->members_[result.labels[g]].push_back(g);
   }
   for (size_t v = 0; v < scene.views.size(); ++v) {
-    ASSIGN_OR_RETURN(std::vector<uint32_t> map, RenderLabelMap(cloud, scene.views[v].camera, result.labels, 0.5f, num_threads));
+    ASSIGN_OR_RETURN(std::vector<uint32_t> map, RenderLabelMap(cloud, scene.views[v].camera,
+                                                               result.labels, 0.5f, num_threads));
     std::map<uint32_t, size_t> counts;
     for (uint32_t l : map) {
       if (l != 0) ++counts[l];
@@ -41,15 +45,18 @@ QueryAnswer QueryIndex::Answer(uint32_t instance) const {
 }
 
 absl::StatusOr<QueryAnswer> QueryIndex::Click(int view, int x, int y) const {
-  if (view < 0 || view >= static_cast<int>(label_maps_.size())) return absl::OutOfRangeError(absl::StrCat("no view ", view));
+  if (view < 0 || view >= static_cast<int>(label_maps_.size()))
+    return absl::OutOfRangeError(absl::StrCat("no view ", view));
   const PinholeCamera& camera = scene_->views[view].camera;
   if (x < 0 || y < 0 || x >= camera.width || y >= camera.height) {
-    return absl::OutOfRangeError(absl::StrCat("pixel (", x, ", ", y, ") outside the ", camera.width, "x", camera.height, " image"));
+    return absl::OutOfRangeError(absl::StrCat("pixel (", x, ", ", y, ") outside the ", camera.width,
+                                              "x", camera.height, " image"));
   }
   return Answer(label_maps_[view][static_cast<size_t>(y) * camera.width + x]);
 }
 
-absl::StatusOr<QueryAnswer> QueryIndex::Point(const Eigen::Vector3f& point, float max_distance) const {
+absl::StatusOr<QueryAnswer> QueryIndex::Point(const Eigen::Vector3f& point,
+                                              float max_distance) const {
   if (!point.allFinite()) return absl::InvalidArgumentError("query point is not finite");
   if (points_->size() == 0) return Answer(0);
   const auto [g, dist2] = points_->Nearest(point);

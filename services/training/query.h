@@ -21,20 +21,23 @@
 namespace instascene::training {
 
 struct QueryAnswer {
-  uint32_t instance = 0;                        // 0 = background / nothing
-  size_t gaussians = 0;                         // Gaussians of that instance
-  std::vector<std::pair<int, size_t>> views;    // (view, pixels) where the instance is visible
+  uint32_t instance = 0;                      // 0 = background / nothing
+  size_t gaussians = 0;                       // Gaussians of that instance
+  std::vector<std::pair<int, size_t>> views;  // (view, pixels) where the instance is visible
 };
 
 class QueryIndex {
  public:
-  static absl::StatusOr<std::unique_ptr<QueryIndex>> Build(const Scene& scene, const GaussianCloud& cloud,
-                                                           const SegmentationResult& result, int num_threads = 0);
+  static absl::StatusOr<std::unique_ptr<QueryIndex>> Build(const Scene& scene,
+                                                           const GaussianCloud& cloud,
+                                                           const SegmentationResult& result,
+                                                           int num_threads = 0);
 
   // The instance under pixel (x, y) of view `view`.
   absl::StatusOr<QueryAnswer> Click(int view, int x, int y) const;
   // The instance of the Gaussian nearest to a 3D point, if one lies within max_distance.
-  absl::StatusOr<QueryAnswer> Point(const Eigen::Vector3f& point_in_world, float max_distance) const;
+  absl::StatusOr<QueryAnswer> Point(const Eigen::Vector3f& point_in_world,
+                                    float max_distance) const;
   // The instance's mask in a view (W*H, 1 = selected).
   std::vector<uint8_t> Mask(uint32_t instance, int view) const;
   const std::vector<uint32_t>& Gaussians(uint32_t instance) const;
@@ -42,8 +45,8 @@ class QueryIndex {
  private:
   QueryAnswer Answer(uint32_t instance) const;
   const Scene* scene_ = nullptr;
-  std::vector<std::vector<uint32_t>> label_maps_;              // per view, W*H
-  std::map<uint32_t, std::vector<uint32_t>> members_;          // instance -> Gaussians
+  std::vector<std::vector<uint32_t>> label_maps_;                    // per view, W*H
+  std::map<uint32_t, std::vector<uint32_t>> members_;                // instance -> Gaussians
   std::map<uint32_t, std::vector<std::pair<int, size_t>>> visible_;  // instance -> (view, pixels)
   std::vector<uint32_t> labels_;
   std::unique_ptr<PointIndex3> points_;

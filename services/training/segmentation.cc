@@ -14,14 +14,16 @@
 
 namespace instascene::training {
 
-std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int dim, const std::vector<uint32_t>& coarse,
+std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int dim,
+                                        const std::vector<uint32_t>& coarse,
                                         const SegmentOptions& options) {
   const size_t n = coarse.size();
   std::vector<double> unit(features.size());
   for (size_t g = 0; g < n; ++g) {
     double norm = 0;
     for (int d = 0; d < dim; ++d) norm += double{features[g * dim + d]} * features[g * dim + d];
-    for (int d = 0; d < dim; ++d) unit[g * dim + d] = features[g * dim + d] / (std::sqrt(norm) + 1e-6);
+    for (int d = 0; d < dim; ++d)
+      unit[g * dim + d] = features[g * dim + d] / (std::sqrt(norm) + 1e-6);
   }
   std::map<uint32_t, std::vector<double>> mean;
   std::map<uint32_t, double> count;
@@ -59,7 +61,8 @@ std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int 
   return labels;
 }
 
-absl::Status ExportInstances(const std::string& directory, const GaussianCloud& cloud, const std::vector<uint32_t>& labels) {
+absl::Status ExportInstances(const std::string& directory, const GaussianCloud& cloud,
+                             const std::vector<uint32_t>& labels) {
   namespace fs = std::filesystem;
   std::error_code ec;
   fs::create_directories(fs::path(directory) / "instances", ec);
@@ -81,14 +84,18 @@ absl::Status ExportInstances(const std::string& directory, const GaussianCloud& 
       centroid += p.cast<double>();
     }
     centroid /= static_cast<double>(indices.size());
-    manifest.push_back({{"id", id}, {"gaussians", indices.size()}, {"ply", file},
+    manifest.push_back({{"id", id},
+                        {"gaussians", indices.size()},
+                        {"ply", file},
                         {"bounds_min", {box.min().x(), box.min().y(), box.min().z()}},
                         {"bounds_max", {box.max().x(), box.max().y(), box.max().z()}},
                         {"centroid", {centroid.x(), centroid.y(), centroid.z()}}});
   }
   GaussianCloud labelled = cloud;
-  labelled.SetExtra("instance_id", ScalarType::kUint32, std::vector<float>(labels.begin(), labels.end()));
-  RETURN_IF_ERROR(WriteGaussianPly((fs::path(directory) / "scene_labelled.ply").string(), labelled));
+  labelled.SetExtra("instance_id", ScalarType::kUint32,
+                    std::vector<float>(labels.begin(), labels.end()));
+  RETURN_IF_ERROR(
+      WriteGaussianPly((fs::path(directory) / "scene_labelled.ply").string(), labelled));
   return WriteFileAtomically((fs::path(directory) / "instances.json").string(), manifest.dump(1));
 }
 

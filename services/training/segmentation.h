@@ -21,10 +21,12 @@ struct SegmentOptions {
 
 // labels: per Gaussian, the coarse instance id (0 = none) used to define the instances; returns
 // the final per-Gaussian labels with the same ids.
-std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int dim, const std::vector<uint32_t>& coarse,
+std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int dim,
+                                        const std::vector<uint32_t>& coarse,
                                         const SegmentOptions& options);
 
 // instances/<id>.ply (every original property), scene_labelled.ply (+ instance_id), instances.json.
-absl::Status ExportInstances(const std::string& directory, const GaussianCloud& cloud, const std::vector<uint32_t>& labels);
+absl::Status ExportInstances(const std::string& directory, const GaussianCloud& cloud,
+                             const std::vector<uint32_t>& labels);
 
 }  // namespace instascene::training

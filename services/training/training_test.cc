@@ -21,7 +21,8 @@ std::vector<float> ClusteredFeatures(const std::vector<uint32_t>& cls, int dim, 
   std::normal_distribution<float> noise(0.0f, 0.01f);
   std::vector<float> x(cls.size() * dim);
   for (size_t j = 0; j < cls.size(); ++j) {
-    for (int d = 0; d < dim; ++d) x[j * dim + d] = (d == static_cast<int>(cls[j] % dim) ? 1.5f : 0.1f) + noise(rng);
+    for (int d = 0; d < dim; ++d)
+      x[j * dim + d] = (d == static_cast<int>(cls[j] % dim) ? 1.5f : 0.1f) + noise(rng);
   }
   return x;
 }
@@ -42,8 +43,10 @@ TEST(ContrastiveLoss, GradientMatchesFiniteDifferences) {
       plus[i] += h;
       minus[i] -= h;
       const double fd = (ContrastiveLoss(plus, dim, labels, options, &unused) -
-                         ContrastiveLoss(minus, dim, labels, options, &unused)) / (plus[i] - minus[i]);
-      EXPECT_NEAR(grad[i], fd, 2e-3 * std::max(1.0, std::abs(fd))) << i << " negatives " << negatives;
+                         ContrastiveLoss(minus, dim, labels, options, &unused)) /
+                        (plus[i] - minus[i]);
+      EXPECT_NEAR(grad[i], fd, 2e-3 * std::max(1.0, std::abs(fd)))
+          << i << " negatives " << negatives;
     }
   }
 }
@@ -55,7 +58,8 @@ TEST(ContrastiveLoss, SeparatedClassesScoreLowerThanMixedOnes) {
   std::vector<float> mixed = ClusteredFeatures({1, 2, 1, 2, 1, 2}, 4, 1);
   const double confused = ContrastiveLoss(mixed, 4, labels, {}, &grad);
   EXPECT_LT(separated, confused);
-  EXPECT_EQ(ContrastiveLoss(mixed, 4, {1, 1, 1, 1, 1, 1}, {}, &grad), 0.0);  // one class: no contrast
+  EXPECT_EQ(ContrastiveLoss(mixed, 4, {1, 1, 1, 1, 1, 1}, {}, &grad),
+            0.0);  // one class: no contrast
 }
 
 // Hand-built training data: 2 views of 40 pool pixels, each rendered by 1-3 Gaussians of one class.
@@ -97,7 +101,8 @@ TEST(FeatureField, GradientOfAllTermsMatchesFiniteDifferences) {
   options.samples = 64;
   options.consider_negative = false;
   options.detach_sample_norm = false;
-  options.lambda_single = options.lambda_multi = options.lambda_3d = 1.0;  // unit weights for the check
+  options.lambda_single = options.lambda_multi = options.lambda_3d =
+      1.0;  // unit weights for the check
   std::vector<double> grad, unused;
   LossAndGradient(data, options, features, 1, true, 42, &grad);
   for (size_t i = 0; i < features.size(); i += 3) {
@@ -106,7 +111,8 @@ TEST(FeatureField, GradientOfAllTermsMatchesFiniteDifferences) {
     plus[i] += h;
     minus[i] -= h;
     const double fd = (LossAndGradient(data, options, plus, 1, true, 42, &unused) -
-                       LossAndGradient(data, options, minus, 1, true, 42, &unused)) / (plus[i] - minus[i]);
+                       LossAndGradient(data, options, minus, 1, true, 42, &unused)) /
+                      (plus[i] - minus[i]);
     EXPECT_NEAR(grad[i], fd, 3e-3 * std::max(1.0, std::abs(fd))) << "feature entry " << i;
   }
 }
@@ -132,12 +138,14 @@ TEST(FeatureField, TrainingOnASyntheticSceneSeparatesInstances) {
   absl::StatusOr<decomposition::DecompositionResult> coarse =
       decomposition::Decompose(*read, scene->cloud, decomposition::DecompositionOptions{});
   ASSERT_TRUE(coarse.ok());
-  ASSERT_TRUE(decomposition::WriteDecomposition(dir + "/decomposition", *read, scene->cloud, *coarse).ok());
+  ASSERT_TRUE(
+      decomposition::WriteDecomposition(dir + "/decomposition", *read, scene->cloud, *coarse).ok());
   TrainingOptions options;
   options.iterations = 300;
   options.samples = 2048;
   options.pixel_pool = 4096;
-  absl::StatusOr<TrainingData> data = PrepareTraining(*read, scene->cloud, dir + "/decomposition", options);
+  absl::StatusOr<TrainingData> data =
+      PrepareTraining(*read, scene->cloud, dir + "/decomposition", options);
   ASSERT_TRUE(data.ok()) << data.status();
   absl::StatusOr<TrainingResult> trained = TrainFeatures(*data, options);
   ASSERT_TRUE(trained.ok()) << trained.status();
@@ -149,14 +157,18 @@ TEST(FeatureField, TrainingOnASyntheticSceneSeparatesInstances) {
   EXPECT_LT(last, 0.5 * first);  // the loss falls
   SegmentationResult result;
   result.stage = "train";
-  result.labels = SegmentByFeatures(trained->features, options.feature_dim, data->labels3d, SegmentOptions{});
+  result.labels =
+      SegmentByFeatures(trained->features, options.feature_dim, data->labels3d, SegmentOptions{});
   result.features = trained->features;
   result.feature_dim = options.feature_dim;
   ASSERT_TRUE(WriteResult(dir + "/trained", result, scene->cloud).ok());
-  absl::StatusOr<ClickEvaluation> features = EvaluateResultDirectory(dir, dir + "/trained", ClickEvalOptions{});
-  absl::StatusOr<ClickEvaluation> labels = EvaluateResultDirectory(dir, dir + "/decomposition", ClickEvalOptions{});
+  absl::StatusOr<ClickEvaluation> features =
+      EvaluateResultDirectory(dir, dir + "/trained", ClickEvalOptions{});
+  absl::StatusOr<ClickEvaluation> labels =
+      EvaluateResultDirectory(dir, dir + "/decomposition", ClickEvalOptions{});
   ASSERT_TRUE(features.ok() && labels.ok());
-  EXPECT_GT(features->miou, 0.6) << "feature click mIoU; decomposition labels give " << labels->miou;
+  EXPECT_GT(features->miou, 0.6) << "feature click mIoU; decomposition labels give "
+                                 << labels->miou;
 }
 
 TEST(Query, ClicksAndPointsReturnTheGroundTruthInstance) {
@@ -172,7 +184,8 @@ TEST(Query, ClicksAndPointsReturnTheGroundTruthInstance) {
   absl::StatusOr<std::unique_ptr<QueryIndex>> index = QueryIndex::Build(*read, scene->cloud, *gt);
   ASSERT_TRUE(index.ok()) << index.status();
   const int view = 4;
-  absl::StatusOr<LabelMap> mask = ReadLabelMap(dir + "/gt/masks/" + read->views[view].name + ".png");
+  absl::StatusOr<LabelMap> mask =
+      ReadLabelMap(dir + "/gt/masks/" + read->views[view].name + ".png");
   ASSERT_TRUE(mask.ok());
   int clicked = 0;
   for (size_t p = 0; p < mask->labels.size(); p += 37) {
@@ -188,7 +201,8 @@ TEST(Query, ClicksAndPointsReturnTheGroundTruthInstance) {
   }
   EXPECT_GT(clicked, 10);
   const SynthObject& o = scene->objects[2];
-  absl::StatusOr<QueryAnswer> at = (*index)->Point(Eigen::Vector3f(&scene->cloud.positions[3 * o.first_gaussian]), 0.01f);
+  absl::StatusOr<QueryAnswer> at =
+      (*index)->Point(Eigen::Vector3f(&scene->cloud.positions[3 * o.first_gaussian]), 0.01f);
   ASSERT_TRUE(at.ok());
   EXPECT_EQ(at->instance, static_cast<uint32_t>(o.id));
   EXPECT_EQ((*index)->Point(Eigen::Vector3f(50, 50, 50), 0.01f)->instance, 0u);

@@ -9,7 +9,8 @@
 namespace instascene::training {
 
 absl::StatusOr<std::vector<uint32_t>> VoteLabels(const Scene& scene, const GaussianCloud& cloud,
-                                                 const std::string& decomposition_dir, int num_threads) {
+                                                 const std::string& decomposition_dir,
+                                                 int num_threads) {
   // Per Gaussian a short list of (label, summed weight): a Gaussian sees few instances.
   std::vector<std::vector<std::pair<uint32_t, float>>> votes(cloud.size());
   RenderOptions options;
@@ -20,9 +21,12 @@ absl::StatusOr<std::vector<uint32_t>> VoteLabels(const Scene& scene, const Gauss
   options.workspace = &workspace;
   RenderResult render;
   for (const SceneView& view : scene.views) {
-    ASSIGN_OR_RETURN(LabelMap sorted, ReadLabelMap((std::filesystem::path(decomposition_dir) / "masks_sorted" / (view.name + ".png")).string()));
+    ASSIGN_OR_RETURN(LabelMap sorted, ReadLabelMap((std::filesystem::path(decomposition_dir) /
+                                                    "masks_sorted" / (view.name + ".png"))
+                                                       .string()));
     if (sorted.width != view.camera.width || sorted.height != view.camera.height) {
-      return absl::InvalidArgumentError(absl::StrCat("masks_sorted of view '", view.name, "' does not match its camera"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("masks_sorted of view '", view.name, "' does not match its camera"));
     }
     RETURN_IF_ERROR(RenderInto(cloud, view.camera, options, &render));
     const ContributorTrace& trace = render.trace;
@@ -30,7 +34,8 @@ absl::StatusOr<std::vector<uint32_t>> VoteLabels(const Scene& scene, const Gauss
       const uint32_t label = sorted.labels[trace.pixels[i]];
       for (uint64_t k = trace.offsets[i]; k < trace.offsets[i + 1]; ++k) {
         auto& list = votes[trace.entries[k].gaussian];
-        auto it = std::find_if(list.begin(), list.end(), [label](const auto& v) { return v.first == label; });
+        auto it = std::find_if(list.begin(), list.end(),
+                               [label](const auto& v) { return v.first == label; });
         if (it == list.end()) {
           list.emplace_back(label, trace.entries[k].weight);
         } else {

@@ -15,6 +15,7 @@
 namespace instascene::training {
 
 absl::StatusOr<std::vector<uint32_t>> VoteLabels(const Scene& scene, const GaussianCloud& cloud,
-                                                 const std::string& decomposition_dir, int num_threads = 0);
+                                                 const std::string& decomposition_dir,
+                                                 int num_threads = 0);
 
 }  // namespace instascene::training

@@ -12,7 +12,7 @@ namespace {
 
 struct RefSplat {
   bool visible = false;
-  Eigen::Vector3d p_view, a, b, normal_view;  // a, b: scaled tangent axes in view (2DGS)
+  Eigen::Vector3d p_view, a, b, normal_view;        // a, b: scaled tangent axes in view (2DGS)
   Eigen::Matrix3d conic = Eigen::Matrix3d::Zero();  // 3DGS: 2x2 inverse covariance in top-left
   Eigen::Vector2d mean_px;
   double opacity = 0, depth = 0;
@@ -35,17 +35,21 @@ RenderResult ReferenceRender(const GaussianCloud& cloud, const PinholeCamera& ca
   std::vector<RefSplat> splats(n);
   for (size_t i = 0; i < n; ++i) {
     RefSplat& s = splats[i];
-    const Eigen::Vector3d pos(cloud.positions[3 * i], cloud.positions[3 * i + 1], cloud.positions[3 * i + 2]);
+    const Eigen::Vector3d pos(cloud.positions[3 * i], cloud.positions[3 * i + 1],
+                              cloud.positions[3 * i + 2]);
     s.p_view = Rcw * pos + tcw;
     if (s.p_view.z() <= options.near_plane) continue;
     const float* q = &cloud.rotations[4 * i];
-    const Eigen::Matrix3d R = Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized().toRotationMatrix();
+    const Eigen::Matrix3d R =
+        Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized().toRotationMatrix();
     s.opacity = 1.0 / (1.0 + std::exp(-static_cast<double>(cloud.opacity_logits[i])));
     s.depth = s.p_view.z();
     double radius = 0;
     if (surfel) {
-      s.a = Rcw * R.col(0) * std::exp(static_cast<double>(cloud.log_scales[2 * i])) * options.scale_modifier;
-      s.b = Rcw * R.col(1) * std::exp(static_cast<double>(cloud.log_scales[2 * i + 1])) * options.scale_modifier;
+      s.a = Rcw * R.col(0) * std::exp(static_cast<double>(cloud.log_scales[2 * i])) *
+            options.scale_modifier;
+      s.b = Rcw * R.col(1) * std::exp(static_cast<double>(cloud.log_scales[2 * i + 1])) *
+            options.scale_modifier;
       s.normal_view = Rcw * R.col(2);
       const double c = -s.p_view.dot(s.normal_view);
       if (c == 0) continue;
@@ -61,12 +65,15 @@ RenderResult ReferenceRender(const GaussianCloud& cloud, const PinholeCamera& ca
       if (d == 0) continue;
       const Eigen::Vector3d f = t / d;
       s.mean_px = {f.dot(tu.cwiseProduct(tw)), f.dot(tv.cwiseProduct(tw))};
-      const double hx = std::sqrt(std::max(1e-4, s.mean_px.x() * s.mean_px.x() - f.dot(tu.cwiseProduct(tu))));
-      const double hy = std::sqrt(std::max(1e-4, s.mean_px.y() * s.mean_px.y() - f.dot(tv.cwiseProduct(tv))));
+      const double hx =
+          std::sqrt(std::max(1e-4, s.mean_px.x() * s.mean_px.x() - f.dot(tu.cwiseProduct(tu))));
+      const double hy =
+          std::sqrt(std::max(1e-4, s.mean_px.y() * s.mean_px.y() - f.dot(tv.cwiseProduct(tv))));
       radius = std::ceil(std::max({hx, hy, 3.0 * 0.707106}));
     } else {
       Eigen::Vector3d sc;
-      for (int k = 0; k < 3; ++k) sc[k] = std::exp(static_cast<double>(cloud.log_scales[3 * i + k])) * options.scale_modifier;
+      for (int k = 0; k < 3; ++k)
+        sc[k] = std::exp(static_cast<double>(cloud.log_scales[3 * i + k])) * options.scale_modifier;
       const Eigen::Matrix3d cov = R * sc.cwiseAbs2().asDiagonal() * R.transpose();
       const Eigen::Vector3d& t = s.p_view;
       const double limx = 1.3 * 0.5 * W / fx, limy = 1.3 * 0.5 * H / fy;
@@ -96,8 +103,9 @@ RenderResult ReferenceRender(const GaussianCloud& cloud, const PinholeCamera& ca
     s.visible = true;
     const Eigen::Vector3d dir = (pos - center).normalized();
     float rgb[3];
-    EvalShColor(sh_degree, &cloud.sh[static_cast<size_t>(cloud.sh_stride()) * i], static_cast<float>(dir.x()),
-                static_cast<float>(dir.y()), static_cast<float>(dir.z()), rgb);
+    EvalShColor(sh_degree, &cloud.sh[static_cast<size_t>(cloud.sh_stride()) * i],
+                static_cast<float>(dir.x()), static_cast<float>(dir.y()),
+                static_cast<float>(dir.z()), rgb);
     for (int c = 0; c < 3; ++c) s.rgb[c] = rgb[c];
   }
 
@@ -158,13 +166,15 @@ RenderResult ReferenceRender(const GaussianCloud& cloud, const PinholeCamera& ca
         for (int c = 0; c < 3; ++c) N[c] += w * s.normal_view[c];
         for (int k = 0; k < D; ++k) E[k] += w * options.features[i * D + k];
         if (T > 0.5) median = depth;
-        out.trace.entries.push_back({static_cast<uint32_t>(i), static_cast<float>(w), static_cast<float>(T)});
+        out.trace.entries.push_back(
+            {static_cast<uint32_t>(i), static_cast<float>(w), static_cast<float>(T)});
         ++out.num_contributors[pix];
         T *= 1 - alpha;
       }
       out.trace.pixels.push_back(static_cast<uint32_t>(pix));
       out.trace.offsets.push_back(out.trace.entries.size());
-      for (int c = 0; c < 3; ++c) out.color[3 * pix + c] = static_cast<float>(C[c] + T * options.background[c]);
+      for (int c = 0; c < 3; ++c)
+        out.color[3 * pix + c] = static_cast<float>(C[c] + T * options.background[c]);
       out.alpha[pix] = static_cast<float>(1 - T);
       out.depth[pix] = T < 1 ? static_cast<float>(Dacc / (1 - T)) : 0.0f;
       out.median_depth[pix] = static_cast<float>(median);
