@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <system_error>
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
@@ -414,14 +415,14 @@ absl::Status WriteFileAtomically(const std::string& path, absl::string_view byte
   const std::string tmp = absl::StrCat(path, ".tmp.", ::getpid());
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) {
-    return absl::UnavailableError(absl::StrCat(path, ": cannot create: ", std::strerror(errno)));
+    return absl::UnavailableError(absl::StrCat(path, ": cannot create: ", std::error_code(errno, std::generic_category()).message()));
   }
   size_t written = 0;
   while (written < bytes.size()) {
     const ssize_t n = ::write(fd, bytes.data() + written, bytes.size() - written);
     if (n < 0) {
       if (errno == EINTR) continue;
-      const std::string reason = std::strerror(errno);
+      const std::string reason = std::error_code(errno, std::generic_category()).message();
       ::close(fd);
       ::unlink(tmp.c_str());
       return absl::UnavailableError(absl::StrCat(path, ": write failed: ", reason));
@@ -433,7 +434,7 @@ absl::Status WriteFileAtomically(const std::string& path, absl::string_view byte
     return absl::UnavailableError(absl::StrCat(path, ": fsync/close failed"));
   }
   if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string reason = std::strerror(errno);
+    const std::string reason = std::error_code(errno, std::generic_category()).message();
     ::unlink(tmp.c_str());
     return absl::UnavailableError(absl::StrCat(path, ": rename failed: ", reason));
   }
