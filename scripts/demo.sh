@@ -38,14 +38,23 @@ for v in 0 11 23; do
   "$BIN" render --scene "$OUT/synthetic" --view "$v" --mode normal --out "$OUT/synthetic/normal_$v.png"
 done
 
-echo "== 3. Decomposition: noisy 2D masks -> 3D instances, scored against ground truth =="
-"$BIN" decompose --scene "$OUT/synthetic" --out "$OUT/synthetic/decomposition"
-"$BIN" eval --scene "$OUT/synthetic" --result "$OUT/synthetic/decomposition"
+echo "== 3. The main job offline: noisy 2D masks -> 3D instances (decompose + train + segment) =="
+"$BIN" run --scene "$OUT/synthetic" --out "$OUT/synthetic/run"
+echo "-- coarse decomposition (labels):"
+"$BIN" eval --scene "$OUT/synthetic" --result "$OUT/synthetic/run/decomposition" | tail -n 1
+echo "-- full method (trained features, click protocol):"
+"$BIN" eval --scene "$OUT/synthetic" --result "$OUT/synthetic/run/segmentation"
+for v in 0 11 23; do
+  "$BIN" render --scene "$OUT/synthetic" --view "$v" --mode labels --result "$OUT/synthetic/run/segmentation" --out "$OUT/synthetic/instances_$v.png"
+done
+echo "-- per-instance splats (open in any 3DGS viewer):"
+ls "$OUT/synthetic/run/segmentation/instances" | head -n 20 | sed 's/^/  /' 
 if [ -d "$SPLATS" ]; then
   "$BIN" synth --out "$OUT/composite" --from-splats "$SPLATS/statue_massa.ply,$SPLATS/playbot_lod4_3dgs_order.ply,$SPLATS/statue_angel.ply" \
     --views 24 --width 320 --height 240
-  "$BIN" decompose --scene "$OUT/composite" --out "$OUT/composite/decomposition"
-  "$BIN" eval --scene "$OUT/composite" --result "$OUT/composite/decomposition" | tail -n 1
+  "$BIN" run --scene "$OUT/composite" --out "$OUT/composite/run"
+  echo "-- real-capture composite, full method:"
+  "$BIN" eval --scene "$OUT/composite" --result "$OUT/composite/run/segmentation" | tail -n 1
 fi
 
 end_ns=$(date +%s%N)

@@ -39,6 +39,7 @@ check "run wrote instances" test -s "$WORK/run/segmentation/instances.json"
 check "run wrote labelled scene" test -s "$WORK/run/segmentation/scene_labelled.ply"
 check "eval trained features" "$BIN" eval --scene "$WORK/s" --result "$WORK/run/segmentation" --json
 check "eval used features" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"mode\":\"features\"'"
+check "render labels" "$BIN" render --scene "$WORK/s" --view 2 --mode labels --result "$WORK/run/segmentation" --out "$WORK/labels.png"
 check "segment again" "$BIN" segment --scene "$WORK/s" --features "$WORK/run/segmentation" --out "$WORK/seg2" --threshold 0.8
 check "train on the decomposition" "$BIN" train --scene "$WORK/s" --decomposition "$WORK/run/decomposition" --out "$WORK/tr" --iterations 30 --samples 256 --pixel-pool 512 --supervision 3d
 check_fails "bad supervision" "supervision" "$BIN" train --scene "$WORK/s" --decomposition "$WORK/run/decomposition" --out "$WORK/tr" --supervision bogus

@@ -10,6 +10,8 @@
 #include "absl/strings/str_split.h"
 #include "clients/cli/cli.h"
 #include "common/core/status.h"
+#include "common/eval/result.h"
+#include "common/raster/label_render.h"
 #include "common/raster/rasterizer.h"
 #include "common/raster/visualize.h"
 #include "common/scene/scene.h"
@@ -54,12 +56,12 @@ absl::StatusOr<std::vector<float>> Visualize(const RenderResult& r, const std::s
   if (mode == "alpha") return GrayToRgb(r.alpha);
   if (mode == "features") return FeaturesToRgb(r.features, feature_dim);
   return absl::InvalidArgumentError(
-      absl::StrCat("unknown --mode '", mode, "' (color, depth, normal, alpha, features)"));
+      absl::StrCat("unknown --mode '", mode, "' (color, depth, normal, alpha, labels, features)"));
 }
 
 void AddRenderCommand(CLI::App& app, Action* action) {
   struct Args {
-    std::string scene, view = "0", ply, out, mode = "color", up = "-y", feature_prefix = "segfeat_";
+    std::string scene, view = "0", ply, out, mode = "color", up = "-y", feature_prefix = "segfeat_", result;
     std::string orbit = "0,20";
     int width = 800, height = 600, threads = 0;
     double fov = 50.0, distance = 2.2;
@@ -75,9 +77,11 @@ void AddRenderCommand(CLI::App& app, Action* action) {
       cmd->add_option("--ply", args->ply, "Render this .ply without a scene (orbit camera)");
   scene_opt->excludes(ply_opt);
   cmd->add_option("--out", args->out, "Output PNG")->required();
-  cmd->add_option(
-      "--mode", args->mode,
-      "color, depth (median), normal, alpha or features (PCA of --feature-prefix channels)");
+  cmd->add_option("--mode", args->mode,
+                  "color, depth (median), normal, alpha, labels (of --result) or features (PCA of "
+                  "--feature-prefix channels)");
+  cmd->add_option("--result", args->result,
+                  "--mode labels: a result directory (instance labels per Gaussian)");
   cmd->add_option("--orbit", args->orbit,
                   "Bare .ply: azimuth,elevation in degrees around the robust centre");
   cmd->add_option("--distance", args->distance,
@@ -137,8 +141,18 @@ void AddRenderCommand(CLI::App& app, Action* action) {
         options.features = features.data();
         options.feature_dim = dim;
       }
-      ASSIGN_OR_RETURN(RenderResult r, Render(cloud, camera, options));
-      ASSIGN_OR_RETURN(std::vector<float> rgb, Visualize(r, args->mode, dim));
+      std::vector<float> rgb;
+      RenderResult r;
+      if (args->mode == "labels") {
+        if (args->result.empty()) return absl::InvalidArgumentError("--mode labels needs --result DIR");
+        ASSIGN_OR_RETURN(SegmentationResult result, ReadResult(args->result, cloud.size()));
+        options.trace.enabled = true;
+        ASSIGN_OR_RETURN(r, Render(cloud, camera, options));
+        rgb = LabelsToRgb(LabelMapFromTrace(r, result.labels));
+      } else {
+        ASSIGN_OR_RETURN(r, Render(cloud, camera, options));
+        ASSIGN_OR_RETURN(rgb, Visualize(r, args->mode, dim));
+      }
       RETURN_IF_ERROR(WriteImage(args->out, Image{r.width, r.height, 3, std::move(rgb)}));
       std::fprintf(stderr, "render: %s (%dx%d, %zu Gaussians, %s) in %.1f ms\n", args->out.c_str(),
                    r.width, r.height, cloud.size(), args->mode.c_str(), r.stats.total_ms);

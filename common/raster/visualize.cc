@@ -44,6 +44,17 @@ std::vector<float> GrayToRgb(const std::vector<float>& gray) {
   return rgb;
 }
 
+std::vector<float> LabelsToRgb(const std::vector<uint32_t>& labels) {
+  std::vector<float> rgb(3 * labels.size(), 0.0f);
+  for (size_t i = 0; i < labels.size(); ++i) {
+    if (labels[i] == 0) continue;
+    uint32_t h = labels[i] * 2654435761u;
+    h ^= h >> 15;
+    for (int c = 0; c < 3; ++c) rgb[3 * i + c] = 0.25f + 0.75f * static_cast<float>((h >> (8 * c)) & 0xff) / 255.0f;
+  }
+  return rgb;
+}
+
 std::vector<float> FeaturesToRgb(const std::vector<float>& features, int dim) {
   const size_t n = dim > 0 ? features.size() / dim : 0;
   std::vector<float> rgb(3 * n, 0.0f);

@@ -2,6 +2,7 @@
 // map, normals, alpha, feature PCA). Stateless, thread-safe.
 #pragma once
 
+#include <cstdint>
 #include <vector>
 
 namespace instascene {
@@ -13,6 +14,8 @@ std::vector<float> ColorizeDepth(const std::vector<float>& depth, const std::vec
 std::vector<float> NormalsToRgb(const std::vector<float>& normal);
 // One channel replicated to RGB.
 std::vector<float> GrayToRgb(const std::vector<float>& gray);
+// Integer labels (HxW) to distinct colours (0 = black), by hashing the label.
+std::vector<float> LabelsToRgb(const std::vector<uint32_t>& labels);
 // HxWxD features projected on their 3 principal components (per-image PCA), mapped to [0, 1].
 std::vector<float> FeaturesToRgb(const std::vector<float>& features, int dim);
 
