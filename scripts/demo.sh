@@ -60,7 +60,12 @@ fi
 end_ns=$(date +%s%N)
 echo
 echo "== Demo output =="
-find "$OUT" -name '*.png' | sort | sed 's/^/  /' | head -n 40
-echo "  ... $(find "$OUT" -name '*.png' | wc -l) PNG files in $OUT/"
+echo "  demo-out/real/                         $(ls demo-out/real 2>/dev/null | wc -l) renders of the real captures (color, depth, surfel normals)"
+echo "  demo-out/synthetic/                    scene: images/, masks/ (noisy), gt/ (ground truth)"
+echo "  demo-out/synthetic/run/decomposition/  coarse 3D instances, filtered and consistent 2D masks"
+echo "  demo-out/synthetic/run/segmentation/   features, labels, instances/*.ply, scene_labelled.ply"
+echo "  demo-out/synthetic/instances_*.png     rendered instance maps"
+[ -d "$OUT/composite" ] && echo "  demo-out/composite/                    the real captures composed into one scene, and its run/"
+echo "  ($(find "$OUT" -name '*.png' | wc -l) PNG and $(find "$OUT" -name '*.ply' | wc -l) PLY files in all)"
 elapsed_ms=$(( (end_ns - start_ns) / 1000000 ))
 printf "Demo finished in %d.%03d s\n" $((elapsed_ms / 1000)) $((elapsed_ms % 1000))
