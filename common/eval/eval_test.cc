@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include "common/core/testing/temp_dir.h"
+
 #include <cmath>
 #include <filesystem>
 #include <map>
@@ -172,7 +174,7 @@ TEST(GeometryMetrics, VolumeIouOfShiftedCubesAndSphereVolume) {
 class ClickProtocol : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new std::string(::testing::TempDir() + "/click_eval_scene");
+    dir_ = new std::string(instascene::testing::FreshTempDir("click_eval_scene") + "/scene");
     std::filesystem::remove_all(*dir_);
     absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("tiny"));
     ASSERT_TRUE(scene.ok());
@@ -277,7 +279,7 @@ TEST_F(ClickProtocol, MergedObjectScoresWhatItShould) {
 }
 
 TEST(Result, RejectsWrongSizesAndMalformedFiles) {
-  const std::string dir = ::testing::TempDir() + "/bad_result";
+  const std::string dir = instascene::testing::FreshTempDir("bad_result");
   std::filesystem::remove_all(dir);
   GaussianCloud cloud;
   cloud.Resize(4);

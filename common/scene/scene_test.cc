@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include "common/core/testing/temp_dir.h"
+
 #include <OpenImageIO/imageio.h>
 
 #include <cstdio>
@@ -17,7 +19,7 @@ namespace {
 namespace fs = std::filesystem;
 
 std::string FreshDir(const std::string& name) {
-  const std::string dir = ::testing::TempDir() + "/scene_test_" + name;
+  const std::string dir = instascene::testing::FreshTempDir("scene_test_" + name);
   fs::remove_all(dir);
   fs::create_directories(dir);
   return dir;

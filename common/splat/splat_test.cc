@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include "common/core/testing/temp_dir.h"
+
 #include <cmath>
 #include <filesystem>
 #include <numbers>
@@ -68,7 +70,8 @@ INSTANTIATE_TEST_SUITE_P(ScalesAndDegrees, PlyRoundTrip,
                                             ::testing::Values(0, 1, 2, 3)));
 
 TEST(GaussianPly, WritesAtomicallyToDisk) {
-  const std::string path = ::testing::TempDir() + "/roundtrip.ply";
+  const std::string dir = instascene::testing::FreshTempDir("ply_roundtrip");
+  const std::string path = dir + "/roundtrip.ply";
   GaussianCloud cloud = RandomCloud(10, 2, 1, 5);
   ASSERT_TRUE(WriteGaussianPly(path, cloud).ok());
   absl::StatusOr<GaussianCloud> back = ReadGaussianPly(path);
@@ -81,7 +84,7 @@ TEST(GaussianPly, WritesAtomicallyToDisk) {
   EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(s.message().find("Gaussian #1"), std::string::npos) << s;
   ASSERT_TRUE(ReadGaussianPly(path).ok());
-  for (const auto& entry : std::filesystem::directory_iterator(::testing::TempDir())) {
+  for (const auto& entry : std::filesystem::directory_iterator(dir)) {
     EXPECT_EQ(entry.path().string().find("roundtrip.ply.tmp"), std::string::npos);
   }
 }

@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include "common/core/testing/temp_dir.h"
+
 #include <map>
 #include <numbers>
 
@@ -202,7 +204,7 @@ TEST(MaskNoise, MergesSplitsAndMissesHappenAtTheirRates) {
 }
 
 TEST(SceneWriter, WritesImagesMasksAndGroundTruth) {
-  const std::string dir = ::testing::TempDir() + "/synth_writer";
+  const std::string dir = instascene::testing::FreshTempDir("synth_writer") + "/scene";
   std::filesystem::remove_all(dir);
   absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("tiny"));
   ASSERT_TRUE(scene.ok());

@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include "common/core/testing/temp_dir.h"
+
 #include <filesystem>
 #include <random>
 
@@ -172,7 +174,8 @@ TEST(PostProcess, GridDbscanMatchesBruteForceOnCorePoints) {
 
 // End to end on small synthetic scenes; returns the evaluation of the decomposition.
 ClickEvaluation DecomposeSynthetic(const std::string& noise, uint64_t seed) {
-  const std::string dir = ::testing::TempDir() + "/decomp_" + noise + std::to_string(seed);
+  const std::string dir =
+      instascene::testing::FreshTempDir("decomp_" + noise + std::to_string(seed)) + "/scene";
   std::filesystem::remove_all(dir);
   ClutterOptions scene_options = *ClutterPreset("small");
   scene_options.seed = seed;

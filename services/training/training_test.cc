@@ -1,5 +1,7 @@
 #include <gtest/gtest.h>
 
+#include "common/core/testing/temp_dir.h"
+
 #include <filesystem>
 #include <random>
 
@@ -126,7 +128,7 @@ TEST(Segmentation, AssignsByMeanFeatureWithThreshold) {
 }
 
 TEST(FeatureField, TrainingOnASyntheticSceneSeparatesInstances) {
-  const std::string dir = ::testing::TempDir() + "/training_scene";
+  const std::string dir = instascene::testing::FreshTempDir("training_scene") + "/scene";
   std::filesystem::remove_all(dir);
   absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("small"));
   ASSERT_TRUE(scene.ok());
@@ -172,7 +174,7 @@ TEST(FeatureField, TrainingOnASyntheticSceneSeparatesInstances) {
 }
 
 TEST(Query, ClicksAndPointsReturnTheGroundTruthInstance) {
-  const std::string dir = ::testing::TempDir() + "/query_scene";
+  const std::string dir = instascene::testing::FreshTempDir("query_scene") + "/scene";
   std::filesystem::remove_all(dir);
   absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("tiny"));
   ASSERT_TRUE(scene.ok());
