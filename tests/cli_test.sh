@@ -46,6 +46,7 @@ check_fails "bad supervision" "supervision" "$BIN" train --scene "$WORK/s" --dec
 check_fails "segment without features" "no features" "$BIN" segment --scene "$WORK/s" --features "$WORK/s/gt" --out "$WORK/seg3"
 check "query a pixel" "$BIN" query --scene "$WORK/s" --result "$WORK/run/segmentation" --view 3 --pixel 40,40 --out "$WORK/q" --json
 check "query a point" "$BIN" query --scene "$WORK/s" --result "$WORK/s/gt" --point 0,0,0.8 --json
+check "query a ray" "$BIN" query --scene "$WORK/s" --result "$WORK/s/gt" --ray 0,-1,1.2,0,1,-0.4 --json
 check_fails "query outside the image" "outside" "$BIN" query --scene "$WORK/s" --result "$WORK/s/gt" --view 3 --pixel 4000,1
 check "help" "$BIN" --help
 check "render help" "$BIN" render --help

@@ -15,7 +15,7 @@ namespace instascene::cli {
 
 void AddQueryCommand(CLI::App& app, Action* action) {
   struct Args {
-    std::string scene, result, view = "0", pixel, point, out;
+    std::string scene, result, view = "0", pixel, point, ray, out;
     float max_distance = 0.02f;
     bool json = false;
   };
@@ -28,14 +28,16 @@ void AddQueryCommand(CLI::App& app, Action* action) {
   cmd->add_option("--view", args->view, "View name or index of the click");
   cmd->add_option("--pixel", args->pixel, "Clicked pixel X,Y");
   cmd->add_option("--point", args->point, "Or a 3D point X,Y,Z (world)");
+  cmd->add_option("--ray", args->ray, "Or a ray OX,OY,OZ,DX,DY,DZ (origin and direction, world)");
   cmd->add_option("--max-distance", args->max_distance,
                   "3D point query: nearest-Gaussian radius (scene units)");
   cmd->add_option("--out", args->out, "Write the instance's mask in every view as PNGs here");
   cmd->add_flag("--json", args->json, "Print the answer as one JSON line");
   cmd->callback([args, action] {
     *action = [args]() -> absl::Status {
-      if (args->pixel.empty() == args->point.empty())
-        return absl::InvalidArgumentError("give exactly one of --pixel or --point");
+      if (args->pixel.empty() + args->point.empty() + args->ray.empty() != 2) {
+        return absl::InvalidArgumentError("give exactly one of --pixel, --point or --ray");
+      }
       ASSIGN_OR_RETURN(Scene scene, ReadScene(args->scene));
       ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
       ASSIGN_OR_RETURN(SegmentationResult result, ReadResult(args->result, cloud.size()));
@@ -43,8 +45,10 @@ void AddQueryCommand(CLI::App& app, Action* action) {
       ASSIGN_OR_RETURN(std::unique_ptr<training::QueryIndex> index,
                        training::QueryIndex::Build(scene, cloud, result));
       const double build_ms = build.ElapsedMs();
-      std::vector<std::string> parts =
-          absl::StrSplit(args->pixel.empty() ? args->point : args->pixel, ',');
+      const std::string& spec = !args->pixel.empty()   ? args->pixel
+                                : !args->point.empty() ? args->point
+                                                       : args->ray;
+      std::vector<std::string> parts = absl::StrSplit(spec, ',');
       std::vector<double> values;
       for (const std::string& p : parts) {
         double v = 0;
@@ -59,6 +63,12 @@ void AddQueryCommand(CLI::App& app, Action* action) {
         ASSIGN_OR_RETURN(int view, ResolveView(scene, args->view));
         ASSIGN_OR_RETURN(
             answer, index->Click(view, static_cast<int>(values[0]), static_cast<int>(values[1])));
+      } else if (!args->ray.empty()) {
+        if (values.size() != 6)
+          return absl::InvalidArgumentError("--ray must be OX,OY,OZ,DX,DY,DZ");
+        ASSIGN_OR_RETURN(
+            answer, index->Ray(Eigen::Vector3d(values[0], values[1], values[2]).cast<float>(),
+                               Eigen::Vector3d(values[3], values[4], values[5]).cast<float>()));
       } else {
         if (values.size() != 3) return absl::InvalidArgumentError("--point must be X,Y,Z");
         ASSIGN_OR_RETURN(

@@ -61,7 +61,8 @@ absl::StatusOr<std::vector<float>> Visualize(const RenderResult& r, const std::s
 
 void AddRenderCommand(CLI::App& app, Action* action) {
   struct Args {
-    std::string scene, view = "0", ply, out, mode = "color", up = "-y", feature_prefix = "segfeat_", result;
+    std::string scene, view = "0", ply, out, mode = "color", up = "-y", feature_prefix = "segfeat_",
+                       result;
     std::string orbit = "0,20";
     int width = 800, height = 600, threads = 0;
     double fov = 50.0, distance = 2.2;
@@ -144,7 +145,8 @@ void AddRenderCommand(CLI::App& app, Action* action) {
       std::vector<float> rgb;
       RenderResult r;
       if (args->mode == "labels") {
-        if (args->result.empty()) return absl::InvalidArgumentError("--mode labels needs --result DIR");
+        if (args->result.empty())
+          return absl::InvalidArgumentError("--mode labels needs --result DIR");
         ASSIGN_OR_RETURN(SegmentationResult result, ReadResult(args->result, cloud.size()));
         options.trace.enabled = true;
         ASSIGN_OR_RETURN(r, Render(cloud, camera, options));

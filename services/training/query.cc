@@ -14,6 +14,7 @@ absl::StatusOr<std::unique_ptr<QueryIndex>> QueryIndex::Build(const Scene& scene
     return absl::InvalidArgumentError("result and scene disagree on the Gaussian count");
   auto index = std::unique_ptr<QueryIndex>(new QueryIndex());
   index->scene_ = &scene;
+  index->cloud_ = &cloud;
   index->labels_ = result.labels;
   for (uint32_t g = 0; g < result.labels.size(); ++g) {
     if (result.labels[g] != 0) index->members_[result.labels[g]].push_back(g);
@@ -61,6 +62,25 @@ absl::StatusOr<QueryAnswer> QueryIndex::Point(const Eigen::Vector3f& point,
   if (points_->size() == 0) return Answer(0);
   const auto [g, dist2] = points_->Nearest(point);
   return Answer(dist2 <= max_distance * max_distance ? labels_[g] : 0);
+}
+
+absl::StatusOr<QueryAnswer> QueryIndex::Ray(const Eigen::Vector3f& origin,
+                                            const Eigen::Vector3f& direction) const {
+  if (!origin.allFinite() || !direction.allFinite() || direction.norm() < 1e-12f) {
+    return absl::InvalidArgumentError(
+        "ray origin and direction must be finite, direction non-zero");
+  }
+  // A 1x1 camera: its only pixel centre lies on the optical axis.
+  const Eigen::Vector3d forward = direction.cast<double>().normalized();
+  const Eigen::Vector3d helper =
+      std::abs(forward.z()) < 0.9 ? Eigen::Vector3d::UnitZ() : Eigen::Vector3d::UnitX();
+  PinholeCamera camera;
+  camera.width = camera.height = 1;
+  camera.fx = camera.fy = 1000.0;
+  camera.cx = camera.cy = 0.5;
+  camera.camera_from_world = LookAt(origin.cast<double>(), origin.cast<double>() + forward, helper);
+  ASSIGN_OR_RETURN(std::vector<uint32_t> map, RenderLabelMap(*cloud_, camera, labels_, 0.5f));
+  return Answer(map[0]);
 }
 
 std::vector<uint8_t> QueryIndex::Mask(uint32_t instance, int view) const {

@@ -3,7 +3,8 @@
 // The index renders every view's instance label map once (per pixel, the label with the largest
 // summed blending weight) and keeps per-instance Gaussian lists and per-view pixel counts, so a
 // click (view, pixel) is a lookup, and a 3D point query is a k-d tree nearest-neighbour search.
-// Build is not thread-safe; queries are const and safe from many threads.
+// The scene and cloud passed to Build must outlive the index. Build is not thread-safe; queries are
+// const and safe from many threads.
 #pragma once
 
 #include <cstdint>
@@ -38,6 +39,10 @@ class QueryIndex {
   // The instance of the Gaussian nearest to a 3D point, if one lies within max_distance.
   absl::StatusOr<QueryAnswer> Point(const Eigen::Vector3f& point_in_world,
                                     float max_distance) const;
+  // The instance a ray meets: the label with the largest summed blending weight along the ray
+  // (rendered through a one-pixel camera at the origin looking along the direction).
+  absl::StatusOr<QueryAnswer> Ray(const Eigen::Vector3f& origin_in_world,
+                                  const Eigen::Vector3f& direction) const;
   // The instance's mask in a view (W*H, 1 = selected).
   std::vector<uint8_t> Mask(uint32_t instance, int view) const;
   const std::vector<uint32_t>& Gaussians(uint32_t instance) const;
@@ -45,6 +50,7 @@ class QueryIndex {
  private:
   QueryAnswer Answer(uint32_t instance) const;
   const Scene* scene_ = nullptr;
+  const GaussianCloud* cloud_ = nullptr;
   std::vector<std::vector<uint32_t>> label_maps_;                    // per view, W*H
   std::map<uint32_t, std::vector<uint32_t>> members_;                // instance -> Gaussians
   std::map<uint32_t, std::vector<std::pair<int, size_t>>> visible_;  // instance -> (view, pixels)
