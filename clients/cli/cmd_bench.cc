@@ -128,20 +128,30 @@ double PeakRssBytes() {
   return static_cast<double>(usage.ru_maxrss) * 1024.0;
 }
 
-absl::Status BenchDecompose(const BenchArgs& args) {
-  ASSIGN_OR_RETURN(ClutterOptions options, ClutterPreset(args.preset));
-  options.seed = args.seed;
-  if (args.gaussians_set) options.gaussians = static_cast<size_t>(args.gaussians);
-  if (args.views_set) options.views = args.frames;
-  const std::string dir =
-      args.work.empty()
-          ? (std::filesystem::temp_directory_path() / ("instascene-bench-" + args.preset)).string()
-          : args.work;
-  Stopwatch build;
-  ASSIGN_OR_RETURN(ClutterScene scene, GenerateClutterScene(options));
+// The preset scene of a pipeline benchmark, generated and written to args.work (or a temp folder).
+absl::StatusOr<std::pair<ClutterScene, std::string>> BenchScene(const BenchArgs& args,
+                                                                const std::string& tag,
+                                                                ClutterOptions* options) {
+  ASSIGN_OR_RETURN(*options, ClutterPreset(args.preset));
+  options->seed = args.seed;
+  if (args.gaussians_set) options->gaussians = static_cast<size_t>(args.gaussians);
+  if (args.views_set) options->views = args.frames;
+  const std::string dir = args.work.empty() ? (std::filesystem::temp_directory_path() /
+                                               ("instascene-bench-" + tag + "-" + args.preset))
+                                                  .string()
+                                            : args.work;
+  ASSIGN_OR_RETURN(ClutterScene scene, GenerateClutterScene(*options));
   SceneWriteOptions write;
   write.num_threads = args.threads;
   RETURN_IF_ERROR(WriteClutterScene(scene, dir, write));
+  return std::make_pair(std::move(scene), dir);
+}
+
+absl::Status BenchDecompose(const BenchArgs& args) {
+  ClutterOptions options;
+  Stopwatch build;
+  ASSIGN_OR_RETURN(auto generated, BenchScene(args, "decompose", &options));
+  const auto& [scene, dir] = generated;
   std::fprintf(stderr,
                "bench decompose: scene %s (%zu Gaussians, %zu views of %dx%d, medium noise) "
                "written in %.1f s\n",
@@ -189,19 +199,9 @@ absl::Status BenchDecompose(const BenchArgs& args) {
 }
 
 absl::Status BenchTrain(const BenchArgs& args) {
-  ASSIGN_OR_RETURN(ClutterOptions options, ClutterPreset(args.preset));
-  options.seed = args.seed;
-  if (args.gaussians_set) options.gaussians = static_cast<size_t>(args.gaussians);
-  if (args.views_set) options.views = args.frames;
-  const std::string dir =
-      args.work.empty()
-          ? (std::filesystem::temp_directory_path() / ("instascene-bench-train-" + args.preset))
-                .string()
-          : args.work;
-  ASSIGN_OR_RETURN(ClutterScene scene, GenerateClutterScene(options));
-  SceneWriteOptions write;
-  write.num_threads = args.threads;
-  RETURN_IF_ERROR(WriteClutterScene(scene, dir, write));
+  ClutterOptions options;
+  ASSIGN_OR_RETURN(auto generated, BenchScene(args, "train", &options));
+  const auto& [scene, dir] = generated;
   ASSIGN_OR_RETURN(Scene read, ReadScene(dir));
   decomposition::DecompositionOptions dopt;
   dopt.num_threads = args.threads;

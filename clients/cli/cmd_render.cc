@@ -31,20 +31,6 @@ absl::StatusOr<Eigen::Vector3d> ParseAxis(const std::string& text) {
       absl::StrCat("--up must be one of x, y, z, -x, -y, -z; got '", text, "'"));
 }
 
-// Robust centre and radius of a cloud: the 2nd-98th percentile box of the positions.
-void RobustBounds(const GaussianCloud& cloud, Eigen::Vector3d* center, double* radius) {
-  Eigen::Vector3d lo, hi;
-  for (int a = 0; a < 3; ++a) {
-    std::vector<float> v(cloud.size());
-    for (size_t i = 0; i < cloud.size(); ++i) v[i] = cloud.positions[3 * i + a];
-    std::sort(v.begin(), v.end());
-    lo[a] = v[v.size() * 2 / 100];
-    hi[a] = v[std::min(v.size() - 1, v.size() * 98 / 100)];
-  }
-  *center = 0.5 * (lo + hi);
-  *radius = std::max(0.5 * (hi - lo).norm(), 1e-3);
-}
-
 }  // namespace
 
 // Shared by render and the demo: converts a render result to the requested RGB visualisation.
@@ -120,9 +106,9 @@ void AddRenderCommand(CLI::App& app, Action* action) {
           return absl::InvalidArgumentError("--orbit must be AZIMUTH,ELEVATION in degrees");
         }
         ASSIGN_OR_RETURN(Eigen::Vector3d up, ParseAxis(args->up));
-        Eigen::Vector3d center;
-        double radius = 1;
-        RobustBounds(cloud, &center, &radius);
+        const Eigen::AlignedBox3f box = RobustBounds(cloud);
+        const Eigen::Vector3d center = box.center().cast<double>();
+        const double radius = std::max(0.5 * static_cast<double>(box.diagonal().norm()), 1e-3);
         camera = OrbitCamera(center, up, args->distance * radius, az, el, args->width, args->height,
                              args->fov);
       }

@@ -149,6 +149,24 @@ GaussianCloud GaussianCloud::Subset(const std::vector<uint32_t>& indices) const 
   return out;
 }
 
+Eigen::AlignedBox3f RobustBounds(const GaussianCloud& cloud, double low_fraction,
+                                 double high_fraction) {
+  Eigen::AlignedBox3f box;
+  const size_t n = cloud.size();
+  if (n == 0) return box;
+  const size_t lo = std::min(n - 1, static_cast<size_t>(low_fraction * static_cast<double>(n)));
+  const size_t hi = std::min(n - 1, static_cast<size_t>(high_fraction * static_cast<double>(n)));
+  std::vector<float> v(n);
+  for (int a = 0; a < 3; ++a) {
+    for (size_t i = 0; i < n; ++i) v[i] = cloud.positions[3 * i + a];
+    std::nth_element(v.begin(), v.begin() + lo, v.end());
+    box.min()[a] = v[lo];
+    std::nth_element(v.begin(), v.begin() + hi, v.end());
+    box.max()[a] = v[hi];
+  }
+  return box;
+}
+
 GaussianCloud ToSurfels(const GaussianCloud& cloud) {
   if (cloud.num_scales == 2) return cloud;
   GaussianCloud out = cloud;

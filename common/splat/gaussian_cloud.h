@@ -10,6 +10,8 @@
 #include <vector>
 #include "absl/strings/string_view.h"
 
+#include <Eigen/Geometry>
+
 #include "absl/status/status.h"
 #include "absl/status/statusor.h"
 #include "common/splat/ply.h"
@@ -61,6 +63,11 @@ struct GaussianCloud {
   // The Gaussians at `indices`, in that order, with every attribute and extra channel.
   GaussianCloud Subset(const std::vector<uint32_t>& indices) const;
 };
+
+// Per-axis percentile box of the Gaussian centres (default 2nd-98th): robust against the floaters
+// real captures carry. Empty box for an empty cloud.
+Eigen::AlignedBox3f RobustBounds(const GaussianCloud& cloud, double low_fraction = 0.02,
+                                 double high_fraction = 0.98);
 
 // Turns a 3DGS cloud into 2DGS surfels by dropping each Gaussian's smallest axis: the two largest
 // axes become the tangent axes and the smallest becomes the normal (rotation re-ordered, kept

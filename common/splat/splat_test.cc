@@ -272,3 +272,28 @@ TEST(ToSurfels, DropsSmallestAxisAndKeepsFrame) {
 
 }  // namespace
 }  // namespace instascene
+
+namespace instascene {
+namespace {
+
+TEST(RobustBounds, MatchesSortedPercentilesAndIgnoresFloaters) {
+  GaussianCloud cloud;
+  cloud.Resize(1000);
+  std::mt19937 rng(2);
+  std::uniform_real_distribution<float> u(-1.0f, 1.0f);
+  for (float& p : cloud.positions) p = u(rng);
+  for (int i = 0; i < 5; ++i) cloud.positions[3 * i] = 1000.0f;  // far floaters on x
+  const Eigen::AlignedBox3f box = RobustBounds(cloud);
+  for (int a = 0; a < 3; ++a) {
+    std::vector<float> v(cloud.size());
+    for (size_t i = 0; i < cloud.size(); ++i) v[i] = cloud.positions[3 * i + a];
+    std::sort(v.begin(), v.end());
+    EXPECT_EQ(box.min()[a], v[20]);
+    EXPECT_EQ(box.max()[a], v[980]);
+  }
+  EXPECT_LT(box.max().x(), 1.0f);
+  EXPECT_TRUE(RobustBounds(GaussianCloud{}).isEmpty());
+}
+
+}  // namespace
+}  // namespace instascene

@@ -7,17 +7,7 @@
 #include "absl/strings/str_cat.h"
 
 namespace instascene {
-namespace {
-
-// 2nd and 98th percentile of one coordinate.
-std::pair<float, float> RobustRange(const GaussianCloud& cloud, int axis) {
-  std::vector<float> v(cloud.size());
-  for (size_t i = 0; i < cloud.size(); ++i) v[i] = cloud.positions[3 * i + axis];
-  std::sort(v.begin(), v.end());
-  return {v[v.size() * 2 / 100], v[std::min(v.size() - 1, v.size() * 98 / 100)]};
-}
-
-}  // namespace
+namespace {}  // namespace
 
 absl::StatusOr<ClutterScene> ComposeSplats(const std::vector<GaussianCloud>& input,
                                            const std::vector<std::string>& names,
@@ -50,9 +40,9 @@ absl::StatusOr<ClutterScene> ComposeSplats(const std::vector<GaussianCloud>& inp
   std::vector<Placement> placements;
   float row_length = 0;
   for (const GaussianCloud& c : input) {
-    const auto [x0, x1] = RobustRange(c, 0);
-    const auto [y0, y1] = RobustRange(c, 1);
-    const auto [z0, z1] = RobustRange(c, 2);
+    const Eigen::AlignedBox3f box = RobustBounds(c);
+    const float x0 = box.min().x(), x1 = box.max().x(), y0 = box.min().y(), y1 = box.max().y();
+    const float z0 = box.min().z(), z1 = box.max().z();
     const float scale = options.object_height / std::max(y1 - y0, 1e-6f);
     const float radius = 0.5f * scale * std::hypot(x1 - x0, z1 - z0);  // circumscribed: no overlap
     placements.push_back({scale, radius, Eigen::Vector3f(0.5f * (x0 + x1), y1, 0.5f * (z0 + z1))});

@@ -220,16 +220,7 @@ std::vector<int> Dbscan(const std::vector<Eigen::Vector3f>& points, float eps, i
 }
 
 float RobustSceneDiagonal(const GaussianCloud& cloud) {
-  if (cloud.size() == 0) return 0.0f;
-  Eigen::Vector3f lo, hi;
-  for (int a = 0; a < 3; ++a) {
-    std::vector<float> v(cloud.size());
-    for (size_t i = 0; i < cloud.size(); ++i) v[i] = cloud.positions[3 * i + a];
-    std::sort(v.begin(), v.end());
-    lo[a] = v[v.size() * 2 / 100];
-    hi[a] = v[std::min(v.size() - 1, v.size() * 98 / 100)];
-  }
-  return (hi - lo).norm();
+  return cloud.size() == 0 ? 0.0f : RobustBounds(cloud).diagonal().norm();
 }
 
 std::vector<Instance> BuildInstances(const TrackerSet& set, const std::vector<MaskNode>& nodes,
