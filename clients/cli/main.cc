@@ -13,7 +13,9 @@ void PrintJsonLine(const std::string& json) {
 
 }  // namespace instascene::cli
 
-int main(int argc, char** argv) {
+namespace {
+
+int Run(int argc, char** argv) {
   using namespace instascene::cli;
   CLI::App app{
       "instascene: decompose captured Gaussian-splat scenes into complete object instances"};
@@ -40,4 +42,17 @@ int main(int argc, char** argv) {
     return 1;
   }
   return 0;
+}
+
+}  // namespace
+
+// Errors are statuses; an exception reaching here (e.g. std::bad_alloc) still ends with the
+// one-line reason and a non-zero exit instead of an abort.
+int main(int argc, char** argv) {
+  try {
+    return Run(argc, argv);
+  } catch (const std::exception& e) {
+    std::fprintf(stderr, "instascene: error: %s\n", e.what());
+    return 1;
+  }
 }

@@ -5,6 +5,7 @@
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 
@@ -30,7 +31,7 @@ std::string TempPath(const std::string& path) {
 }
 
 absl::Status WritePixels(const std::string& path, int width, int height, int channels,
-                         OIIO::TypeDesc format, const void* data) {
+                         const OIIO::TypeDesc& format, const void* data) {
   const std::string tmp = TempPath(path);
   auto out = OIIO::ImageOutput::create(path);
   if (!out) return OiioError(path, "no writer for this extension", OIIO::geterror());
@@ -81,13 +82,14 @@ absl::Status WriteImage(const std::string& path, const Image& image, int bits) {
   if (bits == 16) {
     std::vector<uint16_t> data(n);
     for (size_t i = 0; i < n; ++i)
-      data[i] = static_cast<uint16_t>(std::clamp(image.pixels[i], 0.0f, 1.0f) * 65535.0f + 0.5f);
+      data[i] =
+          static_cast<uint16_t>(std::lround(std::clamp(image.pixels[i], 0.0f, 1.0f) * 65535.0f));
     return WritePixels(path, image.width, image.height, image.channels, OIIO::TypeDesc::UINT16,
                        data.data());
   }
   std::vector<uint8_t> data(n);
   for (size_t i = 0; i < n; ++i)
-    data[i] = static_cast<uint8_t>(std::clamp(image.pixels[i], 0.0f, 1.0f) * 255.0f + 0.5f);
+    data[i] = static_cast<uint8_t>(std::lround(std::clamp(image.pixels[i], 0.0f, 1.0f) * 255.0f));
   return WritePixels(path, image.width, image.height, image.channels, OIIO::TypeDesc::UINT8,
                      data.data());
 }

@@ -162,7 +162,7 @@ absl::Status ClutterOptions::Validate() const {
   if (width < 16 || height < 16 || width > 8192 || height > 8192) {
     return absl::InvalidArgumentError("image size must be in 16..8192");
   }
-  if (gaussians < static_cast<size_t>(200 * objects) || gaussians > 50'000'000) {
+  if (gaussians < size_t{200} * static_cast<size_t>(objects) || gaussians > 50'000'000) {
     return absl::InvalidArgumentError(
         absl::StrCat("gaussians must be in ", 200 * objects, "..5e7 (200 per object)"));
   }

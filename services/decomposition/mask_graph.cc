@@ -161,6 +161,7 @@ std::vector<MaskNode> ClusterMasks(const TrackerSet& set, const MaskJudgement& j
     if (!j.undersegmented[t]) initial.push_back(t);
   }
   std::vector<MaskNode> nodes;
+  nodes.reserve(initial.size());
   for (uint32_t t : initial) nodes.push_back({{t}, j.visible[t], j.contained[t]});
   const std::vector<double> schedule = ObserverSchedule(j, initial);
   if (schedule_out) *schedule_out = schedule;
