@@ -50,7 +50,8 @@ std::vector<float> LabelsToRgb(const std::vector<uint32_t>& labels) {
     if (labels[i] == 0) continue;
     uint32_t h = labels[i] * 2654435761u;
     h ^= h >> 15;
-    for (int c = 0; c < 3; ++c) rgb[3 * i + c] = 0.25f + 0.75f * static_cast<float>((h >> (8 * c)) & 0xff) / 255.0f;
+    for (int c = 0; c < 3; ++c)
+      rgb[3 * i + c] = 0.25f + 0.75f * static_cast<float>((h >> (8 * c)) & 0xff) / 255.0f;
   }
   return rgb;
 }

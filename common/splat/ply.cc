@@ -415,7 +415,8 @@ absl::Status WriteFileAtomically(const std::string& path, absl::string_view byte
   const std::string tmp = absl::StrCat(path, ".tmp.", ::getpid());
   const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
   if (fd < 0) {
-    return absl::UnavailableError(absl::StrCat(path, ": cannot create: ", std::error_code(errno, std::generic_category()).message()));
+    return absl::UnavailableError(absl::StrCat(
+        path, ": cannot create: ", std::error_code(errno, std::generic_category()).message()));
   }
   size_t written = 0;
   while (written < bytes.size()) {
