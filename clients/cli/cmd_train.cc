@@ -70,12 +70,8 @@ absl::Status TrainAndSegment(const TrainArgs& args, const Scene& scene, const Ga
                    training::TrainFeatures(data, options, [&](int step, int total, double) {
                      if (step % 25 == 0 || step == total) bar.Update(step, total);
                    }));
-  SegmentationResult result;
-  result.stage = "segment";
-  result.labels = training::SegmentByFeatures(trained.features, options.feature_dim, data.labels3d,
-                                              training::SegmentOptions{args.threshold});
-  result.features = trained.features;
-  result.feature_dim = options.feature_dim;
+  SegmentationResult result = training::TrainedResult(trained, data, options.feature_dim,
+                                                      training::SegmentOptions{args.threshold});
   result.metadata["supervision"] = args.supervision;
   result.metadata["iterations"] = options.iterations;
   RETURN_IF_ERROR(WriteResult(args.out, result, cloud));

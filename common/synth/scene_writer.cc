@@ -66,9 +66,8 @@ nlohmann::json ObjectJson(const SynthObject& o, const GaussianCloud& cloud) {
 }  // namespace
 
 LabelMap GroundTruthInstanceMap(const RenderResult& traced,
-                                const std::vector<uint16_t>& instance_ids) {
-  const std::vector<uint32_t> labels(instance_ids.begin(), instance_ids.end());
-  const std::vector<uint32_t> map = LabelMapFromTrace(traced, labels, 0.5f);
+                                const std::vector<uint32_t>& instance_ids) {
+  const std::vector<uint32_t> map = LabelMapFromTrace(traced, instance_ids, 0.5f);
   return LabelMap{traced.width, traced.height, std::vector<uint16_t>(map.begin(), map.end())};
 }
 
@@ -123,7 +122,7 @@ absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& dir
     view.camera = scene.cameras[v];
     view.mask = absl::StrCat("masks/", view.name, ".png");
     ASSIGN_OR_RETURN(RenderResult r, Render(scene.cloud, view.camera, render));
-    const LabelMap gt = GroundTruthInstanceMap(r, scene.instance_ids);
+    const LabelMap gt = GroundTruthInstanceMap(r, gt_result.labels);
     RETURN_IF_ERROR(WriteLabelMap(out.Path(absl::StrCat("gt/masks/", view.name, ".png")), gt));
     RETURN_IF_ERROR(WriteLabelMap(out.Path(view.mask),
                                   SimulateSegmenter(gt, noise, options.seed * 1000003 + v)));

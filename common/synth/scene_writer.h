@@ -32,7 +32,7 @@ struct SceneWriteOptions {
 // Ground-truth instance map of one view: per pixel, the instance id with the largest summed
 // blending weight (0 when that is stuff, or alpha < 0.5).
 LabelMap GroundTruthInstanceMap(const RenderResult& traced,
-                                const std::vector<uint16_t>& instance_ids);
+                                const std::vector<uint32_t>& instance_ids);
 
 absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& directory,
                                const SceneWriteOptions& options = {});

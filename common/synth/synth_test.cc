@@ -133,7 +133,8 @@ TEST(GroundTruth, InstanceMapsAgreeWithOneHotFeatureRendering) {
   for (int v : {0, 5, 11}) {
     absl::StatusOr<RenderResult> r = Render(scene->cloud, scene->cameras[v], options);
     ASSERT_TRUE(r.ok());
-    const LabelMap gt = GroundTruthInstanceMap(*r, scene->instance_ids);
+    const LabelMap gt = GroundTruthInstanceMap(
+        *r, std::vector<uint32_t>(scene->instance_ids.begin(), scene->instance_ids.end()));
     for (size_t p = 0; p < gt.labels.size(); ++p) {
       // Independent route: the rendered one-hot features are the per-instance weight sums.
       const float* f = &r->features[p * dim];

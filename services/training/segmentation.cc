@@ -61,6 +61,16 @@ std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int 
   return labels;
 }
 
+SegmentationResult TrainedResult(const TrainingResult& trained, const TrainingData& data, int dim,
+                                 const SegmentOptions& options) {
+  SegmentationResult result;
+  result.stage = "segment";
+  result.labels = SegmentByFeatures(trained.features, dim, data.labels3d, options);
+  result.features = trained.features;
+  result.feature_dim = dim;
+  return result;
+}
+
 absl::Status ExportInstances(const std::string& directory, const GaussianCloud& cloud,
                              const std::vector<uint32_t>& labels) {
   namespace fs = std::filesystem;

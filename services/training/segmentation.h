@@ -11,7 +11,9 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "common/eval/result.h"
 #include "common/splat/gaussian_cloud.h"
+#include "services/training/feature_field.h"
 
 namespace instascene::training {
 
@@ -24,6 +26,11 @@ struct SegmentOptions {
 std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int dim,
                                         const std::vector<uint32_t>& coarse,
                                         const SegmentOptions& options);
+
+// The segmentation result of a training run: labels by the tau rule over the coarse instances,
+// the raw features kept for click queries and evaluation.
+SegmentationResult TrainedResult(const TrainingResult& trained, const TrainingData& data, int dim,
+                                 const SegmentOptions& options);
 
 // instances/<id>.ply (every original property), scene_labelled.ply (+ instance_id), instances.json.
 absl::Status ExportInstances(const std::string& directory, const GaussianCloud& cloud,

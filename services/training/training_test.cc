@@ -157,12 +157,9 @@ TEST(FeatureField, TrainingOnASyntheticSceneSeparatesInstances) {
     last += trained->loss[trained->loss.size() - 1 - i];
   }
   EXPECT_LT(last, 0.5 * first);  // the loss falls
-  SegmentationResult result;
-  result.stage = "train";
-  result.labels =
-      SegmentByFeatures(trained->features, options.feature_dim, data->labels3d, SegmentOptions{});
-  result.features = trained->features;
-  result.feature_dim = options.feature_dim;
+  const SegmentationResult result =
+      TrainedResult(*trained, *data, options.feature_dim, SegmentOptions{});
+  EXPECT_EQ(result.feature_dim, options.feature_dim);
   ASSERT_TRUE(WriteResult(dir + "/trained", result, scene->cloud).ok());
   absl::StatusOr<ClickEvaluation> features =
       EvaluateResultDirectory(dir, dir + "/trained", ClickEvalOptions{});
