@@ -1,0 +1,301 @@
+#include "common/store/blob_store.h"
+
+#include <fcntl.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <vector>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+
+namespace instascene::store {
+namespace fs = std::filesystem;
+namespace {
+
+absl::Status ErrnoError(const std::string& what) {
+  return absl::UnavailableError(absl::StrCat(what, ": ", std::strerror(errno)));
+}
+
+// Writes `bytes` to `path` (create/truncate) and fsyncs it.
+absl::Status WriteAndSync(const std::string& path, absl::string_view bytes) {
+  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd < 0) return ErrnoError(absl::StrCat(path, ": cannot create"));
+  size_t written = 0;
+  while (written < bytes.size()) {
+    const ssize_t n = ::write(fd, bytes.data() + written, bytes.size() - written);
+    if (n < 0) {
+      if (errno == EINTR) continue;
+      const absl::Status s = ErrnoError(absl::StrCat(path, ": write failed"));
+      ::close(fd);
+      return s;
+    }
+    written += static_cast<size_t>(n);
+  }
+  if (::fsync(fd) != 0) {
+    const absl::Status s = ErrnoError(absl::StrCat(path, ": fsync failed"));
+    ::close(fd);
+    return s;
+  }
+  ::close(fd);
+  return absl::OkStatus();
+}
+
+absl::Status SyncFile(const std::string& path, bool directory) {
+  const int fd = ::open(path.c_str(), (directory ? O_RDONLY | O_DIRECTORY : O_RDONLY) | O_CLOEXEC);
+  if (fd < 0) return ErrnoError(absl::StrCat(path, ": cannot open for fsync"));
+  const int rc = ::fsync(fd);
+  ::close(fd);
+  if (rc != 0) return ErrnoError(absl::StrCat(path, ": fsync failed"));
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status StoreOptions::Validate() const {
+  if (max_blob_bytes <= 0) return absl::InvalidArgumentError("max_blob_bytes must be > 0");
+  if (max_batch_bytes <= 0) return absl::InvalidArgumentError("max_batch_bytes must be > 0");
+  return absl::OkStatus();
+}
+
+absl::Status BlobStore::PutFile(const Digest& digest, const std::string& path,
+                                const TransferProgress& progress) {
+  RETURN_IF_ERROR(ValidateDigest(digest));
+  ASSIGN_OR_RETURN(int64_t committed, CommittedSize(digest));
+  if (committed == digest.size_bytes) {
+    ASSIGN_OR_RETURN(std::vector<Digest> missing, FindMissing({digest}));
+    if (missing.empty()) {
+      if (progress) progress(digest.size_bytes, digest.size_bytes);
+      return absl::OkStatus();
+    }
+  }
+  if (digest.size_bytes <= options().max_batch_bytes && committed == 0) {
+    std::ifstream in(path, std::ios::binary);
+    if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open"));
+    std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+    RETURN_IF_ERROR(Put(digest, bytes));
+    if (progress) progress(digest.size_bytes, digest.size_bytes);
+    return absl::OkStatus();
+  }
+  std::ifstream in(path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat(path, ": cannot open"));
+  in.seekg(committed);
+  std::vector<char> chunk(1 << 20);
+  while (committed < digest.size_bytes) {
+    const int64_t want = std::min<int64_t>(static_cast<int64_t>(chunk.size()),
+                                           digest.size_bytes - committed);
+    in.read(chunk.data(), want);
+    if (in.gcount() != want)
+      return absl::DataLossError(absl::StrCat(path, ": shorter than its digest says (",
+                                              digest.size_bytes, " bytes)"));
+    ASSIGN_OR_RETURN(committed, Append(digest, committed,
+                                       absl::string_view(chunk.data(), static_cast<size_t>(want))));
+    if (progress) progress(committed, digest.size_bytes);
+  }
+  return FinishUpload(digest);
+}
+
+absl::Status BlobStore::GetFile(const Digest& digest, const std::string& path) {
+  const std::string temp = absl::StrCat(path, ".partial");
+  {
+    std::ofstream out(temp, std::ios::binary | std::ios::trunc);
+    if (!out) return absl::UnavailableError(absl::StrCat(temp, ": cannot create"));
+    Sha256 sha;
+    constexpr int64_t kChunk = int64_t{4} << 20;
+    for (int64_t offset = 0; offset < digest.size_bytes; offset += kChunk) {
+      ASSIGN_OR_RETURN(std::string bytes, Read(digest, offset, kChunk));
+      sha.Update(bytes);
+      out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    }
+    if (!out) return absl::UnavailableError(absl::StrCat(temp, ": write failed"));
+    if (const std::string hash = sha.HexDigest(); hash != digest.hash) {
+      out.close();
+      std::remove(temp.c_str());
+      return absl::DataLossError(
+          absl::StrCat("blob ", digest.ToString(), " read back with hash ", hash));
+    }
+  }
+  std::error_code ec;
+  fs::rename(temp, path, ec);
+  if (ec) return absl::UnavailableError(absl::StrCat(path, ": cannot rename: ", ec.message()));
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::unique_ptr<FilesystemBlobStore>> FilesystemBlobStore::Open(
+    const std::string& root, const StoreOptions& options) {
+  RETURN_IF_ERROR(options.Validate());
+  std::error_code ec;
+  for (const char* sub : {"cas", "uploads", "tmp"}) {
+    fs::create_directories(fs::path(root) / sub, ec);
+    if (ec) return absl::UnavailableError(absl::StrCat(root, "/", sub, ": ", ec.message()));
+  }
+  // Temp files of writes interrupted by a crash were never published: drop them.
+  for (const auto& entry : fs::directory_iterator(fs::path(root) / "tmp", ec)) {
+    fs::remove(entry.path(), ec);
+  }
+  return std::unique_ptr<FilesystemBlobStore>(new FilesystemBlobStore(root, options));
+}
+
+std::string FilesystemBlobStore::BlobPath(const Digest& digest) const {
+  return (fs::path(root_) / "cas" / digest.hash.substr(0, 2) / digest.hash).string();
+}
+
+std::string FilesystemBlobStore::PartPath(const Digest& digest) const {
+  return (fs::path(root_) / "uploads" / absl::StrCat(digest.hash, "-", digest.size_bytes, ".part"))
+      .string();
+}
+
+absl::Status FilesystemBlobStore::CheckWritable(const Digest& digest) const {
+  RETURN_IF_ERROR(ValidateDigest(digest));
+  if (digest.size_bytes > options_.max_blob_bytes)
+    return absl::ResourceExhaustedError(
+        absl::StrCat("blob ", digest.ToString(), " is larger than the store's limit of ",
+                     options_.max_blob_bytes, " bytes"));
+  return absl::OkStatus();
+}
+
+bool FilesystemBlobStore::Contains(const Digest& digest) const {
+  std::error_code ec;
+  const auto size = fs::file_size(BlobPath(digest), ec);
+  return !ec && static_cast<int64_t>(size) == digest.size_bytes;
+}
+
+absl::StatusOr<std::vector<Digest>> FilesystemBlobStore::FindMissing(
+    const std::vector<Digest>& digests) {
+  std::vector<Digest> missing;
+  for (const Digest& d : digests) {
+    RETURN_IF_ERROR(ValidateDigest(d));
+    if (!Contains(d)) missing.push_back(d);
+  }
+  return missing;
+}
+
+absl::Status FilesystemBlobStore::Publish(const std::string& from, const Digest& digest) {
+  const fs::path target = BlobPath(digest);
+  std::error_code ec;
+  fs::create_directories(target.parent_path(), ec);
+  if (ec) return absl::UnavailableError(absl::StrCat(target.parent_path().string(), ": ", ec.message()));
+  fs::rename(from, target, ec);
+  if (ec) {
+    fs::remove(from, ec);
+    return absl::UnavailableError(absl::StrCat(target.string(), ": cannot publish: ", ec.message()));
+  }
+  return SyncFile(target.parent_path().string(), /*directory=*/true);
+}
+
+absl::Status FilesystemBlobStore::Put(const Digest& digest, absl::string_view bytes) {
+  RETURN_IF_ERROR(CheckWritable(digest));
+  if (static_cast<int64_t>(bytes.size()) != digest.size_bytes)
+    return absl::InvalidArgumentError(absl::StrCat("blob ", digest.ToString(), ": got ",
+                                                   bytes.size(), " bytes, digest says ",
+                                                   digest.size_bytes));
+  const Digest actual = ComputeDigest(bytes);
+  if (actual.hash != digest.hash)
+    return absl::InvalidArgumentError(absl::StrCat("digest mismatch: claimed ", digest.hash,
+                                                   ", bytes hash to ", actual.hash,
+                                                   "; nothing stored"));
+  if (Contains(digest)) return absl::OkStatus();
+  std::string temp;
+  {
+    std::lock_guard<std::mutex> lock(temp_mutex_);
+    temp = (fs::path(root_) / "tmp" / absl::StrCat(digest.hash, ".", ::getpid(), ".", temp_counter_++))
+               .string();
+  }
+  absl::Status s = WriteAndSync(temp, bytes);
+  if (!s.ok()) {
+    std::error_code ec;
+    fs::remove(temp, ec);
+    return s;
+  }
+  return Publish(temp, digest);
+}
+
+absl::StatusOr<std::string> FilesystemBlobStore::Read(const Digest& digest, int64_t offset,
+                                                      int64_t limit) {
+  RETURN_IF_ERROR(ValidateDigest(digest));
+  if (offset < 0 || limit < 0 || offset > digest.size_bytes)
+    return absl::OutOfRangeError(absl::StrCat("blob ", digest.ToString(), ": read offset ", offset,
+                                              " / limit ", limit, " out of range"));
+  const std::string path = BlobPath(digest);
+  std::ifstream in(path, std::ios::binary);
+  if (!in || !Contains(digest))
+    return absl::NotFoundError(absl::StrCat("blob ", digest.ToString(), " is not in the store"));
+  int64_t count = digest.size_bytes - offset;
+  if (limit > 0) count = std::min(count, limit);
+  std::string bytes(static_cast<size_t>(count), '\0');
+  in.seekg(offset);
+  in.read(bytes.data(), count);
+  if (in.gcount() != count)
+    return absl::DataLossError(absl::StrCat("blob ", digest.ToString(), ": short read at ", path));
+  if (options_.verify_reads && offset == 0 && count == digest.size_bytes &&
+      ComputeDigest(bytes).hash != digest.hash)
+    return absl::DataLossError(absl::StrCat("blob ", digest.ToString(), " is corrupt on disk"));
+  return bytes;
+}
+
+absl::StatusOr<int64_t> FilesystemBlobStore::CommittedSize(const Digest& digest) {
+  RETURN_IF_ERROR(ValidateDigest(digest));
+  if (Contains(digest)) return digest.size_bytes;
+  std::error_code ec;
+  const auto size = fs::file_size(PartPath(digest), ec);
+  return ec ? 0 : static_cast<int64_t>(size);
+}
+
+absl::StatusOr<int64_t> FilesystemBlobStore::Append(const Digest& digest, int64_t offset,
+                                                    absl::string_view data) {
+  RETURN_IF_ERROR(CheckWritable(digest));
+  std::lock_guard<std::mutex> lock(upload_mutex_);
+  if (Contains(digest)) return digest.size_bytes;
+  const std::string part = PartPath(digest);
+  std::error_code ec;
+  const auto existing = fs::file_size(part, ec);
+  const int64_t committed = ec ? 0 : static_cast<int64_t>(existing);
+  if (offset != committed)
+    return absl::FailedPreconditionError(
+        absl::StrCat("blob ", digest.ToString(), ": write at offset ", offset,
+                     " but the upload has ", committed, " bytes committed (resume there)"));
+  if (offset + static_cast<int64_t>(data.size()) > digest.size_bytes)
+    return absl::InvalidArgumentError(absl::StrCat("blob ", digest.ToString(), ": ",
+                                                   offset + static_cast<int64_t>(data.size()),
+                                                   " bytes sent, more than the digest's size"));
+  std::ofstream out(part, std::ios::binary | std::ios::app);
+  out.write(data.data(), static_cast<std::streamsize>(data.size()));
+  out.flush();
+  if (!out) return absl::UnavailableError(absl::StrCat(part, ": write failed"));
+  return committed + static_cast<int64_t>(data.size());
+}
+
+absl::Status FilesystemBlobStore::FinishUpload(const Digest& digest) {
+  RETURN_IF_ERROR(CheckWritable(digest));
+  std::lock_guard<std::mutex> lock(upload_mutex_);
+  if (Contains(digest)) return absl::OkStatus();
+  const std::string part = PartPath(digest);
+  ASSIGN_OR_RETURN(Digest actual, DigestFile(part));
+  if (actual != digest) {
+    std::error_code ec;
+    fs::remove(part, ec);  // a wrong upload is never kept, not even to resume
+    return absl::InvalidArgumentError(absl::StrCat("digest mismatch: claimed ", digest.ToString(),
+                                                   ", uploaded bytes are ", actual.ToString(),
+                                                   "; upload discarded"));
+  }
+  RETURN_IF_ERROR(SyncFile(part, /*directory=*/false));
+  return Publish(part, digest);
+}
+
+absl::StatusOr<StoreStats> FilesystemBlobStore::Stats() {
+  StoreStats stats;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(fs::path(root_) / "cas", ec);
+       it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    if (ec) break;
+    if (it->is_regular_file(ec)) {
+      ++stats.blob_count;
+      stats.total_bytes += static_cast<int64_t>(it->file_size(ec));
+    }
+  }
+  return stats;
+}
+
+}  // namespace instascene::store

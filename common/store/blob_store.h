@@ -1,0 +1,102 @@
+// common/store/blob_store.h: the content-addressed blob store. `BlobStore` is the interface every
+// stage and client codes against (filesystem here; the gRPC client in services/store and, later, S3
+// implement it too); `FilesystemBlobStore` is the embedded default.
+//
+// Guarantees (every implementation): a blob becomes visible only after its bytes were verified
+// against the claimed digest; a rejected write leaves nothing behind; interrupted uploads can be
+// resumed at their committed size. Thread-safe.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <mutex>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "common/store/digest.h"
+
+namespace instascene::store {
+
+struct StoreOptions {
+  int64_t max_blob_bytes = int64_t{16} << 30;  // larger blobs are refused (bytes)
+  int64_t max_batch_bytes = int64_t{4} << 20;  // limit of one batch RPC / Put of a small blob
+  bool verify_reads = false;                   // re-hash blobs on every full read
+
+  absl::Status Validate() const;
+};
+
+struct StoreStats {
+  int64_t blob_count = 0;
+  int64_t total_bytes = 0;
+};
+
+// Progress of a transfer: bytes done, bytes total.
+using TransferProgress = std::function<void(int64_t done, int64_t total)>;
+
+class BlobStore {
+ public:
+  virtual ~BlobStore() = default;
+
+  virtual const StoreOptions& options() const = 0;
+  // The digests (of `digests`) the store does not hold.
+  virtual absl::StatusOr<std::vector<Digest>> FindMissing(const std::vector<Digest>& digests) = 0;
+  // Stores a blob after verifying its bytes (InvalidArgument on mismatch, nothing stored).
+  virtual absl::Status Put(const Digest& digest, absl::string_view bytes) = 0;
+  // A blob's bytes, or a range of them (limit 0 = to the end). NotFound if absent.
+  virtual absl::StatusOr<std::string> Read(const Digest& digest, int64_t offset = 0,
+                                           int64_t limit = 0) = 0;
+
+  // Resumable uploads of large blobs: bytes committed so far (the full size once the blob is in
+  // the store), append at exactly that offset, then finish (verify + publish).
+  virtual absl::StatusOr<int64_t> CommittedSize(const Digest& digest) = 0;
+  virtual absl::StatusOr<int64_t> Append(const Digest& digest, int64_t offset,
+                                         absl::string_view data) = 0;
+  virtual absl::Status FinishUpload(const Digest& digest) = 0;
+
+  virtual absl::StatusOr<StoreStats> Stats() = 0;
+
+  // Uploads a local file as `digest` (resuming an interrupted upload); no-op if present.
+  virtual absl::Status PutFile(const Digest& digest, const std::string& path,
+                               const TransferProgress& progress = nullptr);
+  // Downloads a blob into a local file (written to a temp file, verified, renamed).
+  virtual absl::Status GetFile(const Digest& digest, const std::string& path);
+};
+
+// Blobs under <root>/cas/<hash[0:2]>/<hash>, interrupted uploads under <root>/uploads/, temp files
+// under <root>/tmp/ (cleared at open). Writes: temp file + fsync + rename + directory fsync.
+class FilesystemBlobStore final : public BlobStore {
+ public:
+  static absl::StatusOr<std::unique_ptr<FilesystemBlobStore>> Open(const std::string& root,
+                                                                   const StoreOptions& options);
+
+  const StoreOptions& options() const override { return options_; }
+  absl::StatusOr<std::vector<Digest>> FindMissing(const std::vector<Digest>& digests) override;
+  absl::Status Put(const Digest& digest, absl::string_view bytes) override;
+  absl::StatusOr<std::string> Read(const Digest& digest, int64_t offset = 0,
+                                   int64_t limit = 0) override;
+  absl::StatusOr<int64_t> CommittedSize(const Digest& digest) override;
+  absl::StatusOr<int64_t> Append(const Digest& digest, int64_t offset,
+                                 absl::string_view data) override;
+  absl::Status FinishUpload(const Digest& digest) override;
+  absl::StatusOr<StoreStats> Stats() override;
+
+  std::string BlobPath(const Digest& digest) const;
+
+ private:
+  FilesystemBlobStore(std::string root, StoreOptions options)
+      : root_(std::move(root)), options_(options) {}
+  std::string PartPath(const Digest& digest) const;
+  absl::Status CheckWritable(const Digest& digest) const;
+  bool Contains(const Digest& digest) const;
+  // Moves a verified file into cas/ (fsync + rename + directory fsync).
+  absl::Status Publish(const std::string& from, const Digest& digest);
+
+  const std::string root_;
+  const StoreOptions options_;
+  std::mutex upload_mutex_;  // serialises Append / FinishUpload (one part file per digest)
+  std::mutex temp_mutex_;
+  uint64_t temp_counter_ = 0;
+};
+
+}  // namespace instascene::store
