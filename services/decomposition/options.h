@@ -3,6 +3,7 @@
 #pragma once
 
 #include "absl/status/status.h"
+#include "common/core/cancel.h"
 
 namespace instascene::decomposition {
 
@@ -28,6 +29,7 @@ struct DecompositionOptions {
   double overlap_ratio = 0.8;             // duplicate-object removal
   double remedy_ratio = 0.8;              // under-segmentation remedy
   int num_threads = 0;                    // 0 = all cores; results never depend on it
+  const CancelFlag* cancel = nullptr;     // polled per view; not owned (common/core/cancel.h)
 
   absl::Status Validate() const;
 };

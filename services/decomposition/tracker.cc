@@ -120,6 +120,10 @@ absl::StatusOr<TrackerSet> BuildTrackers(const GaussianCloud& cloud,
   int done = 0;
   RunWithThreads(options.num_threads, [&] {
     tbb::parallel_for(0, num_views, [&](int v) {
+      if (IsCancelled(options.cancel)) {
+        views[v] = absl::CancelledError("tracking: cancelled");
+        return;
+      }
       views[v] = TrackView(cloud, cameras[v], v, load_mask, options);
       if (progress) {
         std::lock_guard<std::mutex> lock(progress_mutex);

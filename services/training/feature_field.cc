@@ -127,6 +127,7 @@ absl::StatusOr<TrainingData> PrepareTraining(const Scene& scene, const GaussianC
   RunWithThreads(options.num_threads, [&] {
     tbb::parallel_for(0, num_views, [&](int v) {
       status[v] = [&]() -> absl::Status {
+        RETURN_IF_ERROR(CheckCancelled(options.cancel, "training preparation"));
         const SceneView& view = scene.views[v];
         ASSIGN_OR_RETURN(LabelMap raw, ReadViewMask(scene, v));
         const std::filesystem::path dir(decomposition_dir);
@@ -284,6 +285,7 @@ absl::StatusOr<TrainingResult> TrainFeatures(
   std::vector<int> stack;  // shuffled views, refilled when empty
   constexpr double kBeta1 = 0.9, kBeta2 = 0.999, kEps = 1e-15;
   for (int step = 1; step <= options.iterations; ++step) {
+    RETURN_IF_ERROR(CheckCancelled(options.cancel, "training"));
     if (stack.empty()) {
       stack.resize(data.views.size());
       std::iota(stack.begin(), stack.end(), 0);

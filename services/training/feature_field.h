@@ -15,6 +15,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "common/core/cancel.h"
 #include "common/scene/scene.h"
 #include "common/splat/gaussian_cloud.h"
 
@@ -46,6 +47,7 @@ struct TrainingOptions {
   bool detach_sample_norm = true;  // as the authors' code (ContrastiveLossOptions::detach_norm)
   uint64_t seed = 1;
   int num_threads = 0;
+  const CancelFlag* cancel = nullptr;  // polled per view and step; not owned
 
   absl::Status Validate() const;
 };

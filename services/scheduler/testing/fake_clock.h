@@ -1,0 +1,20 @@
+// services/scheduler/testing/fake_clock.h: a manually advanced clock for queue tests. Thread-safe.
+#pragma once
+
+#include <atomic>
+
+#include "services/scheduler/job_queue.h"
+
+namespace instascene::scheduler::testing {
+
+class FakeClock final : public Clock {
+ public:
+  explicit FakeClock(int64_t start_ms = 1'000'000) : now_(start_ms) {}
+  int64_t NowMs() override { return now_.load(); }
+  void Advance(int64_t ms) { now_ += ms; }
+
+ private:
+  std::atomic<int64_t> now_;
+};
+
+}  // namespace instascene::scheduler::testing
