@@ -1,0 +1,150 @@
+// The ContentStore service over loopback gRPC, driven through RemoteBlobStore and raw stubs.
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include "common/core/testing/temp_dir.h"
+#include "common/rpc/server.h"
+#include "common/store/manifest.h"
+#include "services/store/remote_blob_store.h"
+#include "services/store/store_service.h"
+
+namespace instascene::store_service {
+namespace {
+namespace fs = std::filesystem;
+
+std::string RandomBytes(size_t n, uint64_t seed) {
+  std::mt19937_64 rng(seed);
+  std::string s(n, '\0');
+  for (char& c : s) c = static_cast<char>(rng() & 0xff);
+  return s;
+}
+
+size_t CountFiles(const fs::path& dir) {
+  size_t n = 0;
+  for (const auto& e : fs::recursive_directory_iterator(dir)) n += e.is_regular_file();
+  return n;
+}
+
+class StoreServiceTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    root_ = testing::FreshTempDir("store_service");
+    store::StoreOptions options;
+    options.max_blob_bytes = 8 << 20;
+    options.max_batch_bytes = 64 << 10;
+    local_ = std::move(*store::FilesystemBlobStore::Open(root_ + "/store", options));
+    service_ = std::make_unique<StoreService>(local_.get());
+    auto server = rpc::Server::Start({"127.0.0.1:0"}, {service_.get()},
+                                     {"instascene.v1.ContentStore"});
+    ASSERT_TRUE(server.ok()) << server.status();
+    server_ = std::move(*server);
+    channel_ = rpc::Connect(server_->address());
+    auto remote = RemoteBlobStore::Connect(channel_);
+    ASSERT_TRUE(remote.ok()) << remote.status();
+    remote_ = std::move(*remote);
+    stub_ = v1::ContentStore::NewStub(channel_);
+  }
+
+  std::string root_;
+  std::unique_ptr<store::FilesystemBlobStore> local_;
+  std::unique_ptr<StoreService> service_;
+  std::unique_ptr<rpc::Server> server_;
+  std::shared_ptr<grpc::Channel> channel_;
+  std::unique_ptr<RemoteBlobStore> remote_;
+  std::unique_ptr<v1::ContentStore::Stub> stub_;
+};
+
+TEST_F(StoreServiceTest, SmallAndLargeBlobsRoundTrip) {
+  EXPECT_EQ(remote_->options().max_batch_bytes, 64 << 10);
+  for (size_t size : {0, 100, 64 << 10, (64 << 10) + 1, 3 << 20}) {
+    const std::string data = RandomBytes(size, size + 1);
+    const store::Digest d = store::ComputeDigest(data);
+    ASSERT_TRUE(remote_->Put(d, data).ok()) << size;
+    EXPECT_TRUE(remote_->FindMissing({d})->empty());
+    EXPECT_EQ(*remote_->Read(d), data);
+    EXPECT_EQ(*local_->Read(d), data);
+    if (size > 10) {
+      EXPECT_EQ(*remote_->Read(d, 5, 5), data.substr(5, 5));
+    }
+  }
+}
+
+TEST_F(StoreServiceTest, CorruptOversizedAndUnknownAreRejectedLeavingNothing) {
+  const std::string data = RandomBytes(1000, 9);
+  store::Digest wrong = store::ComputeDigest(data);
+  wrong.hash[3] = wrong.hash[3] == '0' ? '1' : '0';
+  absl::Status s = remote_->Put(wrong, data);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(s.message().find("digest mismatch"), std::string::npos) << s;
+  // The same through the streaming path (a large blob with one flipped byte).
+  std::string big = RandomBytes(200 << 10, 10);
+  const store::Digest big_digest = store::ComputeDigest(big);
+  big[1000] ^= 1;
+  s = remote_->Put(big_digest, big);
+  EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << s;
+  // Over the blob limit: refused before any byte is stored.
+  const std::string huge = RandomBytes((8 << 20) + 1, 11);
+  s = remote_->Put(store::ComputeDigest(huge), huge);
+  EXPECT_EQ(s.code(), absl::StatusCode::kResourceExhausted) << s;
+  // Unknown digest.
+  const auto unknown = remote_->Read(store::ComputeDigest("never stored"));
+  EXPECT_EQ(unknown.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(unknown.status().message().find("not in the store"), std::string::npos);
+  // Malformed digest.
+  v1::FindMissingBlobsRequest request;
+  request.add_digests()->set_hash("zz");
+  v1::FindMissingBlobsResponse response;
+  grpc::ClientContext context;
+  const grpc::Status gs = stub_->FindMissingBlobs(&context, request, &response);
+  EXPECT_EQ(gs.error_code(), grpc::StatusCode::INVALID_ARGUMENT);
+  EXPECT_NE(gs.error_message().find("digests[0]"), std::string::npos);
+  EXPECT_EQ(CountFiles(root_ + "/store"), 0u);
+}
+
+TEST_F(StoreServiceTest, InterruptedUploadResumesAtTheCommittedSize) {
+  const std::string data = RandomBytes(3 << 20, 12);
+  const store::Digest d = store::ComputeDigest(data);
+  // The client "crashes" after 1 MiB + 7 bytes.
+  ASSERT_TRUE(remote_->Append(d, 0, absl::string_view(data).substr(0, (1 << 20) + 7)).ok());
+  EXPECT_EQ(*remote_->CommittedSize(d), (1 << 20) + 7);
+  // A write at the wrong offset says where to resume.
+  const auto wrong = remote_->Append(d, 0, "abc");
+  EXPECT_EQ(wrong.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(wrong.status().message().find("1048583 bytes committed"), std::string::npos);
+  const std::string path = root_ + "/upload.bin";
+  std::ofstream(path, std::ios::binary) << data;
+  int64_t first_progress = -1;
+  ASSERT_TRUE(remote_
+                  ->PutFile(d, path,
+                            [&](int64_t done, int64_t) {
+                              if (first_progress < 0) first_progress = done;
+                            })
+                  .ok());
+  EXPECT_GT(first_progress, (1 << 20) + 7);  // continued, did not start over
+  EXPECT_EQ(*local_->Read(d), data);
+}
+
+TEST_F(StoreServiceTest, ManifestUploadThroughTheServiceSendsOnlyMissingFiles) {
+  const std::string dir = root_ + "/result";
+  fs::create_directories(dir + "/instances");
+  std::ofstream(dir + "/a.txt") << "alpha";
+  std::ofstream(dir + "/instances/1.ply") << RandomBytes(100 << 10, 13);
+  auto manifest = store::ManifestFromDirectory(dir, "segment");
+  ASSERT_TRUE(manifest.ok());
+  auto first = store::UploadManifest(*remote_, *manifest, dir);
+  ASSERT_TRUE(first.ok()) << first.status();
+  EXPECT_EQ(first->files_sent, 2);
+  auto second = store::UploadManifest(*remote_, *manifest, dir);
+  EXPECT_EQ(second->files_sent, 0);
+  auto back = store::ReadManifest(*remote_, first->manifest);
+  ASSERT_TRUE(back.ok());
+  ASSERT_TRUE(store::MaterializeManifest(*remote_, *back, root_ + "/copy").ok());
+  std::ifstream in(root_ + "/copy/a.txt");
+  EXPECT_EQ(std::string(std::istreambuf_iterator<char>(in), {}), "alpha");
+}
+
+}  // namespace
+}  // namespace instascene::store_service
