@@ -1,4 +1,4 @@
-// instascene: offline pipeline commands and (later) clients of the services. See --help.
+// instascene: offline pipeline commands, the embedded server and clients of the services.
 #include <cstdio>
 
 #include "clients/cli/cli.h"
@@ -31,6 +31,8 @@ int Run(int argc, char** argv) {
   AddQueryCommand(app, &action);
   AddEvalCommand(app, &action);
   AddBenchCommand(app, &action);
+  AddServeCommand(app, &action);
+  AddClientCommands(app, &action);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -1,0 +1,9 @@
+// instascene-store: the content-addressed blob store service alone.
+#include "services/node/node_flags.h"
+
+int main(int argc, char** argv) {
+  instascene::node::NodeOptions o;
+  o.run_scheduler = o.run_decomposition = o.run_training = false;
+  return instascene::node::NodeMain(
+      argc, argv, "instascene-store: the content-addressed Gaussian store service", o, false, false);
+}

@@ -1,0 +1,51 @@
+// services/node/node_flags.h: the command-line flags shared by `instascene serve` and the
+// per-service binaries, and their main(). Header-only (CLI11).
+#pragma once
+
+#include <CLI/CLI.hpp>
+
+#include <cstdio>
+
+#include "services/node/node.h"
+
+namespace instascene::node {
+
+inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address,
+                         bool needs_scheduler_address) {
+  app.add_option("--data", o->data_dir, "Data directory (store/, jobs.db, work/)")
+      ->capture_default_str();
+  app.add_option("--listen", o->listen, "host:port to serve on (port 0 = any free port)")
+      ->capture_default_str();
+  auto* store = app.add_option("--store", o->store_address, "Address of the store service");
+  auto* scheduler =
+      app.add_option("--scheduler", o->scheduler_address, "Address of the scheduler service");
+  if (needs_store_address) store->required();
+  if (needs_scheduler_address) scheduler->required();
+  app.add_option("--lease-seconds", o->lease_seconds, "Job lease length in seconds")
+      ->capture_default_str();
+  app.add_option("--drain-seconds", o->drain_seconds,
+                 "On SIGTERM, how long running jobs may take before they are handed back")
+      ->capture_default_str();
+  app.add_option("--threads", o->num_threads, "Threads per job (0 = all cores)");
+  app.add_option("--ready-file", o->ready_file,
+                 "Write the bound address here once serving (removed at exit)");
+  app.add_option("--max-blob-bytes", o->store_options.max_blob_bytes,
+                 "Largest blob the store accepts")
+      ->capture_default_str();
+}
+
+// main() of a per-service binary.
+inline int NodeMain(int argc, char** argv, const char* description, NodeOptions options,
+                    bool needs_store_address, bool needs_scheduler_address) {
+  CLI::App app{description};
+  AddNodeFlags(app, &options, needs_store_address, needs_scheduler_address);
+  CLI11_PARSE(app, argc, argv);
+  const absl::Status status = RunNode(options);
+  if (!status.ok()) {
+    std::fprintf(stderr, "%s: error: %s\n", app.get_name().c_str(), status.ToString().c_str());
+    return 1;
+  }
+  return 0;
+}
+
+}  // namespace instascene::node

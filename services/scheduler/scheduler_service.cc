@@ -1,0 +1,234 @@
+#include "services/scheduler/scheduler_service.h"
+
+#include <set>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/rpc/status.h"
+#include "common/store/manifest.h"
+#include "services/scheduler/job_proto.h"
+#include "services/scheduler/submit.h"
+
+namespace instascene::scheduler {
+
+using rpc::ToGrpcStatus;
+
+SchedulerService::SchedulerService(JobQueue* queue, store::BlobStore* store,
+                                   const SchedulerServiceOptions& options)
+    : queue_(queue), store_(store), options_(options) {
+  rescuer_ = std::thread([this] { RescueLoop(); });
+}
+
+SchedulerService::~SchedulerService() { Stop(); }
+
+void SchedulerService::Stop() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    stopping_ = true;
+  }
+  changed_.notify_all();
+  if (rescuer_.joinable()) rescuer_.join();
+}
+
+void SchedulerService::Notify() {
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    ++version_;
+  }
+  changed_.notify_all();
+}
+
+void SchedulerService::RescueLoop() {
+  std::unique_lock<std::mutex> lock(mutex_);
+  while (!stopping_) {
+    changed_.wait_for(lock, std::chrono::milliseconds(options_.rescue_interval_ms));
+    if (stopping_) break;
+    lock.unlock();
+    absl::StatusOr<int> rescued = queue_->RescueExpired();
+    lock.lock();
+    if (rescued.ok() && *rescued > 0) {
+      ++version_;
+      changed_.notify_all();
+    }
+  }
+}
+
+absl::Status SchedulerService::Submit(const v1::SubmitPipelineRequest& request,
+                                      v1::SubmitPipelineResponse* response) {
+  ASSIGN_OR_RETURN(store::Digest manifest_digest,
+                   rpc::ParseProtoDigest(request.scene_manifest(), "scene_manifest"));
+  ASSIGN_OR_RETURN(store::Manifest manifest, store::ReadManifest(*store_, manifest_digest));
+  RETURN_IF_ERROR(store::ValidateSceneManifest(*store_, manifest));
+  PipelineRequest pipeline;
+  pipeline.scene_manifest = manifest_digest;
+  pipeline.scene = request.scene();
+  if (!request.parameters_json().empty()) {
+    pipeline.parameters = nlohmann::json::parse(request.parameters_json(), nullptr, false);
+    if (pipeline.parameters.is_discarded())
+      return absl::InvalidArgumentError("parameters_json is not valid JSON");
+  }
+  pipeline.priority = request.priority();
+  pipeline.stages.assign(request.stages().begin(), request.stages().end());
+  pipeline.max_attempts = options_.max_attempts;
+  ASSIGN_OR_RETURN(std::vector<SubmitResult> jobs, scheduler::SubmitPipeline(*queue_, pipeline));
+  for (const SubmitResult& r : jobs) {
+    ToProto(r.job, response->add_jobs());
+    response->add_created(r.created);
+  }
+  return absl::OkStatus();
+}
+
+grpc::Status SchedulerService::SubmitPipeline(grpc::ServerContext*,
+                                              const v1::SubmitPipelineRequest* request,
+                                              v1::SubmitPipelineResponse* response) {
+  const absl::Status s = Submit(*request, response);
+  if (s.ok()) Notify();
+  return ToGrpcStatus(s);
+}
+
+absl::Status SchedulerService::Lease(const v1::LeaseJobRequest& request,
+                                     v1::LeaseJobResponse* response) {
+  if (request.worker_id().empty()) return absl::InvalidArgumentError("worker_id is empty");
+  const std::vector<std::string> kinds(request.kinds().begin(), request.kinds().end());
+  ASSIGN_OR_RETURN(std::optional<scheduler::Lease> lease,
+                   queue_->LeaseNext(kinds, request.worker_id(),
+                                     int64_t{request.lease_seconds()} * 1000));
+  if (!lease) return absl::OkStatus();
+  ToProto(lease->job, response->mutable_job());
+  response->set_lease_token(lease->token);
+  // The outputs of the dependency chain, by stage.
+  std::string parent = lease->job.depends_on;
+  while (!parent.empty()) {
+    ASSIGN_OR_RETURN(Job job, queue_->Get(parent));
+    (*response->mutable_inputs())[job.kind] = rpc::ToProto(job.output_manifest);
+    parent = job.depends_on;
+  }
+  return absl::OkStatus();
+}
+
+grpc::Status SchedulerService::LeaseJob(grpc::ServerContext*, const v1::LeaseJobRequest* request,
+                                        v1::LeaseJobResponse* response) {
+  const absl::Status s = Lease(*request, response);
+  if (s.ok() && response->has_job()) Notify();
+  return ToGrpcStatus(s);
+}
+
+grpc::Status SchedulerService::Heartbeat(grpc::ServerContext*, const v1::HeartbeatRequest* request,
+                                         v1::HeartbeatResponse* response) {
+  absl::StatusOr<HeartbeatResult> r =
+      queue_->Heartbeat(request->job_id(), request->lease_token(), FromProto(request->progress()));
+  if (!r.ok()) return ToGrpcStatus(r.status());
+  response->set_cancel_requested(r->cancel_requested);
+  response->set_lease_expires_unix_ms(r->lease_expires_ms);
+  Notify();
+  return grpc::Status::OK;
+}
+
+grpc::Status SchedulerService::CompleteJob(grpc::ServerContext*,
+                                           const v1::CompleteJobRequest* request,
+                                           v1::CompleteJobResponse*) {
+  absl::StatusOr<store::Digest> output =
+      rpc::ParseProtoDigest(request->output_manifest(), "output_manifest");
+  if (!output.ok()) return ToGrpcStatus(output.status());
+  absl::StatusOr<std::vector<store::Digest>> missing = store_->FindMissing({*output});
+  if (!missing.ok()) return ToGrpcStatus(missing.status());
+  if (!missing->empty())
+    return ToGrpcStatus(absl::FailedPreconditionError(
+        absl::StrCat("output manifest ", output->ToString(), " is not in the store")));
+  const absl::Status s = queue_->Complete(request->job_id(), request->lease_token(), *output);
+  if (s.ok()) Notify();
+  return ToGrpcStatus(s);
+}
+
+grpc::Status SchedulerService::FailJob(grpc::ServerContext*, const v1::FailJobRequest* request,
+                                       v1::FailJobResponse*) {
+  const absl::Status s = queue_->Fail(request->job_id(), request->lease_token(), request->error(),
+                                      request->retryable(), request->cancelled());
+  if (s.ok()) Notify();
+  return ToGrpcStatus(s);
+}
+
+grpc::Status SchedulerService::CancelJob(grpc::ServerContext*, const v1::CancelJobRequest* request,
+                                         v1::Job* response) {
+  absl::StatusOr<Job> job = queue_->Cancel(request->job_id());
+  if (!job.ok()) return ToGrpcStatus(job.status());
+  ToProto(*job, response);
+  Notify();
+  return grpc::Status::OK;
+}
+
+grpc::Status SchedulerService::GetJob(grpc::ServerContext*, const v1::GetJobRequest* request,
+                                      v1::Job* response) {
+  absl::StatusOr<Job> job = queue_->Get(request->job_id());
+  if (!job.ok()) return ToGrpcStatus(job.status());
+  ToProto(*job, response);
+  return grpc::Status::OK;
+}
+
+grpc::Status SchedulerService::ListJobs(grpc::ServerContext*, const v1::ListJobsRequest* request,
+                                        v1::ListJobsResponse* response) {
+  JobFilter filter;
+  filter.scene = request->scene();
+  if (request->state() != v1::JOB_STATE_UNSPECIFIED) {
+    if (request->state() < v1::JOB_STATE_QUEUED || request->state() > v1::JOB_STATE_CANCELLED)
+      return ToGrpcStatus(absl::InvalidArgumentError("unknown job state"));
+    filter.state = static_cast<JobState>(static_cast<int>(request->state()));
+  }
+  filter.limit = request->limit() > 0 ? request->limit() : 100;
+  absl::StatusOr<std::vector<Job>> jobs = queue_->List(filter);
+  if (!jobs.ok()) return ToGrpcStatus(jobs.status());
+  for (const Job& j : *jobs) ToProto(j, response->add_jobs());
+  return grpc::Status::OK;
+}
+
+grpc::Status SchedulerService::GetQueueStats(grpc::ServerContext*, const v1::GetQueueStatsRequest*,
+                                             v1::QueueStats* response) {
+  absl::StatusOr<QueueStats> stats = queue_->Stats();
+  if (!stats.ok()) return ToGrpcStatus(stats.status());
+  for (const auto& [state, n] : stats->jobs_by_state) (*response->mutable_jobs_by_state())[state] = n;
+  response->set_scenes(stats->scenes);
+  response->set_oldest_queued_age_ms(stats->oldest_queued_age_ms);
+  return grpc::Status::OK;
+}
+
+grpc::Status SchedulerService::WatchJobs(grpc::ServerContext* context,
+                                         const v1::WatchJobsRequest* request,
+                                         grpc::ServerWriter<v1::Job>* writer) {
+  JobFilter filter;
+  filter.ids.assign(request->job_ids().begin(), request->job_ids().end());
+  filter.scene = request->scene();
+  filter.limit = 1000;
+  if (filter.ids.empty() && filter.scene.empty())
+    return ToGrpcStatus(absl::InvalidArgumentError("WatchJobs: give job_ids or a scene"));
+  std::map<std::string, std::string> sent;  // id -> fingerprint of the last snapshot sent
+  while (!context->IsCancelled()) {
+    uint64_t seen;
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      if (stopping_) return grpc::Status(grpc::StatusCode::UNAVAILABLE, "scheduler shutting down");
+      seen = version_;
+    }
+    absl::StatusOr<std::vector<Job>> jobs = queue_->List(filter);
+    if (!jobs.ok()) return ToGrpcStatus(jobs.status());
+    if (jobs->empty()) return ToGrpcStatus(absl::NotFoundError("no jobs for scene " + filter.scene));
+    bool all_final = true;
+    for (auto it = jobs->rbegin(); it != jobs->rend(); ++it) {  // oldest first
+      const Job& job = *it;
+      all_final &= IsFinal(job.state);
+      const std::string fingerprint =
+          absl::StrCat(job.state, "/", job.updated_ms, "/", job.progress.step, "/", job.attempts);
+      if (sent[job.id] == fingerprint) continue;
+      sent[job.id] = fingerprint;
+      v1::Job out;
+      ToProto(job, &out);
+      if (!writer->Write(out)) return grpc::Status::CANCELLED;
+    }
+    if (all_final) return grpc::Status::OK;
+    std::unique_lock<std::mutex> lock(mutex_);
+    changed_.wait_for(lock, std::chrono::milliseconds(500),
+                      [&] { return version_ != seen || stopping_; });
+  }
+  return grpc::Status::CANCELLED;
+}
+
+}  // namespace instascene::scheduler

@@ -1,0 +1,68 @@
+// services/scheduler/scheduler_service.h: the Scheduler gRPC service (scheduler.proto), a thin
+// adapter over a JobQueue plus the store (to check scene manifests at submission and job outputs
+// at completion). Owns the rescuer thread that returns expired leases, and wakes WatchJobs streams
+// whenever a job changes. Thread-safe.
+#pragma once
+
+#include <condition_variable>
+#include <mutex>
+#include <thread>
+
+#include "common/store/blob_store.h"
+#include "instascene/v1/scheduler.grpc.pb.h"
+#include "services/scheduler/job_queue.h"
+
+namespace instascene::scheduler {
+
+struct SchedulerServiceOptions {
+  int rescue_interval_ms = 1000;  // how often expired leases are looked for
+  int max_attempts = 3;           // per job, for submitted pipelines
+};
+
+class SchedulerService final : public v1::Scheduler::Service {
+ public:
+  // queue and store must outlive the service. Starts the rescuer.
+  SchedulerService(JobQueue* queue, store::BlobStore* store, const SchedulerServiceOptions& options);
+  ~SchedulerService() override;
+  // Ends watch streams and the rescuer (call before the server drains).
+  void Stop();
+
+  grpc::Status SubmitPipeline(grpc::ServerContext*, const v1::SubmitPipelineRequest* request,
+                              v1::SubmitPipelineResponse* response) override;
+  grpc::Status LeaseJob(grpc::ServerContext*, const v1::LeaseJobRequest* request,
+                        v1::LeaseJobResponse* response) override;
+  grpc::Status Heartbeat(grpc::ServerContext*, const v1::HeartbeatRequest* request,
+                         v1::HeartbeatResponse* response) override;
+  grpc::Status CompleteJob(grpc::ServerContext*, const v1::CompleteJobRequest* request,
+                           v1::CompleteJobResponse* response) override;
+  grpc::Status FailJob(grpc::ServerContext*, const v1::FailJobRequest* request,
+                       v1::FailJobResponse* response) override;
+  grpc::Status CancelJob(grpc::ServerContext*, const v1::CancelJobRequest* request,
+                         v1::Job* response) override;
+  grpc::Status GetJob(grpc::ServerContext*, const v1::GetJobRequest* request,
+                      v1::Job* response) override;
+  grpc::Status ListJobs(grpc::ServerContext*, const v1::ListJobsRequest* request,
+                        v1::ListJobsResponse* response) override;
+  grpc::Status GetQueueStats(grpc::ServerContext*, const v1::GetQueueStatsRequest* request,
+                             v1::QueueStats* response) override;
+  grpc::Status WatchJobs(grpc::ServerContext* context, const v1::WatchJobsRequest* request,
+                         grpc::ServerWriter<v1::Job>* writer) override;
+
+ private:
+  absl::Status Submit(const v1::SubmitPipelineRequest& request,
+                      v1::SubmitPipelineResponse* response);
+  absl::Status Lease(const v1::LeaseJobRequest& request, v1::LeaseJobResponse* response);
+  void Notify();
+  void RescueLoop();
+
+  JobQueue* queue_;
+  store::BlobStore* store_;
+  SchedulerServiceOptions options_;
+  std::mutex mutex_;
+  std::condition_variable changed_;
+  uint64_t version_ = 0;
+  bool stopping_ = false;
+  std::thread rescuer_;
+};
+
+}  // namespace instascene::scheduler

@@ -1,0 +1,293 @@
+#include "services/worker/stage_worker.h"
+
+#include <unistd.h>
+
+#include <filesystem>
+
+#include <spdlog/spdlog.h>
+
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_join.h"
+#include "common/core/status.h"
+#include "common/core/timer.h"
+#include "common/rpc/status.h"
+#include "common/store/manifest.h"
+#include "services/pipeline/stages.h"
+
+namespace instascene::worker {
+namespace fs = std::filesystem;
+
+namespace {
+
+// Bad input or parameters will fail again: no retry. Everything else may be transient.
+bool IsRetryable(absl::StatusCode code) {
+  return code != absl::StatusCode::kInvalidArgument && code != absl::StatusCode::kNotFound &&
+         code != absl::StatusCode::kOutOfRange && code != absl::StatusCode::kUnimplemented;
+}
+
+// Latest progress of the running stage with an ETA from the rate within the current phase.
+class ProgressTracker {
+ public:
+  void Update(const pipeline::StageProgress& p) {
+    std::lock_guard<std::mutex> lock(mutex_);
+    if (p.phase != current_.phase()) {
+      phase_watch_ = Stopwatch();
+    }
+    current_.set_phase(p.phase);
+    current_.set_step(p.step);
+    current_.set_total(p.total);
+    current_.set_loss(p.loss);
+    const double elapsed = phase_watch_.ElapsedSeconds();
+    current_.set_eta_seconds(p.step > 0 && p.total >= p.step
+                                 ? elapsed * static_cast<double>(p.total - p.step) / p.step
+                                 : -1.0);
+  }
+  v1::Progress Get() const {
+    std::lock_guard<std::mutex> lock(mutex_);
+    return current_;
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  v1::Progress current_;
+  Stopwatch phase_watch_;
+};
+
+}  // namespace
+
+absl::Status WorkerOptions::Validate() const {
+  if (kinds.empty()) return absl::InvalidArgumentError("worker: no job kinds");
+  for (const std::string& k : kinds) RETURN_IF_ERROR(pipeline::StageInput(k).status());
+  if (work_dir.empty()) return absl::InvalidArgumentError("worker: work_dir is empty");
+  if (poll_interval_ms <= 0 || heartbeat_interval_ms <= 0)
+    return absl::InvalidArgumentError("worker: intervals must be > 0");
+  return absl::OkStatus();
+}
+
+StageWorker::StageWorker(WorkerOptions options, store::BlobStore* store)
+    : options_(std::move(options)), store_(store) {
+  if (options_.worker_id.empty()) {
+    char host[256] = "host";
+    gethostname(host, sizeof(host) - 1);
+    options_.worker_id = absl::StrCat(host, "-", ::getpid(), "-", absl::StrJoin(options_.kinds, "+"));
+  }
+}
+
+StageWorker::~StageWorker() { Drain(std::chrono::milliseconds(0)); }
+
+void StageWorker::Start(std::shared_ptr<grpc::Channel> scheduler) {
+  scheduler_ = v1::Scheduler::NewStub(std::move(scheduler));
+  thread_ = std::thread([this] { Loop(); });
+}
+
+std::string StageWorker::current_job() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  return current_job_;
+}
+
+void StageWorker::Drain(std::chrono::milliseconds deadline) {
+  draining_ = true;
+  wake_.notify_all();
+  if (!thread_.joinable()) return;
+  {
+    std::unique_lock<std::mutex> lock(mutex_);
+    if (!wake_.wait_for(lock, deadline, [&] { return current_job_.empty(); }) && current_cancel_) {
+      spdlog::warn("worker {}: drain deadline reached; handing job {} back", options_.worker_id,
+                   current_job_);
+      handed_back_ = true;
+      current_cancel_->store(true);
+    }
+  }
+  thread_.join();
+}
+
+bool StageWorker::SleepUnlessDraining(std::chrono::milliseconds duration) {
+  std::unique_lock<std::mutex> lock(mutex_);
+  return !wake_.wait_for(lock, duration, [&] { return draining_.load(); });
+}
+
+void StageWorker::Loop() {
+  spdlog::info("worker {}: leasing {} jobs", options_.worker_id, absl::StrJoin(options_.kinds, ", "));
+  while (!draining_) {
+    v1::LeaseJobRequest request;
+    for (const std::string& k : options_.kinds) request.add_kinds(k);
+    request.set_worker_id(options_.worker_id);
+    request.set_lease_seconds(options_.lease_seconds);
+    v1::LeaseJobResponse lease;
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+    const grpc::Status s = scheduler_->LeaseJob(&context, request, &lease);
+    if (!s.ok()) {
+      spdlog::warn("worker {}: lease failed: {}", options_.worker_id, s.error_message());
+      SleepUnlessDraining(std::chrono::milliseconds(options_.poll_interval_ms * 3));
+      continue;
+    }
+    if (!lease.has_job()) {
+      SleepUnlessDraining(std::chrono::milliseconds(options_.poll_interval_ms));
+      continue;
+    }
+    if (draining_) {  // leased while the drain began: hand it straight back
+      v1::FailJobRequest back;
+      back.set_job_id(lease.job().id());
+      back.set_lease_token(lease.lease_token());
+      back.set_retryable(true);
+      back.set_error(absl::StrCat("handed back by worker ", options_.worker_id, " (draining)"));
+      v1::FailJobResponse ignored;
+      grpc::ClientContext back_context;
+      (void)scheduler_->FailJob(&back_context, back, &ignored);
+      break;
+    }
+    RunJob(lease);
+  }
+}
+
+absl::Status StageWorker::Execute(const v1::LeaseJobResponse& lease, const std::string& job_dir,
+                                  CancelFlag* cancel, const ProgressFn& progress,
+                                  store::Digest* output) {
+  const v1::Job& job = lease.job();
+  Stopwatch watch;
+  // Scene and input, cached by digest: a scene is fetched once per worker, not once per job.
+  const store::Digest scene_digest = rpc::FromProto(job.scene_manifest());
+  pipeline::StageContext context;
+  context.scene_dir = (fs::path(options_.work_dir) / "scenes" / scene_digest.hash).string();
+  progress({"fetching inputs", 0, 1, 0});
+  ASSIGN_OR_RETURN(store::Manifest scene, store::ReadManifest(*store_, scene_digest));
+  RETURN_IF_ERROR(
+      Annotate(store::MaterializeManifest(*store_, scene, context.scene_dir), "fetching scene"));
+  ASSIGN_OR_RETURN(std::string input_kind, pipeline::StageInput(job.kind()));
+  if (!input_kind.empty()) {
+    auto it = lease.inputs().find(input_kind);
+    if (it == lease.inputs().end())
+      return absl::InvalidArgumentError(absl::StrCat("lease has no '", input_kind, "' input"));
+    const store::Digest input = rpc::FromProto(it->second);
+    context.input_dir = (fs::path(options_.work_dir) / "results" / input.hash).string();
+    ASSIGN_OR_RETURN(store::Manifest manifest, store::ReadManifest(*store_, input));
+    RETURN_IF_ERROR(Annotate(store::MaterializeManifest(*store_, manifest, context.input_dir),
+                             "fetching input"));
+  }
+  context.out_dir = job_dir;
+  context.parameters = nlohmann::json::parse(job.parameters_json(), nullptr, false);
+  if (context.parameters.is_discarded())
+    return absl::InvalidArgumentError("job parameters are not JSON");
+  context.num_threads = options_.num_threads;
+  context.cancel = cancel;
+  context.progress = progress;
+  RETURN_IF_ERROR(pipeline::RunStage(job.kind(), context));
+  RETURN_IF_ERROR(CheckCancelled(cancel, job.kind()));
+  progress({"uploading", 0, 1, 0});
+  ASSIGN_OR_RETURN(store::Manifest manifest, store::ManifestFromDirectory(job_dir, job.kind()));
+  manifest.metadata["job"] = job.id();
+  manifest.metadata["scene_manifest"] = scene_digest.ToString();
+  ASSIGN_OR_RETURN(store::UploadReport report, store::UploadManifest(*store_, manifest, job_dir));
+  *output = report.manifest;
+  return absl::OkStatus();
+}
+
+void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
+  const v1::Job& job = lease.job();
+  const std::string job_dir =
+      (fs::path(options_.work_dir) / "jobs" / absl::StrCat(job.id(), "-a", job.attempts())).string();
+  CancelFlag cancel{false};
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    current_job_ = job.id();
+    current_cancel_ = &cancel;
+    handed_back_ = false;
+  }
+  spdlog::info("worker {}: job {} ({} of scene {}, attempt {})", options_.worker_id, job.id(),
+               job.kind(), job.scene(), job.attempts());
+  Stopwatch watch;
+  ProgressTracker progress;
+  std::atomic<bool> cancel_requested{false}, lease_lost{false}, stop_heartbeat{false};
+  std::mutex hb_mutex;
+  std::condition_variable hb_wake;
+  std::thread heartbeat([&] {
+    std::unique_lock<std::mutex> lock(hb_mutex);
+    while (!hb_wake.wait_for(lock, std::chrono::milliseconds(options_.heartbeat_interval_ms),
+                             [&] { return stop_heartbeat.load(); })) {
+      v1::HeartbeatRequest request;
+      request.set_job_id(job.id());
+      request.set_lease_token(lease.lease_token());
+      *request.mutable_progress() = progress.Get();
+      v1::HeartbeatResponse response;
+      grpc::ClientContext context;
+      context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+      const grpc::Status s = scheduler_->Heartbeat(&context, request, &response);
+      if (s.error_code() == grpc::StatusCode::FAILED_PRECONDITION ||
+          s.error_code() == grpc::StatusCode::NOT_FOUND) {
+        spdlog::warn("worker {}: job {}: {}; stopping it", options_.worker_id, job.id(),
+                     s.error_message());
+        lease_lost = true;
+        cancel = true;
+      } else if (s.ok() && response.cancel_requested()) {
+        cancel_requested = true;
+        cancel = true;
+      }
+    }
+  });
+
+  std::error_code ec;
+  fs::remove_all(job_dir, ec);
+  store::Digest output;
+  const absl::Status status =
+      Execute(lease, job_dir, &cancel,
+              [&](const pipeline::StageProgress& p) { progress.Update(p); }, &output);
+  {
+    std::lock_guard<std::mutex> lock(hb_mutex);
+    stop_heartbeat = true;
+  }
+  hb_wake.notify_all();
+  heartbeat.join();
+  bool handed_back;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    handed_back = handed_back_;
+  }
+
+  grpc::ClientContext context;
+  context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
+  grpc::Status reply;
+  if (lease_lost) {
+    spdlog::warn("worker {}: job {} abandoned (lease lost)", options_.worker_id, job.id());
+  } else if (status.ok()) {
+    v1::CompleteJobRequest request;
+    request.set_job_id(job.id());
+    request.set_lease_token(lease.lease_token());
+    rpc::ToProto(output, request.mutable_output_manifest());
+    v1::CompleteJobResponse response;
+    reply = scheduler_->CompleteJob(&context, request, &response);
+    if (reply.ok()) ++succeeded_;
+    spdlog::info("worker {}: job {} succeeded in {:.1f} s -> {}", options_.worker_id, job.id(),
+                 watch.ElapsedSeconds(), output.ToString());
+  } else {
+    v1::FailJobRequest request;
+    request.set_job_id(job.id());
+    request.set_lease_token(lease.lease_token());
+    if (cancel_requested) {
+      request.set_cancelled(true);
+      request.set_error("cancelled by request");
+    } else if (handed_back) {
+      request.set_retryable(true);
+      request.set_error(absl::StrCat("handed back by worker ", options_.worker_id, " (draining)"));
+    } else {
+      request.set_retryable(IsRetryable(status.code()));
+      request.set_error(status.ToString());
+    }
+    v1::FailJobResponse response;
+    reply = scheduler_->FailJob(&context, request, &response);
+    ++failed_;
+    spdlog::warn("worker {}: job {} failed: {}", options_.worker_id, job.id(), request.error());
+  }
+  if (!reply.ok())
+    spdlog::warn("worker {}: reporting job {}: {}", options_.worker_id, job.id(),
+                 reply.error_message());
+  fs::remove_all(job_dir, ec);  // outputs live in the store now
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    current_job_.clear();
+    current_cancel_ = nullptr;
+  }
+  wake_.notify_all();
+}
+
+}  // namespace instascene::worker

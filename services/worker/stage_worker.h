@@ -1,0 +1,79 @@
+// services/worker/stage_worker.h: the pull loop every stage service runs. It leases jobs of its kinds
+// from the scheduler, fetches the scene and the dependency's output from the store (cached by
+// digest under work_dir), runs the stage library (services/pipeline) with progress and cooperative
+// cancellation, uploads the output directory as a manifest and completes the job — or fails it,
+// marked retryable unless the input itself is bad. A heartbeat thread extends the lease, reports
+// progress with an ETA, and stops the stage when cancellation is requested or the lease is lost.
+// Thread-safe.
+#pragma once
+
+#include <grpcpp/grpcpp.h>
+
+#include <atomic>
+#include <condition_variable>
+#include <memory>
+#include <mutex>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include "common/core/cancel.h"
+#include "common/store/blob_store.h"
+#include "instascene/v1/scheduler.grpc.pb.h"
+#include "services/pipeline/stages.h"
+
+namespace instascene::worker {
+
+struct WorkerOptions {
+  std::string worker_id;            // "" = <hostname>-<pid>-<kinds>
+  std::vector<std::string> kinds;   // job kinds to lease: decompose, train, segment
+  std::string work_dir;             // scene/input cache and job scratch space
+  int num_threads = 0;              // per job; 0 = all cores
+  int poll_interval_ms = 300;       // wait between empty lease attempts
+  int heartbeat_interval_ms = 1000; // progress + lease extension period
+  int lease_seconds = 0;            // requested lease length; 0 = the scheduler's default
+
+  absl::Status Validate() const;
+};
+
+class StageWorker {
+ public:
+  // `store` must outlive the worker.
+  StageWorker(WorkerOptions options, store::BlobStore* store);
+  ~StageWorker();
+
+  // Starts the lease loop against the scheduler behind `scheduler`.
+  void Start(std::shared_ptr<grpc::Channel> scheduler);
+  // Stops leasing, gives the running job until `deadline` to finish, then cancels it and hands it
+  // back to the queue (retryable failure). Returns when the loop has ended.
+  void Drain(std::chrono::milliseconds deadline);
+
+  const std::string& worker_id() const { return options_.worker_id; }
+  std::string current_job() const;
+  int64_t succeeded() const { return succeeded_; }
+  int64_t failed() const { return failed_; }
+  bool draining() const { return draining_; }
+
+ private:
+  void Loop();
+  void RunJob(const v1::LeaseJobResponse& lease);
+  using ProgressFn = std::function<void(const pipeline::StageProgress&)>;
+  // Fetches inputs, runs the stage, uploads the output manifest.
+  absl::Status Execute(const v1::LeaseJobResponse& lease, const std::string& job_dir,
+                       CancelFlag* cancel, const ProgressFn& progress, store::Digest* output);
+  bool SleepUnlessDraining(std::chrono::milliseconds duration);
+
+  WorkerOptions options_;
+  std::unique_ptr<v1::Scheduler::Stub> scheduler_;
+  store::BlobStore* store_;
+  std::thread thread_;
+  mutable std::mutex mutex_;
+  std::condition_variable wake_;
+  std::string current_job_;
+  CancelFlag* current_cancel_ = nullptr;  // of the running job, under mutex_
+  bool handed_back_ = false;              // the running job was cancelled by Drain
+  std::atomic<bool> draining_{false};
+  std::atomic<int64_t> succeeded_{0}, failed_{0};
+};
+
+}  // namespace instascene::worker
