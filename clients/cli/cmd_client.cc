@@ -42,8 +42,8 @@ void SetDeadline(grpc::ClientContext* context, int seconds = 30) {
 absl::Status Call(const grpc::Status& status, const std::string& server) {
   if (status.error_code() == grpc::StatusCode::UNAVAILABLE ||
       status.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED)
-    return absl::UnavailableError(absl::StrCat("server ", server, " unreachable: ",
-                                               status.error_message(),
+    return absl::UnavailableError(absl::StrCat("server ", server,
+                                               " unreachable: ", status.error_message(),
                                                " (is `instascene serve` running?)"));
   return rpc::FromGrpcStatus(status);
 }
@@ -67,23 +67,22 @@ nlohmann::json JobJson(const v1::Job& j) {
 std::string ProgressText(const v1::Job& j) {
   const v1::Progress& p = j.progress();
   if (p.phase().empty()) return "";
-  std::string text = p.total() > 0 ? absl::StrFormat("%s %d/%d", p.phase(), p.step(), p.total())
-                                   : p.phase();
+  std::string text =
+      p.total() > 0 ? absl::StrFormat("%s %d/%d", p.phase(), p.step(), p.total()) : p.phase();
   if (p.loss() != 0) absl::StrAppendFormat(&text, " loss %.4g", p.loss());
   if (p.eta_seconds() >= 0) absl::StrAppendFormat(&text, " eta %.0fs", p.eta_seconds());
   return text;
 }
 
 bool IsFinalState(v1::JobState s) {
-  return s == v1::JOB_STATE_SUCCEEDED || s == v1::JOB_STATE_FAILED ||
-         s == v1::JOB_STATE_CANCELLED;
+  return s == v1::JOB_STATE_SUCCEEDED || s == v1::JOB_STATE_FAILED || s == v1::JOB_STATE_CANCELLED;
 }
 
 // Streams job snapshots until every watched job is final. Prints a line per state change and per
 // progress step of 10 %; returns the final snapshots.
 absl::StatusOr<std::map<std::string, v1::Job>> Watch(Connection& c, const std::string& server,
-                                                    const std::vector<std::string>& ids,
-                                                    const std::string& scene) {
+                                                     const std::vector<std::string>& ids,
+                                                     const std::string& scene) {
   v1::WatchJobsRequest request;
   for (const std::string& id : ids) request.add_job_ids(id);
   request.set_scene(scene);
@@ -96,13 +95,13 @@ absl::StatusOr<std::map<std::string, v1::Job>> Watch(Connection& c, const std::s
   while (reader->Read(&job)) {
     const v1::Progress& p = job.progress();
     const int decile = p.total() > 0 ? static_cast<int>(10 * p.step() / p.total()) : 0;
-    const std::string key = absl::StrCat(job.state(), "/", p.phase(), "/", decile, "/",
-                                         job.attempts());
+    const std::string key =
+        absl::StrCat(job.state(), "/", p.phase(), "/", decile, "/", job.attempts());
     if (printed[job.id()] != key) {
       printed[job.id()] = key;
-      std::fprintf(stderr, "[%6.1fs] %s %-9s %-9s %s%s\n", watch.ElapsedSeconds(),
-                   job.id().c_str(), job.kind().c_str(),
-                   scheduler::StateName(job.state()).c_str(), ProgressText(job).c_str(),
+      std::fprintf(stderr, "[%6.1fs] %s %-9s %-9s %s%s\n", watch.ElapsedSeconds(), job.id().c_str(),
+                   job.kind().c_str(), scheduler::StateName(job.state()).c_str(),
+                   ProgressText(job).c_str(),
                    job.error().empty() ? "" : absl::StrCat("  (", job.error(), ")").c_str());
     }
     last[job.id()] = job;
@@ -121,10 +120,10 @@ void AddClientCommands(CLI::App& app, Action* action) {
     bool json = false, wait = false;
   };
   auto submit = std::make_shared<SubmitArgs>();
-  CLI::App* s = app.add_subcommand(
-      "submit",
-      "Upload a scene (only the blobs the store lacks) and submit its pipeline "
-      "decompose -> train -> segment; prints the job ids");
+  CLI::App* s =
+      app.add_subcommand("submit",
+                         "Upload a scene (only the blobs the store lacks) and submit its pipeline "
+                         "decompose -> train -> segment; prints the job ids");
   s->add_option("--scene", submit->scene, "Scene directory")->required();
   s->add_option("--server", submit->server, "Scheduler address")->capture_default_str();
   s->add_option("--store", submit->store, "Store address (default: --server)");
@@ -134,8 +133,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
   s->add_option("--iterations", submit->iterations, "Shortcut for train.iterations");
   s->add_option("--priority", submit->priority, "Higher runs first (interactive requests)");
   s->add_flag("--wait", submit->wait, "Watch the jobs until they finish");
-  s->add_flag("--json", submit->json,
-              "Print {\"scene\", \"jobs\", ...} as the last stdout line");
+  s->add_flag("--json", submit->json, "Print {\"scene\", \"jobs\", ...} as the last stdout line");
   s->callback([submit, action] {
     *action = [submit]() -> absl::Status {
       const SubmitArgs& a = *submit;
@@ -152,26 +150,27 @@ void AddClientCommands(CLI::App& app, Action* action) {
           store_service::RemoteBlobStore::Connect(
               a.store.empty() ? c.channel : rpc::Connect(a.store), 5000);
       if (!connected.ok())
-        return absl::UnavailableError(absl::StrCat(
-            "store ", a.store.empty() ? a.server : a.store, " unreachable: ",
-            connected.status().message(), " (is `instascene serve` running?)"));
+        return absl::UnavailableError(absl::StrCat("store ", a.store.empty() ? a.server : a.store,
+                                                   " unreachable: ", connected.status().message(),
+                                                   " (is `instascene serve` running?)"));
       std::unique_ptr<store_service::RemoteBlobStore> blobs = std::move(*connected);
       ProgressBar bar("upload");
       int64_t last_mb = -1;
-      ASSIGN_OR_RETURN(store::UploadReport upload,
-                       store::UploadManifest(*blobs, manifest, a.scene, [&](int64_t done, int64_t total) {
-                         if (done / (1 << 20) == last_mb && done != total) return;
-                         last_mb = done / (1 << 20);
-                         bar.Update(static_cast<int>(done >> 10), static_cast<int>(total >> 10));
-                       }));
+      ASSIGN_OR_RETURN(
+          store::UploadReport upload,
+          store::UploadManifest(*blobs, manifest, a.scene, [&](int64_t done, int64_t total) {
+            if (done / (1 << 20) == last_mb && done != total) return;
+            last_mb = done / (1 << 20);
+            bar.Update(static_cast<int>(done >> 10), static_cast<int>(total >> 10));
+          }));
       std::fprintf(stderr, "upload: %lld files (%.1f MB) sent, %lld already in the store\n",
                    static_cast<long long>(upload.files_sent), upload.bytes_sent / 1e6,
                    static_cast<long long>(upload.files_skipped));
       v1::SubmitPipelineRequest request;
       rpc::ToProto(upload.manifest, request.mutable_scene_manifest());
-      const std::string name = a.name.empty()
-                                   ? std::filesystem::path(a.scene).lexically_normal().filename().string()
-                                   : a.name;
+      const std::string name =
+          a.name.empty() ? std::filesystem::path(a.scene).lexically_normal().filename().string()
+                         : a.name;
       request.set_scene(name);
       request.set_parameters_json(params.dump());
       request.set_priority(a.priority);
@@ -214,8 +213,9 @@ void AddClientCommands(CLI::App& app, Action* action) {
   };
   auto watch = std::make_shared<WatchArgs>();
   CLI::App* w = app.add_subcommand(
-      "watch", "Follow jobs live (state, phase, step, loss, ETA) until they finish; exits 1 if "
-               "any failed or was cancelled");
+      "watch",
+      "Follow jobs live (state, phase, step, loss, ETA) until they finish; exits 1 if "
+      "any failed or was cancelled");
   w->add_option("ids", watch->ids, "Job ids");
   w->add_option("--scene", watch->scene, "Every job of this scene");
   w->add_option("--server", watch->server, "Scheduler address")->capture_default_str();
@@ -274,9 +274,9 @@ void AddClientCommands(CLI::App& app, Action* action) {
       v1::QueueStats stats;
       grpc::ClientContext stats_context;
       SetDeadline(&stats_context);
-      RETURN_IF_ERROR(Call(c.scheduler->GetQueueStats(&stats_context, v1::GetQueueStatsRequest(),
-                                                      &stats),
-                           list->server));
+      RETURN_IF_ERROR(
+          Call(c.scheduler->GetQueueStats(&stats_context, v1::GetQueueStatsRequest(), &stats),
+               list->server));
       std::printf("%-17s %-9s %-16s %-9s %-3s %s\n", "JOB", "KIND", "SCENE", "STATE", "TRY",
                   "PROGRESS / ERROR");
       nlohmann::json jobs = nlohmann::json::array();
@@ -289,7 +289,8 @@ void AddClientCommands(CLI::App& app, Action* action) {
       }
       nlohmann::json by_state = nlohmann::json::object();
       std::string line;
-      for (const char* state : {"queued", "leased", "running", "succeeded", "failed", "cancelled"}) {
+      for (const char* state :
+           {"queued", "leased", "running", "succeeded", "failed", "cancelled"}) {
         auto it = stats.jobs_by_state().find(state);
         const int64_t n = it == stats.jobs_by_state().end() ? 0 : it->second;
         by_state[state] = n;
@@ -331,9 +332,9 @@ void AddClientCommands(CLI::App& app, Action* action) {
       SetDeadline(&context);
       RETURN_IF_ERROR(Call(c.scheduler->GetJob(&context, request, &job), fetch->server));
       if (job.state() != v1::JOB_STATE_SUCCEEDED)
-        return absl::FailedPreconditionError(
-            absl::StrCat("job ", fetch->id, " is ", scheduler::StateName(job.state()),
-                         ", not succeeded; nothing to fetch yet"));
+        return absl::FailedPreconditionError(absl::StrCat("job ", fetch->id, " is ",
+                                                          scheduler::StateName(job.state()),
+                                                          ", not succeeded; nothing to fetch yet"));
       ASSIGN_OR_RETURN(std::unique_ptr<store_service::RemoteBlobStore> blobs,
                        store_service::RemoteBlobStore::Connect(
                            fetch->store.empty() ? c.channel : rpc::Connect(fetch->store), 5000));
@@ -360,8 +361,9 @@ void AddClientCommands(CLI::App& app, Action* action) {
   };
   auto cancel = std::make_shared<CancelArgs>();
   CLI::App* k = app.add_subcommand(
-      "cancel", "Cancel a job (queued: at once; running: its worker stops at the next heartbeat); "
-                "jobs depending on it are cancelled too");
+      "cancel",
+      "Cancel a job (queued: at once; running: its worker stops at the next heartbeat); "
+      "jobs depending on it are cancelled too");
   k->add_option("id", cancel->id, "Job id")->required();
   k->add_option("--server", cancel->server, "Scheduler address")->capture_default_str();
   k->callback([cancel, action] {

@@ -48,6 +48,7 @@ void BlockShutdownSignals();
 int WaitForShutdownSignal();
 
 // A client channel with the same message limits.
-std::shared_ptr<grpc::Channel> Connect(const std::string& address, int max_message_bytes = 64 << 20);
+std::shared_ptr<grpc::Channel> Connect(const std::string& address,
+                                       int max_message_bytes = 64 << 20);
 
 }  // namespace instascene::rpc

@@ -84,12 +84,12 @@ absl::Status BlobStore::PutFile(const Digest& digest, const std::string& path,
   in.seekg(committed);
   std::vector<char> chunk(1 << 20);
   while (committed < digest.size_bytes) {
-    const int64_t want = std::min<int64_t>(static_cast<int64_t>(chunk.size()),
-                                           digest.size_bytes - committed);
+    const int64_t want =
+        std::min<int64_t>(static_cast<int64_t>(chunk.size()), digest.size_bytes - committed);
     in.read(chunk.data(), want);
     if (in.gcount() != want)
-      return absl::DataLossError(absl::StrCat(path, ": shorter than its digest says (",
-                                              digest.size_bytes, " bytes)"));
+      return absl::DataLossError(
+          absl::StrCat(path, ": shorter than its digest says (", digest.size_bytes, " bytes)"));
     ASSIGN_OR_RETURN(committed, Append(digest, committed,
                                        absl::string_view(chunk.data(), static_cast<size_t>(want))));
     if (progress) progress(committed, digest.size_bytes);
@@ -150,9 +150,9 @@ std::string FilesystemBlobStore::PartPath(const Digest& digest) const {
 absl::Status FilesystemBlobStore::CheckWritable(const Digest& digest) const {
   RETURN_IF_ERROR(ValidateDigest(digest));
   if (digest.size_bytes > options_.max_blob_bytes)
-    return absl::ResourceExhaustedError(
-        absl::StrCat("blob ", digest.ToString(), " is larger than the store's limit of ",
-                     options_.max_blob_bytes, " bytes"));
+    return absl::ResourceExhaustedError(absl::StrCat("blob ", digest.ToString(),
+                                                     " is larger than the store's limit of ",
+                                                     options_.max_blob_bytes, " bytes"));
   return absl::OkStatus();
 }
 
@@ -176,11 +176,13 @@ absl::Status FilesystemBlobStore::Publish(const std::string& from, const Digest&
   const fs::path target = BlobPath(digest);
   std::error_code ec;
   fs::create_directories(target.parent_path(), ec);
-  if (ec) return absl::UnavailableError(absl::StrCat(target.parent_path().string(), ": ", ec.message()));
+  if (ec)
+    return absl::UnavailableError(absl::StrCat(target.parent_path().string(), ": ", ec.message()));
   fs::rename(from, target, ec);
   if (ec) {
     fs::remove(from, ec);
-    return absl::UnavailableError(absl::StrCat(target.string(), ": cannot publish: ", ec.message()));
+    return absl::UnavailableError(
+        absl::StrCat(target.string(), ": cannot publish: ", ec.message()));
   }
   return SyncFile(target.parent_path().string(), /*directory=*/true);
 }
@@ -200,8 +202,9 @@ absl::Status FilesystemBlobStore::Put(const Digest& digest, absl::string_view by
   std::string temp;
   {
     std::lock_guard<std::mutex> lock(temp_mutex_);
-    temp = (fs::path(root_) / "tmp" / absl::StrCat(digest.hash, ".", ::getpid(), ".", temp_counter_++))
-               .string();
+    temp =
+        (fs::path(root_) / "tmp" / absl::StrCat(digest.hash, ".", ::getpid(), ".", temp_counter_++))
+            .string();
   }
   absl::Status s = WriteAndSync(temp, bytes);
   if (!s.ok()) {

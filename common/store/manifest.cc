@@ -39,7 +39,8 @@ std::string SerializeManifest(const Manifest& manifest) {
 absl::Status ValidateRelativePath(absl::string_view path) {
   if (path.empty()) return absl::InvalidArgumentError("empty path");
   if (path.front() == '/' || absl::StrContains(path, '\\'))
-    return absl::InvalidArgumentError(absl::StrCat("path '", path, "' is not a safe relative path"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("path '", path, "' is not a safe relative path"));
   for (absl::string_view part : absl::StrSplit(path, '/')) {
     if (part.empty() || part == "." || part == "..")
       return absl::InvalidArgumentError(
@@ -151,12 +152,11 @@ absl::StatusOr<UploadReport> UploadManifest(BlobStore& store, const Manifest& ma
       continue;
     }
     const int64_t before = report.bytes_sent;
-    RETURN_IF_ERROR(Annotate(
-        store.PutFile(digest, (fs::path(directory) / rel).string(),
-                      [&](int64_t done, int64_t) {
-                        if (progress) progress(before + done, total);
-                      }),
-        rel));
+    RETURN_IF_ERROR(Annotate(store.PutFile(digest, (fs::path(directory) / rel).string(),
+                                           [&](int64_t done, int64_t) {
+                                             if (progress) progress(before + done, total);
+                                           }),
+                             rel));
     sent.insert(digest);
     ++report.files_sent;
     report.bytes_sent += digest.size_bytes;
@@ -182,8 +182,11 @@ absl::Status MaterializeManifest(BlobStore& store, const Manifest& manifest,
     const fs::path target = fs::path(directory) / rel;
     std::error_code ec;
     fs::create_directories(target.parent_path(), ec);
-    if (ec) return absl::UnavailableError(absl::StrCat(target.parent_path().string(), ": ", ec.message()));
-    if (fs::exists(target, ec) && static_cast<int64_t>(fs::file_size(target, ec)) == digest.size_bytes) {
+    if (ec)
+      return absl::UnavailableError(
+          absl::StrCat(target.parent_path().string(), ": ", ec.message()));
+    if (fs::exists(target, ec) &&
+        static_cast<int64_t>(fs::file_size(target, ec)) == digest.size_bytes) {
       absl::StatusOr<Digest> have = DigestFile(target.string());
       if (have.ok() && *have == digest) continue;
     }

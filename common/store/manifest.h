@@ -20,7 +20,7 @@ namespace instascene::store {
 inline constexpr char kManifestFormat[] = "instascene.manifest/1";
 
 struct Manifest {
-  std::string kind;                    // "scene", "decompose", "train", "segment", ...
+  std::string kind;                     // "scene", "decompose", "train", "segment", ...
   std::map<std::string, Digest> files;  // relative path -> blob
   nlohmann::json metadata = nlohmann::json::object();
 

@@ -28,8 +28,7 @@ std::unique_ptr<FilesystemBlobStore> OpenStore(const std::string& root, StoreOpt
 
 size_t CountFiles(const fs::path& dir) {
   size_t n = 0;
-  for (const auto& e : fs::recursive_directory_iterator(dir))
-    n += e.is_regular_file();
+  for (const auto& e : fs::recursive_directory_iterator(dir)) n += e.is_regular_file();
   return n;
 }
 

@@ -6,7 +6,6 @@ int main(int argc, char** argv) {
   o.run_store = o.run_scheduler = o.run_training = false;
   o.listen = "127.0.0.1:0";
   return instascene::node::NodeMain(
-      argc, argv,
-      "instascene-decomposition: leases decompose jobs (needs --store and --scheduler)", o, true,
-      true);
+      argc, argv, "instascene-decomposition: leases decompose jobs (needs --store and --scheduler)",
+      o, true, true);
 }

@@ -24,7 +24,8 @@ absl::Status NodeOptions::Validate() const {
   if (!run_store && store_address.empty())
     return absl::InvalidArgumentError("no store: run one here or give --store ADDR");
   if (!run_scheduler && scheduler_address.empty() && (run_decomposition || run_training))
-    return absl::InvalidArgumentError("workers need a scheduler: run one here or give --scheduler ADDR");
+    return absl::InvalidArgumentError(
+        "workers need a scheduler: run one here or give --scheduler ADDR");
   if (!run_store && !run_scheduler && !run_decomposition && !run_training)
     return absl::InvalidArgumentError("nothing to run");
   if (lease_seconds < 2) return absl::InvalidArgumentError("--lease-seconds must be >= 2");
@@ -44,13 +45,13 @@ absl::Status RunNode(const NodeOptions& options) {
   std::unique_ptr<store::BlobStore> remote_store;
   store::BlobStore* blob_store = nullptr;
   if (options.run_store) {
-    ASSIGN_OR_RETURN(local_store, store::FilesystemBlobStore::Open(
-                                      (fs::path(options.data_dir) / "store").string(),
-                                      options.store_options));
+    ASSIGN_OR_RETURN(local_store,
+                     store::FilesystemBlobStore::Open(
+                         (fs::path(options.data_dir) / "store").string(), options.store_options));
     blob_store = local_store.get();
   } else {
-    ASSIGN_OR_RETURN(remote_store, store_service::RemoteBlobStore::Connect(
-                                       rpc::Connect(options.store_address)));
+    ASSIGN_OR_RETURN(remote_store,
+                     store_service::RemoteBlobStore::Connect(rpc::Connect(options.store_address)));
     blob_store = remote_store.get();
   }
 
@@ -71,8 +72,8 @@ absl::Status RunNode(const NodeOptions& options) {
                                 (fs::path(options.data_dir) / "jobs.db").string(), queue_options));
     scheduler::SchedulerServiceOptions scheduler_options;
     scheduler_options.rescue_interval_ms = std::min(1000, options.lease_seconds * 250);
-    scheduler_svc = std::make_unique<scheduler::SchedulerService>(queue.get(), blob_store,
-                                                                  scheduler_options);
+    scheduler_svc =
+        std::make_unique<scheduler::SchedulerService>(queue.get(), blob_store, scheduler_options);
     services.push_back(scheduler_svc.get());
     names.push_back("instascene.v1.Scheduler");
   }
@@ -106,14 +107,17 @@ absl::Status RunNode(const NodeOptions& options) {
 
   rpc::ServerOptions server_options;
   server_options.listen = options.listen;
-  server_options.max_message_bytes =
-      static_cast<int>(std::min<int64_t>(options.store_options.max_batch_bytes + (1 << 20), 1 << 30));
+  server_options.max_message_bytes = static_cast<int>(
+      std::min<int64_t>(options.store_options.max_batch_bytes + (1 << 20), 1 << 30));
   ASSIGN_OR_RETURN(std::unique_ptr<rpc::Server> server,
                    rpc::Server::Start(server_options, services, names));
-  std::shared_ptr<grpc::Channel> scheduler_channel =
-      options.run_scheduler ? server->InProcessChannel() : rpc::Connect(options.scheduler_address);
-  if (decomposition_worker) decomposition_worker->Start(scheduler_channel);
-  if (training_worker) training_worker->Start(scheduler_channel);
+  if (decomposition_worker || training_worker) {
+    std::shared_ptr<grpc::Channel> scheduler_channel =
+        options.run_scheduler ? server->InProcessChannel()
+                              : rpc::Connect(options.scheduler_address);
+    if (decomposition_worker) decomposition_worker->Start(scheduler_channel);
+    if (training_worker) training_worker->Start(scheduler_channel);
+  }
   spdlog::info("instascene node serving on {} (data {}): {}", server->address(), options.data_dir,
                absl::StrJoin(names, ", "));
   if (!options.ready_file.empty()) {

@@ -22,16 +22,16 @@ TEST(StagesTest, ParametersAreValidated) {
     nlohmann::json p;
     std::string says;
   };
-  for (const Bad& b : std::vector<Bad>{
-           {"train", {{"iterations", "many"}}, "'iterations' has the wrong type"},
-           {"train", {{"iterations", 0}}, "iterations"},
-           {"train", {{"supervision", "psychic"}}, "psychic"},
-           {"train", {{"method", "magic"}}, "magic"},
-           {"segment", {{"threshold", 2.0}}, "threshold 2"},
-           {"segment", {{"tau", 0.9}}, "unknown parameter 'tau'"},
-           {"decompose", {{"dbscan_eps", -1.0}}, "decompose"},
-           {"render", nlohmann::json::object(), "unknown stage 'render'"},
-           {"segment", nlohmann::json::array(), "must be an object"}}) {
+  for (const Bad& b :
+       std::vector<Bad>{{"train", {{"iterations", "many"}}, "'iterations' has the wrong type"},
+                        {"train", {{"iterations", 0}}, "iterations"},
+                        {"train", {{"supervision", "psychic"}}, "psychic"},
+                        {"train", {{"method", "magic"}}, "magic"},
+                        {"segment", {{"threshold", 2.0}}, "threshold 2"},
+                        {"segment", {{"tau", 0.9}}, "unknown parameter 'tau'"},
+                        {"decompose", {{"dbscan_eps", -1.0}}, "decompose"},
+                        {"render", nlohmann::json::object(), "unknown stage 'render'"},
+                        {"segment", nlohmann::json::array(), "must be an object"}}) {
     const absl::Status s = ValidateParameters(b.kind, b.p);
     EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << b.p.dump();
     EXPECT_NE(s.message().find(b.says), std::string::npos) << s;

@@ -30,8 +30,8 @@ absl::Status Read(const nlohmann::json& p, const std::string& kind, const char* 
     ok = v.is_string();
   }
   if (!ok)
-    return absl::InvalidArgumentError(
-        absl::StrCat("stage ", kind, ": parameter '", name, "' has the wrong type (", v.dump(), ")"));
+    return absl::InvalidArgumentError(absl::StrCat("stage ", kind, ": parameter '", name,
+                                                   "' has the wrong type (", v.dump(), ")"));
   *out = v.get<T>();
   return absl::OkStatus();
 }
@@ -39,7 +39,8 @@ absl::Status Read(const nlohmann::json& p, const std::string& kind, const char* 
 absl::Status OnlyKnownKeys(const nlohmann::json& p, const std::string& kind,
                            std::initializer_list<const char*> known) {
   if (!p.is_object())
-    return absl::InvalidArgumentError(absl::StrCat("stage ", kind, ": parameters must be an object"));
+    return absl::InvalidArgumentError(
+        absl::StrCat("stage ", kind, ": parameters must be an object"));
   for (const auto& [key, value] : p.items()) {
     bool found = false;
     for (const char* k : known) found |= key == k;
@@ -128,18 +129,18 @@ absl::Status RunTrain(const StageContext& c, const Scene& scene, const GaussianC
   SegmentationResult result;
   if (t.method == "vote") {
     result.stage = "vote";
-    ASSIGN_OR_RETURN(result.labels,
-                     training::VoteLabels(scene, cloud, c.input_dir, c.num_threads));
+    ASSIGN_OR_RETURN(result.labels, training::VoteLabels(scene, cloud, c.input_dir, c.num_threads));
   } else {
-    ASSIGN_OR_RETURN(training::TrainingData data,
-                     training::PrepareTraining(scene, cloud, c.input_dir, t.options,
-                                               [&](int done, int total) {
-                                                 Report(c, "tracing pixel pools", done, total);
-                                               }));
-    ASSIGN_OR_RETURN(training::TrainingResult trained,
-                     training::TrainFeatures(data, t.options, [&](int step, int total, double loss) {
-                       if (step % 10 == 0 || step == total) Report(c, "training", step, total, loss);
-                     }));
+    ASSIGN_OR_RETURN(
+        training::TrainingData data,
+        training::PrepareTraining(scene, cloud, c.input_dir, t.options, [&](int done, int total) {
+          Report(c, "tracing pixel pools", done, total);
+        }));
+    ASSIGN_OR_RETURN(
+        training::TrainingResult trained,
+        training::TrainFeatures(data, t.options, [&](int step, int total, double loss) {
+          if (step % 10 == 0 || step == total) Report(c, "training", step, total, loss);
+        }));
     // Coarse labels with the features: the segment stage applies the tau rule to them.
     result.stage = "train";
     result.labels = data.labels3d;

@@ -1,5 +1,5 @@
-// services/pipeline/stages.h: the pipeline's stages as directory-to-directory functions, the unit of
-// work a scheduler job runs and the one code path shared by `instascene run` (offline) and the
+// services/pipeline/stages.h: the pipeline's stages as directory-to-directory functions, the unit
+// of work a scheduler job runs and the one code path shared by `instascene run` (offline) and the
 // stage workers (services). No gRPC here.
 //
 //   decompose  scene                       -> decomposition dir (services/decomposition)
@@ -39,7 +39,7 @@ struct StageContext {
   std::string input_dir;  // output directory of the stage this one consumes ("" for decompose)
   std::string out_dir;
   nlohmann::json parameters = nlohmann::json::object();
-  int num_threads = 0;  // 0 = all cores; never changes results
+  int num_threads = 0;                                 // 0 = all cores; never changes results
   std::function<void(const StageProgress&)> progress;  // may be null
   const CancelFlag* cancel = nullptr;                  // not owned
 };

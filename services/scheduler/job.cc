@@ -6,19 +6,25 @@ namespace instascene::scheduler {
 
 const char* JobStateName(JobState state) {
   switch (state) {
-    case JobState::kQueued: return "queued";
-    case JobState::kLeased: return "leased";
-    case JobState::kRunning: return "running";
-    case JobState::kSucceeded: return "succeeded";
-    case JobState::kFailed: return "failed";
-    case JobState::kCancelled: return "cancelled";
+    case JobState::kQueued:
+      return "queued";
+    case JobState::kLeased:
+      return "leased";
+    case JobState::kRunning:
+      return "running";
+    case JobState::kSucceeded:
+      return "succeeded";
+    case JobState::kFailed:
+      return "failed";
+    case JobState::kCancelled:
+      return "cancelled";
   }
   return "unknown";
 }
 
 absl::StatusOr<JobState> ParseJobState(absl::string_view name) {
-  for (JobState s : {JobState::kQueued, JobState::kLeased, JobState::kRunning,
-                     JobState::kSucceeded, JobState::kFailed, JobState::kCancelled}) {
+  for (JobState s : {JobState::kQueued, JobState::kLeased, JobState::kRunning, JobState::kSucceeded,
+                     JobState::kFailed, JobState::kCancelled}) {
     if (name == JobStateName(s)) return s;
   }
   return absl::InvalidArgumentError(absl::StrCat("unknown job state '", name, "'"));
@@ -26,13 +32,20 @@ absl::StatusOr<JobState> ParseJobState(absl::string_view name) {
 
 const char* JobEventName(JobEvent event) {
   switch (event) {
-    case JobEvent::kLease: return "lease";
-    case JobEvent::kProgress: return "report progress on";
-    case JobEvent::kSucceed: return "complete";
-    case JobEvent::kRetry: return "retry";
-    case JobEvent::kGiveUp: return "fail";
-    case JobEvent::kCancel: return "cancel";
-    case JobEvent::kResubmit: return "resubmit";
+    case JobEvent::kLease:
+      return "lease";
+    case JobEvent::kProgress:
+      return "report progress on";
+    case JobEvent::kSucceed:
+      return "complete";
+    case JobEvent::kRetry:
+      return "retry";
+    case JobEvent::kGiveUp:
+      return "fail";
+    case JobEvent::kCancel:
+      return "cancel";
+    case JobEvent::kResubmit:
+      return "resubmit";
   }
   return "?";
 }
@@ -72,8 +85,12 @@ absl::StatusOr<JobState> Transition(JobState from, JobEvent event) {
 }
 
 nlohmann::json JobProgress::ToJson() const {
-  return {{"phase", phase}, {"step", step},           {"total", total},
-          {"loss", loss},   {"eta_seconds", eta_seconds}, {"message", message}};
+  return {{"phase", phase},
+          {"step", step},
+          {"total", total},
+          {"loss", loss},
+          {"eta_seconds", eta_seconds},
+          {"message", message}};
 }
 
 JobProgress JobProgress::FromJson(const nlohmann::json& j) {

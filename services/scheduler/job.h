@@ -17,13 +17,13 @@ namespace instascene::scheduler {
 enum class JobState { kQueued = 1, kLeased, kRunning, kSucceeded, kFailed, kCancelled };
 
 enum class JobEvent {
-  kLease,      // a worker takes a queued, ready job
-  kProgress,   // the worker reports progress (heartbeat)
-  kSucceed,    // the worker completes it
-  kRetry,      // failure or expired lease with attempts left: back to the queue (with backoff)
-  kGiveUp,     // failure without retries left, or not retryable
-  kCancel,     // cancelled (queued: at once; leased/running: when the worker acknowledges)
-  kResubmit,   // a failed or cancelled job submitted again
+  kLease,     // a worker takes a queued, ready job
+  kProgress,  // the worker reports progress (heartbeat)
+  kSucceed,   // the worker completes it
+  kRetry,     // failure or expired lease with attempts left: back to the queue (with backoff)
+  kGiveUp,    // failure without retries left, or not retryable
+  kCancel,    // cancelled (queued: at once; leased/running: when the worker acknowledges)
+  kResubmit,  // a failed or cancelled job submitted again
 };
 
 const char* JobStateName(JobState state);  // "queued", "leased", ...
@@ -46,8 +46,8 @@ struct JobProgress {
 
 // What a client asks for.
 struct JobSpec {
-  std::string scene;             // human name of the scene
-  std::string kind;              // stage
+  std::string scene;  // human name of the scene
+  std::string kind;   // stage
   nlohmann::json parameters = nlohmann::json::object();
   store::Digest scene_manifest;  // the scene's manifest in the store
   std::string depends_on;        // job id whose output this job consumes ("" = none)

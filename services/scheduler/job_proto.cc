@@ -43,7 +43,8 @@ void ToProto(const Job& j, v1::Job* out) {
   out->set_priority(j.priority);
   out->set_attempts(j.attempts);
   out->set_max_attempts(j.max_attempts);
-  if (!j.output_manifest.hash.empty()) rpc::ToProto(j.output_manifest, out->mutable_output_manifest());
+  if (!j.output_manifest.hash.empty())
+    rpc::ToProto(j.output_manifest, out->mutable_output_manifest());
   out->set_error(j.error);
   out->set_worker_id(j.worker_id);
   ToProto(j.progress, out->mutable_progress());

@@ -30,11 +30,11 @@ class Clock {
 Clock* RealClock();
 
 struct QueueOptions {
-  int64_t lease_ms = 30000;         // lease length; heartbeats extend it by this much
-  int64_t backoff_base_ms = 1000;   // first retry delay
-  int64_t backoff_cap_ms = 60000;   // delays double per attempt up to this cap
-  double backoff_jitter = 0.25;     // delay *= 1 - jitter * U[0,1) (spreads retry storms)
-  uint64_t seed = 1;                // jitter random seed
+  int64_t lease_ms = 30000;        // lease length; heartbeats extend it by this much
+  int64_t backoff_base_ms = 1000;  // first retry delay
+  int64_t backoff_cap_ms = 60000;  // delays double per attempt up to this cap
+  double backoff_jitter = 0.25;    // delay *= 1 - jitter * U[0,1) (spreads retry storms)
+  uint64_t seed = 1;               // jitter random seed
 
   absl::Status Validate() const;
 };
@@ -55,9 +55,9 @@ struct HeartbeatResult {
 };
 
 struct JobFilter {
-  std::string scene;               // "" = all
-  std::optional<JobState> state;   // unset = all
-  std::vector<std::string> ids;    // non-empty: exactly these
+  std::string scene;              // "" = all
+  std::optional<JobState> state;  // unset = all
+  std::vector<std::string> ids;   // non-empty: exactly these
   int limit = 100;
 };
 
@@ -84,6 +84,10 @@ class JobQueue {
   // stopped on a cancellation request.
   virtual absl::Status Fail(const std::string& id, const std::string& token,
                             const std::string& error, bool retryable, bool cancelled) = 0;
+  // The worker gives a held job back unfinished (graceful shutdown): queued again at once, and
+  // the attempt does not count.
+  virtual absl::Status Release(const std::string& id, const std::string& token,
+                               const std::string& reason) = 0;
   virtual absl::StatusOr<Job> Cancel(const std::string& id) = 0;
   virtual absl::StatusOr<Job> Get(const std::string& id) = 0;
   virtual absl::StatusOr<std::vector<Job>> List(const JobFilter& filter) = 0;

@@ -90,9 +90,9 @@ absl::Status SchedulerService::Lease(const v1::LeaseJobRequest& request,
                                      v1::LeaseJobResponse* response) {
   if (request.worker_id().empty()) return absl::InvalidArgumentError("worker_id is empty");
   const std::vector<std::string> kinds(request.kinds().begin(), request.kinds().end());
-  ASSIGN_OR_RETURN(std::optional<scheduler::Lease> lease,
-                   queue_->LeaseNext(kinds, request.worker_id(),
-                                     int64_t{request.lease_seconds()} * 1000));
+  ASSIGN_OR_RETURN(
+      std::optional<scheduler::Lease> lease,
+      queue_->LeaseNext(kinds, request.worker_id(), int64_t{request.lease_seconds()} * 1000));
   if (!lease) return absl::OkStatus();
   ToProto(lease->job, response->mutable_job());
   response->set_lease_token(lease->token);
@@ -142,8 +142,11 @@ grpc::Status SchedulerService::CompleteJob(grpc::ServerContext*,
 
 grpc::Status SchedulerService::FailJob(grpc::ServerContext*, const v1::FailJobRequest* request,
                                        v1::FailJobResponse*) {
-  const absl::Status s = queue_->Fail(request->job_id(), request->lease_token(), request->error(),
-                                      request->retryable(), request->cancelled());
+  const absl::Status s =
+      request->released()
+          ? queue_->Release(request->job_id(), request->lease_token(), request->error())
+          : queue_->Fail(request->job_id(), request->lease_token(), request->error(),
+                         request->retryable(), request->cancelled());
   if (s.ok()) Notify();
   return ToGrpcStatus(s);
 }
@@ -185,7 +188,8 @@ grpc::Status SchedulerService::GetQueueStats(grpc::ServerContext*, const v1::Get
                                              v1::QueueStats* response) {
   absl::StatusOr<QueueStats> stats = queue_->Stats();
   if (!stats.ok()) return ToGrpcStatus(stats.status());
-  for (const auto& [state, n] : stats->jobs_by_state) (*response->mutable_jobs_by_state())[state] = n;
+  for (const auto& [state, n] : stats->jobs_by_state)
+    (*response->mutable_jobs_by_state())[state] = n;
   response->set_scenes(stats->scenes);
   response->set_oldest_queued_age_ms(stats->oldest_queued_age_ms);
   return grpc::Status::OK;
@@ -210,7 +214,8 @@ grpc::Status SchedulerService::WatchJobs(grpc::ServerContext* context,
     }
     absl::StatusOr<std::vector<Job>> jobs = queue_->List(filter);
     if (!jobs.ok()) return ToGrpcStatus(jobs.status());
-    if (jobs->empty()) return ToGrpcStatus(absl::NotFoundError("no jobs for scene " + filter.scene));
+    if (jobs->empty())
+      return ToGrpcStatus(absl::NotFoundError("no jobs for scene " + filter.scene));
     bool all_final = true;
     for (auto it = jobs->rbegin(); it != jobs->rend(); ++it) {  // oldest first
       const Job& job = *it;

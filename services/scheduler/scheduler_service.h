@@ -22,7 +22,8 @@ struct SchedulerServiceOptions {
 class SchedulerService final : public v1::Scheduler::Service {
  public:
   // queue and store must outlive the service. Starts the rescuer.
-  SchedulerService(JobQueue* queue, store::BlobStore* store, const SchedulerServiceOptions& options);
+  SchedulerService(JobQueue* queue, store::BlobStore* store,
+                   const SchedulerServiceOptions& options);
   ~SchedulerService() override;
   // Ends watch streams and the rescuer (call before the server drains).
   void Stop();

@@ -151,7 +151,8 @@ absl::StatusOr<std::unique_ptr<SqliteJobQueue>> SqliteJobQueue::Open(const std::
     CREATE INDEX IF NOT EXISTS jobs_by_scene ON jobs(scene);
     CREATE INDEX IF NOT EXISTS jobs_by_dependency ON jobs(depends_on);
     CREATE TABLE IF NOT EXISTS scenes (scene TEXT PRIMARY KEY, last_lease_ms INTEGER NOT NULL);
-  )sql"), path));
+  )sql"),
+                           path));
   return queue;
 }
 
@@ -279,16 +280,15 @@ absl::StatusOr<std::optional<Lease>> SqliteJobQueue::LeaseNext(
     const int64_t now = clock_->NowMs();
     std::vector<std::string> marks(kinds.size(), "?");
     Statement pick(
-        db_,
-        absl::StrCat(
-            "SELECT j.id FROM jobs j LEFT JOIN jobs d ON d.id = j.depends_on "
-            "LEFT JOIN scenes s ON s.scene = j.scene "
-            "WHERE j.state = ? AND j.not_before_ms <= ? AND j.kind IN (",
-            absl::StrJoin(marks, ","),
-            ") AND (j.depends_on = '' OR d.state = ?) "
-            "ORDER BY j.priority DESC, "
-            "(SELECT COUNT(*) FROM jobs h WHERE h.scene = j.scene AND h.state IN (?, ?)) ASC, "
-            "COALESCE(s.last_lease_ms, 0) ASC, j.seq ASC LIMIT 1"));
+        db_, absl::StrCat(
+                 "SELECT j.id FROM jobs j LEFT JOIN jobs d ON d.id = j.depends_on "
+                 "LEFT JOIN scenes s ON s.scene = j.scene "
+                 "WHERE j.state = ? AND j.not_before_ms <= ? AND j.kind IN (",
+                 absl::StrJoin(marks, ","),
+                 ") AND (j.depends_on = '' OR d.state = ?) "
+                 "ORDER BY j.priority DESC, "
+                 "(SELECT COUNT(*) FROM jobs h WHERE h.scene = j.scene AND h.state IN (?, ?)) ASC, "
+                 "COALESCE(s.last_lease_ms, 0) ASC, j.seq ASC LIMIT 1"));
     int i = 1;
     pick.Bind(i++, Code(JobState::kQueued));
     pick.Bind(i++, now);
@@ -353,8 +353,8 @@ absl::Status SqliteJobQueue::Complete(const std::string& id, const std::string& 
 }
 
 int64_t SqliteJobQueue::BackoffMs(int attempts) {
-  const double raw = static_cast<double>(options_.backoff_base_ms) *
-                     std::pow(2.0, std::max(0, attempts - 1));
+  const double raw =
+      static_cast<double>(options_.backoff_base_ms) * std::pow(2.0, std::max(0, attempts - 1));
   const double capped = std::min(raw, static_cast<double>(options_.backoff_cap_ms));
   const double u = std::uniform_real_distribution<double>(0.0, 1.0)(rng_);
   return static_cast<int64_t>(capped * (1.0 - options_.backoff_jitter * u));
@@ -414,6 +414,21 @@ absl::Status SqliteJobQueue::Fail(const std::string& id, const std::string& toke
       return absl::FailedPreconditionError(
           absl::StrCat("job ", id, ": reported cancelled but no cancellation was requested"));
     return RetryOrFail(&job, error, retryable);
+  });
+}
+
+absl::Status SqliteJobQueue::Release(const std::string& id, const std::string& token,
+                                     const std::string& reason) {
+  return InTransaction([&]() -> absl::Status {
+    ASSIGN_OR_RETURN(Job job, LoadHeld(id, token));
+    if (job.cancel_requested) return RetryOrFail(&job, reason, false);  // it ends cancelled
+    RETURN_IF_ERROR(Apply(&job, JobEvent::kRetry));
+    job.attempts = std::max(0, job.attempts - 1);
+    job.error = reason;
+    job.lease_token.clear();
+    job.lease_expires_ms = 0;
+    job.not_before_ms = 0;
+    return Save(job);
   });
 }
 
@@ -504,11 +519,11 @@ absl::StatusOr<int> SqliteJobQueue::RescueExpired() {
     }
     for (const std::string& id : expired) {
       ASSIGN_OR_RETURN(std::optional<Job> job, Load(id));
-      RETURN_IF_ERROR(RetryOrFail(
-          &*job,
-          absl::StrCat("lease of worker '", job->worker_id, "' expired (attempt ", job->attempts,
-                       " of ", job->max_attempts, ")"),
-          /*retryable=*/true));
+      RETURN_IF_ERROR(
+          RetryOrFail(&*job,
+                      absl::StrCat("lease of worker '", job->worker_id, "' expired (attempt ",
+                                   job->attempts, " of ", job->max_attempts, ")"),
+                      /*retryable=*/true));
     }
     return static_cast<int>(expired.size());
   });

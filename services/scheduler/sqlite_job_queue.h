@@ -1,7 +1,7 @@
 // services/scheduler/sqlite_job_queue.h: the embedded JobQueue backend: one SQLite file in WAL mode
-// with synchronous=FULL, so every acknowledged change survives a crash of the process. Mutations run
-// in BEGIN IMMEDIATE transactions; one connection, serialised by a mutex (the scheduler process owns
-// the file; other processes talk to the scheduler over gRPC). Thread-safe.
+// with synchronous=FULL, so every acknowledged change survives a crash of the process. Mutations
+// run in BEGIN IMMEDIATE transactions; one connection, serialised by a mutex (the scheduler process
+// owns the file; other processes talk to the scheduler over gRPC). Thread-safe.
 #pragma once
 
 #include <sqlite3.h>
@@ -30,6 +30,8 @@ class SqliteJobQueue final : public JobQueue {
                         const store::Digest& output) override;
   absl::Status Fail(const std::string& id, const std::string& token, const std::string& error,
                     bool retryable, bool cancelled) override;
+  absl::Status Release(const std::string& id, const std::string& token,
+                       const std::string& reason) override;
   absl::StatusOr<Job> Cancel(const std::string& id) override;
   absl::StatusOr<Job> Get(const std::string& id) override;
   absl::StatusOr<std::vector<Job>> List(const JobFilter& filter) override;

@@ -11,8 +11,9 @@ namespace instascene::scheduler {
 namespace {
 
 testing::QueueFactory SqliteFactory() {
-  return {"sqlite", [](const std::string& dir, const QueueOptions& options,
-                       Clock* clock) -> absl::StatusOr<std::unique_ptr<JobQueue>> {
+  return {"sqlite",
+          [](const std::string& dir, const QueueOptions& options,
+             Clock* clock) -> absl::StatusOr<std::unique_ptr<JobQueue>> {
             auto q = SqliteJobQueue::Open(dir + "/jobs.db", options, clock);
             if (!q.ok()) return q.status();
             return std::unique_ptr<JobQueue>(std::move(*q));
@@ -41,8 +42,8 @@ TEST(TransitionTest, OnlyLegalMoves) {
 
 TEST(SubmitPipelineTest, ChainsStagesAndRefusesBadRequests) {
   testing::FakeClock clock;
-  auto queue = SqliteJobQueue::Open(instascene::testing::FreshTempDir("submit") + "/jobs.db", {},
-                                    &clock);
+  auto queue =
+      SqliteJobQueue::Open(instascene::testing::FreshTempDir("submit") + "/jobs.db", {}, &clock);
   ASSERT_TRUE(queue.ok());
   PipelineRequest request;
   request.scene_manifest = store::ComputeDigest("scene");

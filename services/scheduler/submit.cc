@@ -23,9 +23,9 @@ absl::StatusOr<std::vector<SubmitResult>> SubmitPipeline(JobQueue& queue,
   for (const std::string& kind : stages) {
     ASSIGN_OR_RETURN(std::string input, pipeline::StageInput(kind));
     if (input != previous)
-      return absl::InvalidArgumentError(absl::StrCat(
-          "stage '", kind, "' needs the output of '", input.empty() ? "nothing" : input,
-          "' right before it"));
+      return absl::InvalidArgumentError(absl::StrCat("stage '", kind, "' needs the output of '",
+                                                     input.empty() ? "nothing" : input,
+                                                     "' right before it"));
     RETURN_IF_ERROR(pipeline::ValidateParameters(
         kind, request.parameters.value(kind, nlohmann::json::object())));
     previous = kind;

@@ -14,7 +14,7 @@ namespace instascene::scheduler {
 
 struct PipelineRequest {
   store::Digest scene_manifest;
-  std::string scene;  // "" = the manifest's hash prefix
+  std::string scene;                                     // "" = the manifest's hash prefix
   nlohmann::json parameters = nlohmann::json::object();  // {"train": {...}, ...}
   int priority = 0;
   std::vector<std::string> stages;  // empty = decompose, train, segment

@@ -63,7 +63,8 @@ absl::Status RemoteBlobStore::Put(const store::Digest& digest, absl::string_view
   return WriteStream(
              digest, 0,
              [&]() -> absl::StatusOr<std::string> {
-               const int64_t n = std::min<int64_t>(kChunk, static_cast<int64_t>(bytes.size()) - sent);
+               const int64_t n =
+                   std::min<int64_t>(kChunk, static_cast<int64_t>(bytes.size()) - sent);
                std::string chunk(bytes.substr(static_cast<size_t>(sent), static_cast<size_t>(n)));
                sent += n;
                return chunk;
@@ -88,7 +89,8 @@ absl::StatusOr<int64_t> RemoteBlobStore::WriteStream(
       local = chunk.status();
       break;
     }
-    const bool last = chunk->empty() || offset + static_cast<int64_t>(chunk->size()) >= digest.size_bytes;
+    const bool last =
+        chunk->empty() || offset + static_cast<int64_t>(chunk->size()) >= digest.size_bytes;
     request.set_write_offset(offset);
     offset += static_cast<int64_t>(chunk->size());
     request.set_data(std::move(*chunk));
@@ -145,8 +147,8 @@ absl::StatusOr<int64_t> RemoteBlobStore::Append(const store::Digest& digest, int
 absl::Status RemoteBlobStore::FinishUpload(const store::Digest& digest) {
   ASSIGN_OR_RETURN(int64_t committed, CommittedSize(digest));
   return WriteStream(
-             digest, committed, []() -> absl::StatusOr<std::string> { return std::string(); },
-             true, nullptr)
+             digest, committed, []() -> absl::StatusOr<std::string> { return std::string(); }, true,
+             nullptr)
       .status();
 }
 
@@ -183,8 +185,7 @@ absl::Status RemoteBlobStore::PutFile(const store::Digest& digest, const std::st
                std::string chunk(static_cast<size_t>(n), '\0');
                in.read(chunk.data(), n);
                if (in.gcount() != n)
-                 return absl::DataLossError(
-                     absl::StrCat(path, ": shorter than its digest says"));
+                 return absl::DataLossError(absl::StrCat(path, ": shorter than its digest says"));
                offset += n;
                return chunk;
              },

@@ -93,8 +93,7 @@ grpc::Status StoreService::Write(grpc::ServerContext*, grpc::ServerReader<v1::Wr
   if (!committed.ok()) return ToGrpcStatus(committed.status());
   bool finished = false;
   do {
-    if (finished)
-      return ToGrpcStatus(absl::InvalidArgumentError("Write: data after finish_write"));
+    if (finished) return ToGrpcStatus(absl::InvalidArgumentError("Write: data after finish_write"));
     if (!request.data().empty() || request.write_offset() != *committed) {
       if (*committed == d->size_bytes && request.data().empty()) {
         // Already complete (e.g. resumed after the final chunk landed): nothing to append.

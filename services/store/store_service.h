@@ -1,5 +1,5 @@
-// services/store/store_service.h: the ContentStore gRPC service (store.proto), a thin adapter over a
-// BlobStore. Statuses: INVALID_ARGUMENT malformed digest or digest mismatch (nothing stored),
+// services/store/store_service.h: the ContentStore gRPC service (store.proto), a thin adapter over
+// a BlobStore. Statuses: INVALID_ARGUMENT malformed digest or digest mismatch (nothing stored),
 // RESOURCE_EXHAUSTED blob or batch over the limits, NOT_FOUND unknown digest, FAILED_PRECONDITION
 // write at the wrong offset (the message names the committed size to resume at), OUT_OF_RANGE bad
 // read range. Thread-safe (the BlobStore is).

@@ -37,8 +37,8 @@ class StoreServiceTest : public ::testing::Test {
     options.max_batch_bytes = 64 << 10;
     local_ = std::move(*store::FilesystemBlobStore::Open(root_ + "/store", options));
     service_ = std::make_unique<StoreService>(local_.get());
-    auto server = rpc::Server::Start({"127.0.0.1:0"}, {service_.get()},
-                                     {"instascene.v1.ContentStore"});
+    auto server =
+        rpc::Server::Start({"127.0.0.1:0"}, {service_.get()}, {"instascene.v1.ContentStore"});
     ASSERT_TRUE(server.ok()) << server.status();
     server_ = std::move(*server);
     channel_ = rpc::Connect(server_->address());

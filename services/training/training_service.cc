@@ -68,7 +68,8 @@ absl::StatusOr<std::shared_ptr<TrainingService::Loaded>> TrainingService::Load(
 }
 
 absl::Status TrainingService::Answer(const v1::QueryRequest& request, v1::QueryResponse* response) {
-  ASSIGN_OR_RETURN(store::Digest scene, rpc::ParseProtoDigest(request.scene_manifest(), "scene_manifest"));
+  ASSIGN_OR_RETURN(store::Digest scene,
+                   rpc::ParseProtoDigest(request.scene_manifest(), "scene_manifest"));
   ASSIGN_OR_RETURN(store::Digest result,
                    rpc::ParseProtoDigest(request.result_manifest(), "result_manifest"));
   ASSIGN_OR_RETURN(std::shared_ptr<Loaded> loaded, Load(scene, result));

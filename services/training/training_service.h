@@ -34,14 +34,14 @@ class TrainingService final : public v1::Training::Service {
     std::unique_ptr<QueryIndex> index;
   };
   absl::StatusOr<std::shared_ptr<Loaded>> Load(const store::Digest& scene,
-                                              const store::Digest& result);
+                                               const store::Digest& result);
   absl::Status Answer(const v1::QueryRequest& request, v1::QueryResponse* response);
 
   store::BlobStore* store_;
   std::string work_dir_;
   const worker::StageWorker* worker_;
   size_t cache_entries_;
-  std::mutex mutex_;  // guards cache_ and serialises index builds
+  std::mutex mutex_;                          // guards cache_ and serialises index builds
   std::list<std::shared_ptr<Loaded>> cache_;  // most recent first
 };
 

@@ -69,7 +69,8 @@ StageWorker::StageWorker(WorkerOptions options, store::BlobStore* store)
   if (options_.worker_id.empty()) {
     char host[256] = "host";
     gethostname(host, sizeof(host) - 1);
-    options_.worker_id = absl::StrCat(host, "-", ::getpid(), "-", absl::StrJoin(options_.kinds, "+"));
+    options_.worker_id =
+        absl::StrCat(host, "-", ::getpid(), "-", absl::StrJoin(options_.kinds, "+"));
   }
 }
 
@@ -107,7 +108,8 @@ bool StageWorker::SleepUnlessDraining(std::chrono::milliseconds duration) {
 }
 
 void StageWorker::Loop() {
-  spdlog::info("worker {}: leasing {} jobs", options_.worker_id, absl::StrJoin(options_.kinds, ", "));
+  spdlog::info("worker {}: leasing {} jobs", options_.worker_id,
+               absl::StrJoin(options_.kinds, ", "));
   while (!draining_) {
     v1::LeaseJobRequest request;
     for (const std::string& k : options_.kinds) request.add_kinds(k);
@@ -130,7 +132,7 @@ void StageWorker::Loop() {
       v1::FailJobRequest back;
       back.set_job_id(lease.job().id());
       back.set_lease_token(lease.lease_token());
-      back.set_retryable(true);
+      back.set_released(true);
       back.set_error(absl::StrCat("handed back by worker ", options_.worker_id, " (draining)"));
       v1::FailJobResponse ignored;
       grpc::ClientContext back_context;
@@ -186,7 +188,8 @@ absl::Status StageWorker::Execute(const v1::LeaseJobResponse& lease, const std::
 void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
   const v1::Job& job = lease.job();
   const std::string job_dir =
-      (fs::path(options_.work_dir) / "jobs" / absl::StrCat(job.id(), "-a", job.attempts())).string();
+      (fs::path(options_.work_dir) / "jobs" / absl::StrCat(job.id(), "-a", job.attempts()))
+          .string();
   CancelFlag cancel{false};
   {
     std::lock_guard<std::mutex> lock(mutex_);
@@ -229,9 +232,9 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
   std::error_code ec;
   fs::remove_all(job_dir, ec);
   store::Digest output;
-  const absl::Status status =
-      Execute(lease, job_dir, &cancel,
-              [&](const pipeline::StageProgress& p) { progress.Update(p); }, &output);
+  const absl::Status status = Execute(
+      lease, job_dir, &cancel, [&](const pipeline::StageProgress& p) { progress.Update(p); },
+      &output);
   {
     std::lock_guard<std::mutex> lock(hb_mutex);
     stop_heartbeat = true;
@@ -267,7 +270,7 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
       request.set_cancelled(true);
       request.set_error("cancelled by request");
     } else if (handed_back) {
-      request.set_retryable(true);
+      request.set_released(true);
       request.set_error(absl::StrCat("handed back by worker ", options_.worker_id, " (draining)"));
     } else {
       request.set_retryable(IsRetryable(status.code()));

@@ -1,5 +1,5 @@
-// services/worker/stage_worker.h: the pull loop every stage service runs. It leases jobs of its kinds
-// from the scheduler, fetches the scene and the dependency's output from the store (cached by
+// services/worker/stage_worker.h: the pull loop every stage service runs. It leases jobs of its
+// kinds from the scheduler, fetches the scene and the dependency's output from the store (cached by
 // digest under work_dir), runs the stage library (services/pipeline) with progress and cooperative
 // cancellation, uploads the output directory as a manifest and completes the job — or fails it,
 // marked retryable unless the input itself is bad. A heartbeat thread extends the lease, reports
@@ -25,13 +25,13 @@
 namespace instascene::worker {
 
 struct WorkerOptions {
-  std::string worker_id;            // "" = <hostname>-<pid>-<kinds>
-  std::vector<std::string> kinds;   // job kinds to lease: decompose, train, segment
-  std::string work_dir;             // scene/input cache and job scratch space
-  int num_threads = 0;              // per job; 0 = all cores
-  int poll_interval_ms = 300;       // wait between empty lease attempts
-  int heartbeat_interval_ms = 1000; // progress + lease extension period
-  int lease_seconds = 0;            // requested lease length; 0 = the scheduler's default
+  std::string worker_id;             // "" = <hostname>-<pid>-<kinds>
+  std::vector<std::string> kinds;    // job kinds to lease: decompose, train, segment
+  std::string work_dir;              // scene/input cache and job scratch space
+  int num_threads = 0;               // per job; 0 = all cores
+  int poll_interval_ms = 300;        // wait between empty lease attempts
+  int heartbeat_interval_ms = 1000;  // progress + lease extension period
+  int lease_seconds = 0;             // requested lease length; 0 = the scheduler's default
 
   absl::Status Validate() const;
 };

@@ -149,6 +149,21 @@ TEST_P(JobQueueConformanceTest, RetriesWithCappedBackoffThenFails) {
   EXPECT_EQ(queue_->Submit(Spec("s", "train", d))->job.state, JobState::kQueued);
 }
 
+TEST_P(JobQueueConformanceTest, ReleaseRequeuesWithoutSpendingAnAttempt) {
+  const std::string d = queue_->Submit(Spec("s", "decompose"))->job.id;
+  auto lease = MustLease(*queue_);
+  ASSERT_TRUE(queue_->Release(d, lease->token, "worker shutting down").ok());
+  auto job = queue_->Get(d);
+  EXPECT_EQ(job->state, JobState::kQueued);
+  EXPECT_EQ(job->attempts, 0);
+  EXPECT_EQ(job->error, "worker shutting down");
+  EXPECT_EQ(queue_->Release(d, lease->token, "again").code(),
+            absl::StatusCode::kFailedPrecondition);
+  auto again = MustLease(*queue_);  // no backoff
+  ASSERT_TRUE(again.has_value());
+  EXPECT_EQ(again->job.attempts, 1);
+}
+
 TEST_P(JobQueueConformanceTest, NonRetryableFailureFailsAtOnce) {
   const std::string d = queue_->Submit(Spec("s", "decompose"))->job.id;
   auto lease = MustLease(*queue_);

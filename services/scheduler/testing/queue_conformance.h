@@ -1,6 +1,7 @@
 // services/scheduler/testing/queue_conformance.h: the conformance suite every JobQueue backend
 // must pass. A backend's test instantiates it with a factory:
-//   INSTANTIATE_TEST_SUITE_P(Sqlite, JobQueueConformanceTest, ::testing::Values(MySqliteFactory()));
+//   INSTANTIATE_TEST_SUITE_P(Sqlite, JobQueueConformanceTest,
+//   ::testing::Values(MySqliteFactory()));
 // The factory opens (or re-opens: durability) a queue stored under a per-test directory.
 #pragma once
 
@@ -17,9 +18,8 @@ namespace instascene::scheduler::testing {
 
 struct QueueFactory {
   std::string name;
-  std::function<absl::StatusOr<std::unique_ptr<JobQueue>>(const std::string& directory,
-                                                          const QueueOptions& options,
-                                                          Clock* clock)>
+  std::function<absl::StatusOr<std::unique_ptr<JobQueue>>(
+      const std::string& directory, const QueueOptions& options, Clock* clock)>
       open;
 };
 
@@ -27,8 +27,8 @@ class JobQueueConformanceTest : public ::testing::TestWithParam<QueueFactory> {
  protected:
   void SetUp() override;
   std::unique_ptr<JobQueue> Open();
-  JobSpec Spec(const std::string& scene, const std::string& kind, const std::string& depends_on = "",
-               int priority = 0);
+  JobSpec Spec(const std::string& scene, const std::string& kind,
+               const std::string& depends_on = "", int priority = 0);
 
   std::string directory_;
   QueueOptions options_;

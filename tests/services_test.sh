@@ -1,0 +1,155 @@
+#!/usr/bin/env bash
+# Integration test of the service backbone over loopback: `instascene serve` (store + scheduler +
+# workers), the per-service binaries, and the client commands. Covers: the whole pipeline through
+# the services gives the same labels as `instascene run`; resubmission computes nothing; a worker
+# killed with SIGKILL mid-job (lease expires, retry succeeds, one result); the server killed with
+# SIGKILL and restarted (every job survives); cancellation; SIGTERM drain handing a job back; bad
+# requests rejected with the right status. Prints "N passed, N failed"; exits 1 on any failure.
+set -uo pipefail
+BIN=$1      # the instascene command
+BINDIR=$2   # folder with instascene-store, -scheduler, -decomposition, -training
+WORK=$(mktemp -d)
+PIDS=()
+cleanup() {
+  for p in "${PIDS[@]}"; do kill -9 "$p" 2>/dev/null; done
+  rm -rf "$WORK"
+}
+trap cleanup EXIT
+passed=0
+failed=0
+check() {  # check NAME COMMAND...: the command must succeed
+  local name=$1; shift
+  if "$@" >"$WORK/cmd.txt" 2>"$WORK/err.txt"; then passed=$((passed + 1)); cp "$WORK/cmd.txt" "$WORK/out.txt"; else
+    failed=$((failed + 1)); echo "FAIL: $name"; cat "$WORK/err.txt"; tail -n 20 "$WORK"/*.log 2>/dev/null; fi
+}
+check_fails() {  # check_fails NAME PATTERN COMMAND...: must fail with PATTERN on stderr
+  local name=$1 pattern=$2; shift 2
+  if "$@" >"$WORK/cmd.txt" 2>"$WORK/err.txt"; then failed=$((failed + 1)); echo "FAIL (succeeded): $name"
+  elif grep -q "$pattern" "$WORK/err.txt"; then passed=$((passed + 1)); else
+    failed=$((failed + 1)); echo "FAIL (wrong message): $name"; cat "$WORK/err.txt"; fi
+}
+# start NAME READYFILE COMMAND...: runs a server in the background, waits for its ready file.
+start() {
+  local name=$1 ready=$2; shift 2
+  rm -f "$ready"
+  "$@" >"$WORK/$name.log" 2>&1 &
+  LAST_PID=$!
+  PIDS+=("$LAST_PID")
+  for _ in $(seq 200); do [ -s "$ready" ] && return 0; sleep 0.05; done
+  echo "FAIL: $name did not become ready"; cat "$WORK/$name.log"; failed=$((failed + 1)); return 1
+}
+# job_field ADDR ID FIELD: one field of a job from `instascene jobs --json`.
+job_field() {
+  "$BIN" jobs --server "$1" --json --limit 1000 2>/dev/null | tail -n 1 |
+    python3 -c "import json,sys; d=json.load(sys.stdin); print([j for j in d['jobs'] if j['id']=='$2'][0]['$3'])"
+}
+# wait_state ADDR ID STATE [PHASE]: polls until the job is in STATE (and its progress in PHASE).
+wait_state() {
+  for _ in $(seq 300); do  # 30 s at most
+    if [ "$(job_field "$1" "$2" state)" = "$3" ] && { [ -z "${4:-}" ] || [ "$(job_field "$1" "$2" phase)" = "$4" ]; }; then return 0; fi
+    sleep 0.1
+  done
+  return 1
+}
+json_get() {  # json_get FILE EXPR: evaluates EXPR on the JSON of FILE's last line as d
+  tail -n 1 "$1" | python3 -c "import json,sys; d=json.load(sys.stdin); print($2)"
+}
+
+SMALL='{"train":{"iterations":60,"samples":512,"pixel_pool":1024}}'
+slow() { echo "{\"train\":{\"iterations\":$1,\"samples\":512,\"pixel_pool\":1024}}"; }  # ~1.5 ms/step
+check "synth scene A" "$BIN" synth --out "$WORK/a" --preset tiny --seed 3
+check "synth scene B" "$BIN" synth --out "$WORK/b" --preset tiny --seed 4
+
+# 1. The whole pipeline through the embedded server equals the offline run.
+start serve "$WORK/ready" "$BIN" serve --data "$WORK/data" --listen 127.0.0.1:0 --ready-file "$WORK/ready" --lease-seconds 2
+SERVE=$LAST_PID
+ADDR=$(cat "$WORK/ready")
+check "submit scene A" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params "$SMALL" --json
+cp "$WORK/out.txt" "$WORK/submit1.json"
+check "submit json has scene and 3 jobs" test "$(json_get "$WORK/submit1.json" "d['scene'] + str(len(d['jobs']))")" = "a3"
+SEG=$(json_get "$WORK/submit1.json" "d['jobs'][2]['id']")
+TRAIN=$(json_get "$WORK/submit1.json" "d['jobs'][1]['id']")
+DEC=$(json_get "$WORK/submit1.json" "d['jobs'][0]['id']")
+check "watch until done" "$BIN" watch "$SEG" "$TRAIN" "$DEC" --server "$ADDR" --json
+check "fetch segment result" "$BIN" fetch "$SEG" --out "$WORK/fetched" --server "$ADDR" --json
+check "fetched instances" test -s "$WORK/fetched/instances.json"
+check "offline run" "$BIN" run --scene "$WORK/a" --out "$WORK/offline" --iterations 60 --samples 512 --pixel-pool 1024
+check "service labels == offline labels" cmp "$WORK/fetched/labels.ply" "$WORK/offline/segmentation/labels.ply"
+check "jobs table" "$BIN" jobs --server "$ADDR"
+check "jobs table lists succeeded" grep -q "succeeded 3" "$WORK/out.txt"
+
+# 2. Resubmitting computes nothing new and uploads nothing.
+check "resubmit" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params "$SMALL" --json
+cp "$WORK/out.txt" "$WORK/submit2.json"
+check "resubmit uploads nothing" test "$(json_get "$WORK/submit2.json" "d['uploaded_files']")" = "0"
+check "resubmit returns the same finished jobs" test \
+  "$(json_get "$WORK/submit2.json" "[(j['id'], j['state'], j['created']) for j in d['jobs']]")" = \
+  "[('$DEC', 'succeeded', False), ('$TRAIN', 'succeeded', False), ('$SEG', 'succeeded', False)]"
+check "no job ran twice" test "$(job_field "$ADDR" "$TRAIN" attempts)" = "1"
+
+# 3. Bad requests: the right status, nothing queued.
+check_fails "bad parameter" "INVALID_ARGUMENT.*'iterations' has the wrong type" \
+  "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params '{"train":{"iterations":"many"}}'
+check_fails "unknown stage parameter" "INVALID_ARGUMENT.*unknown parameter 'tau'" \
+  "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params '{"segment":{"tau":0.5}}'
+check_fails "unknown job" "NOT_FOUND.*job jdoesnotexist" "$BIN" fetch jdoesnotexist --out "$WORK/x" --server "$ADDR"
+check_fails "no server" "unreachable" "$BIN" jobs --server 127.0.0.1:1
+check "bad requests queued nothing" test "$(json_get <("$BIN" jobs --server "$ADDR" --json) "len(d['jobs'])")" = "3"
+
+# 4. Cancellation reaches a running job and its dependents.
+check "submit scene B (long)" "$BIN" submit --scene "$WORK/b" --server "$ADDR" --iterations 100000 --json
+cp "$WORK/out.txt" "$WORK/submit3.json"
+BTRAIN=$(json_get "$WORK/submit3.json" "d['jobs'][1]['id']")
+BSEG=$(json_get "$WORK/submit3.json" "d['jobs'][2]['id']")
+check "B training runs" wait_state "$ADDR" "$BTRAIN" running training
+check "cancel running job" "$BIN" cancel "$BTRAIN" --server "$ADDR"
+check_fails "watch reports the cancellation" "cancelled" "$BIN" watch "$BTRAIN" "$BSEG" --server "$ADDR"
+check "cancelled job state" test "$(job_field "$ADDR" "$BTRAIN" state)" = "cancelled"
+check "dependent cancelled" test "$(job_field "$ADDR" "$BSEG" state)" = "cancelled"
+
+# 5. The server killed with SIGKILL mid-job and restarted: every job survives and finishes.
+check "resubmit B with other parameters" "$BIN" submit --scene "$WORK/b" --server "$ADDR" --params "$SMALL" --json
+cp "$WORK/out.txt" "$WORK/submit4.json"
+B4TRAIN=$(json_get "$WORK/submit4.json" "d['jobs'][1]['id']")
+B4SEG=$(json_get "$WORK/submit4.json" "d['jobs'][2]['id']")
+check "submit slow pipeline on A" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params "$(slow 4000)" --json
+cp "$WORK/out.txt" "$WORK/submit5.json"
+SLOW=$(json_get "$WORK/submit5.json" "d['jobs'][1]['id']")
+SLOWSEG=$(json_get "$WORK/submit5.json" "d['jobs'][2]['id']")
+check "slow training runs" wait_state "$ADDR" "$SLOW" running training
+kill -9 "$SERVE"; wait "$SERVE" 2>/dev/null
+start serve2 "$WORK/ready" "$BIN" serve --data "$WORK/data" --listen 127.0.0.1:0 --ready-file "$WORK/ready" --lease-seconds 2 --drain-seconds 0
+SERVE=$LAST_PID
+ADDR=$(cat "$WORK/ready")
+check "all 10 jobs survived the crash" test "$(json_get <("$BIN" jobs --server "$ADDR" --json) "len(d['jobs'])")" = "10"
+check "after restart everything finishes" "$BIN" watch "$SLOWSEG" "$B4SEG" --server "$ADDR"
+check "the interrupted job was retried once" test "$(job_field "$ADDR" "$SLOW" attempts)" = "2"
+check "first pipeline untouched" test "$(job_field "$ADDR" "$SEG" state)/$(job_field "$ADDR" "$SEG" attempts)" = "succeeded/1"
+
+# 6. SIGTERM with a zero drain deadline hands the running job back; it finishes after a restart.
+check "submit another slow pipeline" "$BIN" submit --scene "$WORK/b" --server "$ADDR" --params "$(slow 4001)" --json
+cp "$WORK/out.txt" "$WORK/submit6.json"
+DRAIN=$(json_get "$WORK/submit6.json" "d['jobs'][1]['id']")
+check "it runs" wait_state "$ADDR" "$DRAIN" running training
+kill -TERM "$SERVE"; wait "$SERVE"
+check "serve exited cleanly on SIGTERM" test $? -eq 0
+check "drain log" grep -q "draining" "$WORK/serve2.log"
+
+# 7. Workers as separate processes; one killed with SIGKILL mid-job.
+start store "$WORK/ready-store" "$BINDIR/instascene-store" --data "$WORK/data" --listen 127.0.0.1:0 --ready-file "$WORK/ready-store"
+STORE=$(cat "$WORK/ready-store")
+start scheduler "$WORK/ready-sched" "$BINDIR/instascene-scheduler" --data "$WORK/data" --listen 127.0.0.1:0 --ready-file "$WORK/ready-sched" --store "$STORE" --lease-seconds 2
+SCHED=$(cat "$WORK/ready-sched")
+check "the handed-back job is queued" test "$(job_field "$SCHED" "$DRAIN" state)" = "queued"
+check "handed back, not failed" grep -q "handed back" <(job_field "$SCHED" "$DRAIN" error)
+start trainer1 "$WORK/ready-t1" "$BINDIR/instascene-training" --data "$WORK/w1" --store "$STORE" --scheduler "$SCHED" --lease-seconds 2 --ready-file "$WORK/ready-t1"
+T1=$LAST_PID
+check "worker 1 takes the job" wait_state "$SCHED" "$DRAIN" running training
+kill -9 "$T1"; wait "$T1" 2>/dev/null
+start trainer2 "$WORK/ready-t2" "$BINDIR/instascene-training" --data "$WORK/w2" --store "$STORE" --scheduler "$SCHED" --lease-seconds 2 --ready-file "$WORK/ready-t2"
+check "the killed worker's job is retried and succeeds" "$BIN" watch "$DRAIN" --server "$SCHED"
+check "two attempts: the killed one and the successful one (the hand-back is free)" test "$(job_field "$SCHED" "$DRAIN" attempts)" = "2"
+check "exactly one result recorded" test -n "$(job_field "$SCHED" "$DRAIN" output_manifest)"
+
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]
