@@ -2,8 +2,10 @@
 # `make demo`: what the project can do today, end to end on this machine.
 # 1. renders real trained splats from ../shared/data/splats from several viewpoints;
 # 2. generates a synthetic cluttered scene with ground truth and noisy 2D masks;
-# 3. decomposes it into 3D instances (spatial Gaussian trackers + mask clustering) and scores the
-#    result against the ground truth; also on a composite of the real captures;
+# 3. starts the embedded server (`instascene serve`: store + scheduler + workers), submits that
+#    scene and a composite of the real captures, watches their pipelines (decompose -> train ->
+#    segment), resubmits to show nothing is recomputed;
+# 4. fetches the per-instance results, scores them against the ground truth, stops the server;
 # then prints what it wrote and how long it took.
 set -euo pipefail
 BUILD_DIR=${1:-build}
@@ -38,34 +40,65 @@ for v in 0 11 23; do
   "$BIN" render --scene "$OUT/synthetic" --view "$v" --mode normal --out "$OUT/synthetic/normal_$v.png"
 done
 
-echo "== 3. The main job offline: noisy 2D masks -> 3D instances (decompose + train + segment) =="
-"$BIN" run --scene "$OUT/synthetic" --out "$OUT/synthetic/run"
-echo "-- coarse decomposition (labels):"
-"$BIN" eval --scene "$OUT/synthetic" --result "$OUT/synthetic/run/decomposition" | tail -n 1
-echo "-- full method (trained features, click protocol):"
-"$BIN" eval --scene "$OUT/synthetic" --result "$OUT/synthetic/run/segmentation"
-for v in 0 11 23; do
-  "$BIN" render --scene "$OUT/synthetic" --view "$v" --mode labels --result "$OUT/synthetic/run/segmentation" --out "$OUT/synthetic/instances_$v.png"
-done
-echo "-- per-instance splats (open in any 3DGS viewer):"
-ls "$OUT/synthetic/run/segmentation/instances" | head -n 20 | sed 's/^/  /' 
 if [ -d "$SPLATS" ]; then
+  echo "-- and a composite of the real captures (three trained splats in one room, their 2D masks rendered)"
   "$BIN" synth --out "$OUT/composite" --from-splats "$SPLATS/statue_massa.ply,$SPLATS/playbot_lod4_3dgs_order.ply,$SPLATS/statue_angel.ply" \
     --views 24 --width 320 --height 240
-  "$BIN" run --scene "$OUT/composite" --out "$OUT/composite/run"
-  echo "-- real-capture composite, full method:"
-  "$BIN" eval --scene "$OUT/composite" --result "$OUT/composite/run/segmentation" | tail -n 1
 fi
+
+echo "== 3. The main job through the services (embedded default: store + scheduler + workers in one process) =="
+"$BIN" serve --data "$OUT/server" --listen 127.0.0.1:0 --ready-file "$OUT/server.addr" >"$OUT/server.log" 2>&1 &
+SERVER_PID=$!
+trap 'kill -TERM $SERVER_PID 2>/dev/null || true' EXIT
+for _ in $(seq 200); do [ -s "$OUT/server.addr" ] && break; sleep 0.05; done
+ADDR=$(cat "$OUT/server.addr")
+echo "server: $ADDR (log: $OUT/server.log, data: $OUT/server/)"
+scenes=(synthetic)
+[ -d "$OUT/composite" ] && scenes+=(composite)
+declare -A SEGMENT
+for scene in "${scenes[@]}"; do
+  echo "-- submit $scene"
+  "$BIN" submit --scene "$OUT/$scene" --server "$ADDR" --json > "$OUT/$scene.submit.json"
+  SEGMENT[$scene]=$(tail -n 1 "$OUT/$scene.submit.json" | python3 -c "import json,sys; print(json.load(sys.stdin)['jobs'][-1]['id'])")
+done
+echo "-- watch (both scenes share the workers; the scheduler alternates between them)"
+for scene in "${scenes[@]}"; do "$BIN" watch --scene "$scene" --server "$ADDR"; done
+"$BIN" jobs --server "$ADDR"
+echo "-- resubmitting the same capture uploads and computes nothing:"
+"$BIN" submit --scene "$OUT/synthetic" --server "$ADDR" 2>&1 | sed 's/^/  /'
+
+echo "== 4. Results, fetched from the store =="
+for scene in "${scenes[@]}"; do
+  "$BIN" fetch "${SEGMENT[$scene]}" --out "$OUT/$scene/result" --server "$ADDR"
+  "$BIN" eval --scene "$OUT/$scene" --result "$OUT/$scene/result" --json 2>/dev/null | tail -n 1 > "$OUT/$scene.eval.json"
+  python3 - "$OUT/$scene" <<'PY'
+import json, sys
+d = sys.argv[1]
+ev = json.load(open(d + ".eval.json"))
+instances = json.load(open(d + "/result/instances.json"))
+print(f"  {d}: {len(instances)} instances found ({len(ev['objects'])} objects in the ground truth); "
+      f"click mIoU {ev['miou']:.3f}, 3D precision {ev['precision_3d']:.2f} / recall {ev['recall_3d']:.2f}")
+PY
+done
+for v in 0 11 23; do
+  "$BIN" render --scene "$OUT/synthetic" --view "$v" --mode labels --result "$OUT/synthetic/result" --out "$OUT/synthetic/instances_$v.png"
+done
+echo "-- per-instance splats (open in any 3DGS viewer):"
+ls "$OUT/synthetic/result/instances" | head -n 20 | sed 's/^/  /'
+kill -TERM $SERVER_PID
+wait $SERVER_PID || true
+trap - EXIT
+echo "server stopped: $(tail -n 1 "$OUT/server.log")"
 
 end_ns=$(date +%s%N)
 echo
 echo "== Demo output =="
 echo "  demo-out/real/                         $(ls demo-out/real 2>/dev/null | wc -l) renders of the real captures (color, depth, surfel normals)"
 echo "  demo-out/synthetic/                    scene: images/, masks/ (noisy), gt/ (ground truth)"
-echo "  demo-out/synthetic/run/decomposition/  coarse 3D instances, filtered and consistent 2D masks"
-echo "  demo-out/synthetic/run/segmentation/   features, labels, instances/*.ply, scene_labelled.ply"
+echo "  demo-out/synthetic/result/             fetched from the server: labels, features, instances/*.ply, scene_labelled.ply"
 echo "  demo-out/synthetic/instances_*.png     rendered instance maps"
-[ -d "$OUT/composite" ] && echo "  demo-out/composite/                    the real captures composed into one scene, and its run/"
+[ -d "$OUT/composite" ] && echo "  demo-out/composite/                    the real captures composed into one scene, and its result/"
+echo "  demo-out/server/                       the server's data: store/ (content-addressed blobs), jobs.db (SQLite queue)"
 echo "  ($(find "$OUT" -name '*.png' | wc -l) PNG and $(find "$OUT" -name '*.ply' | wc -l) PLY files in all)"
 elapsed_ms=$(( (end_ns - start_ns) / 1000000 ))
 printf "Demo finished in %d.%03d s\n" $((elapsed_ms / 1000)) $((elapsed_ms % 1000))

@@ -64,9 +64,12 @@ nlohmann::json JobJson(const v1::Job& j) {
   return out;
 }
 
+bool IsFinalState(v1::JobState s);
+
+// Live progress of a held job ("" once the job is final: the last report is no longer news).
 std::string ProgressText(const v1::Job& j) {
   const v1::Progress& p = j.progress();
-  if (p.phase().empty()) return "";
+  if (p.phase().empty() || IsFinalState(j.state())) return "";
   std::string text =
       p.total() > 0 ? absl::StrFormat("%s %d/%d", p.phase(), p.step(), p.total()) : p.phase();
   if (p.loss() != 0) absl::StrAppendFormat(&text, " loss %.4g", p.loss());
