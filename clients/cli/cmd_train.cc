@@ -10,9 +10,13 @@
 #include "common/core/timer.h"
 #include "common/eval/result.h"
 #include "services/decomposition/decompose.h"
+#include "services/pipeline/stages.h"
 #include "services/training/feature_field.h"
 #include "services/training/segmentation.h"
 #include "services/training/vote.h"
+
+#include <map>
+#include <set>
 
 namespace instascene::cli {
 namespace {
@@ -146,7 +150,9 @@ void AddTrainCommands(CLI::App& app, Action* action) {
 
   auto run = std::make_shared<TrainArgs>();
   CLI::App* r = app.add_subcommand(
-      "run", "All stages offline: decompose, train, segment (results under --out)");
+      "run",
+      "All stages offline, the same stage code the services run: decompose, train, segment "
+      "(results under --out: decomposition/, training/, segmentation/)");
   r->add_option("--scene", run->scene, "Scene directory (images, masks, gaussians.ply)")
       ->required();
   r->add_option("--out", run->out, "Output directory: decomposition/ and segmentation/")
@@ -154,32 +160,62 @@ void AddTrainCommands(CLI::App& app, Action* action) {
   AddTrainingOptions(r, run.get());
   r->callback([run, action] {
     *action = [run]() -> absl::Status {
+      // The same stage functions the service workers run (services/pipeline), in order.
       Stopwatch watch;
+      const std::filesystem::path out(run->out);
+      nlohmann::json train_parameters = {{"iterations", run->options.iterations},
+                                         {"samples", run->options.samples},
+                                         {"pixel_pool", run->options.pixel_pool},
+                                         {"supervision", run->supervision},
+                                         {"method", run->method},
+                                         {"seed", run->options.seed}};
+      const std::vector<std::pair<std::string, nlohmann::json>> stages = {
+          {"decompose", nlohmann::json::object()},
+          {"train", train_parameters},
+          {"segment", {{"threshold", run->threshold}}}};
+      const std::map<std::string, std::string> dirs = {
+          {"decompose", "decomposition"}, {"train", "training"}, {"segment", "segmentation"}};
+      std::string input;
+      for (const auto& [kind, parameters] : stages) {
+        pipeline::StageContext context;
+        context.scene_dir = run->scene;
+        context.input_dir = input;
+        context.out_dir = (out / dirs.at(kind)).string();
+        context.parameters = parameters;
+        context.num_threads = run->options.num_threads;
+        std::unique_ptr<ProgressBar> bar;
+        std::string phase;
+        context.progress = [&](const pipeline::StageProgress& p) {
+          if (p.phase != phase) {
+            phase = p.phase;
+            bar = p.total > 1 ? std::make_unique<ProgressBar>(absl::StrCat(kind, ": ", p.phase))
+                              : nullptr;
+          }
+          if (bar) bar->Update(static_cast<int>(p.step), static_cast<int>(p.total));
+        };
+        RETURN_IF_ERROR(pipeline::RunStage(kind, context));
+        input = context.out_dir;
+      }
+      const std::string result = (out / "segmentation").string();
       ASSIGN_OR_RETURN(Scene scene, ReadScene(run->scene));
       ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
-      const std::string decomposition_dir =
-          (std::filesystem::path(run->out) / "decomposition").string();
-      ProgressBar bar("run: tracking");
-      decomposition::DecompositionOptions dopt;
-      dopt.num_threads = run->options.num_threads;
-      ASSIGN_OR_RETURN(decomposition::DecompositionResult coarse,
-                       decomposition::Decompose(scene, cloud, dopt,
-                                                [&](const std::string& stage, int done, int total) {
-                                                  if (stage == "tracking") bar.Update(done, total);
-                                                }));
-      RETURN_IF_ERROR(decomposition::WriteDecomposition(decomposition_dir, scene, cloud, coarse));
-      std::fprintf(stderr, "run: %zu coarse instances from %zu masks\n", coarse.instances.size(),
-                   coarse.trackers.trackers.size());
-      TrainArgs args = *run;
-      args.out = (std::filesystem::path(run->out) / "segmentation").string();
-      nlohmann::json summary = {{"instances", coarse.instances.size()},
-                                {"decomposition", decomposition_dir}};
-      RETURN_IF_ERROR(TrainAndSegment(args, scene, cloud, decomposition_dir, &summary));
-      summary["seconds"] = watch.ElapsedSeconds();
-      std::fprintf(
-          stderr,
-          "run: done in %.1f s; results in %s (evaluate with instascene eval --result %s)\n",
-          watch.ElapsedSeconds(), run->out.c_str(), args.out.c_str());
+      ASSIGN_OR_RETURN(SegmentationResult coarse,
+                       ReadResult((out / "decomposition").string(), cloud.size()));
+      ASSIGN_OR_RETURN(SegmentationResult final_result, ReadResult(result, cloud.size()));
+      std::set<uint32_t> coarse_ids(coarse.labels.begin(), coarse.labels.end());
+      std::set<uint32_t> final_ids(final_result.labels.begin(), final_result.labels.end());
+      coarse_ids.erase(0);
+      final_ids.erase(0);
+      const nlohmann::json summary = {{"instances", final_ids.size()},
+                                      {"coarse_instances", coarse_ids.size()},
+                                      {"decomposition", (out / "decomposition").string()},
+                                      {"out", result},
+                                      {"seconds", watch.ElapsedSeconds()}};
+      std::fprintf(stderr,
+                   "run: %zu instances (%zu coarse) in %.1f s; results in %s (evaluate with "
+                   "instascene eval --result %s)\n",
+                   final_ids.size(), coarse_ids.size(), watch.ElapsedSeconds(), run->out.c_str(),
+                   result.c_str());
       if (run->json) PrintJsonLine(summary.dump());
       return absl::OkStatus();
     };
