@@ -3,7 +3,7 @@
 # Figures go to stdout; docs/PERFORMANCE.md records them with these exact commands.
 set -euo pipefail
 BUILD_DIR=${1:-build}
-for b in "$BUILD_DIR"/common/*/*_benchmark; do
+for b in "$BUILD_DIR"/common/*/*_benchmark "$BUILD_DIR"/services/*/*_benchmark; do
   [ -x "$b" ] || continue
   echo "== $b"
   "$b" --benchmark_repetitions=5 --benchmark_report_aggregates_only=true

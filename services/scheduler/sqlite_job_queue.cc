@@ -279,23 +279,26 @@ absl::StatusOr<std::optional<Lease>> SqliteJobQueue::LeaseNext(
   return InTransaction([&]() -> absl::StatusOr<std::optional<Lease>> {
     const int64_t now = clock_->NowMs();
     std::vector<std::string> marks(kinds.size(), "?");
+    // Held jobs per scene are counted once (not per candidate row): fairness stays O(ready jobs).
     Statement pick(
-        db_, absl::StrCat(
-                 "SELECT j.id FROM jobs j LEFT JOIN jobs d ON d.id = j.depends_on "
-                 "LEFT JOIN scenes s ON s.scene = j.scene "
-                 "WHERE j.state = ? AND j.not_before_ms <= ? AND j.kind IN (",
-                 absl::StrJoin(marks, ","),
-                 ") AND (j.depends_on = '' OR d.state = ?) "
-                 "ORDER BY j.priority DESC, "
-                 "(SELECT COUNT(*) FROM jobs h WHERE h.scene = j.scene AND h.state IN (?, ?)) ASC, "
-                 "COALESCE(s.last_lease_ms, 0) ASC, j.seq ASC LIMIT 1"));
+        db_,
+        absl::StrCat(
+            "WITH held AS (SELECT scene, COUNT(*) AS n FROM jobs WHERE state IN (?, ?) "
+            "GROUP BY scene) "
+            "SELECT j.id FROM jobs j LEFT JOIN jobs d ON d.id = j.depends_on "
+            "LEFT JOIN scenes s ON s.scene = j.scene LEFT JOIN held h ON h.scene = j.scene "
+            "WHERE j.state = ? AND j.not_before_ms <= ? AND j.kind IN (",
+            absl::StrJoin(marks, ","),
+            ") AND (j.depends_on = '' OR d.state = ?) "
+            "ORDER BY j.priority DESC, COALESCE(h.n, 0) ASC, COALESCE(s.last_lease_ms, 0) ASC, "
+            "j.seq ASC LIMIT 1"));
     int i = 1;
+    pick.Bind(i++, Code(JobState::kLeased));
+    pick.Bind(i++, Code(JobState::kRunning));
     pick.Bind(i++, Code(JobState::kQueued));
     pick.Bind(i++, now);
     for (const std::string& k : kinds) pick.Bind(i++, k);
     pick.Bind(i++, Code(JobState::kSucceeded));
-    pick.Bind(i++, Code(JobState::kLeased));
-    pick.Bind(i++, Code(JobState::kRunning));
     ASSIGN_OR_RETURN(bool row, pick.Step());
     if (!row) return std::optional<Lease>();
     ASSIGN_OR_RETURN(std::optional<Job> job, Load(pick.Text(0)));
