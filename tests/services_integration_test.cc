@@ -11,6 +11,7 @@
 #include "common/rpc/status.h"
 #include "common/store/manifest.h"
 #include "common/synth/scene_writer.h"
+#include "grpc/health/v1/health.grpc.pb.h"
 #include "instascene/v1/training.grpc.pb.h"
 #include "services/scheduler/scheduler_service.h"
 #include "services/scheduler/sqlite_job_queue.h"
@@ -105,6 +106,25 @@ class ServicesTest : public ::testing::Test {
   std::vector<std::unique_ptr<worker::StageWorker>> workers_;
   store::Digest scene_manifest_;
 };
+
+TEST_F(ServicesTest, HealthReportsEveryService) {
+  auto health = grpc::health::v1::Health::NewStub(channel_);
+  auto check = [&](const std::string& service) {
+    grpc::health::v1::HealthCheckRequest request;
+    request.set_service(service);
+    grpc::health::v1::HealthCheckResponse response;
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(5));
+    const grpc::Status s = health->Check(&context, request, &response);
+    return s.ok() ? static_cast<int>(response.status()) : -static_cast<int>(s.error_code());
+  };
+  constexpr int kServing = grpc::health::v1::HealthCheckResponse::SERVING;
+  EXPECT_EQ(check(""), kServing);
+  EXPECT_EQ(check("instascene.v1.Scheduler"), kServing);
+  EXPECT_EQ(check("instascene.v1.ContentStore"), kServing);
+  EXPECT_EQ(check("instascene.v1.Training"), kServing);
+  EXPECT_EQ(check("instascene.v1.Nope"), -static_cast<int>(grpc::StatusCode::NOT_FOUND));
+}
 
 TEST_F(ServicesTest, BadRequestsAreRejectedAndLeaveNoTrace) {
   // A good pipeline first: it must come through everything below untouched.
