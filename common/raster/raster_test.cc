@@ -73,6 +73,7 @@ RenderOptions AllOutputs(const std::vector<float>& features, int dim) {
   options.features = features.data();
   options.feature_dim = dim;
   options.trace.enabled = true;
+  options.trace.transmittance = true;
   return options;
 }
 
@@ -101,7 +102,7 @@ TEST_P(RasterVsReference, RandomScenesMatchBruteForce) {
     for (size_t e = 0; e < ref.trace.entries.size(); ++e) {
       ASSERT_EQ(fast->trace.entries[e].gaussian, ref.trace.entries[e].gaussian) << e;
       ASSERT_NEAR(fast->trace.entries[e].weight, ref.trace.entries[e].weight, 1e-5);
-      ASSERT_NEAR(fast->trace.entries[e].transmittance, ref.trace.entries[e].transmittance, 1e-5);
+      ASSERT_NEAR(fast->trace.transmittance[e], ref.trace.transmittance[e], 1e-5);
     }
     EXPECT_GT(fast->stats.blended_fragments, 1000u);  // the scene is not trivially empty
   }
@@ -173,11 +174,12 @@ TEST(Raster, OpaqueStackStopsAtTransmittanceFloor) {
   RenderOptions options;
   options.trace.enabled = true;
   options.trace.pixels = {16 * 33 + 16};
+  options.trace.transmittance = true;
   absl::StatusOr<RenderResult> r = Render(cloud, FrontCamera(33, 33, 50.0), options);
   ASSERT_TRUE(r.ok());
   ASSERT_EQ(r->trace.entries.size(), 3u);
   for (uint32_t k = 0; k < 3; ++k) EXPECT_EQ(r->trace.entries[k].gaussian, k);
-  EXPECT_NEAR(r->trace.entries[2].transmittance, 0.0025f, 1e-7);
+  EXPECT_NEAR(r->trace.transmittance[2], 0.0025f, 1e-7);
   EXPECT_NEAR(r->trace.entries[2].weight, 0.95f * 0.0025f, 1e-7);
   EXPECT_NEAR(r->alpha[16 * 33 + 16], 1.0f - 1.25e-4f, 1e-6);
 }

@@ -69,14 +69,24 @@ void AssembleTrace(const ProjectionParams& p, const std::vector<TileTrace>& tile
   });
   for (size_t i = 1; i < offsets.size(); ++i) offsets[i] += offsets[i - 1];
   trace->entries.resize(offsets.back());
+  const bool with_t = trace_options.transmittance;
+  trace->transmittance.resize(with_t ? offsets.back() : 0);
   tbb::parallel_for(size_t{0}, tiles.size(), [&](size_t t) {
     // Per-pixel write cursors; entries arrive front to back within each pixel, so a plain scatter
     // keeps that order. The tile's target rows are 16 short contiguous runs (cache-resident).
     const TileTrace& tile = tiles[t];
     uint64_t cursor[raster_internal::kTilePixels];
     for_each_pixel(t, [&](int local, size_t row) { cursor[local] = offsets[row]; });
-    for (size_t e = 0; e < tile.entries.size(); ++e)
-      trace->entries[cursor[tile.pixels[e]]++] = tile.entries[e];
+    if (with_t) {
+      for (size_t e = 0; e < tile.entries.size(); ++e) {
+        const uint64_t at = cursor[tile.pixels[e]]++;
+        trace->entries[at] = tile.entries[e];
+        trace->transmittance[at] = tile.transmittance[e];
+      }
+    } else {
+      for (size_t e = 0; e < tile.entries.size(); ++e)
+        trace->entries[cursor[tile.pixels[e]]++] = tile.entries[e];
+    }
   });
 }
 

@@ -26,6 +26,8 @@ struct TraceOptions {
   std::vector<uint32_t> pixels;
   // Record only contributions with weight w = alpha * T > min_weight (the tracker rule uses 0.1).
   float min_weight = 0.0f;
+  // Also record the transmittance before each contribution (ContributorTrace::transmittance).
+  bool transmittance = false;
 };
 
 struct RenderOptions {
@@ -47,11 +49,11 @@ struct RenderOptions {
   absl::Status Validate() const;
 };
 
-// One entry of a pixel's contributor list.
+// One entry of a pixel's contributor list. 8 bytes: a full trace is tens of millions of entries
+// per frame and memory-bound, so the transmittance lives in an optional parallel array.
 struct Contribution {
-  uint32_t gaussian = 0;       // index into the GaussianCloud
-  float weight = 0.0f;         // w = alpha * T, this Gaussian's blending weight at the pixel
-  float transmittance = 0.0f;  // T before this Gaussian
+  uint32_t gaussian = 0;  // index into the GaussianCloud
+  float weight = 0.0f;    // w = alpha * T, this Gaussian's blending weight at the pixel
 };
 
 // Compressed per-pixel lists (CSR): entries[offsets[i] .. offsets[i+1]) belong to pixels[i].
@@ -59,6 +61,9 @@ struct ContributorTrace {
   std::vector<uint32_t> pixels;   // traced pixel ids, increasing
   std::vector<uint64_t> offsets;  // pixels.size() + 1
   std::vector<Contribution> entries;
+  // T before each entry's Gaussian, parallel to `entries`; filled only when
+  // TraceOptions::transmittance is set (empty otherwise).
+  std::vector<float> transmittance;
 
   size_t num_pixels() const { return pixels.size(); }
 };

@@ -29,6 +29,7 @@ inline constexpr int kTilePixels = kTileSize * kTileSize;
 // interleaved), with each entry's local pixel and the count per local pixel.
 struct TileTrace {
   std::vector<Contribution> entries;
+  std::vector<float> transmittance;  // parallel to entries when TraceOptions::transmittance
   std::vector<uint16_t> pixels;  // local pixel of each entry
   uint32_t counts[kTilePixels];
 };
@@ -159,6 +160,7 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
   if constexpr (kFeatures) st.features.assign(static_cast<size_t>(kTilePixels) * dim, 0.0f);
   if constexpr (kTrace) {
     tile_trace->entries.clear();
+    tile_trace->transmittance.clear();
     tile_trace->pixels.clear();
     std::fill_n(tile_trace->counts, kTilePixels, 0u);
   }
@@ -275,7 +277,9 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
           if constexpr (kTrace) {
             if (w > opt.trace.min_weight &&
                 (trace_mask == nullptr || trace_mask[y * p.width + x])) {
-              tile_trace->entries.push_back({gid, w, st.row_transmittance[dx_lane]});
+              tile_trace->entries.push_back({gid, w});
+              if (opt.trace.transmittance)
+                tile_trace->transmittance.push_back(st.row_transmittance[dx_lane]);
               tile_trace->pixels.push_back(static_cast<uint16_t>(i));
               ++tile_trace->counts[i];
             }

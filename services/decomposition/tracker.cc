@@ -54,6 +54,7 @@ absl::StatusOr<ViewTrackers> TrackView(const GaussianCloud& cloud, const Pinhole
   render_options.trace.enabled = true;
   render_options.trace.min_weight =
       options.tracker_rule == TrackerRule::kWeight ? options.tracker_min_weight : 0.0f;
+  render_options.trace.transmittance = options.tracker_rule == TrackerRule::kMedianCrossing;
   ASSIGN_OR_RETURN(RenderResult render, Render(cloud, camera, render_options));
   const ContributorTrace& trace = render.trace;
   ViewTrackers out;
@@ -64,7 +65,7 @@ absl::StatusOr<ViewTrackers> TrackView(const GaussianCloud& cloud, const Pinhole
     for (uint64_t k = trace.offsets[i]; k < trace.offsets[i + 1]; ++k) {
       const Contribution& c = trace.entries[k];
       if (options.tracker_rule == TrackerRule::kMedianCrossing &&
-          !(c.transmittance > 0.5f && c.transmittance - c.weight < 0.5f)) {
+          !(trace.transmittance[k] > 0.5f && trace.transmittance[k] - c.weight < 0.5f)) {
         continue;
       }
       seen[c.gaussian] = 1;

@@ -166,8 +166,8 @@ RenderResult ReferenceRender(const GaussianCloud& cloud, const PinholeCamera& ca
         for (int c = 0; c < 3; ++c) N[c] += w * s.normal_view[c];
         for (int k = 0; k < D; ++k) E[k] += w * options.features[i * D + k];
         if (T > 0.5) median = depth;
-        out.trace.entries.push_back(
-            {static_cast<uint32_t>(i), static_cast<float>(w), static_cast<float>(T)});
+        out.trace.entries.push_back({static_cast<uint32_t>(i), static_cast<float>(w)});
+        if (options.trace.transmittance) out.trace.transmittance.push_back(static_cast<float>(T));
         ++out.num_contributors[pix];
         T *= 1 - alpha;
       }
