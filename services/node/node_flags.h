@@ -16,11 +16,11 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
       ->capture_default_str();
   app.add_option("--listen", o->listen, "host:port to serve on (port 0 = any free port)")
       ->capture_default_str();
-  auto* store = app.add_option("--store", o->store_address, "Address of the store service");
-  auto* scheduler =
-      app.add_option("--scheduler", o->scheduler_address, "Address of the scheduler service");
-  if (needs_store_address) store->required();
-  if (needs_scheduler_address) scheduler->required();
+  if (needs_store_address)
+    app.add_option("--store", o->store_address, "Address of the store service")->required();
+  if (needs_scheduler_address)
+    app.add_option("--scheduler", o->scheduler_address, "Address of the scheduler service")
+        ->required();
   app.add_option("--lease-seconds", o->lease_seconds, "Job lease length in seconds")
       ->capture_default_str();
   app.add_option("--drain-seconds", o->drain_seconds,

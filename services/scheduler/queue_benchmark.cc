@@ -32,8 +32,8 @@ void BM_JobCycle(benchmark::State& state) {
     auto submitted = queue->Submit(Spec(i++));
     auto lease = queue->LeaseNext({"decompose"}, "w", 0);
     benchmark::DoNotOptimize(queue->Heartbeat((*lease)->job.id, (*lease)->token, {}));
-    benchmark::DoNotOptimize(queue->Complete((*lease)->job.id, (*lease)->token,
-                                             store::ComputeDigest("out")));
+    benchmark::DoNotOptimize(
+        queue->Complete((*lease)->job.id, (*lease)->token, store::ComputeDigest("out")));
   }
   state.SetItemsProcessed(state.iterations());
 }
@@ -48,8 +48,8 @@ void BM_LeaseFromDeepQueue(benchmark::State& state) {
   for (auto _ : state) {
     auto lease = queue->LeaseNext({"decompose"}, "w", 0);
     state.PauseTiming();
-    benchmark::DoNotOptimize(queue->Complete((*lease)->job.id, (*lease)->token,
-                                             store::ComputeDigest("out")));
+    benchmark::DoNotOptimize(
+        queue->Complete((*lease)->job.id, (*lease)->token, store::ComputeDigest("out")));
     benchmark::DoNotOptimize(queue->Submit(Spec(next++)));  // keep the depth constant
     state.ResumeTiming();
   }
