@@ -40,7 +40,7 @@ format:
 	git ls-files '*.h' '*.cc' | xargs clang-format -i
 
 tidy: configure
-	git ls-files 'common/*.cc' 'clients/*.cc' | grep -v _test.cc | xargs clang-tidy -p $(BUILD_DIR) --quiet
+	git ls-files 'common/*.cc' 'clients/*.cc' 'services/*.cc' | grep -v _test.cc | grep -v _benchmark.cc | xargs clang-tidy -p $(BUILD_DIR) --quiet
 
 clean:
 	rm -rf $(BUILD_DIR) $(SANITIZE_DIR) demo-out

@@ -141,7 +141,7 @@ TEST_F(ServicesTest, BadRequestsAreRejectedAndLeaveNoTrace) {
     std::string says;
   };
   auto put = [&](const std::string& bytes) {
-    const store::Digest d = store::ComputeDigest(bytes);
+    store::Digest d = store::ComputeDigest(bytes);
     EXPECT_TRUE(remote_->Put(d, bytes).ok());
     return d;
   };
@@ -205,7 +205,7 @@ TEST_F(ServicesTest, BadRequestsAreRejectedAndLeaveNoTrace) {
 }
 
 TEST_F(ServicesTest, WorkersRunThePipelineAndTrainingAnswersClicks) {
-  for (std::vector<std::string> kinds :
+  for (const std::vector<std::string>& kinds :
        {std::vector<std::string>{"decompose"}, std::vector<std::string>{"train", "segment"}}) {
     worker::WorkerOptions options;
     options.kinds = kinds;

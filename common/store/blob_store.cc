@@ -16,7 +16,8 @@ namespace fs = std::filesystem;
 namespace {
 
 absl::Status ErrnoError(const std::string& what) {
-  return absl::UnavailableError(absl::StrCat(what, ": ", std::strerror(errno)));
+  return absl::UnavailableError(
+      absl::StrCat(what, ": ", std::error_code(errno, std::generic_category()).message()));
 }
 
 // Writes `bytes` to `path` (create/truncate) and fsyncs it.
@@ -28,14 +29,14 @@ absl::Status WriteAndSync(const std::string& path, absl::string_view bytes) {
     const ssize_t n = ::write(fd, bytes.data() + written, bytes.size() - written);
     if (n < 0) {
       if (errno == EINTR) continue;
-      const absl::Status s = ErrnoError(absl::StrCat(path, ": write failed"));
+      absl::Status s = ErrnoError(absl::StrCat(path, ": write failed"));
       ::close(fd);
       return s;
     }
     written += static_cast<size_t>(n);
   }
   if (::fsync(fd) != 0) {
-    const absl::Status s = ErrnoError(absl::StrCat(path, ": fsync failed"));
+    absl::Status s = ErrnoError(absl::StrCat(path, ": fsync failed"));
     ::close(fd);
     return s;
   }
