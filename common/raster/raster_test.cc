@@ -104,6 +104,31 @@ TEST_P(RasterVsReference, RandomScenesMatchBruteForce) {
       ASSERT_NEAR(fast->trace.entries[e].weight, ref.trace.entries[e].weight, 1e-5);
       ASSERT_NEAR(fast->trace.transmittance[e], ref.trace.transmittance[e], 1e-5);
     }
+    // Without transmittance the full trace takes the 8-lane append path: the same lists.
+    RenderOptions plain_trace = options;
+    plain_trace.trace.transmittance = false;
+    absl::StatusOr<RenderResult> vector_path = Render(cloud, camera, plain_trace);
+    ASSERT_TRUE(vector_path.ok());
+    ASSERT_EQ(vector_path->trace.offsets, fast->trace.offsets);
+    EXPECT_TRUE(vector_path->trace.transmittance.empty());
+    for (size_t e = 0; e < fast->trace.entries.size(); ++e) {
+      ASSERT_EQ(vector_path->trace.entries[e].gaussian, fast->trace.entries[e].gaussian) << e;
+      ASSERT_EQ(vector_path->trace.entries[e].weight, fast->trace.entries[e].weight) << e;
+    }
+    // ...and with a minimum weight it keeps exactly the entries above it, in order.
+    plain_trace.trace.min_weight = 0.1f;
+    absl::StatusOr<RenderResult> heavy = Render(cloud, camera, plain_trace);
+    ASSERT_TRUE(heavy.ok());
+    for (size_t px = 0; px < fast->trace.num_pixels(); ++px) {
+      std::vector<std::pair<uint32_t, float>> want, got;
+      for (uint64_t k = fast->trace.offsets[px]; k < fast->trace.offsets[px + 1]; ++k) {
+        if (fast->trace.entries[k].weight > 0.1f)
+          want.emplace_back(fast->trace.entries[k].gaussian, fast->trace.entries[k].weight);
+      }
+      for (uint64_t k = heavy->trace.offsets[px]; k < heavy->trace.offsets[px + 1]; ++k)
+        got.emplace_back(heavy->trace.entries[k].gaussian, heavy->trace.entries[k].weight);
+      ASSERT_EQ(got, want) << px;
+    }
     EXPECT_GT(fast->stats.blended_fragments, 1000u);  // the scene is not trivially empty
   }
 }

@@ -78,13 +78,13 @@ void AssembleTrace(const ProjectionParams& p, const std::vector<TileTrace>& tile
     uint64_t cursor[raster_internal::kTilePixels];
     for_each_pixel(t, [&](int local, size_t row) { cursor[local] = offsets[row]; });
     if (with_t) {
-      for (size_t e = 0; e < tile.entries.size(); ++e) {
+      for (size_t e = 0; e < tile.size; ++e) {
         const uint64_t at = cursor[tile.pixels[e]]++;
         trace->entries[at] = tile.entries[e];
         trace->transmittance[at] = tile.transmittance[e];
       }
     } else {
-      for (size_t e = 0; e < tile.entries.size(); ++e)
+      for (size_t e = 0; e < tile.size; ++e)
         trace->entries[cursor[tile.pixels[e]]++] = tile.entries[e];
     }
   });

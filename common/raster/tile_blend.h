@@ -26,12 +26,24 @@ namespace instascene::raster_internal {
 inline constexpr int kTilePixels = kTileSize * kTileSize;
 
 // A tile's traced contributions in blending order (front to back within each pixel, pixels
-// interleaved), with each entry's local pixel and the count per local pixel.
+// interleaved), with each entry's local pixel and the count per local pixel. The vectors are
+// storage with slack: entries [0, size) are valid, so an 8-lane append can store whole vectors and
+// advance by the number of lanes kept (the storage persists in the workspace across frames).
 struct TileTrace {
   std::vector<Contribution> entries;
   std::vector<float> transmittance;  // parallel to entries when TraceOptions::transmittance
-  std::vector<uint16_t> pixels;  // local pixel of each entry
-  uint32_t counts[kTilePixels];
+  std::vector<uint16_t> pixels;      // local pixel of each entry
+  size_t size = 0;
+  uint32_t counts[kTilePixels + 8];  // + one vector of padding (lanes past the tile add 0)
+
+  // Makes room for `extra` more entries past `size`.
+  void Reserve(size_t extra, bool with_transmittance) {
+    if (size + extra <= entries.size()) return;
+    const size_t capacity = std::max<size_t>(2 * entries.size(), size + extra + 1024);
+    entries.resize(capacity);
+    pixels.resize(capacity);
+    if (with_transmittance) transmittance.resize(capacity);
+  }
 };
 
 // Everything a tile task reads.
@@ -83,6 +95,22 @@ inline uint32_t MaskBits(v8i mask) {
   return bits;
 #endif
 }
+
+// Lane permutations that move the set lanes of an 8-bit mask to the front, in lane order (a
+// compress, which AVX2 lacks as an instruction): kCompress[bits] for __builtin_shuffle.
+struct CompressTable {
+  int32_t perm[256][8];
+  constexpr CompressTable() : perm() {
+    for (int bits = 0; bits < 256; ++bits) {
+      int n = 0;
+      for (int l = 0; l < kLanes; ++l) {
+        if (bits & (1 << l)) perm[bits][n++] = l;
+      }
+      for (; n < kLanes; ++n) perm[bits][n] = 0;
+    }
+  }
+};
+inline constexpr CompressTable kCompress{};
 
 // a * b + c, fused where the target has FMA (the polynomial below is evaluated with whichever; its
 // accuracy bound holds for both).
@@ -159,12 +187,14 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
   std::fill_n(st.contributors, TileState::kPadded, 0);
   if constexpr (kFeatures) st.features.assign(static_cast<size_t>(kTilePixels) * dim, 0.0f);
   if constexpr (kTrace) {
-    tile_trace->entries.clear();
-    tile_trace->transmittance.clear();
-    tile_trace->pixels.clear();
-    std::fill_n(tile_trace->counts, kTilePixels, 0u);
+    tile_trace->size = 0;
+    std::fill_n(tile_trace->counts, kTilePixels + kLanes, 0u);
   }
   const uint8_t* trace_mask = ctx.trace_mask->empty() ? nullptr : ctx.trace_mask->data();
+  // Full traces without transmittance (the common, large case) append 8 lanes at a time in the
+  // first pass; pixel subsets and transmittance use the scalar second pass.
+  const bool vector_trace = kTrace && trace_mask == nullptr && !opt.trace.transmittance;
+  const v8f v_min_weight = Splat(opt.trace.min_weight);
   const float near = p.near_plane;
   int num_done = 0;
   v8i tile_blends = {}, tile_live = {};  // lane-wise counters, summed once per tile
@@ -255,6 +285,32 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
           Store(&st.row_weight[x - x0], w);
           Store(&st.row_transmittance[x - x0], T);
         }
+        if constexpr (kTrace) {
+          if (vector_trace) {
+            const v8i keep = blend & (w > v_min_weight);
+            const uint32_t keep_bits = MaskBits(keep);
+            if (keep_bits != 0) {
+              TileTrace& tt = *tile_trace;
+              tt.Reserve(kLanes, false);
+              const v8i perm = LoadI(kCompress.perm[keep_bits]);
+              v8i w_bits;
+              std::memcpy(&w_bits, &w, sizeof(w_bits));
+              const v8i wc = __builtin_shuffle(w_bits, perm);
+              const v8i g = SplatI(static_cast<int32_t>(gid));
+              const v8i lo = __builtin_shuffle(g, wc, v8i{0, 8, 1, 9, 2, 10, 3, 11});
+              const v8i hi = __builtin_shuffle(g, wc, v8i{4, 12, 5, 13, 6, 14, 7, 15});
+              std::memcpy(static_cast<void*>(&tt.entries[tt.size]), &lo, sizeof(lo));
+              std::memcpy(static_cast<void*>(&tt.entries[tt.size + 4]), &hi, sizeof(hi));
+              using v8u16 = uint16_t __attribute__((vector_size(16)));
+              const v8u16 local =
+                  __builtin_convertvector(__builtin_shuffle(SplatI(i) + kLaneIndex, perm), v8u16);
+              std::memcpy(&tt.pixels[tt.size], &local, sizeof(local));
+              tt.size += static_cast<size_t>(std::popcount(keep_bits));
+              int32_t* counts = reinterpret_cast<int32_t*>(&tt.counts[i]);
+              StoreI(counts, LoadI(counts) - keep);  // keep lanes are -1
+            }
+          }
+        }
         const uint32_t stop_bits = MaskBits(stop);
         st.row_done[y - py0] |= stop_bits << (x - px0);
         num_done += std::popcount(stop_bits);
@@ -262,7 +318,7 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
         tile_blends -= blend;
         tile_live -= live;
       }
-      if constexpr (kTrace || kFeatures) {
+      if (kFeatures || (kTrace && !vector_trace)) {
         // Second pass, over the blended pixels of the row only.
         for (uint32_t bits = row_blend_bits; bits != 0; bits &= bits - 1) {
           const int dx_lane = std::countr_zero(bits);
@@ -275,13 +331,15 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
             for (int c = 0; c < dim; ++c) e[c] += w * f[c];
           }
           if constexpr (kTrace) {
-            if (w > opt.trace.min_weight &&
+            if (!vector_trace && w > opt.trace.min_weight &&
                 (trace_mask == nullptr || trace_mask[y * p.width + x])) {
-              tile_trace->entries.push_back({gid, w});
-              if (opt.trace.transmittance)
-                tile_trace->transmittance.push_back(st.row_transmittance[dx_lane]);
-              tile_trace->pixels.push_back(static_cast<uint16_t>(i));
-              ++tile_trace->counts[i];
+              TileTrace& tt = *tile_trace;
+              tt.Reserve(1, opt.trace.transmittance);
+              tt.entries[tt.size] = {gid, w};
+              if (opt.trace.transmittance) tt.transmittance[tt.size] = st.row_transmittance[dx_lane];
+              tt.pixels[tt.size] = static_cast<uint16_t>(i);
+              ++tt.size;
+              ++tt.counts[i];
             }
           }
         }
