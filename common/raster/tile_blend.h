@@ -11,7 +11,10 @@
 #include <algorithm>
 #include <bit>
 #include <cstdint>
+#include <cstdlib>
 #include <cstring>
+#include <memory>
+#include <new>
 #include <vector>
 
 #if defined(__AVX__) || defined(__FMA__)
@@ -25,24 +28,53 @@ namespace instascene::raster_internal {
 
 inline constexpr int kTilePixels = kTileSize * kTileSize;
 
+// Growable uninitialised storage for trivially copyable T (malloc/realloc): growing never
+// touches the unused part, so slack costs address space, not memory (std::vector::resize would
+// write every new element).
+template <typename T>
+class RawBuffer {
+ public:
+  T* data() { return data_.get(); }
+  const T* data() const { return data_.get(); }
+  T& operator[](size_t i) { return data_.get()[i]; }
+  const T& operator[](size_t i) const { return data_.get()[i]; }
+  size_t capacity() const { return capacity_; }
+  void Grow(size_t capacity) {  // keeps the contents
+    if (capacity <= capacity_) return;
+    void* p = std::realloc(data_.release(), capacity * sizeof(T));
+    if (p == nullptr) throw std::bad_alloc();
+    data_.reset(static_cast<T*>(p));
+    capacity_ = capacity;
+  }
+
+ private:
+  struct Free {
+    void operator()(T* p) const { std::free(p); }
+  };
+  std::unique_ptr<T, Free> data_;
+  size_t capacity_ = 0;
+};
+
 // A tile's traced contributions in blending order (front to back within each pixel, pixels
-// interleaved), with each entry's local pixel and the count per local pixel. The vectors are
-// storage with slack: entries [0, size) are valid, so an 8-lane append can store whole vectors and
-// advance by the number of lanes kept (the storage persists in the workspace across frames).
+// interleaved), with each entry's local pixel and the count per local pixel. Entries [0, size)
+// are valid; the slack lets an 8-lane append store whole vectors and advance by the lanes kept.
+// The storage persists in the workspace across frames.
 struct TileTrace {
-  std::vector<Contribution> entries;
-  std::vector<float> transmittance;  // parallel to entries when TraceOptions::transmittance
-  std::vector<uint16_t> pixels;      // local pixel of each entry
+  RawBuffer<Contribution> entries;
+  RawBuffer<float> transmittance;  // parallel to entries when TraceOptions::transmittance
+  RawBuffer<uint16_t> pixels;      // local pixel of each entry
   size_t size = 0;
   uint32_t counts[kTilePixels + 8];  // + one vector of padding (lanes past the tile add 0)
 
   // Makes room for `extra` more entries past `size`.
   void Reserve(size_t extra, bool with_transmittance) {
-    if (size + extra <= entries.size()) return;
-    const size_t capacity = std::max<size_t>(2 * entries.size(), size + extra + 1024);
-    entries.resize(capacity);
-    pixels.resize(capacity);
-    if (with_transmittance) transmittance.resize(capacity);
+    const size_t need = size + extra;
+    if (need > entries.capacity()) {
+      const size_t capacity = std::max<size_t>(2 * entries.capacity(), need + 256);
+      entries.Grow(capacity);
+      pixels.Grow(capacity);
+    }
+    if (with_transmittance) transmittance.Grow(entries.capacity());
   }
 };
 
@@ -335,8 +367,9 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
                 (trace_mask == nullptr || trace_mask[y * p.width + x])) {
               TileTrace& tt = *tile_trace;
               tt.Reserve(1, opt.trace.transmittance);
-              tt.entries[tt.size] = {gid, w};
-              if (opt.trace.transmittance) tt.transmittance[tt.size] = st.row_transmittance[dx_lane];
+              tt.entries[tt.size] = Contribution{gid, w};
+              if (opt.trace.transmittance)
+                tt.transmittance[tt.size] = st.row_transmittance[dx_lane];
               tt.pixels[tt.size] = static_cast<uint16_t>(i);
               ++tt.size;
               ++tt.counts[i];
