@@ -42,14 +42,12 @@ class ServicesTest : public ::testing::Test {
     queue_options.lease_ms = 5000;
     queue_ = std::move(*scheduler::SqliteJobQueue::Open(root_ + "/jobs.db", queue_options));
     store_service_ = std::make_unique<store_service::StoreService>(store_.get());
-    scheduler_service_ =
-        std::make_unique<scheduler::SchedulerService>(queue_.get(), store_.get(),
-                                                      scheduler::SchedulerServiceOptions{});
-    training_service_ = std::make_unique<training::TrainingService>(
-        store_.get(), root_ + "/query", nullptr);
+    scheduler_service_ = std::make_unique<scheduler::SchedulerService>(
+        queue_.get(), store_.get(), scheduler::SchedulerServiceOptions{});
+    training_service_ =
+        std::make_unique<training::TrainingService>(store_.get(), root_ + "/query", nullptr);
     auto server = rpc::Server::Start(
-        {"127.0.0.1:0"},
-        {store_service_.get(), scheduler_service_.get(), training_service_.get()},
+        {"127.0.0.1:0"}, {store_service_.get(), scheduler_service_.get(), training_service_.get()},
         {"instascene.v1.ContentStore", "instascene.v1.Scheduler", "instascene.v1.Training"});
     ASSERT_TRUE(server.ok()) << server.status();
     server_ = std::move(*server);
@@ -157,8 +155,8 @@ TEST_F(ServicesTest, BadRequestsAreRejectedAndLeaveNoTrace) {
        grpc::StatusCode::INVALID_ARGUMENT, "no scene.json"},
       {"manifest naming a blob the store lacks", put(store::SerializeManifest(missing_blob)), "",
        grpc::StatusCode::FAILED_PRECONDITION, "blobs the store lacks"},
-      {"unknown manifest digest", store::ComputeDigest("nothing"), "",
-       grpc::StatusCode::NOT_FOUND, "not in the store"},
+      {"unknown manifest digest", store::ComputeDigest("nothing"), "", grpc::StatusCode::NOT_FOUND,
+       "not in the store"},
       {"bad parameter", scene_manifest_, R"({"train":{"samples":-3}})",
        grpc::StatusCode::INVALID_ARGUMENT, "samples"},
       {"parameters not JSON", scene_manifest_, "{train", grpc::StatusCode::INVALID_ARGUMENT,
@@ -168,8 +166,8 @@ TEST_F(ServicesTest, BadRequestsAreRejectedAndLeaveNoTrace) {
     v1::SubmitPipelineResponse response;
     const grpc::Status s = Submit(c.manifest, c.params, &response);
     EXPECT_EQ(s.error_code(), c.code) << c.name << ": " << s.error_message();
-    EXPECT_NE(s.error_message().find(c.says), std::string::npos) << c.name << ": "
-                                                                 << s.error_message();
+    EXPECT_NE(s.error_message().find(c.says), std::string::npos)
+        << c.name << ": " << s.error_message();
   }
   // Uploads: corrupt and oversized blobs are refused.
   std::string bytes(1000, 'a');
@@ -216,8 +214,8 @@ TEST_F(ServicesTest, WorkersRunThePipelineAndTrainingAnswersClicks) {
     workers_.back()->Start(channel_);
   }
   v1::SubmitPipelineResponse response;
-  ASSERT_TRUE(Submit(scene_manifest_, R"({"train":{"iterations":40,"samples":512}})", &response)
-                  .ok());
+  ASSERT_TRUE(
+      Submit(scene_manifest_, R"({"train":{"iterations":40,"samples":512}})", &response).ok());
   const std::string segment = response.jobs(2).id();
   v1::Job job;
   for (int i = 0; i < 600; ++i) {  // 60 s at most

@@ -57,8 +57,8 @@ void BM_ChunkedUpload(benchmark::State& state) {
     const Digest d = ComputeDigest(data);
     state.ResumeTiming();
     for (size_t offset = 0; offset < size; offset += 1 << 20) {
-      benchmark::DoNotOptimize(store->Append(
-          d, static_cast<int64_t>(offset), absl::string_view(data).substr(offset, 1 << 20)));
+      benchmark::DoNotOptimize(store->Append(d, static_cast<int64_t>(offset),
+                                             absl::string_view(data).substr(offset, 1 << 20)));
     }
     benchmark::DoNotOptimize(store->FinishUpload(d));
   }
