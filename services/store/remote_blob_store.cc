@@ -14,6 +14,16 @@ namespace {
 constexpr int64_t kChunk = 1 << 20;
 }
 
+// Fails fast, before any byte is sent, on blobs the server will refuse (its limit is known from
+// GetStoreInfo); the server checks again.
+absl::Status RemoteBlobStore::CheckSize(const store::Digest& digest) const {
+  if (digest.size_bytes > options_.max_blob_bytes)
+    return absl::ResourceExhaustedError(absl::StrCat("blob ", digest.ToString(),
+                                                     " is larger than the store's limit of ",
+                                                     options_.max_blob_bytes, " bytes"));
+  return absl::OkStatus();
+}
+
 absl::StatusOr<std::unique_ptr<RemoteBlobStore>> RemoteBlobStore::Connect(
     std::shared_ptr<grpc::Channel> channel, int timeout_ms) {
   std::unique_ptr<RemoteBlobStore> store(
@@ -47,6 +57,7 @@ absl::StatusOr<std::vector<store::Digest>> RemoteBlobStore::FindMissing(
 }
 
 absl::Status RemoteBlobStore::Put(const store::Digest& digest, absl::string_view bytes) {
+  RETURN_IF_ERROR(CheckSize(digest));
   if (static_cast<int64_t>(bytes.size()) <= options_.max_batch_bytes) {
     v1::BatchUpdateBlobsRequest request;
     auto* blob = request.add_blobs();
@@ -133,6 +144,7 @@ absl::StatusOr<int64_t> RemoteBlobStore::CommittedSize(const store::Digest& dige
 
 absl::StatusOr<int64_t> RemoteBlobStore::Append(const store::Digest& digest, int64_t offset,
                                                 absl::string_view data) {
+  RETURN_IF_ERROR(CheckSize(digest));
   bool sent = false;
   return WriteStream(
       digest, offset,
@@ -162,6 +174,7 @@ absl::StatusOr<store::StoreStats> RemoteBlobStore::Stats() {
 absl::Status RemoteBlobStore::PutFile(const store::Digest& digest, const std::string& path,
                                       const store::TransferProgress& progress) {
   RETURN_IF_ERROR(store::ValidateDigest(digest));
+  RETURN_IF_ERROR(CheckSize(digest));
   if (digest.size_bytes <= options_.max_batch_bytes) {
     return BlobStore::PutFile(digest, path, progress);  // one batch call
   }

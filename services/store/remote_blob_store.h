@@ -33,6 +33,7 @@ class RemoteBlobStore final : public store::BlobStore {
 
  private:
   explicit RemoteBlobStore(std::unique_ptr<v1::ContentStore::Stub> stub) : stub_(std::move(stub)) {}
+  absl::Status CheckSize(const store::Digest& digest) const;
   // One Write stream: `chunks` yields (data) until empty; starts at `offset`.
   absl::StatusOr<int64_t> WriteStream(const store::Digest& digest, int64_t offset,
                                       const std::function<absl::StatusOr<std::string>()>& next,

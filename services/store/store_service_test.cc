@@ -7,6 +7,7 @@
 
 #include "common/core/testing/temp_dir.h"
 #include "common/rpc/server.h"
+#include "common/rpc/status.h"
 #include "common/store/manifest.h"
 #include "services/store/remote_blob_store.h"
 #include "services/store/store_service.h"
@@ -85,10 +86,24 @@ TEST_F(StoreServiceTest, CorruptOversizedAndUnknownAreRejectedLeavingNothing) {
   big[1000] ^= 1;
   s = remote_->Put(big_digest, big);
   EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << s;
-  // Over the blob limit: refused before any byte is stored.
+  // Over the blob limit: the client refuses before sending, and so does the server when a raw
+  // stream announces such a blob.
   const std::string huge = RandomBytes((8 << 20) + 1, 11);
   s = remote_->Put(store::ComputeDigest(huge), huge);
   EXPECT_EQ(s.code(), absl::StatusCode::kResourceExhausted) << s;
+  {
+    grpc::ClientContext context;
+    v1::WriteResponse response;
+    auto writer = stub_->Write(&context, &response);
+    v1::WriteRequest first;
+    rpc::ToProto(store::ComputeDigest(huge), first.mutable_digest());
+    first.set_data(huge.substr(0, 1000));
+    writer->Write(first);
+    writer->WritesDone();
+    const grpc::Status gs = writer->Finish();
+    EXPECT_EQ(gs.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED) << gs.error_message();
+    EXPECT_NE(gs.error_message().find("larger than the store's limit"), std::string::npos);
+  }
   // Unknown digest.
   const auto unknown = remote_->Read(store::ComputeDigest("never stored"));
   EXPECT_EQ(unknown.status().code(), absl::StatusCode::kNotFound);
