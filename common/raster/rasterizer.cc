@@ -32,63 +32,109 @@ BlendFn PickBlend(bool trace, bool features) {
   return features ? BlendTile<kSurfel, false, true> : BlendTile<kSurfel, false, false>;
 }
 
-// Builds the row-major CSR trace from the per-tile lists (in blending order). Tiles own
-// disjoint pixels, so both passes run tile-parallel without races; a tile row's 16 pixels land in
-// one contiguous stretch of the output.
-void AssembleTrace(const ProjectionParams& p, const std::vector<TileTrace>& tiles,
-                   const TraceOptions& trace_options, ContributorTrace* trace) {
-  const size_t num_pixels = static_cast<size_t>(p.width) * p.height;
-  const bool all_pixels = trace_options.pixels.empty();
-  std::vector<int64_t> slot;  // pixel -> CSR row, for a pixel subset
-  if (all_pixels) {
-    trace->pixels.resize(num_pixels);
-    for (size_t i = 0; i < num_pixels; ++i) trace->pixels[i] = static_cast<uint32_t>(i);
-  } else {
-    trace->pixels = trace_options.pixels;
-    slot.assign(num_pixels, -1);
-    for (size_t i = 0; i < trace->pixels.size(); ++i)
-      slot[trace->pixels[i]] = static_cast<int64_t>(i);
+// Builds the row-major CSR trace band by band: a band is one row of tiles, i.e. 16 image rows,
+// whose traced pixels are one contiguous stretch of CSR rows. Blending a band and scattering its
+// tile lists right away keeps the staging lists in cache (a band's lists are a few MB) and needs
+// staging for one band only; only the final entries go to memory.
+class TraceAssembler {
+ public:
+  TraceAssembler(const ProjectionParams& p, const TraceOptions& options, ContributorTrace* trace)
+      : p_(p), with_t_(options.transmittance), trace_(trace) {
+    const size_t num_pixels = static_cast<size_t>(p.width) * p.height;
+    all_pixels_ = options.pixels.empty();
+    if (all_pixels_) {
+      trace->pixels.resize(num_pixels);
+      for (size_t i = 0; i < num_pixels; ++i) trace->pixels[i] = static_cast<uint32_t>(i);
+    } else {
+      trace->pixels = options.pixels;
+      slot_.assign(num_pixels, -1);
+      for (size_t i = 0; i < trace->pixels.size(); ++i)
+        slot_[trace->pixels[i]] = static_cast<int64_t>(i);
+    }
+    trace->offsets.assign(trace->pixels.size() + 1, 0);
   }
-  // Calls fn(local pixel, CSR row) for every traced in-image pixel of tile t.
-  auto for_each_pixel = [&](size_t t, auto&& fn) {
-    const int tx = static_cast<int>(t % p.tiles_x), ty = static_cast<int>(t / p.tiles_x);
-    const int x1 = std::min(kTileSize, p.width - tx * kTileSize),
-              y1 = std::min(kTileSize, p.height - ty * kTileSize);
+
+  // Appends band `ty`; tiles[tx] holds the lists of tile (tx, ty).
+  void AddBand(int ty, const std::vector<TileTrace>& tiles) {
+    std::vector<uint64_t>& offsets = trace_->offsets;
+    const size_t first_pix = static_cast<size_t>(ty) * kTileSize * p_.width;
+    const size_t end_pix =
+        std::min(static_cast<size_t>(ty + 1) * kTileSize, static_cast<size_t>(p_.height)) *
+        p_.width;
+    const size_t first_row = RowOf(first_pix), end_row = RowOf(end_pix);
+    tbb::parallel_for(0, p_.tiles_x, [&](int tx) {
+      ForEachPixel(tx, ty,
+                   [&](int local, size_t row) { offsets[row + 1] = tiles[tx].counts[local]; });
+    });
+    for (size_t i = first_row + 1; i <= end_row; ++i) offsets[i] += offsets[i - 1];
+    const size_t need = offsets[end_row];
+    if (need > trace_->entries.size()) {
+      if (need > trace_->entries.capacity())
+        trace_->entries.reserve(std::max(need, 2 * trace_->entries.capacity()));
+      trace_->entries.resize(need);
+    }
+    if (with_t_ && need > trace_->transmittance.size()) {
+      if (need > trace_->transmittance.capacity())
+        trace_->transmittance.reserve(std::max(need, 2 * trace_->transmittance.capacity()));
+      trace_->transmittance.resize(need);
+    }
+    tbb::parallel_for(0, p_.tiles_x, [&](int tx) {
+      // Per-pixel write cursors; entries arrive front to back within each pixel, so a plain
+      // scatter keeps that order. The tile's target rows are 16 short contiguous runs.
+      const TileTrace& tile = tiles[tx];
+      uint64_t cursor[raster_internal::kTilePixels];
+      ForEachPixel(tx, ty, [&](int local, size_t row) { cursor[local] = offsets[row]; });
+      Contribution* entries = trace_->entries.data();
+      if (with_t_) {
+        float* t = trace_->transmittance.data();
+        for (size_t e = 0; e < tile.size; ++e) {
+          const uint64_t at = cursor[tile.pixels[e]]++;
+          entries[at] = tile.entries[e];
+          t[at] = tile.transmittance[e];
+        }
+      } else {
+        for (size_t e = 0; e < tile.size; ++e) entries[cursor[tile.pixels[e]]++] = tile.entries[e];
+      }
+    });
+    total_ = need;
+  }
+
+  // Trims the arrays to the final size (they may hold a larger previous frame's data).
+  void Finish() {
+    trace_->entries.resize(total_);
+    trace_->transmittance.resize(with_t_ ? total_ : 0);
+  }
+
+ private:
+  // The first CSR row whose pixel id is >= pix.
+  size_t RowOf(size_t pix) const {
+    if (all_pixels_) return pix;
+    return static_cast<size_t>(
+        std::lower_bound(trace_->pixels.begin(), trace_->pixels.end(), static_cast<uint32_t>(pix)) -
+        trace_->pixels.begin());
+  }
+  // Calls fn(local pixel, CSR row) for every traced in-image pixel of tile (tx, ty).
+  template <typename Fn>
+  void ForEachPixel(int tx, int ty, Fn&& fn) const {
+    const int x1 = std::min(kTileSize, p_.width - tx * kTileSize),
+              y1 = std::min(kTileSize, p_.height - ty * kTileSize);
     for (int ly = 0; ly < y1; ++ly) {
       for (int lx = 0; lx < x1; ++lx) {
-        const size_t pix = static_cast<size_t>(ty * kTileSize + ly) * p.width + tx * kTileSize + lx;
-        const int64_t row = all_pixels ? static_cast<int64_t>(pix) : slot[pix];
+        const size_t pix =
+            static_cast<size_t>(ty * kTileSize + ly) * p_.width + tx * kTileSize + lx;
+        const int64_t row = all_pixels_ ? static_cast<int64_t>(pix) : slot_[pix];
         if (row >= 0) fn(ly * kTileSize + lx, static_cast<size_t>(row));
       }
     }
-  };
-  std::vector<uint64_t>& offsets = trace->offsets;
-  offsets.assign(trace->pixels.size() + 1, 0);
-  tbb::parallel_for(size_t{0}, tiles.size(), [&](size_t t) {
-    for_each_pixel(t, [&](int local, size_t row) { offsets[row + 1] = tiles[t].counts[local]; });
-  });
-  for (size_t i = 1; i < offsets.size(); ++i) offsets[i] += offsets[i - 1];
-  trace->entries.resize(offsets.back());
-  const bool with_t = trace_options.transmittance;
-  trace->transmittance.resize(with_t ? offsets.back() : 0);
-  tbb::parallel_for(size_t{0}, tiles.size(), [&](size_t t) {
-    // Per-pixel write cursors; entries arrive front to back within each pixel, so a plain scatter
-    // keeps that order. The tile's target rows are 16 short contiguous runs (cache-resident).
-    const TileTrace& tile = tiles[t];
-    uint64_t cursor[raster_internal::kTilePixels];
-    for_each_pixel(t, [&](int local, size_t row) { cursor[local] = offsets[row]; });
-    if (with_t) {
-      for (size_t e = 0; e < tile.size; ++e) {
-        const uint64_t at = cursor[tile.pixels[e]]++;
-        trace->entries[at] = tile.entries[e];
-        trace->transmittance[at] = tile.transmittance[e];
-      }
-    } else {
-      for (size_t e = 0; e < tile.size; ++e)
-        trace->entries[cursor[tile.pixels[e]]++] = tile.entries[e];
-    }
-  });
-}
+  }
+
+  const ProjectionParams& p_;
+  bool all_pixels_ = true;
+  const bool with_t_;
+  ContributorTrace* trace_;
+  std::vector<int64_t> slot_;  // pixel -> CSR row, for a pixel subset
+  size_t total_ = 0;
+};
 
 // Bins visible splats into per-tile key lists, in parallel over fixed chunks of Gaussians (the
 // chunking depends only on n, so the output is the same for any thread count). Within a tile,
@@ -245,25 +291,43 @@ absl::Status RenderInto(const GaussianCloud& cloud, const PinholeCamera& camera,
     const bool trace = options.trace.enabled;
     const bool features = options.feature_dim > 0;
     BlendFn blend = surfel ? PickBlend<true>(trace, features) : PickBlend<false>(trace, features);
-    std::vector<TileTrace>& tile_traces = ws->tile_traces;
-    tile_traces.resize(trace ? num_tiles : 0);
     std::vector<TileCounters> counters(num_tiles);
-    tbb::parallel_for(tbb::blocked_range<int>(0, num_tiles, 1),
-                      [&](const tbb::blocked_range<int>& r) {
-                        thread_local TileState state;
-                        for (int t = r.begin(); t < r.end(); ++t) {
-                          blend(ctx, t, state, out, counters[t], trace ? &tile_traces[t] : nullptr);
-                        }
-                      });
+    double assembly_ms = 0;
+    if (!trace) {
+      tbb::parallel_for(tbb::blocked_range<int>(0, num_tiles, 1),
+                        [&](const tbb::blocked_range<int>& r) {
+                          thread_local TileState state;
+                          for (int t = r.begin(); t < r.end(); ++t)
+                            blend(ctx, t, state, out, counters[t], nullptr);
+                        });
+    } else {
+      // Band by band (one row of tiles): blend the band's tiles, then scatter their lists into
+      // the CSR while they are still in cache.
+      std::vector<TileTrace>& band = ws->tile_traces;
+      band.resize(params.tiles_x);
+      TraceAssembler assembler(params, options.trace, &out.trace);
+      for (int ty = 0; ty < params.tiles_y; ++ty) {
+        tbb::parallel_for(tbb::blocked_range<int>(0, params.tiles_x, 1),
+                          [&](const tbb::blocked_range<int>& r) {
+                            thread_local TileState state;
+                            for (int tx = r.begin(); tx < r.end(); ++tx) {
+                              const int t = ty * params.tiles_x + tx;
+                              blend(ctx, t, state, out, counters[t], &band[tx]);
+                            }
+                          });
+        Stopwatch assembly;
+        assembler.AddBand(ty, band);
+        assembly_ms += assembly.ElapsedMs();
+      }
+      assembler.Finish();
+    }
     for (const TileCounters& c : counters) {
       out.stats.evaluated_fragments += c.evaluated;
       out.stats.blended_fragments += c.blended;
     }
     out.stats.gaussian_tile_pairs = keys.size();
-    out.stats.blend_ms = phase.ElapsedMs();
-    phase.Restart();
-    if (trace) AssembleTrace(params, tile_traces, options.trace, &out.trace);
-    out.stats.trace_assembly_ms = phase.ElapsedMs();
+    out.stats.blend_ms = phase.ElapsedMs() - assembly_ms;
+    out.stats.trace_assembly_ms = assembly_ms;
   });
   for (uint8_t v : out.visible) out.stats.visible_gaussians += v;
   out.stats.total_ms = total.ElapsedMs();
