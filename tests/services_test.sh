@@ -146,10 +146,13 @@ start trainer1 "$WORK/ready-t1" "$BINDIR/instascene-training" --data "$WORK/w1" 
 T1=$LAST_PID
 check "worker 1 takes the job" wait_state "$SCHED" "$DRAIN" running training
 kill -9 "$T1"; wait "$T1" 2>/dev/null
-start trainer2 "$WORK/ready-t2" "$BINDIR/instascene-training" --data "$WORK/w2" --store "$STORE" --scheduler "$SCHED" --lease-seconds 2 --ready-file "$WORK/ready-t2"
+start trainer2 "$WORK/ready-t2" "$BINDIR/instascene-training" --data "$WORK/w2" --store "$STORE" --scheduler "$SCHED" --lease-seconds 2 --ready-file "$WORK/ready-t2" --cache-bytes 1
 check "the killed worker's job is retried and succeeds" "$BIN" watch "$DRAIN" --server "$SCHED"
 check "two attempts: the killed one and the successful one (the hand-back is free)" test "$(job_field "$SCHED" "$DRAIN" attempts)" = "2"
 check "exactly one result recorded" test -n "$(job_field "$SCHED" "$DRAIN" output_manifest)"
+DRAINSEG=$(json_get "$WORK/submit6.json" "d['jobs'][2]['id']")
+check "its segment job runs on worker 2 too" "$BIN" watch "$DRAINSEG" --server "$SCHED"
+check "worker 2's 1-byte input cache evicted what the next job did not need" grep -q "evicted" "$WORK/trainer2.log"
 
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

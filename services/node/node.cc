@@ -84,6 +84,7 @@ absl::Status RunNode(const NodeOptions& options) {
     w.work_dir = work_dir;
     w.num_threads = options.num_threads;
     w.lease_seconds = options.lease_seconds;
+    w.cache_bytes = options.cache_bytes;
     w.heartbeat_interval_ms = std::min(1000, options.lease_seconds * 1000 / 4);  // live progress
     return std::make_unique<worker::StageWorker>(w, blob_store);
   };

@@ -28,7 +28,8 @@ struct NodeOptions {
   int lease_seconds = 30;         // job lease length; heartbeats renew it every lease/4
   int drain_seconds = 30;         // SIGTERM: how long running jobs may take to finish
   int num_threads = 0;            // per job; 0 = all cores
-  std::string ready_file;         // written with the bound address once serving ("" = none)
+  int64_t cache_bytes = int64_t{20} << 30;  // per worker: input cache budget (0 = unlimited)
+  std::string ready_file;  // written with the bound address once serving ("" = none)
   store::StoreOptions store_options;
 
   absl::Status Validate() const;

@@ -27,6 +27,10 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
                  "On SIGTERM, how long running jobs may take before they are handed back")
       ->capture_default_str();
   app.add_option("--threads", o->num_threads, "Threads per job (0 = all cores)");
+  app.add_option(
+         "--cache-bytes", o->cache_bytes,
+         "Per worker: budget of the input cache under DATA/work, LRU-evicted (0 = unlimited)")
+      ->capture_default_str();
   app.add_option("--ready-file", o->ready_file,
                  "Write the bound address here once serving (removed at exit)");
   app.add_option("--max-blob-bytes", o->store_options.max_blob_bytes,

@@ -13,6 +13,7 @@
 #include "common/rpc/status.h"
 #include "common/store/manifest.h"
 #include "services/pipeline/stages.h"
+#include "services/worker/input_cache.h"
 
 namespace instascene::worker {
 namespace fs = std::filesystem;
@@ -149,23 +150,39 @@ absl::Status StageWorker::Execute(const v1::LeaseJobResponse& lease, const std::
   const v1::Job& job = lease.job();
   Stopwatch watch;
   // Scene and input, cached by digest: a scene is fetched once per worker, not once per job.
+  // Each worker has its own cache (the workers of one process share work_dir).
   const store::Digest scene_digest = rpc::FromProto(job.scene_manifest());
+  const fs::path cache = fs::path(options_.work_dir) / absl::StrJoin(options_.kinds, "+");
+  const std::string scenes_root = (cache / "scenes").string();
+  const std::string results_root = (cache / "results").string();
   pipeline::StageContext context;
-  context.scene_dir = (fs::path(options_.work_dir) / "scenes" / scene_digest.hash).string();
-  progress({"fetching inputs", 0, 1, 0});
-  ASSIGN_OR_RETURN(store::Manifest scene, store::ReadManifest(*store_, scene_digest));
-  RETURN_IF_ERROR(
-      Annotate(store::MaterializeManifest(*store_, scene, context.scene_dir), "fetching scene"));
+  context.scene_dir = (fs::path(scenes_root) / scene_digest.hash).string();
   ASSIGN_OR_RETURN(std::string input_kind, pipeline::StageInput(job.kind()));
   if (!input_kind.empty()) {
     auto it = lease.inputs().find(input_kind);
     if (it == lease.inputs().end())
       return absl::InvalidArgumentError(absl::StrCat("lease has no '", input_kind, "' input"));
-    const store::Digest input = rpc::FromProto(it->second);
-    context.input_dir = (fs::path(options_.work_dir) / "results" / input.hash).string();
+    context.input_dir = (fs::path(results_root) / it->second.hash()).string();
+  }
+  ASSIGN_OR_RETURN(EvictionReport evicted,
+                   EvictCache({scenes_root, results_root}, options_.cache_bytes,
+                              {context.scene_dir, context.input_dir}));
+  if (!evicted.evicted.empty()) {
+    spdlog::info("worker {}: input cache {:.1f} -> {:.1f} MB, evicted {} entries",
+                 options_.worker_id, evicted.bytes_before / 1e6, evicted.bytes_after / 1e6,
+                 evicted.evicted.size());
+  }
+  progress({"fetching inputs", 0, 1, 0});
+  ASSIGN_OR_RETURN(store::Manifest scene, store::ReadManifest(*store_, scene_digest));
+  RETURN_IF_ERROR(
+      Annotate(store::MaterializeManifest(*store_, scene, context.scene_dir), "fetching scene"));
+  TouchCacheEntry(context.scene_dir);
+  if (!input_kind.empty()) {
+    const store::Digest input = rpc::FromProto(lease.inputs().at(input_kind));
     ASSIGN_OR_RETURN(store::Manifest manifest, store::ReadManifest(*store_, input));
     RETURN_IF_ERROR(Annotate(store::MaterializeManifest(*store_, manifest, context.input_dir),
                              "fetching input"));
+    TouchCacheEntry(context.input_dir);
   }
   context.out_dir = job_dir;
   context.parameters = nlohmann::json::parse(job.parameters_json(), nullptr, false);

@@ -25,13 +25,14 @@
 namespace instascene::worker {
 
 struct WorkerOptions {
-  std::string worker_id;             // "" = <hostname>-<pid>-<kinds>
-  std::vector<std::string> kinds;    // job kinds to lease: decompose, train, segment
-  std::string work_dir;              // scene/input cache and job scratch space
-  int num_threads = 0;               // per job; 0 = all cores
-  int poll_interval_ms = 300;        // wait between empty lease attempts
-  int heartbeat_interval_ms = 1000;  // progress + lease extension period
-  int lease_seconds = 0;             // requested lease length; 0 = the scheduler's default
+  std::string worker_id;                    // "" = <hostname>-<pid>-<kinds>
+  std::vector<std::string> kinds;           // job kinds to lease: decompose, train, segment
+  std::string work_dir;                     // scene/input cache and job scratch space
+  int num_threads = 0;                      // per job; 0 = all cores
+  int poll_interval_ms = 300;               // wait between empty lease attempts
+  int heartbeat_interval_ms = 1000;         // progress + lease extension period
+  int lease_seconds = 0;                    // requested lease length; 0 = the scheduler's default
+  int64_t cache_bytes = int64_t{20} << 30;  // input cache budget, LRU-evicted (0 = unlimited)
 
   absl::Status Validate() const;
 };
