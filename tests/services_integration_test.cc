@@ -6,6 +6,7 @@
 #include <filesystem>
 #include <thread>
 
+#include "common/core/testing/files.h"
 #include "common/core/testing/temp_dir.h"
 #include "common/rpc/server.h"
 #include "common/rpc/status.h"
@@ -24,12 +25,8 @@
 namespace instascene {
 namespace {
 namespace fs = std::filesystem;
-
-size_t CountFiles(const fs::path& dir) {
-  size_t n = 0;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) n += e.is_regular_file();
-  return n;
-}
+using instascene::testing::CountFiles;
+using instascene::testing::RandomBytes;
 
 class ServicesTest : public ::testing::Test {
  protected:

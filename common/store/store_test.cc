@@ -4,6 +4,7 @@
 #include <fstream>
 #include <random>
 
+#include "common/core/testing/files.h"
 #include "common/core/testing/temp_dir.h"
 #include "common/store/blob_store.h"
 #include "common/store/manifest.h"
@@ -12,24 +13,13 @@
 namespace instascene::store {
 namespace {
 namespace fs = std::filesystem;
-
-std::string RandomBytes(size_t n, uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::string s(n, '\0');
-  for (char& c : s) c = static_cast<char>(rng() & 0xff);
-  return s;
-}
+using instascene::testing::CountFiles;
+using instascene::testing::RandomBytes;
 
 std::unique_ptr<FilesystemBlobStore> OpenStore(const std::string& root, StoreOptions options = {}) {
   auto store = FilesystemBlobStore::Open(root, options);
   EXPECT_TRUE(store.ok()) << store.status();
   return std::move(*store);
-}
-
-size_t CountFiles(const fs::path& dir) {
-  size_t n = 0;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) n += e.is_regular_file();
-  return n;
 }
 
 TEST(DigestTest, KnownVectors) {

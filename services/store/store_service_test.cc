@@ -5,6 +5,7 @@
 #include <fstream>
 #include <random>
 
+#include "common/core/testing/files.h"
 #include "common/core/testing/temp_dir.h"
 #include "common/rpc/server.h"
 #include "common/rpc/status.h"
@@ -15,19 +16,8 @@
 namespace instascene::store_service {
 namespace {
 namespace fs = std::filesystem;
-
-std::string RandomBytes(size_t n, uint64_t seed) {
-  std::mt19937_64 rng(seed);
-  std::string s(n, '\0');
-  for (char& c : s) c = static_cast<char>(rng() & 0xff);
-  return s;
-}
-
-size_t CountFiles(const fs::path& dir) {
-  size_t n = 0;
-  for (const auto& e : fs::recursive_directory_iterator(dir)) n += e.is_regular_file();
-  return n;
-}
+using instascene::testing::CountFiles;
+using instascene::testing::RandomBytes;
 
 class StoreServiceTest : public ::testing::Test {
  protected:
