@@ -78,7 +78,8 @@ absl::Status RunNode(const NodeOptions& options) {
     names.push_back("instascene.v1.Scheduler");
   }
   const std::string work_dir = (fs::path(options.data_dir) / "work").string();
-  auto make_worker = [&](std::vector<std::string> kinds) {
+  auto make_worker =
+      [&](std::vector<std::string> kinds) -> absl::StatusOr<std::unique_ptr<worker::StageWorker>> {
     worker::WorkerOptions w;
     w.kinds = std::move(kinds);
     w.work_dir = work_dir;
@@ -86,20 +87,21 @@ absl::Status RunNode(const NodeOptions& options) {
     w.lease_seconds = options.lease_seconds;
     w.cache_bytes = options.cache_bytes;
     w.heartbeat_interval_ms = std::min(1000, options.lease_seconds * 1000 / 4);  // live progress
+    RETURN_IF_ERROR(w.Validate());
     return std::make_unique<worker::StageWorker>(w, blob_store);
   };
   std::unique_ptr<worker::StageWorker> decomposition_worker, training_worker;
   std::unique_ptr<decomposition::DecompositionService> decomposition_svc;
   std::unique_ptr<training::TrainingService> training_svc;
   if (options.run_decomposition) {
-    decomposition_worker = make_worker({"decompose"});
+    ASSIGN_OR_RETURN(decomposition_worker, make_worker({"decompose"}));
     decomposition_svc =
         std::make_unique<decomposition::DecompositionService>(decomposition_worker.get());
     services.push_back(decomposition_svc.get());
     names.push_back("instascene.v1.Decomposition");
   }
   if (options.run_training) {
-    training_worker = make_worker({"train", "segment"});
+    ASSIGN_OR_RETURN(training_worker, make_worker({"train", "segment"}));
     training_svc = std::make_unique<training::TrainingService>(
         blob_store, (fs::path(work_dir) / "query").string(), training_worker.get());
     services.push_back(training_svc.get());

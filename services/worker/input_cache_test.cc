@@ -6,6 +6,7 @@
 #include <fstream>
 
 #include "common/core/testing/temp_dir.h"
+#include "services/worker/stage_worker.h"
 
 namespace instascene::worker {
 namespace {
@@ -45,6 +46,28 @@ TEST(InputCache, EvictsLeastRecentlyUsedFirstAndKeepsWhatTheJobNeeds) {
   ASSERT_TRUE(report.ok());
   EXPECT_EQ(report->evicted, (std::vector<std::string>{(root / "results" / "d").string()}));
   EXPECT_TRUE(fs::exists(root / "scenes" / "a"));
+}
+
+TEST(WorkerOptions, Validate) {
+  WorkerOptions o;
+  o.kinds = {"decompose"};
+  o.work_dir = "/tmp/w";
+  EXPECT_TRUE(o.Validate().ok());
+  WorkerOptions bad = o;
+  bad.kinds = {"render"};
+  EXPECT_EQ(bad.Validate().code(), absl::StatusCode::kInvalidArgument);
+  bad = o;
+  bad.kinds.clear();
+  EXPECT_EQ(bad.Validate().code(), absl::StatusCode::kInvalidArgument);
+  bad = o;
+  bad.work_dir.clear();
+  EXPECT_EQ(bad.Validate().code(), absl::StatusCode::kInvalidArgument);
+  bad = o;
+  bad.heartbeat_interval_ms = 0;
+  EXPECT_EQ(bad.Validate().code(), absl::StatusCode::kInvalidArgument);
+  bad = o;
+  bad.cache_bytes = -1;
+  EXPECT_EQ(bad.Validate().code(), absl::StatusCode::kInvalidArgument);
 }
 
 }  // namespace

@@ -62,6 +62,7 @@ absl::Status WorkerOptions::Validate() const {
   if (work_dir.empty()) return absl::InvalidArgumentError("worker: work_dir is empty");
   if (poll_interval_ms <= 0 || heartbeat_interval_ms <= 0)
     return absl::InvalidArgumentError("worker: intervals must be > 0");
+  if (cache_bytes < 0) return absl::InvalidArgumentError("worker: cache_bytes must be >= 0");
   return absl::OkStatus();
 }
 
