@@ -11,20 +11,6 @@
 namespace instascene::training {
 namespace fs = std::filesystem;
 
-void FillWorkerStatus(const worker::StageWorker* worker, const std::vector<std::string>& kinds,
-                      v1::WorkerStatus* out) {
-  for (const std::string& k : kinds) out->add_kinds(k);
-  if (worker == nullptr) {
-    out->set_state("serving");
-    return;
-  }
-  out->set_worker_id(worker->worker_id());
-  out->set_current_job_id(worker->current_job());
-  out->set_jobs_succeeded(worker->succeeded());
-  out->set_jobs_failed(worker->failed());
-  out->set_state(worker->draining() ? "draining" : "serving");
-}
-
 TrainingService::TrainingService(store::BlobStore* store, std::string work_dir,
                                  const worker::StageWorker* worker, int cache_entries)
     : store_(store),
@@ -35,7 +21,7 @@ TrainingService::TrainingService(store::BlobStore* store, std::string work_dir,
 grpc::Status TrainingService::GetWorkerStatus(grpc::ServerContext*,
                                               const v1::GetWorkerStatusRequest*,
                                               v1::WorkerStatus* response) {
-  FillWorkerStatus(worker_, {"train", "segment"}, response);
+  worker::FillWorkerStatus(worker_, {"train", "segment"}, response);
   return grpc::Status::OK;
 }
 
@@ -62,6 +48,7 @@ absl::StatusOr<std::shared_ptr<TrainingService::Loaded>> TrainingService::Load(
   ASSIGN_OR_RETURN(loaded->cloud, ReadSceneGaussians(loaded->scene));
   ASSIGN_OR_RETURN(SegmentationResult result, ReadResult(result_dir, loaded->cloud.size()));
   ASSIGN_OR_RETURN(loaded->index, QueryIndex::Build(loaded->scene, loaded->cloud, result));
+  loaded->point_radius = 0.02f * RobustBounds(loaded->cloud).diagonal().norm();
   cache_.push_front(loaded);
   if (cache_.size() > cache_entries_) cache_.pop_back();
   return loaded;
@@ -80,9 +67,7 @@ absl::Status TrainingService::Answer(const v1::QueryRequest& request, v1::QueryR
                                 static_cast<float>(request.point_y()),
                                 static_cast<float>(request.point_z()));
     if (!point.allFinite()) return absl::InvalidArgumentError("query point is not finite");
-    // Within 2 % of the scene's robust diagonal (the CLI's default for unit-scale scenes).
-    const float max_distance = 0.02f * RobustBounds(loaded->cloud).diagonal().norm();
-    ASSIGN_OR_RETURN(answer, loaded->index->Point(point, max_distance));
+    ASSIGN_OR_RETURN(answer, loaded->index->Point(point, loaded->point_radius));
   } else {
     ASSIGN_OR_RETURN(int view, ResolveView(loaded->scene, request.view()));
     ASSIGN_OR_RETURN(answer, loaded->index->Click(view, request.x(), request.y()));

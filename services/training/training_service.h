@@ -32,6 +32,7 @@ class TrainingService final : public v1::Training::Service {
     Scene scene;
     GaussianCloud cloud;
     std::unique_ptr<QueryIndex> index;
+    float point_radius = 0;  // 3D queries: 2 % of the scene's robust diagonal
   };
   absl::StatusOr<std::shared_ptr<Loaded>> Load(const store::Digest& scene,
                                                const store::Digest& result);
@@ -44,9 +45,5 @@ class TrainingService final : public v1::Training::Service {
   std::mutex mutex_;                          // guards cache_ and serialises index builds
   std::list<std::shared_ptr<Loaded>> cache_;  // most recent first
 };
-
-// Worker status for any stage service.
-void FillWorkerStatus(const worker::StageWorker* worker, const std::vector<std::string>& kinds,
-                      v1::WorkerStatus* out);
 
 }  // namespace instascene::training

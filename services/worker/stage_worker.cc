@@ -311,4 +311,18 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
   wake_.notify_all();
 }
 
+void FillWorkerStatus(const worker::StageWorker* worker, const std::vector<std::string>& kinds,
+                      v1::WorkerStatus* out) {
+  for (const std::string& k : kinds) out->add_kinds(k);
+  if (worker == nullptr) {
+    out->set_state("serving");
+    return;
+  }
+  out->set_worker_id(worker->worker_id());
+  out->set_current_job_id(worker->current_job());
+  out->set_jobs_succeeded(worker->succeeded());
+  out->set_jobs_failed(worker->failed());
+  out->set_state(worker->draining() ? "draining" : "serving");
+}
+
 }  // namespace instascene::worker

@@ -77,4 +77,8 @@ class StageWorker {
   std::atomic<int64_t> succeeded_{0}, failed_{0};
 };
 
+// The WorkerStatus every stage service reports (worker may be null: a service without a worker).
+void FillWorkerStatus(const StageWorker* worker, const std::vector<std::string>& kinds,
+                      v1::WorkerStatus* out);
+
 }  // namespace instascene::worker
