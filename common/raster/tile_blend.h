@@ -212,8 +212,15 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
   const int tile_pixels = (px1 - px0) * (py1 - py0);
   const int dim = opt.feature_dim;
   std::fill_n(st.T, TileState::kPadded, 1.0f);
-  for (float* a : {st.r, st.g, st.b, st.depth, st.median, st.nx, st.ny, st.nz})
-    std::fill_n(a, TileState::kPadded, 0.0f);
+  if (opt.color) {
+    for (float* a : {st.r, st.g, st.b}) std::fill_n(a, TileState::kPadded, 0.0f);
+  }
+  if (opt.depth) {
+    for (float* a : {st.depth, st.median}) std::fill_n(a, TileState::kPadded, 0.0f);
+  }
+  if (opt.normal) {
+    for (float* a : {st.nx, st.ny, st.nz}) std::fill_n(a, TileState::kPadded, 0.0f);
+  }
   std::fill_n(st.done, TileState::kPadded, 0);
   std::fill_n(st.row_done, kTileSize, 0u);
   std::fill_n(st.contributors, TileState::kPadded, 0);
@@ -228,6 +235,7 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
   const bool vector_trace = kTrace && trace_mask == nullptr && !opt.trace.transmittance;
   const v8f v_min_weight = Splat(opt.trace.min_weight);
   const float near = p.near_plane;
+  const bool want_color = opt.color, want_depth = opt.depth, want_normal = opt.normal;
   int num_done = 0;
   v8i tile_blends = {}, tile_live = {};  // lane-wise counters, summed once per tile
 
@@ -301,15 +309,22 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
         const v8i stop = valid & (next_T < Splat(kTransmittanceMin));
         const v8i blend = valid & ~stop;
         const v8f w = blend ? alpha * T : Splat(0.0f);
-        const v8f d = blend ? depth : Splat(0.0f);
-        Store(&st.r[i], Load(&st.r[i]) + w * v_cr);
-        Store(&st.g[i], Load(&st.g[i]) + w * v_cg);
-        Store(&st.b[i], Load(&st.b[i]) + w * v_cb);
-        Store(&st.depth[i], Load(&st.depth[i]) + w * d);
-        Store(&st.nx[i], Load(&st.nx[i]) + w * v_nx);
-        Store(&st.ny[i], Load(&st.ny[i]) + w * v_ny);
-        Store(&st.nz[i], Load(&st.nz[i]) + w * v_nz);
-        Store(&st.median[i], (blend & (T > Splat(0.5f))) ? d : Load(&st.median[i]));
+        // Only the requested outputs are accumulated (the branches are uniform per frame).
+        if (want_color) {
+          Store(&st.r[i], Load(&st.r[i]) + w * v_cr);
+          Store(&st.g[i], Load(&st.g[i]) + w * v_cg);
+          Store(&st.b[i], Load(&st.b[i]) + w * v_cb);
+        }
+        if (want_depth) {
+          const v8f d = blend ? depth : Splat(0.0f);
+          Store(&st.depth[i], Load(&st.depth[i]) + w * d);
+          Store(&st.median[i], (blend & (T > Splat(0.5f))) ? d : Load(&st.median[i]));
+        }
+        if (want_normal) {
+          Store(&st.nx[i], Load(&st.nx[i]) + w * v_nx);
+          Store(&st.ny[i], Load(&st.ny[i]) + w * v_ny);
+          Store(&st.nz[i], Load(&st.nz[i]) + w * v_nz);
+        }
         Store(&st.T[i], blend ? next_T : T);
         StoreI(&st.done[i], LoadI(&st.done[i]) | (stop & SplatI(1)));
         StoreI(&st.contributors[i], LoadI(&st.contributors[i]) + (blend & SplatI(1)));
