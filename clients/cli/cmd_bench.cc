@@ -60,7 +60,7 @@ absl::Status BenchRaster(const BenchArgs& args) {
   RenderOptions tracker = traced;  // the decomposition tracker's rule: keep w > 0.1 only
   tracker.trace.min_weight = 0.1f;
   std::vector<double> ms, trace_ms, pre, bin, blend, trace_blend, trace_assembly, tracker_ms;
-  double pairs = 0, blended = 0, evaluated = 0, entries = 0, tracker_entries = 0;
+  double visible = 0, pairs = 0, blended = 0, evaluated = 0, entries = 0, tracker_entries = 0;
   // Untimed warm-up frames (thread pool start, first-touch of the reused buffers).
   RenderResult r, t, k;  // reused across frames
   RETURN_IF_ERROR(RenderInto(scene.cloud, scene.cameras[0], plain, &r));
@@ -71,6 +71,7 @@ absl::Status BenchRaster(const BenchArgs& args) {
     pre.push_back(r.stats.preprocess_ms);
     bin.push_back(r.stats.binning_ms);
     blend.push_back(r.stats.blend_ms);
+    visible += static_cast<double>(r.stats.visible_gaussians) / args.frames;
     pairs += static_cast<double>(r.stats.gaussian_tile_pairs) / args.frames;
     blended += static_cast<double>(r.stats.blended_fragments) / args.frames;
     evaluated += static_cast<double>(r.stats.evaluated_fragments) / args.frames;
@@ -87,11 +88,11 @@ absl::Status BenchRaster(const BenchArgs& args) {
   std::fprintf(stderr,
                "bench raster: median %.1f ms/frame (preprocess %.1f, binning %.1f, blend %.1f); "
                "traced %.1f ms (%.2fx; blend %.1f, assembly %.1f)\n"
-               "  %.0f Gaussian-tile pairs, %.0f evaluated and %.0f blended fragments per frame; "
+               "  %.0f visible Gaussians, %.0f Gaussian-tile pairs, %.0f evaluated and %.0f blended fragments per frame; "
                "%.1f M pairs/s, %.1f M blended fragments/s; %.0f trace entries per frame\n"
                "  tracker trace (w > 0.1): %.1f ms (%.2fx), %.0f entries per frame\n",
                median, Median(pre), Median(bin), Median(blend), trace_median, trace_median / median,
-               Median(trace_blend), Median(trace_assembly), pairs, evaluated, blended,
+               Median(trace_blend), Median(trace_assembly), visible, pairs, evaluated, blended,
                pairs / median / 1e3, blended / median / 1e3, entries, Median(tracker_ms),
                Median(tracker_ms) / median, tracker_entries);
   if (args.json) {
@@ -106,6 +107,7 @@ absl::Status BenchRaster(const BenchArgs& args) {
                         {"preprocess_ms", Median(pre)},
                         {"binning_ms", Median(bin)},
                         {"blend_ms", Median(blend)},
+                        {"visible_gaussians", visible},
                         {"gaussian_tile_pairs", pairs},
                         {"evaluated_fragments", evaluated},
                         {"blended_fragments", blended},

@@ -3,6 +3,10 @@
 #include <algorithm>
 #include <cmath>
 
+#if defined(__SSE2__)
+#include <immintrin.h>
+#endif
+
 #include "common/splat/sh.h"
 
 namespace instascene {
@@ -14,19 +18,31 @@ constexpr float kDilation = 0.3f;         // Inria 3DGS covariance dilation, px^
 
 inline float Sigmoid(float x) { return 1.0f / (1.0f + std::exp(-x)); }
 
-void QuaternionToMatrix(const float* q_raw, float r[9]) {
-  const float norm = std::sqrt(q_raw[0] * q_raw[0] + q_raw[1] * q_raw[1] + q_raw[2] * q_raw[2] +
-                               q_raw[3] * q_raw[3]);
-  const float w = q_raw[0] / norm, x = q_raw[1] / norm, y = q_raw[2] / norm, z = q_raw[3] / norm;
-  r[0] = 1 - 2 * (y * y + z * z);
-  r[1] = 2 * (x * y - w * z);
-  r[2] = 2 * (x * z + w * y);
-  r[3] = 2 * (x * y + w * z);
-  r[4] = 1 - 2 * (x * x + z * z);
-  r[5] = 2 * (y * z - w * x);
-  r[6] = 2 * (x * z - w * y);
-  r[7] = 2 * (y * z + w * x);
-  r[8] = 1 - 2 * (x * x + y * y);
+// out = (sqrt(a), sqrt(b)), correctly rounded like std::sqrt, in one packed instruction.
+inline void Sqrt2(double a, double b, double out[2]) {
+#if defined(__SSE2__)
+  _mm_storeu_pd(out, _mm_sqrt_pd(_mm_set_pd(b, a)));
+#else
+  out[0] = std::sqrt(a);
+  out[1] = std::sqrt(b);
+#endif
+}
+
+// Rotation of the unnormalised quaternion q (w first): the products scaled by s = 2 / |q|^2 (one
+// division, no square root). T is float for 3DGS (as the Inria rasterizer), double for surfels.
+template <typename T>
+void QuaternionToMatrix(const float* q, T r[9]) {
+  const T w = q[0], x = q[1], y = q[2], z = q[3];
+  const T s = T{2} / (w * w + x * x + y * y + z * z);
+  r[0] = 1 - s * (y * y + z * z);
+  r[1] = s * (x * y - w * z);
+  r[2] = s * (x * z + w * y);
+  r[3] = s * (x * y + w * z);
+  r[4] = 1 - s * (x * x + z * z);
+  r[5] = s * (y * z - w * x);
+  r[6] = s * (x * z - w * y);
+  r[7] = s * (y * z + w * x);
+  r[8] = 1 - s * (x * x + y * y);
 }
 
 // Rotates a world vector into the camera frame.
@@ -55,8 +71,8 @@ bool Finish(const GaussianCloud& cloud, size_t i, const ProjectionParams& p, flo
   out->tiles[3] = ty1;
   float dir[3] = {pos[0] - p.camera_center[0], pos[1] - p.camera_center[1],
                   pos[2] - p.camera_center[2]};
-  const float len = std::sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
-  for (float& d : dir) d /= len;
+  const float inv_len = 1.0f / std::sqrt(dir[0] * dir[0] + dir[1] * dir[1] + dir[2] * dir[2]);
+  for (float& d : dir) d *= inv_len;
   EvalShColor(p.sh_degree, &cloud.sh[static_cast<size_t>(cloud.sh_stride()) * i], dir[0], dir[1],
               dir[2], out->rgb);
   return true;
@@ -126,8 +142,9 @@ ProjectionParams MakeProjectionParams(const PinholeCamera& camera, const RenderO
 
 bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams& p,
                    ProjectedSplat* out) {
-  // Double precision throughout: the per-view cost is negligible next to blending, and it keeps
-  // the stored planes accurate for the float per-pixel loop.
+  // Double precision for the transform and the bounding boxes: it keeps the stored planes
+  // accurate for the float per-pixel loop. Transcendentals of float inputs (scales, opacity) are
+  // evaluated in float: their inputs carry no more precision than that.
   const float* pos = &cloud.positions[3 * i];
   double pv[3];
   for (int r = 0; r < 3; ++r) {
@@ -135,10 +152,10 @@ bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams&
             double{p.rotation[3 * r + 2]} * pos[2] + p.translation[r];
   }
   if (pv[2] <= p.near_plane) return false;
-  float rot[9];
+  double rot[9];
   QuaternionToMatrix(&cloud.rotations[4 * i], rot);
-  const double su = std::exp(double{cloud.log_scales[2 * i]}) * p.scale_modifier;
-  const double sv = std::exp(double{cloud.log_scales[2 * i + 1]}) * p.scale_modifier;
+  const double su = double{std::exp(cloud.log_scales[2 * i])} * p.scale_modifier;
+  const double sv = double{std::exp(cloud.log_scales[2 * i + 1])} * p.scale_modifier;
   double a[3], b[3], n[3];
   for (int r = 0; r < 3; ++r) {
     const float* row = &p.rotation[3 * r];
@@ -159,22 +176,23 @@ bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams&
     tv[c] = p.fy * cols[c][1] + p.cy * cols[c][2];
     tw[c] = cols[c][2];
   }
-  // Screen AABB of the cutoff ellipse (compute_aabb of the 2DGS rasterizer); returns d.
-  auto aabb = [&](double cutoff, double center[2], double extent[2]) {
-    const double c2 = cutoff * cutoff;
+  // Screen AABB of the ellipse of squared cutoff c2 (compute_aabb of the 2DGS rasterizer);
+  // returns d. Both square roots in one instruction (they are on the critical path).
+  auto aabb = [&](double c2, double center[2], double extent[2]) {
     const double d = c2 * tw[0] * tw[0] + c2 * tw[1] * tw[1] - tw[2] * tw[2];
     if (d == 0.0) return 0.0;
-    const double f[3] = {c2 / d, c2 / d, -1.0 / d};
+    const double inv_d = 1.0 / d;
+    const double f[3] = {c2 * inv_d, c2 * inv_d, -inv_d};
     center[0] = f[0] * tu[0] * tw[0] + f[1] * tu[1] * tw[1] + f[2] * tu[2] * tw[2];
     center[1] = f[0] * tv[0] * tw[0] + f[1] * tv[1] * tw[1] + f[2] * tv[2] * tw[2];
     const double sx = f[0] * tu[0] * tu[0] + f[1] * tu[1] * tu[1] + f[2] * tu[2] * tu[2];
     const double sy = f[0] * tv[0] * tv[0] + f[1] * tv[1] * tv[1] + f[2] * tv[2] * tv[2];
-    extent[0] = std::sqrt(std::max(1e-4, center[0] * center[0] - sx));
-    extent[1] = std::sqrt(std::max(1e-4, center[1] * center[1] - sy));
+    Sqrt2(std::max(1e-4, center[0] * center[0] - sx), std::max(1e-4, center[1] * center[1] - sy),
+          extent);
     return d;
   };
   double mean[2], extent[2];
-  if (aabb(kCutoff, mean, extent) == 0.0) return false;
+  if (aabb(kCutoff * kCutoff, mean, extent) == 0.0) return false;
   const float radius = static_cast<float>(
       std::ceil(std::max({extent[0], extent[1], double{kCutoff * kFilterSize}})));
   out->mean_px[0] = static_cast<float>(mean[0]);
@@ -182,8 +200,10 @@ bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams&
   out->opacity = Sigmoid(cloud.opacity_logits[i]);
   out->depth = static_cast<float>(pv[2]);
   if (!Finish(cloud, i, p, radius, out)) return false;
-  const double ox = std::clamp(std::round(mean[0]), -1e6, 1e6);
-  const double oy = std::clamp(std::round(mean[1]), -1e6, 1e6);
+  // Any integer pixel near the splat serves as the origin; floor(x + 0.5) inlines, round() does
+  // not.
+  const double ox = std::clamp(std::floor(mean[0] + 0.5), -1e6, 1e6);
+  const double oy = std::clamp(std::floor(mean[1] + 0.5), -1e6, 1e6);
   out->origin_px[0] = static_cast<int32_t>(ox);
   out->origin_px[1] = static_cast<int32_t>(oy);
   for (int c = 0; c < 3; ++c) {
@@ -193,7 +213,7 @@ bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams&
   }
   // Pixel window where alpha = opacity * max(G3d, G2d) >= 1/255 is possible:
   // rho <= rho_max = 2 ln(255 opacity). Empty when the opacity alone is below 1/255.
-  const double rho_max = 2.0 * std::log(255.0 * out->opacity);
+  const double rho_max = 2.0 * double{std::log(255.0f * out->opacity)};
   if (!(rho_max > 0.0)) {
     NoWindow(out);
     return true;
@@ -201,7 +221,7 @@ bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams&
   const double r2d = std::sqrt(0.5 * rho_max);  // low-pass disk: 2 |mu - x|^2 <= rho_max
   double x_lo = mean[0] - r2d, x_hi = mean[0] + r2d, y_lo = mean[1] - r2d, y_hi = mean[1] + r2d;
   double c3[2], e3[2];
-  if (aabb(std::sqrt(rho_max), c3, e3) < 0.0) {  // bounded ellipse: its box is exact
+  if (aabb(rho_max, c3, e3) < 0.0) {  // bounded ellipse: its box is exact
     x_lo = std::min(x_lo, c3[0] - e3[0]);
     x_hi = std::max(x_hi, c3[0] + e3[0]);
     y_lo = std::min(y_lo, c3[1] - e3[1]);

@@ -11,6 +11,7 @@
 #include "common/core/parallel.h"
 #include "common/core/status.h"
 #include "common/core/timer.h"
+#include "common/raster/depth_sort.h"
 #include "common/raster/projection.h"
 #include "common/raster/tile_blend.h"
 
@@ -139,7 +140,7 @@ class TraceAssembler {
 // Bins visible splats into per-tile key lists, in parallel over fixed chunks of Gaussians (the
 // chunking depends only on n, so the output is the same for any thread count). Within a tile,
 // keys are then sorted: centre depth first, Gaussian index for ties (the stable CUDA radix sort
-// over Gaussian-ordered input gives the same order).
+// over Gaussian-ordered input gives the same order; so does SortTileKeys, a stable radix sort).
 void BinSplats(const std::vector<ProjectedSplat>& splats, const std::vector<uint8_t>& visible,
                const ProjectionParams& params, RasterWorkspace* ws) {
   const size_t n = splats.size();
@@ -180,7 +181,10 @@ void BinSplats(const std::vector<ProjectedSplat>& splats, const std::vector<uint
     });
   });
   tbb::parallel_for(0, num_tiles, [&](int t) {
-    std::sort(ws->keys.begin() + ws->tile_offsets[t], ws->keys.begin() + ws->tile_offsets[t + 1]);
+    thread_local std::vector<uint64_t> scratch;
+    const uint64_t begin = ws->tile_offsets[t], size = ws->tile_offsets[t + 1] - begin;
+    if (scratch.size() < size) scratch.resize(size);
+    raster_internal::SortTileKeys(ws->keys.data() + begin, size, scratch.data());
   });
 }
 
