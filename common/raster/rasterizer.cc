@@ -7,6 +7,10 @@
 #include <cmath>
 #include <cstring>
 
+#if defined(__AVX__)
+#include <immintrin.h>
+#endif
+
 #include "absl/strings/str_cat.h"
 #include "common/core/parallel.h"
 #include "common/core/status.h"
@@ -31,6 +35,33 @@ template <bool kSurfel>
 BlendFn PickBlend(bool trace, bool features) {
   if (trace) return features ? BlendTile<kSurfel, true, true> : BlendTile<kSurfel, true, false>;
   return features ? BlendTile<kSurfel, false, true> : BlendTile<kSurfel, false, false>;
+}
+
+// Copies `bytes` to `dst`, with non-temporal stores for the 32-byte-aligned middle: the trace
+// arrays are far larger than the caches, so ordinary stores would first read every line they
+// overwrite. StreamFence() orders the streamed stores before the task that wrote them ends.
+void StreamCopy(void* dst, const void* src, size_t bytes) {
+#if defined(__AVX__)
+  char* d = static_cast<char*>(dst);
+  const char* s = static_cast<const char*>(src);
+  const size_t head = std::min(bytes, (32 - reinterpret_cast<uintptr_t>(d) % 32) % 32);
+  std::memcpy(d, s, head);
+  d += head;
+  s += head;
+  bytes -= head;
+  for (; bytes >= 32; bytes -= 32, d += 32, s += 32) {
+    _mm256_stream_si256(reinterpret_cast<__m256i*>(d),
+                        _mm256_loadu_si256(reinterpret_cast<const __m256i*>(s)));
+  }
+  std::memcpy(d, s, bytes);
+#else
+  std::memcpy(dst, src, bytes);
+#endif
+}
+void StreamFence() {
+#if defined(__AVX__)
+  _mm_sfence();
+#endif
 }
 
 // Builds the row-major CSR trace band by band: a band is one row of tiles, i.e. 16 image rows,
@@ -80,22 +111,47 @@ class TraceAssembler {
       trace_->transmittance.resize(need);
     }
     tbb::parallel_for(0, p_.tiles_x, [&](int tx) {
-      // Per-pixel write cursors; entries arrive front to back within each pixel, so a plain
-      // scatter keeps that order. The tile's target rows are 16 short contiguous runs.
+      // The tile's lists arrive splat by splat (pixels interleaved). Group them by pixel in a
+      // per-thread buffer that stays in L2 (a counting sort keeps each pixel's front-to-back
+      // order), then copy each tile row's pixels, which are consecutive CSR rows, in one
+      // sequential run. Scattering straight into the frame-sized CSR was bound by the latency of
+      // its cache misses; sequential runs stream at memory bandwidth.
       const TileTrace& tile = tiles[tx];
-      uint64_t cursor[raster_internal::kTilePixels];
-      ForEachPixel(tx, ty, [&](int local, size_t row) { cursor[local] = offsets[row]; });
-      Contribution* entries = trace_->entries.data();
+      thread_local raster_internal::RawBuffer<Contribution> grouped;
+      thread_local raster_internal::RawBuffer<float> grouped_t;
+      grouped.Grow(tile.size);
+      if (with_t_) grouped_t.Grow(tile.size);
+      uint32_t cursor[raster_internal::kTilePixels];
+      uint32_t running = 0;
+      for (int local = 0; local < raster_internal::kTilePixels; ++local) {
+        cursor[local] = running;
+        running += tile.counts[local];
+      }
+      Contribution* g = grouped.data();
       if (with_t_) {
-        float* t = trace_->transmittance.data();
+        float* gt = grouped_t.data();
         for (size_t e = 0; e < tile.size; ++e) {
-          const uint64_t at = cursor[tile.pixels[e]]++;
-          entries[at] = tile.entries[e];
-          t[at] = tile.transmittance[e];
+          const uint32_t at = cursor[tile.pixels[e]]++;
+          g[at] = tile.entries[e];
+          gt[at] = tile.transmittance[e];
         }
       } else {
-        for (size_t e = 0; e < tile.size; ++e) entries[cursor[tile.pixels[e]]++] = tile.entries[e];
+        for (size_t e = 0; e < tile.size; ++e) g[cursor[tile.pixels[e]]++] = tile.entries[e];
       }
+      // After the scatter, cursor[local] is the end of pixel `local`'s group. Untraced pixels
+      // (a subset trace) have no entries, so each tile row's traced pixels form one run.
+      ForEachTileRow(tx, ty, [&](int first_local, int end_local, size_t csr_row) {
+        const uint32_t from = first_local == 0 ? 0 : cursor[first_local - 1];
+        const uint32_t count = cursor[end_local - 1] - from;
+        if (count == 0) return;
+        const uint64_t to = offsets[csr_row];
+        StreamCopy(trace_->entries.data() + to, g + from, count * sizeof(Contribution));
+        if (with_t_) {
+          StreamCopy(trace_->transmittance.data() + to, grouped_t.data() + from,
+                     count * sizeof(float));
+        }
+      });
+      StreamFence();
     });
     total_ = need;
   }
@@ -113,6 +169,26 @@ class TraceAssembler {
     return static_cast<size_t>(
         std::lower_bound(trace_->pixels.begin(), trace_->pixels.end(), static_cast<uint32_t>(pix)) -
         trace_->pixels.begin());
+  }
+  // Calls fn(first local pixel, end local pixel, CSR row of the first traced pixel) for each
+  // in-image row of tile (tx, ty) that holds a traced pixel.
+  template <typename Fn>
+  void ForEachTileRow(int tx, int ty, Fn&& fn) const {
+    const int x1 = std::min(kTileSize, p_.width - tx * kTileSize),
+              y1 = std::min(kTileSize, p_.height - ty * kTileSize);
+    for (int ly = 0; ly < y1; ++ly) {
+      const size_t pix = static_cast<size_t>(ty * kTileSize + ly) * p_.width + tx * kTileSize;
+      if (all_pixels_) {
+        fn(ly * kTileSize, ly * kTileSize + x1, pix);
+        continue;
+      }
+      for (int lx = 0; lx < x1; ++lx) {
+        if (slot_[pix + lx] >= 0) {
+          fn(ly * kTileSize, ly * kTileSize + x1, static_cast<size_t>(slot_[pix + lx]));
+          break;
+        }
+      }
+    }
   }
   // Calls fn(local pixel, CSR row) for every traced in-image pixel of tile (tx, ty).
   template <typename Fn>
