@@ -3,10 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
-#if defined(__SSE2__)
-#include <immintrin.h>
-#endif
-
+#include "common/raster/simd_math.h"
 #include "common/splat/sh.h"
 
 namespace instascene {
@@ -17,16 +14,6 @@ constexpr float kFilterSize = 0.707106f;  // sqrt(2)/2 px low-pass filter radius
 constexpr float kDilation = 0.3f;         // Inria 3DGS covariance dilation, px^2
 
 inline float Sigmoid(float x) { return 1.0f / (1.0f + std::exp(-x)); }
-
-// out = (sqrt(a), sqrt(b)), correctly rounded like std::sqrt, in one packed instruction.
-inline void Sqrt2(double a, double b, double out[2]) {
-#if defined(__SSE2__)
-  _mm_storeu_pd(out, _mm_sqrt_pd(_mm_set_pd(b, a)));
-#else
-  out[0] = std::sqrt(a);
-  out[1] = std::sqrt(b);
-#endif
-}
 
 // Rotation of the unnormalised quaternion q (w first): the products scaled by s = 2 / |q|^2 (one
 // division, no square root). T is float for 3DGS (as the Inria rasterizer), double for surfels.
@@ -140,101 +127,165 @@ ProjectionParams MakeProjectionParams(const PinholeCamera& camera, const RenderO
   return p;
 }
 
-bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams& p,
-                   ProjectedSplat* out) {
-  // Double precision for the transform and the bounding boxes: it keeps the stored planes
-  // accurate for the float per-pixel loop. Transcendentals of float inputs (scales, opacity) are
-  // evaluated in float: their inputs carry no more precision than that.
-  const float* pos = &cloud.positions[3 * i];
-  double pv[3];
+namespace {
+
+using raster_internal::v4d;
+using raster_internal::v4f;
+using raster_internal::v4l;
+
+// Projects 4 surfels, lane l = Gaussian idx[l]; every lane computes exactly what a one-lane call
+// computes. Double precision for the transform and the bounding boxes keeps the stored planes
+// accurate for the float per-pixel loop; transcendentals of float inputs (scales, opacity) are
+// evaluated in float, since their inputs carry no more precision than that.
+void ProjectSurfel4(const GaussianCloud& cloud, const size_t idx[4], const ProjectionParams& p,
+                    ProjectedSplat* out[4], bool ok_out[4]) {
+  using raster_internal::Ceil4d;
+  using raster_internal::Exp4f;
+  using raster_internal::Floor4d;
+  using raster_internal::Log4f;
+  using raster_internal::Max4d;
+  using raster_internal::Min4d;
+  using raster_internal::Splat4d;
+  using raster_internal::Splat4f;
+  using raster_internal::Sqrt4d;
+  using raster_internal::ToDouble;
+  using raster_internal::ToFloat;
+  auto gather = [&](const std::vector<float>& a, int stride, int k) {
+    return v4d{a[stride * idx[0] + k], a[stride * idx[1] + k], a[stride * idx[2] + k],
+               a[stride * idx[3] + k]};
+  };
+  auto gatherf = [&](const std::vector<float>& a, int stride, int k) {
+    return v4f{a[stride * idx[0] + k], a[stride * idx[1] + k], a[stride * idx[2] + k],
+               a[stride * idx[3] + k]};
+  };
+  const v4d pos[3] = {gather(cloud.positions, 3, 0), gather(cloud.positions, 3, 1),
+                      gather(cloud.positions, 3, 2)};
+  v4d pv[3];
   for (int r = 0; r < 3; ++r) {
-    pv[r] = double{p.rotation[3 * r]} * pos[0] + double{p.rotation[3 * r + 1]} * pos[1] +
-            double{p.rotation[3 * r + 2]} * pos[2] + p.translation[r];
+    pv[r] = Splat4d(p.rotation[3 * r]) * pos[0] + Splat4d(p.rotation[3 * r + 1]) * pos[1] +
+            Splat4d(p.rotation[3 * r + 2]) * pos[2] + Splat4d(p.translation[r]);
   }
-  if (pv[2] <= p.near_plane) return false;
-  double rot[9];
-  QuaternionToMatrix(&cloud.rotations[4 * i], rot);
-  const double su = double{std::exp(cloud.log_scales[2 * i])} * p.scale_modifier;
-  const double sv = double{std::exp(cloud.log_scales[2 * i + 1])} * p.scale_modifier;
-  double a[3], b[3], n[3];
+  v4l ok = pv[2] > Splat4d(p.near_plane);
+  // Rotation of the unnormalised quaternion (w first): products scaled by 2 / |q|^2.
+  const v4d w = gather(cloud.rotations, 4, 0), x = gather(cloud.rotations, 4, 1),
+            y = gather(cloud.rotations, 4, 2), z = gather(cloud.rotations, 4, 3);
+  const v4d s = Splat4d(2.0) / (w * w + x * x + y * y + z * z);
+  const v4d one = Splat4d(1.0);
+  const v4d rot[9] = {
+      one - s * (y * y + z * z), s * (x * y - w * z),       s * (x * z + w * y),
+      s * (x * y + w * z),       one - s * (x * x + z * z), s * (y * z - w * x),
+      s * (x * z - w * y),       s * (y * z + w * x),       one - s * (x * x + y * y)};
+  const v4d su = ToDouble(Exp4f(gatherf(cloud.log_scales, 2, 0))) * Splat4d(p.scale_modifier);
+  const v4d sv = ToDouble(Exp4f(gatherf(cloud.log_scales, 2, 1))) * Splat4d(p.scale_modifier);
+  v4d a[3], b[3], n[3];
   for (int r = 0; r < 3; ++r) {
-    const float* row = &p.rotation[3 * r];
-    a[r] = su * (double{row[0]} * rot[0] + double{row[1]} * rot[3] + double{row[2]} * rot[6]);
-    b[r] = sv * (double{row[0]} * rot[1] + double{row[1]} * rot[4] + double{row[2]} * rot[7]);
-    n[r] = double{row[0]} * rot[2] + double{row[1]} * rot[5] + double{row[2]} * rot[8];
+    const v4d r0 = Splat4d(p.rotation[3 * r]), r1 = Splat4d(p.rotation[3 * r + 1]),
+              r2 = Splat4d(p.rotation[3 * r + 2]);
+    a[r] = su * (r0 * rot[0] + r1 * rot[3] + r2 * rot[6]);
+    b[r] = sv * (r0 * rot[1] + r1 * rot[4] + r2 * rot[7]);
+    n[r] = r0 * rot[2] + r1 * rot[5] + r2 * rot[8];
   }
   // Dual visibility: the normal always faces the camera.
-  const double cos = -(pv[0] * n[0] + pv[1] * n[1] + pv[2] * n[2]);
-  if (cos == 0.0) return false;
-  const double sign = cos > 0.0 ? 1.0 : -1.0;
-  for (int r = 0; r < 3; ++r) out->normal_view[r] = static_cast<float>(sign * n[r]);
+  const v4d cos = -(pv[0] * n[0] + pv[1] * n[1] + pv[2] * n[2]);
+  ok &= cos != Splat4d(0.0);
+  const v4d sign = cos > Splat4d(0.0) ? one : -one;
   // M = K [a | b | pv]: rows Tu, Tv, Tw.
-  const double* cols[3] = {a, b, pv};
-  double tu[3], tv[3], tw[3];
+  const v4d* cols[3] = {a, b, pv};
+  v4d tu[3], tv[3], tw[3];
   for (int c = 0; c < 3; ++c) {
-    tu[c] = p.fx * cols[c][0] + p.cx * cols[c][2];
-    tv[c] = p.fy * cols[c][1] + p.cy * cols[c][2];
+    tu[c] = Splat4d(p.fx) * cols[c][0] + Splat4d(p.cx) * cols[c][2];
+    tv[c] = Splat4d(p.fy) * cols[c][1] + Splat4d(p.cy) * cols[c][2];
     tw[c] = cols[c][2];
   }
-  // Screen AABB of the ellipse of squared cutoff c2 (compute_aabb of the 2DGS rasterizer);
-  // returns d. Both square roots in one instruction (they are on the critical path).
-  auto aabb = [&](double c2, double center[2], double extent[2]) {
-    const double d = c2 * tw[0] * tw[0] + c2 * tw[1] * tw[1] - tw[2] * tw[2];
-    if (d == 0.0) return 0.0;
-    const double inv_d = 1.0 / d;
-    const double f[3] = {c2 * inv_d, c2 * inv_d, -inv_d};
-    center[0] = f[0] * tu[0] * tw[0] + f[1] * tu[1] * tw[1] + f[2] * tu[2] * tw[2];
-    center[1] = f[0] * tv[0] * tw[0] + f[1] * tv[1] * tw[1] + f[2] * tv[2] * tw[2];
-    const double sx = f[0] * tu[0] * tu[0] + f[1] * tu[1] * tu[1] + f[2] * tu[2] * tu[2];
-    const double sy = f[0] * tv[0] * tv[0] + f[1] * tv[1] * tv[1] + f[2] * tv[2] * tv[2];
-    Sqrt2(std::max(1e-4, center[0] * center[0] - sx), std::max(1e-4, center[1] * center[1] - sy),
-          extent);
-    return d;
+  // Screen AABB of the ellipse of squared cutoff c2 (compute_aabb of the 2DGS rasterizer).
+  auto aabb = [&](v4d c2, v4d* d, v4d center[2], v4d extent[2]) {
+    *d = c2 * tw[0] * tw[0] + c2 * tw[1] * tw[1] - tw[2] * tw[2];
+    const v4d inv_d = one / *d;
+    const v4d f0 = c2 * inv_d, f2 = -inv_d;
+    center[0] = f0 * tu[0] * tw[0] + f0 * tu[1] * tw[1] + f2 * tu[2] * tw[2];
+    center[1] = f0 * tv[0] * tw[0] + f0 * tv[1] * tw[1] + f2 * tv[2] * tw[2];
+    const v4d sx = f0 * tu[0] * tu[0] + f0 * tu[1] * tu[1] + f2 * tu[2] * tu[2];
+    const v4d sy = f0 * tv[0] * tv[0] + f0 * tv[1] * tv[1] + f2 * tv[2] * tv[2];
+    extent[0] = Sqrt4d(Max4d(Splat4d(1e-4), center[0] * center[0] - sx));
+    extent[1] = Sqrt4d(Max4d(Splat4d(1e-4), center[1] * center[1] - sy));
   };
-  double mean[2], extent[2];
-  if (aabb(kCutoff * kCutoff, mean, extent) == 0.0) return false;
-  const float radius = static_cast<float>(
-      std::ceil(std::max({extent[0], extent[1], double{kCutoff * kFilterSize}})));
-  out->mean_px[0] = static_cast<float>(mean[0]);
-  out->mean_px[1] = static_cast<float>(mean[1]);
-  out->opacity = Sigmoid(cloud.opacity_logits[i]);
-  out->depth = static_cast<float>(pv[2]);
-  if (!Finish(cloud, i, p, radius, out)) return false;
-  // Any integer pixel near the splat serves as the origin; floor(x + 0.5) inlines, round() does
-  // not.
-  const double ox = std::clamp(std::floor(mean[0] + 0.5), -1e6, 1e6);
-  const double oy = std::clamp(std::floor(mean[1] + 0.5), -1e6, 1e6);
-  out->origin_px[0] = static_cast<int32_t>(ox);
-  out->origin_px[1] = static_cast<int32_t>(oy);
-  for (int c = 0; c < 3; ++c) {
-    out->tu[c] = static_cast<float>(ox * tw[c] - tu[c]);
-    out->tv[c] = static_cast<float>(oy * tw[c] - tv[c]);
-    out->tw[c] = static_cast<float>(tw[c]);
-  }
+  v4d d, mean[2], extent[2];
+  aabb(Splat4d(kCutoff * kCutoff), &d, mean, extent);
+  ok &= d != Splat4d(0.0);
+  const v4f radius =
+      ToFloat(Ceil4d(Max4d(Max4d(extent[0], extent[1]), Splat4d(kCutoff * kFilterSize))));
+  const v4f opacity = Splat4f(1.0f) / (Splat4f(1.0f) + Exp4f(-gatherf(cloud.opacity_logits, 1, 0)));
+  // Integer origin pixel near the splat for the per-pixel planes.
+  const v4d ox = Min4d(Max4d(Floor4d(mean[0] + Splat4d(0.5)), Splat4d(-1e6)), Splat4d(1e6));
+  const v4d oy = Min4d(Max4d(Floor4d(mean[1] + Splat4d(0.5)), Splat4d(-1e6)), Splat4d(1e6));
   // Pixel window where alpha = opacity * max(G3d, G2d) >= 1/255 is possible:
-  // rho <= rho_max = 2 ln(255 opacity). Empty when the opacity alone is below 1/255.
-  const double rho_max = 2.0 * double{std::log(255.0f * out->opacity)};
-  if (!(rho_max > 0.0)) {
-    NoWindow(out);
-    return true;
+  // rho <= rho_max = 2 ln(255 opacity); empty when the opacity alone is below 1/255.
+  const v4d rho_max = Splat4d(2.0) * ToDouble(Log4f(Splat4f(255.0f) * opacity));
+  const v4d r2d = Sqrt4d(Splat4d(0.5) * rho_max);  // low-pass disk: 2 |mu - x|^2 <= rho_max
+  v4d d3, c3[2], e3[2];
+  aabb(rho_max, &d3, c3, e3);
+  // Bounded ellipse: its box is exact; otherwise (grazing, or crossing the camera plane) the
+  // whole image.
+  const v4l bounded = d3 < Splat4d(0.0);
+  const v4d x_lo = bounded ? Min4d(mean[0] - r2d, c3[0] - e3[0]) : Splat4d(0.0);
+  const v4d x_hi = bounded ? Max4d(mean[0] + r2d, c3[0] + e3[0]) : Splat4d(p.width);
+  const v4d y_lo = bounded ? Min4d(mean[1] - r2d, c3[1] - e3[1]) : Splat4d(0.0);
+  const v4d y_hi = bounded ? Max4d(mean[1] + r2d, c3[1] + e3[1]) : Splat4d(p.height);
+
+  for (int l = 0; l < 4; ++l) {
+    ok_out[l] = false;
+    if (!ok[l]) continue;
+    ProjectedSplat* o = out[l];
+    for (int r = 0; r < 3; ++r) o->normal_view[r] = static_cast<float>(sign[l] * n[r][l]);
+    o->mean_px[0] = static_cast<float>(mean[0][l]);
+    o->mean_px[1] = static_cast<float>(mean[1][l]);
+    o->opacity = opacity[l];
+    o->depth = static_cast<float>(pv[2][l]);
+    if (!Finish(cloud, idx[l], p, radius[l], o)) continue;
+    ok_out[l] = true;
+    o->origin_px[0] = static_cast<int32_t>(ox[l]);
+    o->origin_px[1] = static_cast<int32_t>(oy[l]);
+    for (int c = 0; c < 3; ++c) {
+      o->tu[c] = static_cast<float>(ox[l] * tw[c][l] - tu[c][l]);
+      o->tv[c] = static_cast<float>(oy[l] * tw[c][l] - tv[c][l]);
+      o->tw[c] = static_cast<float>(tw[c][l]);
+    }
+    if (!(rho_max[l] > 0.0)) {
+      NoWindow(o);
+      continue;
+    }
+    SetWindow(static_cast<float>(std::max(x_lo[l], -1e6)),
+              static_cast<float>(std::min(x_hi[l], 1e6)),
+              static_cast<float>(std::max(y_lo[l], -1e6)),
+              static_cast<float>(std::min(y_hi[l], 1e6)), p, o);
   }
-  const double r2d = std::sqrt(0.5 * rho_max);  // low-pass disk: 2 |mu - x|^2 <= rho_max
-  double x_lo = mean[0] - r2d, x_hi = mean[0] + r2d, y_lo = mean[1] - r2d, y_hi = mean[1] + r2d;
-  double c3[2], e3[2];
-  if (aabb(rho_max, c3, e3) < 0.0) {  // bounded ellipse: its box is exact
-    x_lo = std::min(x_lo, c3[0] - e3[0]);
-    x_hi = std::max(x_hi, c3[0] + e3[0]);
-    y_lo = std::min(y_lo, c3[1] - e3[1]);
-    y_hi = std::max(y_hi, c3[1] + e3[1]);
-  } else {  // unbounded projection (grazing or crossing the camera plane): whole image
-    x_lo = y_lo = 0.0;
-    x_hi = p.width;
-    y_hi = p.height;
+}
+
+}  // namespace
+
+void ProjectSurfels(const GaussianCloud& cloud, size_t first, size_t count,
+                    const ProjectionParams& params, ProjectedSplat* out, uint8_t* visible) {
+  for (size_t k = 0; k < count; k += 4) {
+    // A partial last group repeats its last Gaussian in the spare lanes and drops their results.
+    size_t idx[4];
+    ProjectedSplat spare[4];
+    ProjectedSplat* dst[4];
+    bool ok[4];
+    for (int l = 0; l < 4; ++l) {
+      const size_t j = std::min(k + l, count - 1);
+      idx[l] = first + j;
+      dst[l] = k + l < count ? &out[k + l] : &spare[l];
+    }
+    ProjectSurfel4(cloud, idx, params, dst, ok);
+    for (size_t l = 0; l < 4 && k + l < count; ++l) visible[k + l] = ok[l] ? 1 : 0;
   }
-  SetWindow(static_cast<float>(std::max(x_lo, -1e6)), static_cast<float>(std::min(x_hi, 1e6)),
-            static_cast<float>(std::max(y_lo, -1e6)), static_cast<float>(std::min(y_hi, 1e6)), p,
-            out);
-  return true;
+}
+
+bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams& p,
+                   ProjectedSplat* out) {
+  uint8_t visible = 0;
+  ProjectSurfels(cloud, i, 1, p, out, &visible);
+  return visible != 0;
 }
 
 bool ProjectEllipsoid(const GaussianCloud& cloud, size_t i, const ProjectionParams& p,

@@ -56,6 +56,11 @@ struct ProjectionParams {
 ProjectionParams MakeProjectionParams(const PinholeCamera& camera, const RenderOptions& options,
                                       int cloud_sh_degree);
 
+// Projects Gaussians [first, first + count) (2DGS surfels) into out[0, count), four at a time
+// with SIMD; visible[k] = 0 where Gaussian first + k is culled (then out[k] is undefined). Each
+// Gaussian's result does not depend on first or count.
+void ProjectSurfels(const GaussianCloud& cloud, size_t first, size_t count,
+                    const ProjectionParams& params, ProjectedSplat* out, uint8_t* visible);
 // Projects Gaussian i (2DGS surfel). Returns false when culled (then `out` is undefined).
 bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams& params,
                    ProjectedSplat* out);

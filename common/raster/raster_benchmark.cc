@@ -75,20 +75,24 @@ BENCHMARK(BM_RenderTraced)
     ->Unit(benchmark::kMillisecond)
     ->UseRealTime();
 
-// Per-Gaussian preprocessing (2DGS transform, bounding box, window, SH colour), single thread.
-void BM_ProjectSurfel(benchmark::State& state) {
+// Per-Gaussian preprocessing (2DGS transform, bounding box, window, SH colour), single thread,
+// in batches of 4096 as the rasterizer calls it.
+void BM_ProjectSurfels(benchmark::State& state) {
   const ClutterScene& scene = Scene(300000, 640, 480);
   const ProjectionParams params =
       MakeProjectionParams(scene.cameras[1], RenderOptions{}, scene.cloud.sh_degree);
-  ProjectedSplat out;
-  size_t i = 0;
+  constexpr size_t kBatch = 4096;
+  std::vector<ProjectedSplat> out(kBatch);
+  std::vector<uint8_t> visible(kBatch);
+  size_t first = 0;
   for (auto _ : state) {
-    benchmark::DoNotOptimize(ProjectSurfel(scene.cloud, i, params, &out));
-    i = (i + 1) % scene.cloud.size();
+    ProjectSurfels(scene.cloud, first, kBatch, params, out.data(), visible.data());
+    benchmark::DoNotOptimize(visible.data());
+    first = first + 2 * kBatch <= scene.cloud.size() ? first + kBatch : 0;
   }
-  state.SetItemsProcessed(state.iterations());
+  state.SetItemsProcessed(state.iterations() * kBatch);
 }
-BENCHMARK(BM_ProjectSurfel);
+BENCHMARK(BM_ProjectSurfels);
 
 void BM_EvalShDegree3(benchmark::State& state) {
   float coeffs[48];

@@ -1,8 +1,10 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <cstring>
 #include <random>
 
+#include "common/raster/projection.h"
 #include "common/raster/rasterizer.h"
 #include "common/raster/testing/reference_renderer.h"
 #include "common/splat/sh.h"
@@ -254,6 +256,32 @@ TEST(Raster, IdenticalForAnyThreadCount) {
       ASSERT_EQ(one->trace.entries[e].weight, other->trace.entries[e].weight);
     }
   }
+}
+
+// The batched (4-lane) surfel projection gives every Gaussian the same bits however the batch
+// is cut, so a render cannot depend on how the Gaussians are split among threads.
+TEST(Raster, SurfelProjectionDoesNotDependOnBatching) {
+  const GaussianCloud cloud = RandomScene(203, 2, 3, 21);
+  const ProjectionParams params =
+      MakeProjectionParams(FrontCamera(96, 64, 80.0), RenderOptions{}, cloud.sh_degree);
+  std::vector<ProjectedSplat> whole(cloud.size());
+  std::vector<uint8_t> whole_visible(cloud.size());
+  ProjectSurfels(cloud, 0, cloud.size(), params, whole.data(), whole_visible.data());
+  int visible = 0;
+  for (size_t first = 0; first < cloud.size();) {
+    const size_t count = std::min<size_t>(1 + first % 7, cloud.size() - first);
+    std::vector<ProjectedSplat> part(count);
+    std::vector<uint8_t> part_visible(count);
+    ProjectSurfels(cloud, first, count, params, part.data(), part_visible.data());
+    for (size_t k = 0; k < count; ++k) {
+      ASSERT_EQ(part_visible[k], whole_visible[first + k]) << first + k;
+      if (!part_visible[k]) continue;
+      ++visible;
+      EXPECT_EQ(std::memcmp(&part[k], &whole[first + k], sizeof(ProjectedSplat)), 0) << first + k;
+    }
+    first += count;
+  }
+  EXPECT_GT(visible, 100);
 }
 
 TEST(Raster, PixelSubsetAndMinWeightFilterTheFullTrace) {

@@ -339,10 +339,13 @@ absl::Status RenderInto(const GaussianCloud& cloud, const PinholeCamera& camera,
     splats.resize(n);
     tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096),
                       [&](const tbb::blocked_range<size_t>& r) {
+                        if (surfel) {
+                          ProjectSurfels(cloud, r.begin(), r.size(), params, &splats[r.begin()],
+                                         &out.visible[r.begin()]);
+                          return;
+                        }
                         for (size_t i = r.begin(); i < r.end(); ++i) {
-                          const bool ok = surfel ? ProjectSurfel(cloud, i, params, &splats[i])
-                                                 : ProjectEllipsoid(cloud, i, params, &splats[i]);
-                          out.visible[i] = ok ? 1 : 0;
+                          out.visible[i] = ProjectEllipsoid(cloud, i, params, &splats[i]) ? 1 : 0;
                         }
                       });
     out.stats.preprocess_ms = phase.ElapsedMs();
