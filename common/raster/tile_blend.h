@@ -234,6 +234,14 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
   // first pass; pixel subsets and transmittance use the scalar second pass.
   const bool vector_trace = kTrace && trace_mask == nullptr && !opt.trace.transmittance;
   const v8f v_min_weight = Splat(opt.trace.min_weight);
+  // Every blended weight is at least (1/255) * 1e-4 > 0, so without a positive minimum weight
+  // the trace keeps exactly the blended fragments and the per-pixel counts are the contributor
+  // counts (copied at the end instead of maintained per vector).
+  const bool counts_are_contributors = !(opt.trace.min_weight > 0.0f);
+  // The vector append's cursor, kept in registers; tile_trace->size is synced per splat.
+  size_t trace_size = 0;
+  Contribution* trace_entries = nullptr;
+  uint16_t* trace_pixels = nullptr;
   const float near = p.near_plane;
   const bool want_color = opt.color, want_depth = opt.depth, want_normal = opt.normal;
   int num_done = 0;
@@ -253,6 +261,13 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
     const int x0 = std::max(px0, s.window[0]), x1 = std::min(px1, s.window[1]);
     const int y0 = std::max(py0, s.window[2]), y1 = std::min(py1, s.window[3]);
     if (x0 >= x1 || y0 >= y1) continue;
+    if (kTrace && vector_trace) {
+      // One splat adds at most one entry per window pixel (+ a vector of store slack).
+      tile_trace->size = trace_size;
+      tile_trace->Reserve(static_cast<size_t>((x1 - x0) * (y1 - y0)) + kLanes, false);
+      trace_entries = tile_trace->entries.data();
+      trace_pixels = tile_trace->pixels.data();
+    }
     const float opacity = s.opacity, cr = s.rgb[0], cg = s.rgb[1], cb = s.rgb[2];
     const float snx = s.normal_view[0], sny = s.normal_view[1], snz = s.normal_view[2];
     const float tw0 = s.tw[0], tw1 = s.tw[1], tw2 = s.tw[2];
@@ -337,8 +352,6 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
             const v8i keep = blend & (w > v_min_weight);
             const uint32_t keep_bits = MaskBits(keep);
             if (keep_bits != 0) {
-              TileTrace& tt = *tile_trace;
-              tt.Reserve(kLanes, false);
               const v8i perm = LoadI(kCompress.perm[keep_bits]);
               v8i w_bits;
               std::memcpy(&w_bits, &w, sizeof(w_bits));
@@ -346,15 +359,17 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
               const v8i g = SplatI(static_cast<int32_t>(gid));
               const v8i lo = __builtin_shuffle(g, wc, v8i{0, 8, 1, 9, 2, 10, 3, 11});
               const v8i hi = __builtin_shuffle(g, wc, v8i{4, 12, 5, 13, 6, 14, 7, 15});
-              std::memcpy(static_cast<void*>(&tt.entries[tt.size]), &lo, sizeof(lo));
-              std::memcpy(static_cast<void*>(&tt.entries[tt.size + 4]), &hi, sizeof(hi));
+              std::memcpy(static_cast<void*>(trace_entries + trace_size), &lo, sizeof(lo));
+              std::memcpy(static_cast<void*>(trace_entries + trace_size + 4), &hi, sizeof(hi));
               using v8u16 = uint16_t __attribute__((vector_size(16)));
               const v8u16 local =
                   __builtin_convertvector(__builtin_shuffle(SplatI(i) + kLaneIndex, perm), v8u16);
-              std::memcpy(&tt.pixels[tt.size], &local, sizeof(local));
-              tt.size += static_cast<size_t>(std::popcount(keep_bits));
-              int32_t* counts = reinterpret_cast<int32_t*>(&tt.counts[i]);
-              StoreI(counts, LoadI(counts) - keep);  // keep lanes are -1
+              std::memcpy(trace_pixels + trace_size, &local, sizeof(local));
+              trace_size += static_cast<size_t>(std::popcount(keep_bits));
+              if (!counts_are_contributors) {
+                int32_t* counts = reinterpret_cast<int32_t*>(&tile_trace->counts[i]);
+                StoreI(counts, LoadI(counts) - keep);  // keep lanes are -1
+              }
             }
           }
         }
@@ -392,6 +407,13 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
           }
         }
       }
+    }
+  }
+  if (kTrace && vector_trace) {
+    tile_trace->size = trace_size;
+    if (counts_are_contributors) {
+      for (int l = 0; l < kTilePixels; ++l)
+        tile_trace->counts[l] = static_cast<uint32_t>(st.contributors[l]);
     }
   }
   counters.evaluated += static_cast<uint64_t>(SumLanes(tile_live));
