@@ -343,7 +343,7 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
         Store(&st.T[i], blend ? next_T : T);
         StoreI(&st.done[i], LoadI(&st.done[i]) | (stop & SplatI(1)));
         StoreI(&st.contributors[i], LoadI(&st.contributors[i]) + (blend & SplatI(1)));
-        if constexpr (kTrace || kFeatures) {
+        if (kFeatures || (kTrace && !vector_trace)) {  // inputs of the second pass
           Store(&st.row_weight[x - x0], w);
           Store(&st.row_transmittance[x - x0], T);
         }
