@@ -2,9 +2,14 @@
 // (run: build/common/raster/raster_benchmark; `make bench` runs them with 5 repetitions).
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
+#include <bit>
 #include <map>
+#include <random>
 #include <tuple>
+#include <vector>
 
+#include "common/raster/depth_sort.h"
 #include "common/raster/projection.h"
 #include "common/raster/rasterizer.h"
 #include "common/splat/gaussian_ply.h"
@@ -93,6 +98,28 @@ void BM_ProjectSurfels(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * kBatch);
 }
 BENCHMARK(BM_ProjectSurfels);
+
+// One tile's depth sort as binning meets it: state.range(0) keys of depths in [2, 6) with
+// ascending Gaussian indices; arg 1 = 0: std::sort, 1: the radix sort the rasterizer uses.
+void BM_SortTileKeys(benchmark::State& state) {
+  const size_t n = static_cast<size_t>(state.range(0));
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> depth(2.0f, 6.0f);
+  std::vector<uint64_t> input(n), keys(n), scratch(n);
+  for (size_t i = 0; i < n; ++i)
+    input[i] = (uint64_t{std::bit_cast<uint32_t>(depth(rng))} << 32) | (7 * i);
+  for (auto _ : state) {
+    keys = input;
+    if (state.range(1) == 0) {
+      std::sort(keys.begin(), keys.end());
+    } else {
+      raster_internal::SortTileKeys(keys.data(), n, scratch.data());
+    }
+    benchmark::DoNotOptimize(keys.data());
+  }
+  state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(n));
+}
+BENCHMARK(BM_SortTileKeys)->ArgsProduct({{64, 200, 400, 600, 5000}, {0, 1}});
 
 void BM_EvalShDegree3(benchmark::State& state) {
   float coeffs[48];
