@@ -31,10 +31,21 @@ using raster_internal::TileTrace;
 using BlendFn = void (*)(const FrameContext&, int, TileState&, RenderResult&, TileCounters&,
                          TileTrace*);
 
+using raster_internal::TraceMode;
+
+template <bool kSurfel, TraceMode kMode>
+BlendFn PickFeatures(bool features) {
+  return features ? BlendTile<kSurfel, kMode, true> : BlendTile<kSurfel, kMode, false>;
+}
+
+// Full traces without transmittance append 8 lanes at a time; pixel subsets and transmittance
+// take the scalar path.
 template <bool kSurfel>
-BlendFn PickBlend(bool trace, bool features) {
-  if (trace) return features ? BlendTile<kSurfel, true, true> : BlendTile<kSurfel, true, false>;
-  return features ? BlendTile<kSurfel, false, true> : BlendTile<kSurfel, false, false>;
+BlendFn PickBlend(const TraceOptions& trace, bool features) {
+  if (!trace.enabled) return PickFeatures<kSurfel, TraceMode::kNone>(features);
+  if (trace.pixels.empty() && !trace.transmittance)
+    return PickFeatures<kSurfel, TraceMode::kVector>(features);
+  return PickFeatures<kSurfel, TraceMode::kScalar>(features);
 }
 
 // Copies `bytes` to `dst`, with non-temporal stores for the 32-byte-aligned middle: the trace
@@ -373,7 +384,8 @@ absl::Status RenderInto(const GaussianCloud& cloud, const PinholeCamera& camera,
     }
     const bool trace = options.trace.enabled;
     const bool features = options.feature_dim > 0;
-    BlendFn blend = surfel ? PickBlend<true>(trace, features) : PickBlend<false>(trace, features);
+    BlendFn blend = surfel ? PickBlend<true>(options.trace, features)
+                           : PickBlend<false>(options.trace, features);
     std::vector<TileCounters> counters(num_tiles);
     double assembly_ms = 0;
     if (!trace) {

@@ -201,9 +201,17 @@ struct alignas(64) TileState {
 };
 
 // Blends one tile; with tracing, `tile_trace` receives the tile's contributions.
-template <bool kSurfel, bool kTrace, bool kFeatures>
+// How a tile records its contributions: not at all, 8 lanes at a time in the first pass (full
+// traces without transmittance: the common, large case), or per pixel in the second pass (pixel
+// subsets, transmittance). A template parameter, so each kernel carries only its own code and
+// live values (the vector-trace kernel ran ~15 % slower while it also held the scalar path).
+enum class TraceMode { kNone, kVector, kScalar };
+
+template <bool kSurfel, TraceMode kTraceMode, bool kFeatures>
 void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& out,
                TileCounters& counters, TileTrace* tile_trace) {
+  constexpr bool kTrace = kTraceMode != TraceMode::kNone;
+  constexpr bool kVectorTrace = kTraceMode == TraceMode::kVector;
   const ProjectionParams& p = *ctx.params;
   const RenderOptions& opt = *ctx.options;
   const int tx = tile % p.tiles_x, ty = tile / p.tiles_x;
@@ -230,9 +238,6 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
     std::fill_n(tile_trace->counts, kTilePixels + kLanes, 0u);
   }
   const uint8_t* trace_mask = ctx.trace_mask->empty() ? nullptr : ctx.trace_mask->data();
-  // Full traces without transmittance (the common, large case) append 8 lanes at a time in the
-  // first pass; pixel subsets and transmittance use the scalar second pass.
-  const bool vector_trace = kTrace && trace_mask == nullptr && !opt.trace.transmittance;
   const v8f v_min_weight = Splat(opt.trace.min_weight);
   // Every blended weight is at least (1/255) * 1e-4 > 0, so without a positive minimum weight
   // the trace keeps exactly the blended fragments and the per-pixel counts are the contributor
@@ -261,7 +266,7 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
     const int x0 = std::max(px0, s.window[0]), x1 = std::min(px1, s.window[1]);
     const int y0 = std::max(py0, s.window[2]), y1 = std::min(py1, s.window[3]);
     if (x0 >= x1 || y0 >= y1) continue;
-    if (kTrace && vector_trace) {
+    if (kTrace && kVectorTrace) {
       // One splat adds at most one entry per window pixel (+ a vector of store slack).
       tile_trace->size = trace_size;
       tile_trace->Reserve(static_cast<size_t>((x1 - x0) * (y1 - y0)) + kLanes, false);
@@ -343,12 +348,12 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
         Store(&st.T[i], blend ? next_T : T);
         StoreI(&st.done[i], LoadI(&st.done[i]) | (stop & SplatI(1)));
         StoreI(&st.contributors[i], LoadI(&st.contributors[i]) + (blend & SplatI(1)));
-        if (kFeatures || (kTrace && !vector_trace)) {  // inputs of the second pass
+        if (kFeatures || (kTrace && !kVectorTrace)) {  // inputs of the second pass
           Store(&st.row_weight[x - x0], w);
           Store(&st.row_transmittance[x - x0], T);
         }
         if constexpr (kTrace) {
-          if (vector_trace) {
+          if constexpr (kVectorTrace) {
             const v8i keep = blend & (w > v_min_weight);
             const uint32_t keep_bits = MaskBits(keep);
             if (keep_bits != 0) {
@@ -380,7 +385,7 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
         tile_blends -= blend;
         tile_live -= live;
       }
-      if (kFeatures || (kTrace && !vector_trace)) {
+      if (kFeatures || (kTrace && !kVectorTrace)) {
         // Second pass, over the blended pixels of the row only.
         for (uint32_t bits = row_blend_bits; bits != 0; bits &= bits - 1) {
           const int dx_lane = std::countr_zero(bits);
@@ -393,7 +398,7 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
             for (int c = 0; c < dim; ++c) e[c] += w * f[c];
           }
           if constexpr (kTrace) {
-            if (!vector_trace && w > opt.trace.min_weight &&
+            if (!kVectorTrace && w > opt.trace.min_weight &&
                 (trace_mask == nullptr || trace_mask[y * p.width + x])) {
               TileTrace& tt = *tile_trace;
               tt.Reserve(1, opt.trace.transmittance);
@@ -409,7 +414,7 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
       }
     }
   }
-  if (kTrace && vector_trace) {
+  if (kTrace && kVectorTrace) {
     tile_trace->size = trace_size;
     if (counts_are_contributors) {
       for (int l = 0; l < kTilePixels; ++l)
