@@ -94,7 +94,9 @@ class TraceAssembler {
       for (size_t i = 0; i < trace->pixels.size(); ++i)
         slot_[trace->pixels[i]] = static_cast<int64_t>(i);
     }
-    trace->offsets.assign(trace->pixels.size() + 1, 0);
+    // Every offset past the first is written by AddBand (the bands cover all CSR rows).
+    trace->offsets.resize(trace->pixels.size() + 1);
+    trace->offsets[0] = 0;
   }
 
   // Appends band `ty`; tiles[tx] holds the lists of tile (tx, ty).
