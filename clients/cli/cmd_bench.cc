@@ -88,7 +88,8 @@ absl::Status BenchRaster(const BenchArgs& args) {
   std::fprintf(stderr,
                "bench raster: median %.1f ms/frame (preprocess %.1f, binning %.1f, blend %.1f); "
                "traced %.1f ms (%.2fx; blend %.1f, assembly %.1f)\n"
-               "  %.0f visible Gaussians, %.0f Gaussian-tile pairs, %.0f evaluated and %.0f blended fragments per frame; "
+               "  %.0f visible Gaussians, %.0f Gaussian-tile pairs, %.0f evaluated and %.0f "
+               "blended fragments per frame; "
                "%.1f M pairs/s, %.1f M blended fragments/s; %.0f trace entries per frame\n"
                "  tracker trace (w > 0.1): %.1f ms (%.2fx), %.0f entries per frame\n",
                median, Median(pre), Median(bin), Median(blend), trace_median, trace_median / median,
