@@ -15,21 +15,21 @@ constexpr float kDilation = 0.3f;         // Inria 3DGS covariance dilation, px^
 
 inline float Sigmoid(float x) { return 1.0f / (1.0f + std::exp(-x)); }
 
-// Rotation of the unnormalised quaternion q (w first): the products scaled by s = 2 / |q|^2 (one
-// division, no square root). T is float for 3DGS (as the Inria rasterizer), double for surfels.
+// Rotation of the unnormalised quaternion (w, x, y, z): the products scaled by s = 2 / |q|^2 (one
+// division, no square root). T is float for 3DGS (as the Inria rasterizer) and 4 double lanes for
+// the surfel batch (scalars broadcast).
 template <typename T>
-void QuaternionToMatrix(const float* q, T r[9]) {
-  const T w = q[0], x = q[1], y = q[2], z = q[3];
-  const T s = T{2} / (w * w + x * x + y * y + z * z);
-  r[0] = 1 - s * (y * y + z * z);
+void QuaternionToMatrix(T w, T x, T y, T z, T r[9]) {
+  const T s = 2.0f / (w * w + x * x + y * y + z * z);
+  r[0] = 1.0f - s * (y * y + z * z);
   r[1] = s * (x * y - w * z);
   r[2] = s * (x * z + w * y);
   r[3] = s * (x * y + w * z);
-  r[4] = 1 - s * (x * x + z * z);
+  r[4] = 1.0f - s * (x * x + z * z);
   r[5] = s * (y * z - w * x);
   r[6] = s * (x * z - w * y);
   r[7] = s * (y * z + w * x);
-  r[8] = 1 - s * (x * x + y * y);
+  r[8] = 1.0f - s * (x * x + y * y);
 }
 
 // Rotates a world vector into the camera frame.
@@ -166,15 +166,10 @@ void ProjectSurfel4(const GaussianCloud& cloud, const size_t idx[4], const Proje
             Splat4d(p.rotation[3 * r + 2]) * pos[2] + Splat4d(p.translation[r]);
   }
   v4l ok = pv[2] > Splat4d(p.near_plane);
-  // Rotation of the unnormalised quaternion (w first): products scaled by 2 / |q|^2.
-  const v4d w = gather(cloud.rotations, 4, 0), x = gather(cloud.rotations, 4, 1),
-            y = gather(cloud.rotations, 4, 2), z = gather(cloud.rotations, 4, 3);
-  const v4d s = Splat4d(2.0) / (w * w + x * x + y * y + z * z);
+  v4d rot[9];
+  QuaternionToMatrix(gather(cloud.rotations, 4, 0), gather(cloud.rotations, 4, 1),
+                     gather(cloud.rotations, 4, 2), gather(cloud.rotations, 4, 3), rot);
   const v4d one = Splat4d(1.0);
-  const v4d rot[9] = {
-      one - s * (y * y + z * z), s * (x * y - w * z),       s * (x * z + w * y),
-      s * (x * y + w * z),       one - s * (x * x + z * z), s * (y * z - w * x),
-      s * (x * z - w * y),       s * (y * z + w * x),       one - s * (x * x + y * y)};
   const v4d su = ToDouble(Exp4f(gatherf(cloud.log_scales, 2, 0))) * Splat4d(p.scale_modifier);
   const v4d sv = ToDouble(Exp4f(gatherf(cloud.log_scales, 2, 1))) * Splat4d(p.scale_modifier);
   v4d a[3], b[3], n[3];
@@ -281,13 +276,6 @@ void ProjectSurfels(const GaussianCloud& cloud, size_t first, size_t count,
   }
 }
 
-bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams& p,
-                   ProjectedSplat* out) {
-  uint8_t visible = 0;
-  ProjectSurfels(cloud, i, 1, p, out, &visible);
-  return visible != 0;
-}
-
 bool ProjectEllipsoid(const GaussianCloud& cloud, size_t i, const ProjectionParams& p,
                       ProjectedSplat* out) {
   const float* pos = &cloud.positions[3 * i];
@@ -296,7 +284,8 @@ bool ProjectEllipsoid(const GaussianCloud& cloud, size_t i, const ProjectionPara
   for (int r = 0; r < 3; ++r) t[r] += p.translation[r];
   if (t[2] <= p.near_plane) return false;
   float rot[9];
-  QuaternionToMatrix(&cloud.rotations[4 * i], rot);
+  const float* q = &cloud.rotations[4 * i];
+  QuaternionToMatrix(q[0], q[1], q[2], q[3], rot);
   float s[3];
   for (int k = 0; k < 3; ++k) s[k] = std::exp(cloud.log_scales[3 * i + k]) * p.scale_modifier;
   // World covariance Sigma = R S S^T R^T.

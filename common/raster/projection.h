@@ -61,9 +61,6 @@ ProjectionParams MakeProjectionParams(const PinholeCamera& camera, const RenderO
 // Gaussian's result does not depend on first or count.
 void ProjectSurfels(const GaussianCloud& cloud, size_t first, size_t count,
                     const ProjectionParams& params, ProjectedSplat* out, uint8_t* visible);
-// Projects Gaussian i (2DGS surfel). Returns false when culled (then `out` is undefined).
-bool ProjectSurfel(const GaussianCloud& cloud, size_t i, const ProjectionParams& params,
-                   ProjectedSplat* out);
 // Projects Gaussian i (3DGS ellipsoid, Inria EWA). Returns false when culled.
 bool ProjectEllipsoid(const GaussianCloud& cloud, size_t i, const ProjectionParams& params,
                       ProjectedSplat* out);
