@@ -22,8 +22,14 @@ configure: $(BUILD_DIR)/build.ninja
 build: deps configure
 	cmake --build $(BUILD_DIR) -j $(JOBS)
 
+# Tests run with TMPDIR set to a fresh directory that must be empty again afterwards: no test may
+# leave anything behind.
 test: build
-	cd $(BUILD_DIR) && ctest --output-on-failure -j $(JOBS)
+	@tmp=$$(mktemp -d) && cd $(BUILD_DIR) && status=0; \
+	  TMPDIR=$$tmp ctest --output-on-failure -j $(JOBS) || status=$$?; \
+	  left=$$(find $$tmp -mindepth 1 -maxdepth 2 | head -20); \
+	  if [ -n "$$left" ]; then echo "tests left files behind in TMPDIR:"; echo "$$left"; status=1; fi; \
+	  rm -rf $$tmp; exit $$status
 
 test-sanitize: deps
 	cmake -S . -B $(SANITIZE_DIR) -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DINSTASCENE_SANITIZE=ON -DINSTASCENE_BUILD_BENCHMARKS=OFF

@@ -55,21 +55,20 @@ ADDR=$(cat "$OUT/server.addr")
 echo "server: $ADDR (log: $OUT/server.log, data: $OUT/server/)"
 scenes=(synthetic)
 [ -d "$OUT/composite" ] && scenes+=(composite)
-declare -A SEGMENT
 for scene in "${scenes[@]}"; do
   echo "-- submit $scene"
   "$BIN" submit --scene "$OUT/$scene" --server "$ADDR" --json > "$OUT/$scene.submit.json"
-  SEGMENT[$scene]=$(tail -n 1 "$OUT/$scene.submit.json" | python3 -c "import json,sys; print(json.load(sys.stdin)['jobs'][-1]['id'])")
 done
 echo "-- watch (both scenes share the workers; the scheduler alternates between them)"
 for scene in "${scenes[@]}"; do "$BIN" watch --scene "$scene" --server "$ADDR"; done
-"$BIN" jobs --server "$ADDR"
+"$BIN" jobs --server "$ADDR" --scene synthetic
 echo "-- resubmitting the same capture uploads and computes nothing:"
 "$BIN" submit --scene "$OUT/synthetic" --server "$ADDR" 2>&1 | sed 's/^/  /'
 
-echo "== 4. Results, fetched from the store =="
+echo "== 4. Results, fetched from the store by scene name (every stage's latest output) =="
 for scene in "${scenes[@]}"; do
-  "$BIN" fetch "${SEGMENT[$scene]}" --out "$OUT/$scene/result" --server "$ADDR"
+  "$BIN" fetch --scene "$scene" --out "$OUT/$scene/stages" --server "$ADDR"
+  rm -rf "$OUT/$scene/result" && ln -s stages/segment "$OUT/$scene/result"
   "$BIN" eval --scene "$OUT/$scene" --result "$OUT/$scene/result" --json 2>/dev/null | tail -n 1 > "$OUT/$scene.eval.json"
   python3 - "$OUT/$scene" <<'PY'
 import json, sys

@@ -1,11 +1,15 @@
 // The services wired together in one process over gRPC (loopback / in-process channels): bad
-// requests are refused with the right status and leave no trace; workers run a pipeline; the
-// training service answers click queries like the offline query index.
+// requests are refused with the right status and leave no trace; workers run a pipeline; the DAG
+// fans out one job per instance and fans in a join (test stages registered here); the training
+// service answers click queries like the offline query index.
 #include <gtest/gtest.h>
 
+#include <atomic>
 #include <filesystem>
-#include <thread>
+#include <fstream>
+#include <set>
 
+#include "common/core/status.h"
 #include "common/core/testing/files.h"
 #include "common/core/testing/temp_dir.h"
 #include "common/rpc/server.h"
@@ -15,7 +19,8 @@
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "instascene/v1/training.grpc.pb.h"
 #include "services/scheduler/scheduler_service.h"
-#include "services/scheduler/sqlite_job_queue.h"
+#include "services/scheduler/sqlite_queue_store.h"
+#include "services/stages/all_stages.h"
 #include "services/store/remote_blob_store.h"
 #include "services/store/store_service.h"
 #include "services/training/query.h"
@@ -28,19 +33,66 @@ namespace fs = std::filesystem;
 using instascene::testing::CountFiles;
 using instascene::testing::RandomBytes;
 
+absl::StatusOr<nlohmann::json> AnyParameters(const nlohmann::json& p) {
+  if (!p.is_object()) return absl::InvalidArgumentError("parameters must be an object");
+  return p;
+}
+
+// Test stages downstream of segment: "crop" runs once per instance and writes the instance's
+// Gaussian count; "collect" joins every crop. Crop fails once (retryable) for item 0 when asked.
+std::atomic<int> crop_failures_left{0};
+
+absl::Status RegisterTestStages(pipeline::StageRegistry* stages) {
+  pipeline::StageSpec crop;
+  crop.kind = "crop";
+  crop.inputs = {{"segment", pipeline::InputMode::kEach}};
+  crop.canonicalize = AnyParameters;
+  RETURN_IF_ERROR(stages->Add(
+      {crop, [](const pipeline::StageContext& c) -> absl::StatusOr<pipeline::StageResult> {
+         if (c.item == 0 && crop_failures_left.fetch_sub(1) > 0)
+           return absl::UnavailableError("crop: simulated worker crash");
+         ASSIGN_OR_RETURN(std::string segment, c.Input("segment"));
+         std::ifstream in(fs::path(segment) / "instances.json");
+         const nlohmann::json instances = nlohmann::json::parse(in);
+         fs::create_directories(c.out_dir);
+         std::ofstream(fs::path(c.out_dir) / "crop.json")
+             << nlohmann::json(
+                    {{"item", c.item}, {"gaussians", instances.at(c.item).at("gaussians")}})
+                    .dump();
+         return pipeline::StageResult{};
+       }}));
+  pipeline::StageSpec collect;
+  collect.kind = "collect";
+  collect.inputs = {{"crop", pipeline::InputMode::kAll}};
+  collect.canonicalize = AnyParameters;
+  return stages->Add(
+      {collect, [](const pipeline::StageContext& c) -> absl::StatusOr<pipeline::StageResult> {
+         nlohmann::json all = nlohmann::json::array();
+         for (const std::string& dir : c.AllInputs("crop")) {
+           std::ifstream in(fs::path(dir) / "crop.json");
+           all.push_back(nlohmann::json::parse(in));
+         }
+         fs::create_directories(c.out_dir);
+         std::ofstream(fs::path(c.out_dir) / "collected.json") << all.dump();
+         return pipeline::StageResult{};
+       }});
+}
+
 class ServicesTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    root_ = testing::FreshTempDir("services_integration");
+    root_ = temp_.str();
     store::StoreOptions store_options;
     store_options.max_blob_bytes = 4 << 20;
     store_ = std::move(*store::FilesystemBlobStore::Open(root_ + "/store", store_options));
     scheduler::QueueOptions queue_options;
     queue_options.lease_ms = 5000;
-    queue_ = std::move(*scheduler::SqliteJobQueue::Open(root_ + "/jobs.db", queue_options));
+    queue_ = std::move(*scheduler::OpenSqliteJobQueue(root_ + "/jobs.db", queue_options));
+    ASSERT_TRUE(stages::RegisterStages(&stages_).ok());
+    ASSERT_TRUE(RegisterTestStages(&stages_).ok());
     store_service_ = std::make_unique<store_service::StoreService>(store_.get());
     scheduler_service_ = std::make_unique<scheduler::SchedulerService>(
-        queue_.get(), store_.get(), scheduler::SchedulerServiceOptions{});
+        queue_.get(), store_.get(), &stages_, scheduler::SchedulerServiceOptions{});
     training_service_ =
         std::make_unique<training::TrainingService>(store_.get(), root_ + "/query", nullptr);
     auto server = rpc::Server::Start(
@@ -70,11 +122,13 @@ class ServicesTest : public ::testing::Test {
   }
 
   grpc::Status Submit(const store::Digest& manifest, const std::string& params,
-                      v1::SubmitPipelineResponse* response) {
+                      v1::SubmitPipelineResponse* response,
+                      const std::vector<std::string>& stages = {"decompose", "train", "segment"}) {
     v1::SubmitPipelineRequest request;
     rpc::ToProto(manifest, request.mutable_scene_manifest());
     request.set_scene("tiny");
     request.set_parameters_json(params);
+    for (const std::string& s : stages) request.add_stages(s);
     grpc::ClientContext context;
     return scheduler_->SubmitPipeline(&context, request, response);
   }
@@ -88,9 +142,35 @@ class ServicesTest : public ::testing::Test {
     return job;
   }
 
+  void StartWorker(std::vector<std::string> kinds) {
+    worker::WorkerOptions options;
+    options.kinds = std::move(kinds);
+    options.work_dir = root_ + "/work";
+    options.poll_interval_ms = 20;
+    options.heartbeat_interval_ms = 100;
+    workers_.push_back(std::make_unique<worker::StageWorker>(options, remote_.get(), &stages_));
+    workers_.back()->Start(channel_);
+  }
+
+  // Follows the scene's jobs (WatchJobs) until every one is final; returns them by id.
+  std::map<std::string, v1::Job> WatchScene() {
+    v1::WatchJobsRequest request;
+    request.set_scene("tiny");
+    grpc::ClientContext context;
+    context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(120));
+    auto reader = scheduler_->WatchJobs(&context, request);
+    std::map<std::string, v1::Job> last;
+    v1::Job job;
+    while (reader->Read(&job)) last[job.id()] = job;
+    EXPECT_TRUE(reader->Finish().ok());
+    return last;
+  }
+
+  testing::ScopedTempDir temp_{"services_integration"};  // first member: removed last
   std::string root_, scene_dir_;
+  pipeline::StageRegistry stages_;
   std::unique_ptr<store::FilesystemBlobStore> store_;
-  std::unique_ptr<scheduler::SqliteJobQueue> queue_;
+  std::unique_ptr<scheduler::JobQueue> queue_;
   std::unique_ptr<store_service::StoreService> store_service_;
   std::unique_ptr<scheduler::SchedulerService> scheduler_service_;
   std::unique_ptr<training::TrainingService> training_service_;
@@ -185,7 +265,9 @@ TEST_F(ServicesTest, BadRequestsAreRejectedAndLeaveNoTrace) {
   grpc::ClientContext context;
   const grpc::Status s = scheduler_->CompleteJob(&context, complete, &ignored);
   EXPECT_EQ(s.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << s.error_message();
-  ASSERT_TRUE(queue_->Release((*lease)->job.id, (*lease)->token, "test").ok());
+  ASSERT_TRUE(
+      queue_->Fail((*lease)->job.id, (*lease)->token, scheduler::FailureKind::kReleased, "test")
+          .ok());
 
   // Nothing was queued, nothing half-written remains, the good jobs are untouched.
   EXPECT_EQ(queue_->List({})->size(), 3u);
@@ -200,26 +282,14 @@ TEST_F(ServicesTest, BadRequestsAreRejectedAndLeaveNoTrace) {
 }
 
 TEST_F(ServicesTest, WorkersRunThePipelineAndTrainingAnswersClicks) {
-  for (const std::vector<std::string>& kinds :
-       {std::vector<std::string>{"decompose"}, std::vector<std::string>{"train", "segment"}}) {
-    worker::WorkerOptions options;
-    options.kinds = kinds;
-    options.work_dir = root_ + "/work";
-    options.poll_interval_ms = 20;
-    options.heartbeat_interval_ms = 100;
-    workers_.push_back(std::make_unique<worker::StageWorker>(options, remote_.get()));
-    workers_.back()->Start(channel_);
-  }
+  StartWorker({"decompose"});
+  StartWorker({"train", "segment"});
   v1::SubmitPipelineResponse response;
   ASSERT_TRUE(
       Submit(scene_manifest_, R"({"train":{"iterations":40,"samples":512}})", &response).ok());
   const std::string segment = response.jobs(2).id();
-  v1::Job job;
-  for (int i = 0; i < 600; ++i) {  // 60 s at most
-    job = GetJob(segment);
-    if (job.state() >= v1::JOB_STATE_SUCCEEDED) break;
-    std::this_thread::sleep_for(std::chrono::milliseconds(100));
-  }
+  WatchScene();
+  const v1::Job job = GetJob(segment);
   ASSERT_EQ(job.state(), v1::JOB_STATE_SUCCEEDED) << job.error();
   EXPECT_EQ(workers_[0]->succeeded(), 1);
   EXPECT_EQ(workers_[1]->succeeded(), 2);
@@ -263,6 +333,84 @@ TEST_F(ServicesTest, WorkersRunThePipelineAndTrainingAnswersClicks) {
   v1::QueryResponse ignored;
   grpc::ClientContext context;
   EXPECT_EQ(stub->Query(&context, bad, &ignored).error_code(), grpc::StatusCode::OUT_OF_RANGE);
+}
+
+TEST_F(ServicesTest, TheDagFansOutPerInstanceAndFansInOnce) {
+  StartWorker({"decompose"});
+  StartWorker({"train", "segment"});
+  StartWorker({"crop", "collect"});
+  crop_failures_left = 1;  // item 0's first attempt crashes: only it is retried
+  const std::vector<std::string> all = {"decompose", "train", "segment", "crop", "collect"};
+  const std::string params = R"({"train":{"iterations":30,"samples":256}})";
+  v1::SubmitPipelineResponse response;
+  ASSERT_TRUE(Submit(scene_manifest_, params, &response, all).ok());
+  ASSERT_EQ(response.jobs_size(), 3);  // crop and collect wait for segment's instances
+  std::map<std::string, v1::Job> jobs = WatchScene();
+  const v1::Job segment = GetJob(response.jobs(2).id());
+  ASSERT_EQ(segment.state(), v1::JOB_STATE_SUCCEEDED) << segment.error();
+  const int64_t n = segment.items();
+  ASSERT_GT(n, 1);
+  std::set<int64_t> items;
+  const v1::Job* collect = nullptr;
+  for (const auto& [id, j] : jobs) {
+    EXPECT_EQ(j.state(), v1::JOB_STATE_SUCCEEDED) << j.kind() << " " << j.error();
+    if (j.kind() == "crop") {
+      items.insert(j.item());
+      EXPECT_EQ(j.parent(), segment.id());
+      EXPECT_EQ(j.attempts(), j.item() == 0 ? 2 : 1) << "item " << j.item();
+    }
+    if (j.kind() == "collect") collect = &j;
+  }
+  EXPECT_EQ(static_cast<int64_t>(items.size()), n);
+  ASSERT_NE(collect, nullptr);
+  EXPECT_EQ(collect->dependencies_size(), n);
+
+  // The scene is first-class: every stage's latest output without knowing a job id.
+  v1::GetSceneRequest scene_request;
+  scene_request.set_scene("tiny");
+  v1::Scene scene;
+  {
+    grpc::ClientContext context;
+    ASSERT_TRUE(scheduler_->GetScene(&context, scene_request, &scene).ok());
+  }
+  EXPECT_EQ(scene.outputs_size(), 4 + n);
+  std::string collected_manifest;
+  for (const v1::StageOutput& o : scene.outputs())
+    if (o.kind() == "collect") collected_manifest = o.job_id();
+  EXPECT_EQ(collected_manifest, collect->id());
+  auto manifest = store::ReadManifest(*remote_, rpc::FromProto(collect->output_manifest()));
+  ASSERT_TRUE(manifest.ok());
+  ASSERT_TRUE(store::MaterializeManifest(*remote_, *manifest, root_ + "/collected").ok());
+  std::ifstream in(root_ + "/collected/collected.json");
+  const nlohmann::json collected = nlohmann::json::parse(in);
+  ASSERT_EQ(static_cast<int64_t>(collected.size()), n);
+  for (int64_t i = 0; i < n; ++i) EXPECT_EQ(collected[i]["item"], i);
+
+  // Resubmission creates nothing.
+  v1::SubmitPipelineResponse again;
+  ASSERT_TRUE(Submit(scene_manifest_, params, &again, all).ok());
+  EXPECT_EQ(again.jobs_size(), 3 + n + 1);
+  for (int i = 0; i < again.jobs_size(); ++i) EXPECT_FALSE(again.created(i)) << i;
+
+  // Without crop workers, a changed crop parameter queues n new children and a join; cancelling
+  // the scene cancels every one of them.
+  for (auto& w : workers_) w->Drain(std::chrono::milliseconds(0));
+  v1::SubmitPipelineResponse changed;
+  ASSERT_TRUE(Submit(scene_manifest_, R"({"train":{"iterations":30,"samples":256},"crop":{"v":2}})",
+                     &changed, all)
+                  .ok());
+  int created = 0;
+  for (int i = 0; i < changed.jobs_size(); ++i) created += changed.created(i);
+  EXPECT_EQ(created, n + 1);
+  v1::CancelSceneRequest cancel;
+  cancel.set_scene("tiny");
+  v1::CancelSceneResponse cancelled;
+  {
+    grpc::ClientContext context;
+    ASSERT_TRUE(scheduler_->CancelScene(&context, cancel, &cancelled).ok());
+  }
+  EXPECT_EQ(cancelled.jobs_size(), n + 1);
+  for (const v1::Job& j : cancelled.jobs()) EXPECT_EQ(j.state(), v1::JOB_STATE_CANCELLED);
 }
 
 }  // namespace

@@ -73,6 +73,11 @@ DEC=$(json_get "$WORK/submit1.json" "d['jobs'][0]['id']")
 check "watch until done" "$BIN" watch "$SEG" "$TRAIN" "$DEC" --server "$ADDR" --json
 check "fetch segment result" "$BIN" fetch "$SEG" --out "$WORK/fetched" --server "$ADDR" --json
 check "fetched instances" test -s "$WORK/fetched/instances.json"
+check "fetch the scene by name" "$BIN" fetch --scene a --out "$WORK/scene-a" --server "$ADDR" --json
+check "fetched every stage" test -s "$WORK/scene-a/decompose/labels.ply" -a -s "$WORK/scene-a/train/features.ply"
+check "by name == by job id" cmp "$WORK/fetched/labels.ply" "$WORK/scene-a/segment/labels.ply"
+check "jobs of a scene as a tree" "$BIN" jobs --server "$ADDR" --scene a
+check "the tree nests train under decompose" grep -q "└ train" "$WORK/out.txt"
 check "offline run" "$BIN" run --scene "$WORK/a" --out "$WORK/offline" --iterations 60 --samples 512 --pixel-pool 1024
 check "service labels == offline labels" cmp "$WORK/fetched/labels.ply" "$WORK/offline/segmentation/labels.ply"
 check "jobs table" "$BIN" jobs --server "$ADDR"
@@ -88,7 +93,7 @@ check "resubmit returns the same finished jobs" test \
 check "no job ran twice" test "$(job_field "$ADDR" "$TRAIN" attempts)" = "1"
 
 # 3. Bad requests: the right status, nothing queued.
-check_fails "bad parameter" "INVALID_ARGUMENT.*'iterations' has the wrong type" \
+check_fails "bad parameter" "INVALID_ARGUMENT.*'iterations' must be an integer" \
   "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params '{"train":{"iterations":"many"}}'
 check_fails "unknown stage parameter" "INVALID_ARGUMENT.*unknown parameter 'tau'" \
   "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params '{"segment":{"tau":0.5}}'

@@ -11,6 +11,7 @@
 #include "common/core/timer.h"
 #include "common/eval/click_eval.h"
 #include "common/raster/rasterizer.h"
+#include "common/scene/image_io.h"
 #include "common/synth/cluttered_scene.h"
 #include "common/synth/scene_writer.h"
 #include "services/decomposition/decompose.h"

@@ -3,6 +3,9 @@
 
 #include <cstdio>
 #include <filesystem>
+#include <functional>
+#include <map>
+#include <set>
 
 #include <nlohmann/json.hpp>
 
@@ -54,14 +57,46 @@ nlohmann::json JobJson(const v1::Job& j) {
                         {"scene", j.scene()},
                         {"state", scheduler::StateName(j.state())},
                         {"attempts", j.attempts()},
-                        {"depends_on", j.depends_on()},
+                        {"item", j.item()},
+                        {"parent", j.parent()},
                         {"error", j.error()},
                         {"phase", j.progress().phase()},
                         {"step", j.progress().step()},
                         {"total", j.progress().total()}};
+  nlohmann::json deps = nlohmann::json::object();
+  for (const v1::JobDependency& d : j.dependencies()) deps[d.name()] = d.job_id();
+  out["dependencies"] = deps;
+  if (j.items() >= 0) out["items"] = j.items();
   if (j.has_output_manifest())
     out["output_manifest"] = rpc::FromProto(j.output_manifest()).ToString();
   return out;
+}
+
+// A job's label in tables: its kind, with the item index for per-item jobs.
+std::string KindLabel(const v1::Job& j) {
+  return j.item() >= 0 ? absl::StrCat(j.kind(), "[", j.item(), "]") : j.kind();
+}
+
+// The jobs of one scene as a tree: each job under its first dependency (fan-in jobs list the
+// others), depth-first in submission order. Returns (depth, job) rows.
+std::vector<std::pair<int, const v1::Job*>> JobTree(const std::vector<const v1::Job*>& jobs) {
+  std::map<std::string, std::vector<const v1::Job*>> children;
+  std::vector<const v1::Job*> roots;
+  std::set<std::string> ids;
+  for (const v1::Job* j : jobs) ids.insert(j->id());
+  for (const v1::Job* j : jobs) {
+    if (j->dependencies().empty() || !ids.count(j->dependencies(0).job_id()))
+      roots.push_back(j);
+    else
+      children[j->dependencies(0).job_id()].push_back(j);
+  }
+  std::vector<std::pair<int, const v1::Job*>> rows;
+  std::function<void(const v1::Job*, int)> visit = [&](const v1::Job* j, int depth) {
+    rows.emplace_back(depth, j);
+    for (const v1::Job* c : children[j->id()]) visit(c, depth + 1);
+  };
+  for (const v1::Job* r : roots) visit(r, 0);
+  return rows;
 }
 
 bool IsFinalState(v1::JobState s);
@@ -280,11 +315,24 @@ void AddClientCommands(CLI::App& app, Action* action) {
       RETURN_IF_ERROR(
           Call(c.scheduler->GetQueueStats(&stats_context, v1::GetQueueStatsRequest(), &stats),
                list->server));
-      std::printf("%-17s %-9s %-16s %-9s %-3s %s\n", "JOB", "KIND", "SCENE", "STATE", "TRY",
+      std::printf("%-17s %-22s %-16s %-9s %-3s %s\n", "JOB", "KIND", "SCENE", "STATE", "TRY",
                   "PROGRESS / ERROR");
       nlohmann::json jobs = nlohmann::json::array();
-      for (const v1::Job& j : response.jobs()) {
-        std::printf("%-17s %-9s %-16s %-9s %d/%d %s\n", j.id().c_str(), j.kind().c_str(),
+      std::vector<const v1::Job*> ordered;  // oldest first
+      for (auto it = response.jobs().rbegin(); it != response.jobs().rend(); ++it)
+        ordered.push_back(&*it);
+      // With --scene the jobs print as their DAG: children indented under their first input.
+      std::vector<std::pair<int, const v1::Job*>> rows;
+      if (list->scene.empty()) {
+        for (auto it = ordered.rbegin(); it != ordered.rend(); ++it) rows.emplace_back(0, *it);
+      } else {
+        rows = JobTree(ordered);
+      }
+      for (const auto& [depth, jp] : rows) {
+        const v1::Job& j = *jp;
+        std::string label = std::string(2 * depth, ' ') + (depth > 0 ? "└ " : "") + KindLabel(j);
+        if (j.dependencies_size() > 1) absl::StrAppend(&label, " (", j.dependencies_size(), " in)");
+        std::printf("%-17s %-22s %-16s %-9s %d/%d %s\n", j.id().c_str(), label.c_str(),
                     j.scene().substr(0, 16).c_str(), scheduler::StateName(j.state()).c_str(),
                     j.attempts(), j.max_attempts(),
                     j.error().empty() ? ProgressText(j).c_str() : j.error().c_str());
@@ -314,44 +362,85 @@ void AddClientCommands(CLI::App& app, Action* action) {
 
   // fetch
   struct FetchArgs {
-    std::string server = kDefaultServer, store, id, out;
+    std::string server = kDefaultServer, store, id, scene, out;
     bool json = false;
   };
   auto fetch = std::make_shared<FetchArgs>();
   CLI::App* f = app.add_subcommand(
-      "fetch", "Download a finished job's output (e.g. the segment job: labels, instances/*.ply)");
-  f->add_option("id", fetch->id, "Job id")->required();
+      "fetch",
+      "Download results: a scene's latest output of every stage (--scene NAME: into "
+      "OUT/<stage>/, per-item stages into OUT/<stage>/<item>/), or one finished job's output");
+  f->add_option("id", fetch->id, "Job id (instead of --scene)");
+  f->add_option("--scene", fetch->scene, "Scene name: every stage's latest output");
   f->add_option("--out", fetch->out, "Directory to write the files to")->required();
   f->add_option("--server", fetch->server, "Scheduler address")->capture_default_str();
   f->add_option("--store", fetch->store, "Store address (default: --server)");
   f->add_flag("--json", fetch->json, "Print a JSON summary as the last stdout line");
   f->callback([fetch, action] {
     *action = [fetch]() -> absl::Status {
+      if (fetch->id.empty() == fetch->scene.empty())
+        return absl::InvalidArgumentError("give a job id or --scene NAME (one of them)");
       Connection c = ConnectTo(fetch->server);
-      v1::GetJobRequest request;
-      request.set_job_id(fetch->id);
-      v1::Job job;
-      grpc::ClientContext context;
-      SetDeadline(&context);
-      RETURN_IF_ERROR(Call(c.scheduler->GetJob(&context, request, &job), fetch->server));
-      if (job.state() != v1::JOB_STATE_SUCCEEDED)
-        return absl::FailedPreconditionError(absl::StrCat("job ", fetch->id, " is ",
-                                                          scheduler::StateName(job.state()),
-                                                          ", not succeeded; nothing to fetch yet"));
+      // (job id or stage output, target directory)
+      std::vector<std::pair<v1::StageOutput, std::string>> outputs;
+      if (!fetch->scene.empty()) {
+        v1::GetSceneRequest request;
+        request.set_scene(fetch->scene);
+        v1::Scene scene;
+        grpc::ClientContext context;
+        SetDeadline(&context);
+        RETURN_IF_ERROR(Call(c.scheduler->GetScene(&context, request, &scene), fetch->server));
+        for (const v1::StageOutput& o : scene.outputs()) {
+          std::filesystem::path dir = std::filesystem::path(fetch->out) / o.kind();
+          if (o.item() >= 0) dir /= std::to_string(o.item());
+          outputs.emplace_back(o, dir.string());
+        }
+        if (outputs.empty())
+          return absl::FailedPreconditionError(
+              absl::StrCat("scene ", fetch->scene, " has no finished stage yet"));
+      } else {
+        v1::GetJobRequest request;
+        request.set_job_id(fetch->id);
+        v1::Job job;
+        grpc::ClientContext context;
+        SetDeadline(&context);
+        RETURN_IF_ERROR(Call(c.scheduler->GetJob(&context, request, &job), fetch->server));
+        if (job.state() != v1::JOB_STATE_SUCCEEDED)
+          return absl::FailedPreconditionError(
+              absl::StrCat("job ", fetch->id, " is ", scheduler::StateName(job.state()),
+                           ", not succeeded; nothing to fetch yet"));
+        v1::StageOutput o;
+        o.set_kind(job.kind());
+        o.set_item(job.item());
+        o.set_job_id(job.id());
+        *o.mutable_output_manifest() = job.output_manifest();
+        outputs.emplace_back(o, fetch->out);
+      }
       ASSIGN_OR_RETURN(std::unique_ptr<store_service::RemoteBlobStore> blobs,
                        store_service::RemoteBlobStore::Connect(
                            fetch->store.empty() ? c.channel : rpc::Connect(fetch->store), 5000));
-      const store::Digest digest = rpc::FromProto(job.output_manifest());
-      ASSIGN_OR_RETURN(store::Manifest manifest, store::ReadManifest(*blobs, digest));
-      RETURN_IF_ERROR(store::MaterializeManifest(*blobs, manifest, fetch->out));
-      std::fprintf(stderr, "fetch: %zu files (%.1f MB) of %s job %s into %s\n",
-                   manifest.files.size(), manifest.TotalBytes() / 1e6, job.kind().c_str(),
-                   job.id().c_str(), fetch->out.c_str());
+      nlohmann::json fetched = nlohmann::json::array();
+      int64_t files = 0, bytes = 0;
+      for (const auto& [o, dir] : outputs) {
+        const store::Digest digest = rpc::FromProto(o.output_manifest());
+        ASSIGN_OR_RETURN(store::Manifest manifest, store::ReadManifest(*blobs, digest));
+        RETURN_IF_ERROR(store::MaterializeManifest(*blobs, manifest, dir));
+        files += static_cast<int64_t>(manifest.files.size());
+        bytes += manifest.TotalBytes();
+        fetched.push_back({{"kind", o.kind()},
+                           {"item", o.item()},
+                           {"job", o.job_id()},
+                           {"files", manifest.files.size()},
+                           {"out", dir}});
+      }
+      std::fprintf(stderr, "fetch: %lld files (%.1f MB) of %zu outputs into %s\n",
+                   static_cast<long long>(files), bytes / 1e6, outputs.size(), fetch->out.c_str());
       if (fetch->json)
         PrintJsonLine(nlohmann::json({{"job", fetch->id},
-                                      {"kind", job.kind()},
-                                      {"files", manifest.files.size()},
-                                      {"bytes", manifest.TotalBytes()},
+                                      {"scene", fetch->scene},
+                                      {"outputs", fetched},
+                                      {"files", files},
+                                      {"bytes", bytes},
                                       {"out", fetch->out}})
                           .dump());
       return absl::OkStatus();
@@ -360,29 +449,47 @@ void AddClientCommands(CLI::App& app, Action* action) {
 
   // cancel
   struct CancelArgs {
-    std::string server = kDefaultServer, id;
+    std::string server = kDefaultServer, id, scene;
   };
   auto cancel = std::make_shared<CancelArgs>();
   CLI::App* k = app.add_subcommand(
       "cancel",
-      "Cancel a job (queued: at once; running: its worker stops at the next heartbeat); "
-      "jobs depending on it are cancelled too");
-  k->add_option("id", cancel->id, "Job id")->required();
+      "Cancel a job (queued: at once; running: its worker stops at the next heartbeat) and every "
+      "job depending on it, or with --scene every unfinished job of a scene");
+  k->add_option("id", cancel->id, "Job id (instead of --scene)");
+  k->add_option("--scene", cancel->scene, "Scene name: cancel all its unfinished jobs");
   k->add_option("--server", cancel->server, "Scheduler address")->capture_default_str();
   k->callback([cancel, action] {
     *action = [cancel]() -> absl::Status {
+      if (cancel->id.empty() == cancel->scene.empty())
+        return absl::InvalidArgumentError("give a job id or --scene NAME (one of them)");
       Connection c = ConnectTo(cancel->server);
-      v1::CancelJobRequest request;
-      request.set_job_id(cancel->id);
-      v1::Job job;
+      std::vector<v1::Job> jobs;
       grpc::ClientContext context;
       SetDeadline(&context);
-      RETURN_IF_ERROR(Call(c.scheduler->CancelJob(&context, request, &job), cancel->server));
-      std::fprintf(stderr, "job %s: %s%s\n", job.id().c_str(),
-                   scheduler::StateName(job.state()).c_str(),
-                   job.cancel_requested() && !IsFinalState(job.state())
-                       ? " (cancellation requested; the worker stops at its next heartbeat)"
-                       : "");
+      if (!cancel->scene.empty()) {
+        v1::CancelSceneRequest request;
+        request.set_scene(cancel->scene);
+        v1::CancelSceneResponse response;
+        RETURN_IF_ERROR(
+            Call(c.scheduler->CancelScene(&context, request, &response), cancel->server));
+        jobs.assign(response.jobs().begin(), response.jobs().end());
+        std::fprintf(stderr, "scene %s: %zu unfinished jobs cancelled or asked to stop\n",
+                     cancel->scene.c_str(), jobs.size());
+      } else {
+        v1::CancelJobRequest request;
+        request.set_job_id(cancel->id);
+        v1::Job job;
+        RETURN_IF_ERROR(Call(c.scheduler->CancelJob(&context, request, &job), cancel->server));
+        jobs.push_back(job);
+      }
+      for (const v1::Job& job : jobs) {
+        std::fprintf(stderr, "job %s %s: %s%s\n", job.id().c_str(), KindLabel(job).c_str(),
+                     scheduler::StateName(job.state()).c_str(),
+                     job.cancel_requested() && !IsFinalState(job.state())
+                         ? " (cancellation requested; the worker stops at its next heartbeat)"
+                         : "");
+      }
       return absl::OkStatus();
     };
   });

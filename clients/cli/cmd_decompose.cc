@@ -5,16 +5,19 @@
 
 #include "clients/cli/cli.h"
 #include "clients/cli/progress.h"
+#include "clients/cli/stage_flags.h"
 #include "common/core/status.h"
 #include "common/core/timer.h"
 #include "services/decomposition/decompose.h"
+#include "services/decomposition/stage_params.h"
 
 namespace instascene::cli {
 
 void AddDecomposeCommand(CLI::App& app, Action* action) {
   struct Args {
-    std::string scene, out, rule = "weight";
-    decomposition::DecompositionOptions options;
+    std::string scene, out;
+    StageFlags flags;
+    int threads = 0;
     bool json = false;
   };
   auto args = std::make_shared<Args>();
@@ -24,24 +27,17 @@ void AddDecomposeCommand(CLI::App& app, Action* action) {
   cmd->add_option("--out", args->out,
                   "Output directory (result format + decomposition.json + per-view maps)")
       ->required();
-  cmd->add_option("--tracker-rule", args->rule,
-                  "weight (w > 0.1, release) or median (T crosses 0.5, paper)")
-      ->check(CLI::IsMember({"weight", "median"}));
-  cmd->add_option("--min-tracker", args->options.min_tracker_gaussians,
-                  "Minimum Gaussians per mask tracker (50)");
-  cmd->add_option(
-      "--dbscan-eps", args->options.dbscan_eps,
-      "DBSCAN radius: scene units, or a fraction of the scene diagonal with --relative-eps (0.1)");
-  cmd->add_flag("--relative-eps", args->options.dbscan_eps_relative,
-                "Interpret --dbscan-eps relative to the robust scene diagonal");
-  cmd->add_option("--threads", args->options.num_threads, "Threads (0 = all cores)");
+  args->flags.Add(cmd, decomposition::DecomposeSpec());  // the decompose job's parameters
+  cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");
   cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
   cmd->callback([args, action] {
     *action = [args]() -> absl::Status {
       Stopwatch watch;
-      decomposition::DecompositionOptions options = args->options;
-      options.tracker_rule = args->rule == "median" ? decomposition::TrackerRule::kMedianCrossing
-                                                    : decomposition::TrackerRule::kWeight;
+      ASSIGN_OR_RETURN(nlohmann::json parameters, args->flags.Parameters());
+      ASSIGN_OR_RETURN(decomposition::DecompositionOptions options,
+                       decomposition::DecomposeCodec().Decode(
+                           parameters.value("decompose", nlohmann::json::object())));
+      options.num_threads = args->threads;
       ASSIGN_OR_RETURN(Scene scene, ReadScene(args->scene));
       ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
       ProgressBar bar("decompose: tracking");

@@ -7,6 +7,7 @@
 #include "common/core/status.h"
 #include "common/core/timer.h"
 #include "common/eval/click_eval.h"
+#include "common/scene/image_io.h"
 
 namespace instascene::cli {
 

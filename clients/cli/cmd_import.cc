@@ -6,6 +6,7 @@
 #include "absl/strings/str_cat.h"
 #include "clients/cli/cli.h"
 #include "common/core/status.h"
+#include "common/scene/image_io.h"
 #include "common/scene/importers.h"
 #include "common/splat/gaussian_ply.h"
 

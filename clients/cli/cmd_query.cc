@@ -9,6 +9,7 @@
 #include "clients/cli/cli.h"
 #include "common/core/status.h"
 #include "common/core/timer.h"
+#include "common/scene/image_io.h"
 #include "services/training/query.h"
 
 namespace instascene::cli {

@@ -14,6 +14,7 @@
 #include "common/raster/label_render.h"
 #include "common/raster/rasterizer.h"
 #include "common/raster/visualize.h"
+#include "common/scene/image_io.h"
 #include "common/scene/scene.h"
 #include "common/splat/gaussian_ply.h"
 

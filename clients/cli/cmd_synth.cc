@@ -8,6 +8,7 @@
 #include "clients/cli/progress.h"
 #include "common/core/status.h"
 #include "common/core/timer.h"
+#include "common/scene/image_io.h"
 #include "common/splat/gaussian_ply.h"
 #include "common/synth/cluttered_scene.h"
 #include "common/synth/scene_writer.h"

@@ -6,13 +6,16 @@
 
 #include "clients/cli/cli.h"
 #include "clients/cli/progress.h"
+#include "clients/cli/stage_flags.h"
 #include "common/core/status.h"
 #include "common/core/timer.h"
 #include "common/eval/result.h"
-#include "services/decomposition/decompose.h"
-#include "services/pipeline/stages.h"
+#include "services/decomposition/stage_params.h"
+#include "services/pipeline/local_runner.h"
+#include "services/stages/all_stages.h"
 #include "services/training/feature_field.h"
 #include "services/training/segmentation.h"
+#include "services/training/stage_params.h"
 #include "services/training/vote.h"
 
 #include <map>
@@ -22,39 +25,34 @@ namespace instascene::cli {
 namespace {
 
 struct TrainArgs {
-  std::string scene, decomposition, out, supervision = "full", method = "contrastive";
-  training::TrainingOptions options;
-  double threshold = 0.9;
+  std::string scene, decomposition, out;
+  StageFlags flags;  // the stages' parameters, from their codecs
+  int threads = 0;
   bool json = false;
 };
 
-void AddTrainingOptions(CLI::App* cmd, TrainArgs* args) {
-  cmd->add_option("--iterations", args->options.iterations, "Optimisation steps (default 1500)");
-  cmd->add_option("--samples", args->options.samples,
-                  "Samples per loss term and step (default 4096)");
-  cmd->add_option("--pixel-pool", args->options.pixel_pool,
-                  "Traced pixels cached per view (default 8192)");
-  cmd->add_option("--supervision", args->supervision,
-                  "Loss terms: noisy2d, 3d, 3d+filtered2d, full (paper Table 2)")
-      ->check(CLI::IsMember({"noisy2d", "3d", "3d+filtered2d", "full"}));
-  cmd->add_option("--threshold", args->threshold, "Segmentation threshold tau (default 0.9)");
-  cmd->add_option("--method", args->method,
-                  "contrastive (the paper's feature field) or vote (training-free baseline)")
-      ->check(CLI::IsMember({"contrastive", "vote"}));
-  cmd->add_option("--seed", args->options.seed, "Random seed");
-  cmd->add_option("--threads", args->options.num_threads, "Threads (0 = all cores)");
+void AddCommonOptions(CLI::App* cmd, TrainArgs* args) {
+  cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");
   cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
 }
 
 // Trains on a decomposition and writes the segmented result (result format + instances).
 absl::Status TrainAndSegment(const TrainArgs& args, const Scene& scene, const GaussianCloud& cloud,
                              const std::string& decomposition_dir, nlohmann::json* summary) {
-  if (args.method == "vote") {
+  ASSIGN_OR_RETURN(nlohmann::json parameters, args.flags.Parameters());
+  ASSIGN_OR_RETURN(
+      training::TrainStageOptions train,
+      training::TrainCodec().Decode(parameters.value("train", nlohmann::json::object())));
+  ASSIGN_OR_RETURN(
+      training::SegmentStageOptions segment,
+      training::SegmentCodec().Decode(parameters.value("segment", nlohmann::json::object())));
+  train.num_threads = args.threads;
+  if (train.method == "vote") {
     Stopwatch watch;
     SegmentationResult result;
     result.stage = "vote";
-    ASSIGN_OR_RETURN(result.labels, training::VoteLabels(scene, cloud, decomposition_dir,
-                                                         args.options.num_threads));
+    ASSIGN_OR_RETURN(result.labels,
+                     training::VoteLabels(scene, cloud, decomposition_dir, args.threads));
     RETURN_IF_ERROR(WriteResult(args.out, result, cloud));
     RETURN_IF_ERROR(training::ExportInstances(args.out, cloud, result.labels));
     std::fprintf(stderr, "vote: labels by weighted 2D-mask voting in %.1f s; wrote %s\n",
@@ -62,8 +60,7 @@ absl::Status TrainAndSegment(const TrainArgs& args, const Scene& scene, const Ga
     (*summary)["out"] = args.out;
     return absl::OkStatus();
   }
-  training::TrainingOptions options = args.options;
-  ASSIGN_OR_RETURN(options.supervision, training::ParseSupervision(args.supervision));
+  const training::TrainingOptions& options = train;
   ProgressBar prepare_bar("train: tracing pixel pools");
   ASSIGN_OR_RETURN(
       training::TrainingData data,
@@ -75,8 +72,8 @@ absl::Status TrainAndSegment(const TrainArgs& args, const Scene& scene, const Ga
                      if (step % 25 == 0 || step == total) bar.Update(step, total);
                    }));
   SegmentationResult result = training::TrainedResult(trained, data, options.feature_dim,
-                                                      training::SegmentOptions{args.threshold});
-  result.metadata["supervision"] = args.supervision;
+                                                      training::SegmentOptions{segment.threshold});
+  result.metadata["supervision"] = training::TrainCodec().Encode(train)["supervision"];
   result.metadata["iterations"] = options.iterations;
   RETURN_IF_ERROR(WriteResult(args.out, result, cloud));
   RETURN_IF_ERROR(training::ExportInstances(args.out, cloud, result.labels));
@@ -104,7 +101,9 @@ void AddTrainCommands(CLI::App& app, Action* action) {
       ->required();
   cmd->add_option("--out", train->out, "Result directory (features, labels, instances/*.ply)")
       ->required();
-  AddTrainingOptions(cmd, train.get());
+  train->flags.Add(cmd, training::TrainSpec());
+  train->flags.Add(cmd, training::SegmentSpec());
+  AddCommonOptions(cmd, train.get());
   cmd->callback([train, action] {
     *action = [train]() -> absl::Status {
       ASSIGN_OR_RETURN(Scene scene, ReadScene(train->scene));
@@ -118,7 +117,7 @@ void AddTrainCommands(CLI::App& app, Action* action) {
 
   struct SegmentArgs {
     std::string scene, features, out;
-    double threshold = 0.9;
+    StageFlags flags;
   };
   auto segment = std::make_shared<SegmentArgs>();
   CLI::App* seg = app.add_subcommand(
@@ -128,9 +127,13 @@ void AddTrainCommands(CLI::App& app, Action* action) {
                   "A result directory with features (instascene train)")
       ->required();
   seg->add_option("--out", segment->out, "Result directory")->required();
-  seg->add_option("--threshold", segment->threshold, "Segmentation threshold tau (default 0.9)");
+  segment->flags.Add(seg, training::SegmentSpec());
   seg->callback([segment, action] {
     *action = [segment]() -> absl::Status {
+      ASSIGN_OR_RETURN(nlohmann::json parameters, segment->flags.Parameters());
+      ASSIGN_OR_RETURN(
+          training::SegmentStageOptions options,
+          training::SegmentCodec().Decode(parameters.value("segment", nlohmann::json::object())));
       ASSIGN_OR_RETURN(Scene scene, ReadScene(segment->scene));
       ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
       ASSIGN_OR_RETURN(SegmentationResult in, ReadResult(segment->features, cloud.size()));
@@ -140,7 +143,7 @@ void AddTrainCommands(CLI::App& app, Action* action) {
       SegmentationResult out = in;
       out.stage = "segment";
       out.labels = training::SegmentByFeatures(in.features, in.feature_dim, in.labels,
-                                               training::SegmentOptions{segment->threshold});
+                                               training::SegmentOptions{options.threshold});
       RETURN_IF_ERROR(WriteResult(segment->out, out, cloud));
       RETURN_IF_ERROR(training::ExportInstances(segment->out, cloud, out.labels));
       std::fprintf(stderr, "segment: wrote %s\n", segment->out.c_str());
@@ -155,47 +158,39 @@ void AddTrainCommands(CLI::App& app, Action* action) {
       "(results under --out: decomposition/, training/, segmentation/)");
   r->add_option("--scene", run->scene, "Scene directory (images, masks, gaussians.ply)")
       ->required();
-  r->add_option("--out", run->out, "Output directory: decomposition/ and segmentation/")
+  r->add_option("--out", run->out,
+                "Output directory: one folder per stage (decomposition/, training/, "
+                "segmentation/)")
       ->required();
-  AddTrainingOptions(r, run.get());
-  r->callback([run, action] {
-    *action = [run]() -> absl::Status {
-      // The same stage functions the service workers run (services/pipeline), in order.
+  auto registry = std::make_shared<pipeline::StageRegistry>();
+  if (absl::Status s = stages::RegisterStages(registry.get()); !s.ok())
+    throw std::logic_error(s.ToString());
+  for (const std::string& kind : registry->Kinds()) run->flags.Add(r, registry->Find(kind)->spec);
+  AddCommonOptions(r, run.get());
+  r->callback([run, registry, action] {
+    *action = [run, registry]() -> absl::Status {
+      // The same stages and DAG the service workers run (services/pipeline), in this process.
       Stopwatch watch;
       const std::filesystem::path out(run->out);
-      nlohmann::json train_parameters = {{"iterations", run->options.iterations},
-                                         {"samples", run->options.samples},
-                                         {"pixel_pool", run->options.pixel_pool},
-                                         {"supervision", run->supervision},
-                                         {"method", run->method},
-                                         {"seed", run->options.seed}};
-      const std::vector<std::pair<std::string, nlohmann::json>> stages = {
-          {"decompose", nlohmann::json::object()},
-          {"train", train_parameters},
-          {"segment", {{"threshold", run->threshold}}}};
-      const std::map<std::string, std::string> dirs = {
-          {"decompose", "decomposition"}, {"train", "training"}, {"segment", "segmentation"}};
-      std::string input;
-      for (const auto& [kind, parameters] : stages) {
-        pipeline::StageContext context;
-        context.scene_dir = run->scene;
-        context.input_dir = input;
-        context.out_dir = (out / dirs.at(kind)).string();
-        context.parameters = parameters;
-        context.num_threads = run->options.num_threads;
-        std::unique_ptr<ProgressBar> bar;
-        std::string phase;
-        context.progress = [&](const pipeline::StageProgress& p) {
-          if (p.phase != phase) {
-            phase = p.phase;
-            bar = p.total > 1 ? std::make_unique<ProgressBar>(absl::StrCat(kind, ": ", p.phase))
-                              : nullptr;
-          }
-          if (bar) bar->Update(static_cast<int>(p.step), static_cast<int>(p.total));
-        };
-        RETURN_IF_ERROR(pipeline::RunStage(kind, context));
-        input = context.out_dir;
-      }
+      ASSIGN_OR_RETURN(nlohmann::json parameters, run->flags.Parameters());
+      ASSIGN_OR_RETURN(std::vector<pipeline::PlannedStage> plan, registry->Plan({}, parameters));
+      pipeline::LocalRunOptions options;
+      options.scene_dir = run->scene;
+      options.out_dir = run->out;
+      options.num_threads = run->threads;
+      std::unique_ptr<ProgressBar> bar;
+      std::string phase;
+      options.progress = [&](const std::string& kind, int64_t item,
+                             const pipeline::StageProgress& p) {
+        const std::string label = item < 0 ? absl::StrCat(kind, ": ", p.phase)
+                                           : absl::StrCat(kind, "[", item, "]: ", p.phase);
+        if (label != phase) {
+          phase = label;
+          bar = p.total > 1 ? std::make_unique<ProgressBar>(label) : nullptr;
+        }
+        if (bar) bar->Update(static_cast<int>(p.step), static_cast<int>(p.total));
+      };
+      RETURN_IF_ERROR(pipeline::RunPipelineLocally(*registry, plan, options).status());
       const std::string result = (out / "segmentation").string();
       ASSIGN_OR_RETURN(Scene scene, ReadScene(run->scene));
       ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));

@@ -13,16 +13,19 @@
 #define INSTASCENE_CONCAT_INNER(a, b) a##b
 #define INSTASCENE_CONCAT(a, b) INSTASCENE_CONCAT_INNER(a, b)
 
-// Returns from the current function if `expr` (an absl::Status) is not OK.
-#define RETURN_IF_ERROR(expr)                                \
-  do {                                                       \
-    ::absl::Status _instascene_status = (expr);              \
-    if (!_instascene_status.ok()) return _instascene_status; \
+// Returns from the current function if `expr` (an absl::Status) is not OK. The temporary's name is
+// unique per use, so the macro nests (e.g. inside a lambda passed to another RETURN_IF_ERROR).
+#define RETURN_IF_ERROR(expr) \
+  RETURN_IF_ERROR_IMPL(INSTASCENE_CONCAT(_instascene_status_, __COUNTER__), expr)
+#define RETURN_IF_ERROR_IMPL(tmp, expr) \
+  do {                                  \
+    ::absl::Status tmp = (expr);        \
+    if (!tmp.ok()) return tmp;          \
   } while (0)
 
 // `lhs = value of expr` where expr is an absl::StatusOr<T>; returns its status on error.
 #define ASSIGN_OR_RETURN(lhs, expr) \
-  ASSIGN_OR_RETURN_IMPL(INSTASCENE_CONCAT(_instascene_statusor_, __LINE__), lhs, expr)
+  ASSIGN_OR_RETURN_IMPL(INSTASCENE_CONCAT(_instascene_statusor_, __COUNTER__), lhs, expr)
 #define ASSIGN_OR_RETURN_IMPL(tmp, lhs, expr)    \
   auto tmp = (expr);                             \
   if (!tmp.ok()) return std::move(tmp).status(); \

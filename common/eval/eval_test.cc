@@ -174,8 +174,8 @@ TEST(GeometryMetrics, VolumeIouOfShiftedCubesAndSphereVolume) {
 class ClickProtocol : public ::testing::Test {
  protected:
   static void SetUpTestSuite() {
-    dir_ = new std::string(instascene::testing::FreshTempDir("click_eval_scene") + "/scene");
-    std::filesystem::remove_all(*dir_);
+    temp_ = new instascene::testing::ScopedTempDir("click_eval_scene");
+    dir_ = new std::string(temp_->Sub("scene"));
     absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("tiny"));
     ASSERT_TRUE(scene.ok());
     SceneWriteOptions options;
@@ -184,10 +184,16 @@ class ClickProtocol : public ::testing::Test {
     ids_ = new std::vector<uint32_t>(scene->instance_ids.begin(), scene->instance_ids.end());
     cloud_ = new GaussianCloud(scene->cloud);
   }
+  static void TearDownTestSuite() {
+    delete temp_;
+    temp_ = nullptr;
+  }
+  static instascene::testing::ScopedTempDir* temp_;
   static std::string* dir_;
   static std::vector<uint32_t>* ids_;
   static GaussianCloud* cloud_;
 };
+instascene::testing::ScopedTempDir* ClickProtocol::temp_ = nullptr;
 std::string* ClickProtocol::dir_ = nullptr;
 std::vector<uint32_t>* ClickProtocol::ids_ = nullptr;
 GaussianCloud* ClickProtocol::cloud_ = nullptr;
@@ -279,8 +285,8 @@ TEST_F(ClickProtocol, MergedObjectScoresWhatItShould) {
 }
 
 TEST(Result, RejectsWrongSizesAndMalformedFiles) {
-  const std::string dir = instascene::testing::FreshTempDir("bad_result");
-  std::filesystem::remove_all(dir);
+  const instascene::testing::ScopedTempDir temp("bad_result");
+  const std::string dir = temp.Sub("result");
   GaussianCloud cloud;
   cloud.Resize(4);
   SegmentationResult r;

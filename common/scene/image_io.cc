@@ -1,5 +1,7 @@
 #include "common/scene/image_io.h"
 
+#include "common/scene/scene.h"
+
 #include <unistd.h>
 
 #include <OpenImageIO/imageio.h>
@@ -10,6 +12,8 @@
 #include <filesystem>
 
 #include "absl/strings/str_cat.h"
+#include "common/core/file_io.h"
+#include "common/core/status.h"
 
 namespace instascene {
 namespace {
@@ -41,11 +45,12 @@ absl::Status WritePixels(const std::string& path, int width, int height, int cha
     std::remove(tmp.c_str());
     return absl::UnavailableError(absl::StrCat(path, ": write failed: ", err));
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    std::remove(tmp.c_str());
-    return absl::UnavailableError(absl::StrCat(path, ": rename failed"));
-  }
-  return absl::OkStatus();
+  // OpenImageIO writes the encoded file itself; it is then published like every other file
+  // (common/core/file_io.h): fsync, rename, fsync of the folder.
+  absl::Status s = SyncPath(tmp, /*directory=*/false);
+  if (s.ok()) s = RenameDurably(tmp, path);
+  if (!s.ok()) std::remove(tmp.c_str());
+  return s;
 }
 
 }  // namespace
@@ -133,6 +138,30 @@ absl::Status WriteLabelMap(const std::string& path, const LabelMap& labels) {
   }
   return WritePixels(path, labels.width, labels.height, 1, OIIO::TypeDesc::UINT16,
                      labels.labels.data());
+}
+
+absl::StatusOr<Image> ReadViewImage(const Scene& scene, int view) {
+  const SceneView& v = scene.views.at(view);
+  if (v.image.empty()) return absl::NotFoundError(absl::StrCat("view '", v.name, "' has no image"));
+  ASSIGN_OR_RETURN(Image image, ReadImage(scene.Path(v.image)));
+  if (image.width != v.camera.width || image.height != v.camera.height) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(scene.Path(v.image), ": image is ", image.width, "x", image.height,
+                     " but view '", v.name, "' camera is ", v.camera.width, "x", v.camera.height));
+  }
+  return image;
+}
+
+absl::StatusOr<LabelMap> ReadViewMask(const Scene& scene, int view) {
+  const SceneView& v = scene.views.at(view);
+  if (v.mask.empty()) return absl::NotFoundError(absl::StrCat("view '", v.name, "' has no mask"));
+  ASSIGN_OR_RETURN(LabelMap mask, ReadLabelMap(scene.Path(v.mask)));
+  if (mask.width != v.camera.width || mask.height != v.camera.height) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(scene.Path(v.mask), ": mask is ", mask.width, "x", mask.height, " but view '",
+                     v.name, "' camera is ", v.camera.width, "x", v.camera.height));
+  }
+  return mask;
 }
 
 }  // namespace instascene

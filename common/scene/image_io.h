@@ -37,4 +37,9 @@ absl::StatusOr<LabelMap> ReadLabelMap(const std::string& path);
 // Writes a 16-bit single-channel PNG (atomically).
 absl::Status WriteLabelMap(const std::string& path, const LabelMap& labels);
 
+struct Scene;
+// Reads a view's image / mask and checks its size against the view's camera.
+absl::StatusOr<Image> ReadViewImage(const Scene& scene, int view);
+absl::StatusOr<LabelMap> ReadViewMask(const Scene& scene, int view);
+
 }  // namespace instascene

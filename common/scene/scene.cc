@@ -172,28 +172,4 @@ absl::StatusOr<GaussianCloud> ReadSceneGaussians(const Scene& scene) {
   return ReadGaussianPly(scene.Path(scene.gaussians));
 }
 
-absl::StatusOr<Image> ReadViewImage(const Scene& scene, int view) {
-  const SceneView& v = scene.views.at(view);
-  if (v.image.empty()) return absl::NotFoundError(absl::StrCat("view '", v.name, "' has no image"));
-  ASSIGN_OR_RETURN(Image image, ReadImage(scene.Path(v.image)));
-  if (image.width != v.camera.width || image.height != v.camera.height) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(scene.Path(v.image), ": image is ", image.width, "x", image.height,
-                     " but view '", v.name, "' camera is ", v.camera.width, "x", v.camera.height));
-  }
-  return image;
-}
-
-absl::StatusOr<LabelMap> ReadViewMask(const Scene& scene, int view) {
-  const SceneView& v = scene.views.at(view);
-  if (v.mask.empty()) return absl::NotFoundError(absl::StrCat("view '", v.name, "' has no mask"));
-  ASSIGN_OR_RETURN(LabelMap mask, ReadLabelMap(scene.Path(v.mask)));
-  if (mask.width != v.camera.width || mask.height != v.camera.height) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(scene.Path(v.mask), ": mask is ", mask.width, "x", mask.height, " but view '",
-                     v.name, "' camera is ", v.camera.width, "x", v.camera.height));
-  }
-  return mask;
-}
-
 }  // namespace instascene

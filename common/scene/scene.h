@@ -17,7 +17,6 @@
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
 #include "common/geometry/camera.h"
-#include "common/scene/image_io.h"
 #include "common/splat/gaussian_cloud.h"
 
 namespace instascene {
@@ -55,8 +54,7 @@ absl::Status WriteScene(const Scene& scene);
 absl::StatusOr<int> ResolveView(const Scene& scene, absl::string_view name_or_index);
 
 absl::StatusOr<GaussianCloud> ReadSceneGaussians(const Scene& scene);
-// Reads a view's image / mask and checks its size against the view's camera.
-absl::StatusOr<Image> ReadViewImage(const Scene& scene, int view);
-absl::StatusOr<LabelMap> ReadViewMask(const Scene& scene, int view);
+// A view's image and mask: ReadViewImage / ReadViewMask in common/scene/image_io.h (OpenImageIO
+// stays out of this header, so the store and the scheduler can parse scenes without it).
 
 }  // namespace instascene

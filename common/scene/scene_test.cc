@@ -18,11 +18,11 @@ namespace {
 
 namespace fs = std::filesystem;
 
+// A fresh directory that lives until the test process exits (each test case is its own process).
 std::string FreshDir(const std::string& name) {
-  const std::string dir = instascene::testing::FreshTempDir("scene_test_" + name);
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  return dir;
+  static std::vector<std::unique_ptr<instascene::testing::ScopedTempDir>> dirs;
+  dirs.push_back(std::make_unique<instascene::testing::ScopedTempDir>("scene_test_" + name));
+  return dirs.back()->str();
 }
 
 SceneView MakeView(const std::string& name, double yaw) {

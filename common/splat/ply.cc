@@ -390,58 +390,6 @@ absl::StatusOr<PlyColumns> ReadPlyElement(absl::string_view data, const PlyHeade
       absl::StrCat(source, ": PLY file has no element '", element_name, "'"));
 }
 
-absl::StatusOr<std::string> ReadFileBounded(const std::string& path, size_t max_bytes) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec)) {
-    return absl::NotFoundError(absl::StrCat(path, ": no such file"));
-  }
-  const uintmax_t size = std::filesystem::file_size(path, ec);
-  if (ec) return absl::UnavailableError(absl::StrCat(path, ": cannot stat: ", ec.message()));
-  if (size > max_bytes) {
-    return absl::ResourceExhaustedError(
-        absl::StrCat(path, ": file is ", size, " bytes, above the limit of ", max_bytes));
-  }
-  std::ifstream in(path, std::ios::binary);
-  if (!in) return absl::UnavailableError(absl::StrCat(path, ": cannot open for reading"));
-  std::string bytes(size, '\0');
-  in.read(bytes.data(), static_cast<std::streamsize>(size));
-  if (static_cast<uintmax_t>(in.gcount()) != size) {
-    return absl::DataLossError(absl::StrCat(path, ": short read"));
-  }
-  return bytes;
-}
-
-absl::Status WriteFileAtomically(const std::string& path, absl::string_view bytes) {
-  const std::string tmp = absl::StrCat(path, ".tmp.", ::getpid());
-  const int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) {
-    return absl::UnavailableError(absl::StrCat(
-        path, ": cannot create: ", std::error_code(errno, std::generic_category()).message()));
-  }
-  size_t written = 0;
-  while (written < bytes.size()) {
-    const ssize_t n = ::write(fd, bytes.data() + written, bytes.size() - written);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      const std::string reason = std::error_code(errno, std::generic_category()).message();
-      ::close(fd);
-      ::unlink(tmp.c_str());
-      return absl::UnavailableError(absl::StrCat(path, ": write failed: ", reason));
-    }
-    written += static_cast<size_t>(n);
-  }
-  if (::fsync(fd) != 0 || ::close(fd) != 0) {
-    ::unlink(tmp.c_str());
-    return absl::UnavailableError(absl::StrCat(path, ": fsync/close failed"));
-  }
-  if (::rename(tmp.c_str(), path.c_str()) != 0) {
-    const std::string reason = std::error_code(errno, std::generic_category()).message();
-    ::unlink(tmp.c_str());
-    return absl::UnavailableError(absl::StrCat(path, ": rename failed: ", reason));
-  }
-  return absl::OkStatus();
-}
-
 std::string EncodePlyBinary(const std::string& element_name, const PlyColumns& columns,
                             const std::vector<std::string>& comments) {
   std::string out = "ply\nformat binary_little_endian 1.0\n";

@@ -13,6 +13,7 @@
 #include "absl/strings/string_view.h"
 
 #include "absl/status/statusor.h"
+#include "common/core/file_io.h"  // ReadFileBounded, WriteFileAtomically (used with PLY data)
 
 namespace instascene {
 
@@ -70,13 +71,6 @@ struct PlyColumns {
 absl::StatusOr<PlyColumns> ReadPlyElement(absl::string_view data, const PlyHeader& header,
                                           absl::string_view element_name, absl::string_view source,
                                           const PlyLimits& limits = {});
-
-// Reads a whole file into memory, refusing files larger than max_bytes.
-absl::StatusOr<std::string> ReadFileBounded(const std::string& path, size_t max_bytes);
-
-// Writes `bytes` to `path` atomically: temp file in the same folder, fsync, rename. On error the
-// previous file (if any) is intact and no temp file remains.
-absl::Status WriteFileAtomically(const std::string& path, absl::string_view bytes);
 
 // Serialises one element of float columns (each written with its ScalarType) as binary
 // little-endian PLY.

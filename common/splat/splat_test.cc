@@ -70,7 +70,8 @@ INSTANTIATE_TEST_SUITE_P(ScalesAndDegrees, PlyRoundTrip,
                                             ::testing::Values(0, 1, 2, 3)));
 
 TEST(GaussianPly, WritesAtomicallyToDisk) {
-  const std::string dir = instascene::testing::FreshTempDir("ply_roundtrip");
+  const instascene::testing::ScopedTempDir temp("ply_roundtrip");
+  const std::string dir = temp.str();
   const std::string path = dir + "/roundtrip.ply";
   GaussianCloud cloud = RandomCloud(10, 2, 1, 5);
   ASSERT_TRUE(WriteGaussianPly(path, cloud).ok());

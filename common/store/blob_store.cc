@@ -9,52 +9,11 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "common/core/file_io.h"
 #include "common/core/status.h"
 
 namespace instascene::store {
 namespace fs = std::filesystem;
-namespace {
-
-absl::Status ErrnoError(const std::string& what) {
-  return absl::UnavailableError(
-      absl::StrCat(what, ": ", std::error_code(errno, std::generic_category()).message()));
-}
-
-// Writes `bytes` to `path` (create/truncate) and fsyncs it.
-absl::Status WriteAndSync(const std::string& path, absl::string_view bytes) {
-  const int fd = ::open(path.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) return ErrnoError(absl::StrCat(path, ": cannot create"));
-  size_t written = 0;
-  while (written < bytes.size()) {
-    const ssize_t n = ::write(fd, bytes.data() + written, bytes.size() - written);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      absl::Status s = ErrnoError(absl::StrCat(path, ": write failed"));
-      ::close(fd);
-      return s;
-    }
-    written += static_cast<size_t>(n);
-  }
-  if (::fsync(fd) != 0) {
-    absl::Status s = ErrnoError(absl::StrCat(path, ": fsync failed"));
-    ::close(fd);
-    return s;
-  }
-  ::close(fd);
-  return absl::OkStatus();
-}
-
-absl::Status SyncFile(const std::string& path, bool directory) {
-  const int fd = ::open(path.c_str(), (directory ? O_RDONLY | O_DIRECTORY : O_RDONLY) | O_CLOEXEC);
-  if (fd < 0) return ErrnoError(absl::StrCat(path, ": cannot open for fsync"));
-  const int rc = ::fsync(fd);
-  ::close(fd);
-  if (rc != 0) return ErrnoError(absl::StrCat(path, ": fsync failed"));
-  return absl::OkStatus();
-}
-
-}  // namespace
-
 absl::Status StoreOptions::Validate() const {
   if (max_blob_bytes <= 0) return absl::InvalidArgumentError("max_blob_bytes must be > 0");
   if (max_batch_bytes <= 0) return absl::InvalidArgumentError("max_batch_bytes must be > 0");
@@ -118,10 +77,8 @@ absl::Status BlobStore::GetFile(const Digest& digest, const std::string& path) {
           absl::StrCat("blob ", digest.ToString(), " read back with hash ", hash));
     }
   }
-  std::error_code ec;
-  fs::rename(temp, path, ec);
-  if (ec) return absl::UnavailableError(absl::StrCat(path, ": cannot rename: ", ec.message()));
-  return absl::OkStatus();
+  RETURN_IF_ERROR(SyncPath(temp, /*directory=*/false));
+  return RenameDurably(temp, path);
 }
 
 absl::StatusOr<std::unique_ptr<FilesystemBlobStore>> FilesystemBlobStore::Open(
@@ -179,13 +136,9 @@ absl::Status FilesystemBlobStore::Publish(const std::string& from, const Digest&
   fs::create_directories(target.parent_path(), ec);
   if (ec)
     return absl::UnavailableError(absl::StrCat(target.parent_path().string(), ": ", ec.message()));
-  fs::rename(from, target, ec);
-  if (ec) {
-    fs::remove(from, ec);
-    return absl::UnavailableError(
-        absl::StrCat(target.string(), ": cannot publish: ", ec.message()));
-  }
-  return SyncFile(target.parent_path().string(), /*directory=*/true);
+  absl::Status s = RenameDurably(from, target.string());
+  if (!s.ok()) fs::remove(from, ec);
+  return s;
 }
 
 absl::Status FilesystemBlobStore::Put(const Digest& digest, absl::string_view bytes) {
@@ -284,7 +237,7 @@ absl::Status FilesystemBlobStore::FinishUpload(const Digest& digest) {
                                                    ", uploaded bytes are ", actual.ToString(),
                                                    "; upload discarded"));
   }
-  RETURN_IF_ERROR(SyncFile(part, /*directory=*/false));
+  RETURN_IF_ERROR(SyncPath(part, /*directory=*/false));
   return Publish(part, digest);
 }
 

@@ -44,7 +44,8 @@ TEST(DigestTest, KnownVectors) {
 }
 
 TEST(BlobStoreTest, PutReadFindMissing) {
-  auto store = OpenStore(testing::FreshTempDir("store_put"));
+  const testing::ScopedTempDir temp("store_put");
+  auto store = OpenStore(temp.str());
   const std::string a = RandomBytes(1000, 2), b = RandomBytes(10, 3);
   const Digest da = ComputeDigest(a), db = ComputeDigest(b);
   auto missing = store->FindMissing({da, db});
@@ -62,7 +63,8 @@ TEST(BlobStoreTest, PutReadFindMissing) {
 }
 
 TEST(BlobStoreTest, RejectsWrongDigestAndOversizedBlobsLeavingNothing) {
-  const std::string root = testing::FreshTempDir("store_reject");
+  const testing::ScopedTempDir temp("store_reject");
+  const std::string root = temp.str();
   StoreOptions options;
   options.max_blob_bytes = 100;
   auto store = OpenStore(root, options);
@@ -84,7 +86,8 @@ TEST(BlobStoreTest, RejectsWrongDigestAndOversizedBlobsLeavingNothing) {
 }
 
 TEST(BlobStoreTest, ResumableUpload) {
-  const std::string root = testing::FreshTempDir("store_resume");
+  const testing::ScopedTempDir temp("store_resume");
+  const std::string root = temp.str();
   const std::string data = RandomBytes(300000, 6);
   const Digest d = ComputeDigest(data);
   {
@@ -108,7 +111,8 @@ TEST(BlobStoreTest, ResumableUpload) {
 }
 
 TEST(BlobStoreTest, FinishWithWrongBytesDiscardsTheUpload) {
-  const std::string root = testing::FreshTempDir("store_finish_bad");
+  const testing::ScopedTempDir temp("store_finish_bad");
+  const std::string root = temp.str();
   auto store = OpenStore(root);
   std::string data = RandomBytes(5000, 7);
   const Digest d = ComputeDigest(data);
@@ -122,7 +126,8 @@ TEST(BlobStoreTest, FinishWithWrongBytesDiscardsTheUpload) {
 }
 
 TEST(BlobStoreTest, PutFileAndGetFileRoundTrip) {
-  const std::string root = testing::FreshTempDir("store_files");
+  const testing::ScopedTempDir temp("store_files");
+  const std::string root = temp.str();
   StoreOptions options;
   options.max_batch_bytes = 1000;  // force the chunked path for the big file
   auto store = OpenStore(fs::path(root) / "store", options);
@@ -166,7 +171,8 @@ TEST(ManifestTest, RoundTripAndMalformed) {
 }
 
 TEST(ManifestTest, SceneUploadSendsOnlyWhatIsMissing) {
-  const std::string root = testing::FreshTempDir("store_scene");
+  const testing::ScopedTempDir temp("store_scene");
+  const std::string root = temp.str();
   const std::string scene_dir = (fs::path(root) / "scene").string();
   absl::StatusOr<ClutterScene> generated = GenerateClutterScene(*ClutterPreset("tiny"));
   ASSERT_TRUE(generated.ok());

@@ -9,6 +9,7 @@
 #include "common/eval/result.h"
 #include "common/raster/label_render.h"
 #include "common/raster/rasterizer.h"
+#include "common/scene/image_io.h"
 #include "common/scene/scene.h"
 #include "common/splat/gaussian_ply.h"
 #include "common/splat/ply.h"

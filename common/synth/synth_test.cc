@@ -7,6 +7,7 @@
 
 #include "common/raster/label_render.h"
 #include "common/raster/rasterizer.h"
+#include "common/scene/image_io.h"
 #include "common/scene/scene.h"
 #include "common/splat/gaussian_ply.h"
 #include "common/synth/cluttered_scene.h"
@@ -205,7 +206,8 @@ TEST(MaskNoise, MergesSplitsAndMissesHappenAtTheirRates) {
 }
 
 TEST(SceneWriter, WritesImagesMasksAndGroundTruth) {
-  const std::string dir = instascene::testing::FreshTempDir("synth_writer") + "/scene";
+  const instascene::testing::ScopedTempDir temp("synth_writer");
+  const std::string dir = temp.Sub("scene");
   std::filesystem::remove_all(dir);
   absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("tiny"));
   ASSERT_TRUE(scene.ok());

@@ -8,6 +8,7 @@
 #include "common/core/status.h"
 #include "common/core/timer.h"
 #include "common/eval/result.h"
+#include "common/scene/image_io.h"
 #include "common/splat/ply.h"
 
 namespace instascene::decomposition {

@@ -174,9 +174,8 @@ TEST(PostProcess, GridDbscanMatchesBruteForceOnCorePoints) {
 
 // End to end on small synthetic scenes; returns the evaluation of the decomposition.
 ClickEvaluation DecomposeSynthetic(const std::string& noise, uint64_t seed) {
-  const std::string dir =
-      instascene::testing::FreshTempDir("decomp_" + noise + std::to_string(seed)) + "/scene";
-  std::filesystem::remove_all(dir);
+  const instascene::testing::ScopedTempDir temp("decomp_" + noise + std::to_string(seed));
+  const std::string dir = temp.Sub("scene");
   ClutterOptions scene_options = *ClutterPreset("small");
   scene_options.seed = seed;
   absl::StatusOr<ClutterScene> scene = GenerateClutterScene(scene_options);

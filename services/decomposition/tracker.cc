@@ -12,24 +12,6 @@
 
 namespace instascene::decomposition {
 
-absl::Status DecompositionOptions::Validate() const {
-  auto in01 = [](double v) { return v >= 0.0 && v <= 1.0; };
-  if (!in01(mask_visible_threshold) || !in01(contained_threshold) ||
-      !in01(undersegment_threshold) || !in01(view_consensus_threshold) ||
-      !in01(point_filter_threshold) || !in01(overlap_ratio) || !in01(remedy_ratio)) {
-    return absl::InvalidArgumentError("decomposition thresholds must lie in [0, 1]");
-  }
-  if (!(tracker_min_weight >= 0.0f && tracker_min_weight < 1.0f)) {
-    return absl::InvalidArgumentError("tracker_min_weight must lie in [0, 1)");
-  }
-  if (min_tracker_gaussians < 1)
-    return absl::InvalidArgumentError("min_tracker_gaussians must be >= 1");
-  if (!(dbscan_eps > 0.0) || dbscan_min_points < 1) {
-    return absl::InvalidArgumentError("dbscan_eps must be > 0 and dbscan_min_points >= 1");
-  }
-  return absl::OkStatus();
-}
-
 namespace {
 
 // What one view contributes, computed independently of the others.

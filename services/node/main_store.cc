@@ -3,8 +3,8 @@
 
 int main(int argc, char** argv) {
   instascene::node::NodeOptions o;
-  o.run_scheduler = o.run_decomposition = o.run_training = false;
+  o.run_scheduler = false;
   return instascene::node::NodeMain(
-      argc, argv, "instascene-store: the content-addressed Gaussian store service", o, false,
-      false);
+      argc, argv, "instascene-store: the content-addressed Gaussian store service", o, false, false,
+      instascene::pipeline::StageRegistry());
 }

@@ -7,15 +7,13 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
+#include "common/core/file_io.h"
 #include "common/core/status.h"
 #include "common/rpc/server.h"
-#include "services/decomposition/decomposition_service.h"
 #include "services/scheduler/scheduler_service.h"
-#include "services/scheduler/sqlite_job_queue.h"
+#include "services/scheduler/sqlite_queue_store.h"
 #include "services/store/remote_blob_store.h"
 #include "services/store/store_service.h"
-#include "services/training/training_service.h"
-#include "services/worker/stage_worker.h"
 
 namespace instascene::node {
 namespace fs = std::filesystem;
@@ -23,18 +21,32 @@ namespace fs = std::filesystem;
 absl::Status NodeOptions::Validate() const {
   if (!run_store && store_address.empty())
     return absl::InvalidArgumentError("no store: run one here or give --store ADDR");
-  if (!run_scheduler && scheduler_address.empty() && (run_decomposition || run_training))
+  if (!run_scheduler && scheduler_address.empty() && !workers.empty())
     return absl::InvalidArgumentError(
         "workers need a scheduler: run one here or give --scheduler ADDR");
-  if (!run_store && !run_scheduler && !run_decomposition && !run_training)
+  if (!run_store && !run_scheduler && workers.empty())
     return absl::InvalidArgumentError("nothing to run");
   if (lease_seconds < 2) return absl::InvalidArgumentError("--lease-seconds must be >= 2");
   if (drain_seconds < 0) return absl::InvalidArgumentError("--drain-seconds must be >= 0");
   return store_options.Validate();
 }
 
-absl::Status RunNode(const NodeOptions& options) {
+absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& stages,
+                     const std::vector<StageService>& available) {
   RETURN_IF_ERROR(options.Validate());
+  std::vector<const StageService*> hosted;
+  for (const std::string& name : options.workers) {
+    const StageService* found = nullptr;
+    std::vector<std::string> names;
+    for (const StageService& s : available) {
+      names.push_back(s.name);
+      if (s.name == name) found = &s;
+    }
+    if (found == nullptr)
+      return absl::InvalidArgumentError(absl::StrCat(
+          "unknown worker '", name, "' (this binary runs ", absl::StrJoin(names, ", "), ")"));
+    hosted.push_back(found);
+  }
   rpc::BlockShutdownSignals();
   std::error_code ec;
   fs::create_directories(options.data_dir, ec);
@@ -63,49 +75,38 @@ absl::Status RunNode(const NodeOptions& options) {
     services.push_back(store_svc.get());
     names.push_back("instascene.v1.ContentStore");
   }
-  std::unique_ptr<scheduler::SqliteJobQueue> queue;
+  std::unique_ptr<scheduler::JobQueue> queue;
   std::unique_ptr<scheduler::SchedulerService> scheduler_svc;
   if (options.run_scheduler) {
     scheduler::QueueOptions queue_options;
     queue_options.lease_ms = int64_t{options.lease_seconds} * 1000;
-    ASSIGN_OR_RETURN(queue, scheduler::SqliteJobQueue::Open(
+    queue_options.max_lease_ms = std::max(queue_options.max_lease_ms, queue_options.lease_ms);
+    ASSIGN_OR_RETURN(queue, scheduler::OpenSqliteJobQueue(
                                 (fs::path(options.data_dir) / "jobs.db").string(), queue_options));
     scheduler::SchedulerServiceOptions scheduler_options;
     scheduler_options.rescue_interval_ms = std::min(1000, options.lease_seconds * 250);
-    scheduler_svc =
-        std::make_unique<scheduler::SchedulerService>(queue.get(), blob_store, scheduler_options);
+    scheduler_svc = std::make_unique<scheduler::SchedulerService>(queue.get(), blob_store, &stages,
+                                                                  scheduler_options);
     services.push_back(scheduler_svc.get());
     names.push_back("instascene.v1.Scheduler");
   }
   const std::string work_dir = (fs::path(options.data_dir) / "work").string();
-  auto make_worker =
-      [&](std::vector<std::string> kinds) -> absl::StatusOr<std::unique_ptr<worker::StageWorker>> {
+  std::vector<std::unique_ptr<worker::StageWorker>> workers;
+  std::vector<std::unique_ptr<grpc::Service>> stage_services;
+  for (const StageService* hosted_service : hosted) {
     worker::WorkerOptions w;
-    w.kinds = std::move(kinds);
+    w.kinds = hosted_service->kinds;
     w.work_dir = work_dir;
     w.num_threads = options.num_threads;
     w.lease_seconds = options.lease_seconds;
     w.cache_bytes = options.cache_bytes;
     w.heartbeat_interval_ms = std::min(1000, options.lease_seconds * 1000 / 4);  // live progress
-    RETURN_IF_ERROR(w.Validate());
-    return std::make_unique<worker::StageWorker>(w, blob_store);
-  };
-  std::unique_ptr<worker::StageWorker> decomposition_worker, training_worker;
-  std::unique_ptr<decomposition::DecompositionService> decomposition_svc;
-  std::unique_ptr<training::TrainingService> training_svc;
-  if (options.run_decomposition) {
-    ASSIGN_OR_RETURN(decomposition_worker, make_worker({"decompose"}));
-    decomposition_svc =
-        std::make_unique<decomposition::DecompositionService>(decomposition_worker.get());
-    services.push_back(decomposition_svc.get());
-    names.push_back("instascene.v1.Decomposition");
-  }
-  if (options.run_training) {
-    ASSIGN_OR_RETURN(training_worker, make_worker({"train", "segment"}));
-    training_svc = std::make_unique<training::TrainingService>(
-        blob_store, (fs::path(work_dir) / "query").string(), training_worker.get());
-    services.push_back(training_svc.get());
-    names.push_back("instascene.v1.Training");
+    RETURN_IF_ERROR(w.Validate(stages));
+    workers.push_back(std::make_unique<worker::StageWorker>(w, blob_store, &stages));
+    stage_services.push_back(hosted_service->make(
+        workers.back().get(), blob_store, (fs::path(work_dir) / hosted_service->name).string()));
+    services.push_back(stage_services.back().get());
+    names.push_back(hosted_service->grpc_name);
   }
 
   rpc::ServerOptions server_options;
@@ -114,19 +115,16 @@ absl::Status RunNode(const NodeOptions& options) {
       std::min<int64_t>(options.store_options.max_batch_bytes + (1 << 20), 1 << 30));
   ASSIGN_OR_RETURN(std::unique_ptr<rpc::Server> server,
                    rpc::Server::Start(server_options, services, names));
-  if (decomposition_worker || training_worker) {
+  if (!workers.empty()) {
     std::shared_ptr<grpc::Channel> scheduler_channel =
         options.run_scheduler ? server->InProcessChannel()
                               : rpc::Connect(options.scheduler_address);
-    if (decomposition_worker) decomposition_worker->Start(scheduler_channel);
-    if (training_worker) training_worker->Start(scheduler_channel);
+    for (auto& w : workers) w->Start(scheduler_channel);
   }
   spdlog::info("instascene node serving on {} (data {}): {}", server->address(), options.data_dir,
                absl::StrJoin(names, ", "));
   if (!options.ready_file.empty()) {
-    const std::string temp = options.ready_file + ".tmp";
-    std::ofstream(temp) << server->address() << "\n";
-    fs::rename(temp, options.ready_file, ec);
+    RETURN_IF_ERROR(WriteFileAtomically(options.ready_file, server->address() + "\n"));
   }
 
   const int sig = rpc::WaitForShutdownSignal();
@@ -134,9 +132,7 @@ absl::Status RunNode(const NodeOptions& options) {
   const auto deadline = std::chrono::seconds(options.drain_seconds);
   // Workers first (they still need the scheduler to hand jobs back), then the scheduler, then RPCs.
   std::vector<std::thread> drains;
-  for (worker::StageWorker* w : {decomposition_worker.get(), training_worker.get()}) {
-    if (w) drains.emplace_back([w, deadline] { w->Drain(deadline); });
-  }
+  for (auto& w : workers) drains.emplace_back([w = w.get(), deadline] { w->Drain(deadline); });
   for (std::thread& t : drains) t.join();
   if (scheduler_svc) scheduler_svc->Stop();
   server->Drain(std::chrono::seconds(5));

@@ -1,5 +1,7 @@
 // services/node/node.h: one process hosting any subset of the services: the store, the scheduler
-// and the stage workers (decomposition, training) with their gRPC adapters, all on one port.
+// and stage services (a worker leasing some stages' jobs + its gRPC adapter), all on one port.
+// The node links no stage library: each binary's main registers the stages it knows (runnable or
+// specs only) and the stage services it can host (stage_services.h), and passes them in.
 // `instascene serve` runs everything (the embedded default: filesystem store + SQLite queue under
 // --data); `instascene-store`, `instascene-scheduler`, `instascene-decomposition` and
 // `instascene-training` run one role each and reach the others by address.
@@ -9,10 +11,17 @@
 // queue) -> STOPPED. Nothing acknowledged is lost: the queue and the store are durable.
 #pragma once
 
+#include <functional>
+#include <memory>
 #include <string>
+#include <vector>
+
+#include <grpcpp/grpcpp.h>
 
 #include "absl/status/status.h"
 #include "common/store/blob_store.h"
+#include "services/pipeline/registry.h"
+#include "services/worker/stage_worker.h"
 
 namespace instascene::node {
 
@@ -21,13 +30,12 @@ struct NodeOptions {
   std::string listen = "127.0.0.1:50051";    // host:port (port 0 = any free port)
   bool run_store = true;
   bool run_scheduler = true;
-  bool run_decomposition = true;  // a worker leasing "decompose" jobs + its service
-  bool run_training = true;       // a worker leasing "train" and "segment" jobs + its service
-  std::string store_address;      // where the store is when !run_store
-  std::string scheduler_address;  // where the scheduler is when !run_scheduler
-  int lease_seconds = 30;         // job lease length; heartbeats renew it every lease/4
-  int drain_seconds = 30;         // SIGTERM: how long running jobs may take to finish
-  int num_threads = 0;            // per job; 0 = all cores
+  std::vector<std::string> workers;  // stage services to run here, by name (see StageService)
+  std::string store_address;         // where the store is when !run_store
+  std::string scheduler_address;     // where the scheduler is when !run_scheduler
+  int lease_seconds = 30;            // job lease length; heartbeats renew it every lease/4
+  int drain_seconds = 30;            // SIGTERM: how long running jobs may take to finish
+  int num_threads = 0;               // per job; 0 = all cores
   int64_t cache_bytes = int64_t{20} << 30;  // per worker: input cache budget (0 = unlimited)
   std::string ready_file;  // written with the bound address once serving ("" = none)
   store::StoreOptions store_options;
@@ -35,7 +43,21 @@ struct NodeOptions {
   absl::Status Validate() const;
 };
 
-// Runs until SIGTERM or SIGINT, then drains. Call from main before starting other threads.
-absl::Status RunNode(const NodeOptions& options);
+// A stage service a node can host: a worker leasing `kinds` and the gRPC adapter around it.
+struct StageService {
+  std::string name;       // as --workers names it: "decomposition", "training", ...
+  std::string grpc_name;  // full gRPC service name (health, reflection)
+  std::vector<std::string> kinds;
+  // Builds the adapter; `work_dir` is the service's own scratch folder.
+  std::function<std::unique_ptr<grpc::Service>(
+      const worker::StageWorker* worker, store::BlobStore* store, const std::string& work_dir)>
+      make;
+};
+
+// Runs until SIGTERM or SIGINT, then drains. `stages` must hold every stage the scheduler accepts
+// (specs suffice) and the runnable stages of the hosted services. Call from main before starting
+// other threads.
+absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& stages,
+                     const std::vector<StageService>& services);
 
 }  // namespace instascene::node

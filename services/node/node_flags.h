@@ -38,13 +38,16 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
       ->capture_default_str();
 }
 
-// main() of a per-service binary.
+// main() of a per-service binary: `stages` are the stages it knows, `services` the stage services
+// it can host (all of them run unless --workers is given).
 inline int NodeMain(int argc, char** argv, const char* description, NodeOptions options,
-                    bool needs_store_address, bool needs_scheduler_address) {
+                    bool needs_store_address, bool needs_scheduler_address,
+                    const pipeline::StageRegistry& stages,
+                    const std::vector<StageService>& services = {}) {
   CLI::App app{description};
   AddNodeFlags(app, &options, needs_store_address, needs_scheduler_address);
   CLI11_PARSE(app, argc, argv);
-  const absl::Status status = RunNode(options);
+  const absl::Status status = RunNode(options, stages, services);
   if (!status.ok()) {
     std::fprintf(stderr, "%s: error: %s\n", app.get_name().c_str(), status.ToString().c_str());
     return 1;

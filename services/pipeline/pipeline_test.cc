@@ -6,61 +6,117 @@
 #include "common/eval/result.h"
 #include "common/scene/scene.h"
 #include "common/synth/scene_writer.h"
-#include "services/pipeline/stages.h"
+#include "services/pipeline/local_runner.h"
+#include "services/stages/all_stages.h"
 #include "services/training/segmentation.h"
 
 namespace instascene::pipeline {
 namespace {
 namespace fs = std::filesystem;
 
-TEST(StagesTest, ParametersAreValidated) {
-  EXPECT_TRUE(ValidateParameters("decompose", nlohmann::json::object()).ok());
-  EXPECT_TRUE(ValidateParameters("train", {{"iterations", 10}, {"supervision", "3d"}}).ok());
-  EXPECT_TRUE(ValidateParameters("segment", {{"threshold", 0.8}}).ok());
+StageRegistry Stages() {
+  StageRegistry r;
+  EXPECT_TRUE(stages::RegisterStages(&r).ok());
+  return r;
+}
+
+TEST(Registry, CodecsValidateAndCanonicalize) {
+  const StageRegistry r = Stages();
+  EXPECT_EQ(r.Kinds(), (std::vector<std::string>{"decompose", "train", "segment"}));
+  // Defaults are filled in: {} and the explicit defaults are the same job.
+  auto a = r.Canonicalize("train", nlohmann::json::object());
+  auto b = r.Canonicalize("train", {{"iterations", 1500}, {"supervision", "full"}});
+  ASSERT_TRUE(a.ok() && b.ok());
+  EXPECT_EQ(*a, *b);
+  EXPECT_EQ((*a)["iterations"], 1500);
+  EXPECT_EQ((*a)["method"], "contrastive");
+  EXPECT_EQ((*r.Canonicalize("decompose", {{"tracker_rule", "median"}}))["tracker_rule"], "median");
   struct Bad {
     std::string kind;
     nlohmann::json p;
     std::string says;
   };
-  for (const Bad& b :
-       std::vector<Bad>{{"train", {{"iterations", "many"}}, "'iterations' has the wrong type"},
-                        {"train", {{"iterations", 0}}, "iterations"},
+  for (const Bad& c :
+       std::vector<Bad>{{"train", {{"iterations", "many"}}, "'iterations' must be an integer"},
+                        {"train", {{"iterations", 0}}, "outside [1, 1e+06]"},
+                        {"train", {{"iterations", -1}}, "iterations"},
+                        {"train", {{"samples", 2147483647}}, "samples"},
+                        {"train", {{"iterations", 10.5}}, "must be an integer"},
                         {"train", {{"supervision", "psychic"}}, "psychic"},
                         {"train", {{"method", "magic"}}, "magic"},
-                        {"segment", {{"threshold", 2.0}}, "threshold 2"},
-                        {"segment", {{"tau", 0.9}}, "unknown parameter 'tau'"},
-                        {"decompose", {{"dbscan_eps", -1.0}}, "decompose"},
+                        {"segment", {{"threshold", 2.0}}, "threshold"},
+                        {"segment", {{"threshold", -1.0}}, "not in (-1, 1]"},
+                        {"segment", {{"tau", 0.9}}, "unknown parameter 'tau' (known: threshold)"},
+                        {"decompose", {{"dbscan_eps", -1.0}}, "stage decompose"},
+                        {"decompose", {{"dbscan_eps_relative", 1}}, "true or false"},
                         {"render", nlohmann::json::object(), "unknown stage 'render'"},
-                        {"segment", nlohmann::json::array(), "must be an object"}}) {
-    const absl::Status s = ValidateParameters(b.kind, b.p);
-    EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << b.p.dump();
-    EXPECT_NE(s.message().find(b.says), std::string::npos) << s;
+                        {"segment", nlohmann::json::array(), "must be a JSON object"}}) {
+    const absl::Status s = r.Canonicalize(c.kind, c.p).status();
+    EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << c.p.dump();
+    EXPECT_NE(s.message().find(c.says), std::string::npos) << s;
   }
 }
 
-TEST(StagesTest, ThreeStagesGiveTheTauRuleLabelsAndCancelStops) {
-  const std::string root = testing::FreshTempDir("pipeline_stages");
+TEST(Registry, PlansPipelinesAndRefusesBadOnes) {
+  const StageRegistry r = Stages();
+  auto plan = r.Plan({}, {{"train", {{"iterations", 50}}}});
+  ASSERT_TRUE(plan.ok()) << plan.status();
+  ASSERT_EQ(plan->size(), 3u);
+  EXPECT_EQ((*plan)[1].parameters["iterations"], 50);
+  EXPECT_EQ((*plan)[2].inputs.size(), 1u);
+  EXPECT_EQ((*plan)[2].inputs[0].stage, "train");
+  EXPECT_EQ(r.Plan({"decompose"}, nlohmann::json::object())->size(), 1u);
+  for (const auto& [stages, params] :
+       std::vector<std::pair<std::vector<std::string>, nlohmann::json>>{
+           {{"train", "segment"}, nlohmann::json::object()},        // train needs decompose
+           {{}, {{"render", nlohmann::json::object()}}},            // not in the pipeline
+           {{"decompose"}, {{"train", nlohmann::json::object()}}},  // not in the pipeline
+           {{"decompose", "decompose"}, nlohmann::json::object()},
+           {{}, {{"train", {{"iterations", -5}}}}},
+           {{}, nlohmann::json::array()}}) {
+    EXPECT_EQ(r.Plan(stages, params).status().code(), absl::StatusCode::kInvalidArgument)
+        << params.dump();
+  }
+  // Registration checks inputs.
+  StageRegistry bad;
+  StageSpec orphan;
+  orphan.kind = "orphan";
+  orphan.inputs = {{"nothing", InputMode::kOne}};
+  orphan.canonicalize = [](const nlohmann::json& p) -> absl::StatusOr<nlohmann::json> { return p; };
+  EXPECT_EQ(bad.Add({orphan, nullptr}).code(), absl::StatusCode::kInvalidArgument);
+  StageRegistry twice = Stages();
+  EXPECT_EQ(stages::RegisterStageSpecs(&twice).code(), absl::StatusCode::kAlreadyExists);
+  // A spec-only registry validates but cannot run.
+  StageRegistry specs;
+  ASSERT_TRUE(stages::RegisterStageSpecs(&specs).ok());
+  EXPECT_TRUE(specs.RunnableKinds().empty());
+  EXPECT_EQ(specs.Run("decompose", StageContext{}).status().code(),
+            absl::StatusCode::kUnimplemented);
+}
+
+TEST(LocalRunner, ThreeStagesGiveTheTauRuleLabelsAndCancelStops) {
+  const testing::ScopedTempDir temp("pipeline_stages");
+  const std::string root = temp.str();
   const std::string scene_dir = (fs::path(root) / "scene").string();
   auto generated = GenerateClutterScene(*ClutterPreset("tiny"));
   ASSERT_TRUE(generated.ok());
   ASSERT_TRUE(WriteClutterScene(*generated, scene_dir).ok());
-  const std::string dec = root + "/decompose", train = root + "/train", seg = root + "/segment";
+  const StageRegistry r = Stages();
+  auto plan = r.Plan({}, {{"train", {{"iterations", 60}}}});
+  ASSERT_TRUE(plan.ok());
   std::vector<std::string> phases;
-  StageContext c;
-  c.scene_dir = scene_dir;
-  c.progress = [&](const StageProgress& p) { phases.push_back(p.phase); };
-  c.out_dir = dec;
-  ASSERT_TRUE(RunStage("decompose", c).ok());
-  EXPECT_NE(std::find(phases.begin(), phases.end(), "tracking"), phases.end());
-  c.input_dir = dec;
-  c.out_dir = train;
-  c.parameters = {{"iterations", 60}};
-  ASSERT_TRUE(RunStage("train", c).ok());
-  EXPECT_NE(std::find(phases.begin(), phases.end(), "training"), phases.end());
-  c.input_dir = train;
-  c.out_dir = seg;
-  c.parameters = nlohmann::json::object();
-  ASSERT_TRUE(RunStage("segment", c).ok());
+  LocalRunOptions options;
+  options.scene_dir = scene_dir;
+  options.out_dir = root + "/out";
+  options.progress = [&](const std::string& kind, int64_t, const StageProgress& p) {
+    phases.push_back(kind + ":" + p.phase);
+  };
+  auto run = RunPipelineLocally(r, *plan, options);
+  ASSERT_TRUE(run.ok()) << run.status();
+  EXPECT_NE(std::find(phases.begin(), phases.end(), "decompose:tracking"), phases.end());
+  EXPECT_NE(std::find(phases.begin(), phases.end(), "train:training"), phases.end());
+  const std::string train = root + "/out/training", seg = root + "/out/segmentation";
+  EXPECT_EQ(run->outputs.at("segment"), seg);
 
   auto scene = ReadScene(scene_dir);
   auto cloud = ReadSceneGaussians(*scene);
@@ -71,13 +127,21 @@ TEST(StagesTest, ThreeStagesGiveTheTauRuleLabelsAndCancelStops) {
   EXPECT_EQ(segmented->labels, training::SegmentByFeatures(trained->features, 16, trained->labels,
                                                            training::SegmentOptions{0.9}));
   EXPECT_TRUE(fs::exists(fs::path(seg) / "instances.json"));
+  // segment fans out over its instances.
+  std::set<uint32_t> ids(segmented->labels.begin(), segmented->labels.end());
+  ids.erase(0);
+  EXPECT_EQ(run->items.at("segment"), static_cast<int64_t>(ids.size()));
 
   // A set cancel flag stops a stage with Cancelled.
   CancelFlag cancel{true};
-  c.cancel = &cancel;
-  c.input_dir = "";
+  StageContext c;
+  c.scene_dir = scene_dir;
   c.out_dir = root + "/cancelled";
-  EXPECT_EQ(RunStage("decompose", c).code(), absl::StatusCode::kCancelled);
+  c.cancel = &cancel;
+  EXPECT_EQ(r.Run("decompose", c).status().code(), absl::StatusCode::kCancelled);
+  // A stage without its input is refused before it runs.
+  c.cancel = nullptr;
+  EXPECT_EQ(r.Run("train", c).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
 }  // namespace

@@ -105,12 +105,38 @@ JobProgress JobProgress::FromJson(const nlohmann::json& j) {
   return p;
 }
 
-std::string JobKey(const JobSpec& spec, const std::string& dependency_key) {
-  const nlohmann::json j = {{"scene_manifest", spec.scene_manifest.ToString()},
-                            {"kind", spec.kind},
-                            {"parameters", spec.parameters},
-                            {"dependency", dependency_key}};
+std::string JobKey(const store::Digest& scene_manifest, const std::string& kind,
+                   const nlohmann::json& parameters,
+                   const std::vector<std::pair<std::string, std::string>>& dependency_keys,
+                   int64_t item) {
+  nlohmann::json deps = nlohmann::json::object();
+  for (const auto& [name, key] : dependency_keys) deps[name] = key;
+  const nlohmann::json j = {{"scene_manifest", scene_manifest.ToString()},
+                            {"kind", kind},
+                            {"parameters", parameters},
+                            {"dependencies", deps},
+                            {"item", item}};
   return store::ComputeDigest(j.dump()).hash;
+}
+
+const JobDependency* Job::FindDependency(absl::string_view name) const {
+  for (const JobDependency& d : dependencies)
+    if (d.name == name) return &d;
+  return nullptr;
+}
+
+const char* FailureKindName(FailureKind kind) {
+  switch (kind) {
+    case FailureKind::kRetryable:
+      return "retryable";
+    case FailureKind::kPermanent:
+      return "permanent";
+    case FailureKind::kCancelled:
+      return "cancelled";
+    case FailureKind::kReleased:
+      return "released";
+  }
+  return "?";
 }
 
 std::string JobIdFromKey(const std::string& key) { return absl::StrCat("j", key.substr(0, 15)); }

@@ -1,16 +1,20 @@
-// services/scheduler/job.h: the job model. A job is one stage (decompose, train, segment) of one
-// scene with its parameters and inputs; its key (SHA-256 of the scene manifest, kind, canonical
-// parameters and the dependency's key) makes submission idempotent. Every state change goes
-// through `Transition`, the one place that knows which moves are legal. Value types; thread-safe.
+// services/scheduler/job.h: the job model. A job is one stage of one scene with its parameters and
+// its named inputs (the jobs it depends on: fan-in); a finished fan-out job creates child jobs, one
+// per item of its output, and the jobs that wait for all of them. Its key (SHA-256 of the scene
+// manifest, kind, canonical parameters, the keys of its dependencies by name and its item index)
+// makes submission idempotent. Every state change goes through `Transition`, the one place that
+// knows which moves are legal. Value types; thread-safe.
 #pragma once
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
 #include "common/store/digest.h"
+#include "services/pipeline/plan.h"
 
 namespace instascene::scheduler {
 
@@ -26,9 +30,18 @@ enum class JobEvent {
   kResubmit,  // a failed or cancelled job submitted again
 };
 
+// How a held job ended without success: one outcome, never a combination of flags.
+enum class FailureKind {
+  kRetryable,  // may succeed on another attempt (environment, crash, timeout): retried with backoff
+  kPermanent,  // bad input or parameters: fails now, never retried
+  kCancelled,  // the worker stopped because cancellation was requested
+  kReleased,   // handed back unfinished (worker draining): queued again, attempt not counted
+};
+
 const char* JobStateName(JobState state);  // "queued", "leased", ...
 absl::StatusOr<JobState> ParseJobState(absl::string_view name);
 const char* JobEventName(JobEvent event);
+const char* FailureKindName(FailureKind kind);
 bool IsFinal(JobState state);
 
 // The single transition function. FailedPrecondition names the illegal move.
@@ -44,22 +57,38 @@ struct JobProgress {
   static JobProgress FromJson(const nlohmann::json& j);
 };
 
-// What a client asks for.
-struct JobSpec {
-  std::string scene;  // human name of the scene
-  std::string kind;   // stage
-  nlohmann::json parameters = nlohmann::json::object();
+// One named input of a job: the output of job `job_id` arrives under `name` (a stage kind, or
+// "<kind>/<item>" for the fan-in of per-item jobs).
+struct JobDependency {
+  std::string name;
+  std::string job_id;
+  bool operator==(const JobDependency&) const = default;
+};
+
+using pipeline::InputMode;
+using pipeline::PlannedInput;
+using pipeline::PlannedStage;
+
+// A pipeline submission: the stages in dependency order. Stages with a kEach or kAll input (and
+// stages depending on them) are created when their fan-out source succeeds.
+struct SubmitRequest {
+  std::string scene;             // human name of the scene
   store::Digest scene_manifest;  // the scene's manifest in the store
-  std::string depends_on;        // job id whose output this job consumes ("" = none)
-  int priority = 0;              // higher first
-  int max_attempts = 3;          // leases before the job fails for good
+  std::vector<PlannedStage> stages;
+  int priority = 0;      // higher first
+  int max_attempts = 3;  // leases before a job fails for good
 };
 
 struct Job {
   std::string id, key, scene, kind;
   std::string parameters_json;  // canonical
   store::Digest scene_manifest;
-  std::string depends_on;
+  std::vector<JobDependency> dependencies;  // named inputs (fan-in), sorted by name
+  std::string parent;  // the fan-out job that created this one ("" = submitted directly)
+  int64_t item = -1;   // index among the parent's items (-1: not a per-item job)
+  int pending = 0;     // dependencies not yet succeeded (ready when 0)
+  int64_t items = -1;  // fan-out jobs: items reported at completion (-1: none yet)
+  nlohmann::json plans = nlohmann::json::array();  // fan-out jobs: deferred stages to create
   JobState state = JobState::kQueued;
   int priority = 0, attempts = 0, max_attempts = 3;
   store::Digest output_manifest;  // set when succeeded
@@ -67,10 +96,16 @@ struct Job {
   JobProgress progress;
   bool cancel_requested = false;
   int64_t created_ms = 0, updated_ms = 0, not_before_ms = 0, lease_expires_ms = 0;
+  int64_t lease_ms = 0;  // the lease length granted at the last lease; heartbeats renew with it
+
+  const JobDependency* FindDependency(absl::string_view name) const;
 };
 
-// key = SHA-256 over (scene manifest, kind, canonical parameters, dependency key).
-std::string JobKey(const JobSpec& spec, const std::string& dependency_key);
+// key = SHA-256 over (scene manifest, kind, canonical parameters, dependency keys by name, item).
+std::string JobKey(const store::Digest& scene_manifest, const std::string& kind,
+                   const nlohmann::json& parameters,
+                   const std::vector<std::pair<std::string, std::string>>& dependency_keys,
+                   int64_t item);
 // Job ids are derived from keys: the same job has the same id everywhere.
 std::string JobIdFromKey(const std::string& key);
 

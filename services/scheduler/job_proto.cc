@@ -31,6 +31,35 @@ JobProgress FromProto(const v1::Progress& p) {
   return out;
 }
 
+absl::StatusOr<FailureKind> FromProto(v1::FailureKind kind) {
+  switch (kind) {
+    case v1::FAILURE_KIND_RETRYABLE:
+      return FailureKind::kRetryable;
+    case v1::FAILURE_KIND_PERMANENT:
+      return FailureKind::kPermanent;
+    case v1::FAILURE_KIND_CANCELLED:
+      return FailureKind::kCancelled;
+    case v1::FAILURE_KIND_RELEASED:
+      return FailureKind::kReleased;
+    default:
+      return absl::InvalidArgumentError("FailJob: kind is unspecified or unknown");
+  }
+}
+
+v1::FailureKind ToProto(FailureKind kind) {
+  switch (kind) {
+    case FailureKind::kRetryable:
+      return v1::FAILURE_KIND_RETRYABLE;
+    case FailureKind::kPermanent:
+      return v1::FAILURE_KIND_PERMANENT;
+    case FailureKind::kCancelled:
+      return v1::FAILURE_KIND_CANCELLED;
+    case FailureKind::kReleased:
+      return v1::FAILURE_KIND_RELEASED;
+  }
+  return v1::FAILURE_KIND_UNSPECIFIED;
+}
+
 void ToProto(const Job& j, v1::Job* out) {
   out->set_id(j.id);
   out->set_key(j.key);
@@ -38,7 +67,15 @@ void ToProto(const Job& j, v1::Job* out) {
   out->set_kind(j.kind);
   out->set_parameters_json(j.parameters_json);
   rpc::ToProto(j.scene_manifest, out->mutable_scene_manifest());
-  out->set_depends_on(j.depends_on);
+  for (const JobDependency& d : j.dependencies) {
+    v1::JobDependency* dep = out->add_dependencies();
+    dep->set_name(d.name);
+    dep->set_job_id(d.job_id);
+  }
+  out->set_parent(j.parent);
+  out->set_item(j.item);
+  out->set_items(j.items);
+  out->set_lease_ms(j.lease_ms);
   out->set_state(ToProto(j.state));
   out->set_priority(j.priority);
   out->set_attempts(j.attempts);

@@ -1,40 +1,42 @@
-// services/scheduler/job_queue.h: the durable job queue behind the scheduler. One interface, one
-// conformance suite (queue_conformance.h) that every backend passes: SQLite (embedded default,
-// sqlite_job_queue.h) now, PostgreSQL for scale-out later. Time comes from an injected clock.
-//
-// Semantics (docs/SERVICES.md): idempotent submission by key; leasing picks the highest priority
-// ready job, then the scene with the fewest held jobs, then the scene served least recently, then
-// submission order; a job is ready when queued, past its backoff time and its dependency
-// succeeded; leases expire unless heartbeats extend them; lease tokens fence stale workers; a
-// failed or cancelled job cancels the jobs that depend on it. Implementations are thread-safe.
+// services/scheduler/job_queue.h: the job queue core. Every policy of the queue lives here once,
+// over the narrow storage interface of queue_store.h, so that each backend (SQLite now, PostgreSQL
+// next) stores jobs and nothing else:
+//   - submission of a whole pipeline in one transaction, idempotent by job key (a succeeded job is
+//     a cached result; a failed or cancelled one is queued again);
+//   - the DAG: a job is ready when all its dependencies succeeded; a fan-out job reports how many
+//     items its output holds, and its completion creates one job per item of each per-item stage
+//     and the join jobs that wait for all of them (in the same transaction);
+//   - leases with fencing tokens, bounded by the server's maximum and persisted (heartbeats renew
+//     with the granted length); expiry rescue; capped exponential backoff with jitter;
+//   - failure outcomes (FailureKind): retryable, permanent (never retried), cancelled, released;
+//   - cancellation and failure cascade to every dependent job; a whole scene can be cancelled;
+//   - scenes as first-class things: the latest successful output of each stage.
+// Time comes from an injected clock. Thread-safe.
 #pragma once
 
 #include <cstdint>
-#include <functional>
 #include <memory>
+#include <mutex>
 #include <optional>
+#include <random>
 #include <string>
 #include <vector>
 
 #include "absl/status/statusor.h"
-#include "services/scheduler/job.h"
+#include "common/core/clock.h"
+#include "services/scheduler/queue_store.h"
 
 namespace instascene::scheduler {
 
-// Milliseconds since the Unix epoch; tests inject a fake.
-class Clock {
- public:
-  virtual ~Clock() = default;
-  virtual int64_t NowMs() = 0;
-};
-Clock* RealClock();
-
 struct QueueOptions {
-  int64_t lease_ms = 30000;        // lease length; heartbeats extend it by this much
+  int64_t lease_ms = 30000;        // lease length when a worker asks for none
+  int64_t max_lease_ms = 600000;   // the longest lease a worker may ask for (longer: clamped)
+  int64_t min_lease_ms = 1000;     // the shortest (shorter: clamped)
   int64_t backoff_base_ms = 1000;  // first retry delay
   int64_t backoff_cap_ms = 60000;  // delays double per attempt up to this cap
   double backoff_jitter = 0.25;    // delay *= 1 - jitter * U[0,1) (spreads retry storms)
-  uint64_t seed = 1;               // jitter random seed
+  int64_t max_items = 10000;       // most items one fan-out job may report
+  uint64_t seed = 1;               // jitter and lease-token random seed
 
   absl::Status Validate() const;
 };
@@ -47,6 +49,8 @@ struct SubmitResult {
 struct Lease {
   Job job;
   std::string token;
+  // The outputs of the job's dependencies, by dependency name.
+  std::vector<std::pair<std::string, store::Digest>> inputs;
 };
 
 struct HeartbeatResult {
@@ -54,46 +58,79 @@ struct HeartbeatResult {
   int64_t lease_expires_ms = 0;
 };
 
-struct JobFilter {
-  std::string scene;              // "" = all
-  std::optional<JobState> state;  // unset = all
-  std::vector<std::string> ids;   // non-empty: exactly these
-  int limit = 100;
+// The latest successful output of one stage (one item of a per-item stage) of a scene.
+struct StageOutput {
+  std::string kind;
+  int64_t item = -1;
+  std::string job_id;
+  store::Digest output;
+  store::Digest scene_manifest;
+  int64_t completed_ms = 0;
 };
 
-struct QueueStats {
+struct SceneSummary {
+  std::string scene;
+  store::Digest scene_manifest;      // of the most recently submitted job
+  std::vector<StageOutput> outputs;  // by kind, then item
   std::vector<std::pair<std::string, int64_t>> jobs_by_state;
-  int64_t scenes = 0;
-  int64_t oldest_queued_age_ms = 0;
 };
 
 class JobQueue {
  public:
-  virtual ~JobQueue() = default;
+  JobQueue(std::unique_ptr<QueueStore> store, const QueueOptions& options,
+           Clock* clock = RealClock());
 
-  virtual absl::StatusOr<SubmitResult> Submit(const JobSpec& spec) = 0;
-  // The next ready job of one of `kinds`, or nullopt.
-  virtual absl::StatusOr<std::optional<Lease>> LeaseNext(const std::vector<std::string>& kinds,
-                                                         const std::string& worker_id,
-                                                         int64_t lease_ms = 0) = 0;
-  virtual absl::StatusOr<HeartbeatResult> Heartbeat(const std::string& id, const std::string& token,
-                                                    const JobProgress& progress) = 0;
-  virtual absl::Status Complete(const std::string& id, const std::string& token,
-                                const store::Digest& output) = 0;
-  // retryable: back to the queue with backoff while attempts are left; cancelled: the worker
-  // stopped on a cancellation request.
-  virtual absl::Status Fail(const std::string& id, const std::string& token,
-                            const std::string& error, bool retryable, bool cancelled) = 0;
-  // The worker gives a held job back unfinished (graceful shutdown): queued again at once, and
-  // the attempt does not count.
-  virtual absl::Status Release(const std::string& id, const std::string& token,
-                               const std::string& reason) = 0;
-  virtual absl::StatusOr<Job> Cancel(const std::string& id) = 0;
-  virtual absl::StatusOr<Job> Get(const std::string& id) = 0;
-  virtual absl::StatusOr<std::vector<Job>> List(const JobFilter& filter) = 0;
-  virtual absl::StatusOr<QueueStats> Stats() = 0;
+  // Creates (or finds) every job of a pipeline in one transaction: all or nothing. Returns the
+  // jobs created or found now (deferred per-item and join jobs only where their fan-out source
+  // already succeeded), in dependency order.
+  absl::StatusOr<std::vector<SubmitResult>> Submit(const SubmitRequest& request);
+  // The next ready job of one of `kinds`, or nullopt. lease_ms 0 = the default.
+  absl::StatusOr<std::optional<Lease>> LeaseNext(const std::vector<std::string>& kinds,
+                                                 const std::string& worker_id,
+                                                 int64_t lease_ms = 0);
+  absl::StatusOr<HeartbeatResult> Heartbeat(const std::string& id, const std::string& token,
+                                            const JobProgress& progress);
+  // `items`: how many items the output holds, for a fan-out stage (-1 for other stages).
+  absl::Status Complete(const std::string& id, const std::string& token,
+                        const store::Digest& output, int64_t items = -1);
+  absl::Status Fail(const std::string& id, const std::string& token, FailureKind kind,
+                    const std::string& error);
+  absl::StatusOr<Job> Cancel(const std::string& id);
+  // Cancels every unfinished job of a scene; returns each of them as it is now (cancelled, or
+  // asked to stop when held). NotFound for an unknown scene.
+  absl::StatusOr<std::vector<Job>> CancelScene(const std::string& scene);
+  absl::StatusOr<Job> Get(const std::string& id);
+  absl::StatusOr<std::vector<Job>> List(const JobFilter& filter);
+  absl::StatusOr<QueueStats> Stats();
+  absl::StatusOr<SceneSummary> GetScene(const std::string& scene);
   // Returns expired leases to the queue (or fails / cancels them); the number handled.
-  virtual absl::StatusOr<int> RescueExpired() = 0;
+  absl::StatusOr<int> RescueExpired();
+
+  const QueueOptions& options() const { return options_; }
+
+ private:
+  absl::Status Apply(Job* job, JobEvent event);
+  absl::StatusOr<Job> LoadHeld(QueueTx& tx, const std::string& id, const std::string& token);
+  absl::StatusOr<Job> Load(QueueTx& tx, const std::string& id);
+  // Creates the job or returns the existing one (re-queuing it when failed or cancelled).
+  absl::StatusOr<SubmitResult> SubmitOne(QueueTx& tx, const SubmitRequest& request,
+                                         const std::string& kind, const nlohmann::json& parameters,
+                                         std::vector<JobDependency> dependencies,
+                                         const std::string& parent, int64_t item);
+  // Creates the deferred jobs of one plan of a succeeded fan-out job.
+  absl::Status Expand(QueueTx& tx, const Job& source, const nlohmann::json& plan,
+                      std::vector<SubmitResult>* results);
+  absl::Status RetryOrFail(QueueTx& tx, Job* job, const std::string& error, bool retryable);
+  absl::Status EndCancelled(QueueTx& tx, Job* job, const std::string& why);
+  absl::Status CancelDependents(QueueTx& tx, const std::string& id, const std::string& why);
+  int64_t BackoffMs(int attempts);
+  std::string NewToken(int attempt);
+
+  std::unique_ptr<QueueStore> store_;
+  QueueOptions options_;
+  Clock* clock_;
+  std::mutex rng_mutex_;
+  std::mt19937_64 rng_;
 };
 
 }  // namespace instascene::scheduler

@@ -2,31 +2,44 @@
 // a full job cycle (submit, lease, heartbeat, complete) and a lease scan over a deep queue.
 #include <benchmark/benchmark.h>
 
+#include <unistd.h>
+
 #include <filesystem>
 
 #include "common/store/digest.h"
-#include "services/scheduler/sqlite_job_queue.h"
+#include "services/scheduler/sqlite_queue_store.h"
 
 namespace instascene::scheduler {
 namespace {
 
-std::unique_ptr<SqliteJobQueue> FreshQueue(const std::string& name) {
-  const std::string dir = std::filesystem::temp_directory_path() / ("queue_bench_" + name);
-  std::filesystem::remove_all(dir);
-  std::filesystem::create_directories(dir);
-  return std::move(*SqliteJobQueue::Open(dir + "/jobs.db", QueueOptions{}));
-}
+// A queue in a fresh directory, removed when the benchmark ends.
+struct BenchQueue {
+  explicit BenchQueue(const std::string& name)
+      : dir(std::filesystem::temp_directory_path() /
+            ("queue_bench_" + name + "_" + std::to_string(::getpid()))) {
+    std::filesystem::remove_all(dir);
+    std::filesystem::create_directories(dir);
+    queue = std::move(*OpenSqliteJobQueue((dir / "jobs.db").string(), QueueOptions{}));
+  }
+  ~BenchQueue() {
+    queue.reset();
+    std::filesystem::remove_all(dir);
+  }
+  JobQueue* operator->() { return queue.get(); }
+  std::filesystem::path dir;
+  std::unique_ptr<JobQueue> queue;
+};
 
-JobSpec Spec(int64_t i) {
-  JobSpec s;
+SubmitRequest Spec(int64_t i) {
+  SubmitRequest s;
   s.scene = "scene" + std::to_string(i % 16);
-  s.kind = "decompose";
   s.scene_manifest = store::ComputeDigest(std::to_string(i));
+  s.stages = {{"decompose", nlohmann::json::object(), {}}};
   return s;
 }
 
 void BM_JobCycle(benchmark::State& state) {
-  auto queue = FreshQueue("cycle");
+  BenchQueue queue("cycle");
   int64_t i = 0;
   for (auto _ : state) {
     auto submitted = queue->Submit(Spec(i++));
@@ -41,7 +54,7 @@ BENCHMARK(BM_JobCycle)->Unit(benchmark::kMillisecond);
 
 // Leasing from a queue holding `depth` ready jobs of 16 scenes (the fairness ordering scans them).
 void BM_LeaseFromDeepQueue(benchmark::State& state) {
-  auto queue = FreshQueue("deep");
+  BenchQueue queue("deep");
   const int64_t depth = state.range(0);
   for (int64_t i = 0; i < depth; ++i) benchmark::DoNotOptimize(queue->Submit(Spec(i)));
   int64_t next = depth;

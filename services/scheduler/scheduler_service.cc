@@ -7,15 +7,15 @@
 #include "common/rpc/status.h"
 #include "common/store/manifest.h"
 #include "services/scheduler/job_proto.h"
-#include "services/scheduler/submit.h"
 
 namespace instascene::scheduler {
 
 using rpc::ToGrpcStatus;
 
 SchedulerService::SchedulerService(JobQueue* queue, store::BlobStore* store,
+                                   const pipeline::StageRegistry* stages,
                                    const SchedulerServiceOptions& options)
-    : queue_(queue), store_(store), options_(options) {
+    : queue_(queue), store_(store), stages_(stages), options_(options) {
   rescuer_ = std::thread([this] { RescueLoop(); });
 }
 
@@ -59,18 +59,20 @@ absl::Status SchedulerService::Submit(const v1::SubmitPipelineRequest& request,
                    rpc::ParseProtoDigest(request.scene_manifest(), "scene_manifest"));
   ASSIGN_OR_RETURN(store::Manifest manifest, store::ReadManifest(*store_, manifest_digest));
   RETURN_IF_ERROR(store::ValidateSceneManifest(*store_, manifest));
-  PipelineRequest pipeline;
-  pipeline.scene_manifest = manifest_digest;
-  pipeline.scene = request.scene();
+  nlohmann::json parameters = nlohmann::json::object();
   if (!request.parameters_json().empty()) {
-    pipeline.parameters = nlohmann::json::parse(request.parameters_json(), nullptr, false);
-    if (pipeline.parameters.is_discarded())
+    parameters = nlohmann::json::parse(request.parameters_json(), nullptr, false);
+    if (parameters.is_discarded())
       return absl::InvalidArgumentError("parameters_json is not valid JSON");
   }
-  pipeline.priority = request.priority();
-  pipeline.stages.assign(request.stages().begin(), request.stages().end());
-  pipeline.max_attempts = options_.max_attempts;
-  ASSIGN_OR_RETURN(std::vector<SubmitResult> jobs, scheduler::SubmitPipeline(*queue_, pipeline));
+  SubmitRequest submit;
+  submit.scene_manifest = manifest_digest;
+  submit.scene = request.scene().empty() ? manifest_digest.hash.substr(0, 12) : request.scene();
+  submit.priority = request.priority();
+  submit.max_attempts = options_.max_attempts;
+  ASSIGN_OR_RETURN(submit.stages,
+                   stages_->Plan({request.stages().begin(), request.stages().end()}, parameters));
+  ASSIGN_OR_RETURN(std::vector<SubmitResult> jobs, queue_->Submit(submit));
   for (const SubmitResult& r : jobs) {
     ToProto(r.job, response->add_jobs());
     response->add_created(r.created);
@@ -96,13 +98,8 @@ absl::Status SchedulerService::Lease(const v1::LeaseJobRequest& request,
   if (!lease) return absl::OkStatus();
   ToProto(lease->job, response->mutable_job());
   response->set_lease_token(lease->token);
-  // The outputs of the dependency chain, by stage.
-  std::string parent = lease->job.depends_on;
-  while (!parent.empty()) {
-    ASSIGN_OR_RETURN(Job job, queue_->Get(parent));
-    (*response->mutable_inputs())[job.kind] = rpc::ToProto(job.output_manifest);
-    parent = job.depends_on;
-  }
+  for (const auto& [name, digest] : lease->inputs)
+    (*response->mutable_inputs())[name] = rpc::ToProto(digest);
   return absl::OkStatus();
 }
 
@@ -135,18 +132,18 @@ grpc::Status SchedulerService::CompleteJob(grpc::ServerContext*,
   if (!missing->empty())
     return ToGrpcStatus(absl::FailedPreconditionError(
         absl::StrCat("output manifest ", output->ToString(), " is not in the store")));
-  const absl::Status s = queue_->Complete(request->job_id(), request->lease_token(), *output);
+  const absl::Status s =
+      queue_->Complete(request->job_id(), request->lease_token(), *output, request->items());
   if (s.ok()) Notify();
   return ToGrpcStatus(s);
 }
 
 grpc::Status SchedulerService::FailJob(grpc::ServerContext*, const v1::FailJobRequest* request,
                                        v1::FailJobResponse*) {
+  absl::StatusOr<FailureKind> kind = FromProto(request->kind());
+  if (!kind.ok()) return ToGrpcStatus(kind.status());
   const absl::Status s =
-      request->released()
-          ? queue_->Release(request->job_id(), request->lease_token(), request->error())
-          : queue_->Fail(request->job_id(), request->lease_token(), request->error(),
-                         request->retryable(), request->cancelled());
+      queue_->Fail(request->job_id(), request->lease_token(), *kind, request->error());
   if (s.ok()) Notify();
   return ToGrpcStatus(s);
 }
@@ -157,6 +154,64 @@ grpc::Status SchedulerService::CancelJob(grpc::ServerContext*, const v1::CancelJ
   if (!job.ok()) return ToGrpcStatus(job.status());
   ToProto(*job, response);
   Notify();
+  return grpc::Status::OK;
+}
+
+grpc::Status SchedulerService::CancelScene(grpc::ServerContext*,
+                                           const v1::CancelSceneRequest* request,
+                                           v1::CancelSceneResponse* response) {
+  absl::StatusOr<std::vector<Job>> jobs = queue_->CancelScene(request->scene());
+  if (!jobs.ok()) return ToGrpcStatus(jobs.status());
+  for (const Job& j : *jobs) ToProto(j, response->add_jobs());
+  Notify();
+  return grpc::Status::OK;
+}
+
+grpc::Status SchedulerService::GetScene(grpc::ServerContext*, const v1::GetSceneRequest* request,
+                                        v1::Scene* response) {
+  absl::StatusOr<SceneSummary> scene = queue_->GetScene(request->scene());
+  if (!scene.ok()) return ToGrpcStatus(scene.status());
+  response->set_name(scene->scene);
+  rpc::ToProto(scene->scene_manifest, response->mutable_scene_manifest());
+  for (const StageOutput& o : scene->outputs) {
+    v1::StageOutput* out = response->add_outputs();
+    out->set_kind(o.kind);
+    out->set_item(o.item);
+    out->set_job_id(o.job_id);
+    rpc::ToProto(o.output, out->mutable_output_manifest());
+    rpc::ToProto(o.scene_manifest, out->mutable_scene_manifest());
+    out->set_completed_unix_ms(o.completed_ms);
+  }
+  for (const auto& [state, n] : scene->jobs_by_state)
+    (*response->mutable_jobs_by_state())[state] = n;
+  return grpc::Status::OK;
+}
+
+grpc::Status SchedulerService::ListStages(grpc::ServerContext*, const v1::ListStagesRequest*,
+                                          v1::ListStagesResponse* response) {
+  static constexpr const char* kTypes[] = {"bool", "int", "double", "string"};
+  for (const std::string& kind : stages_->Kinds()) {
+    const pipeline::StageSpec& spec = stages_->Find(kind)->spec;
+    v1::StageInfo* info = response->add_stages();
+    info->set_kind(spec.kind);
+    info->set_description(spec.description);
+    info->set_fans_out(spec.fans_out);
+    for (const pipeline::PlannedInput& in : spec.inputs) {
+      v1::StageInput* i = info->add_inputs();
+      i->set_stage(in.stage);
+      i->set_mode(pipeline::InputModeName(in.mode));
+    }
+    for (const pipeline::ParamSpec& p : spec.parameters) {
+      v1::StageParameter* out = info->add_parameters();
+      out->set_name(p.name);
+      out->set_type(kTypes[static_cast<int>(p.type)]);
+      out->set_default_json(p.default_value.dump());
+      out->set_min(p.min);
+      out->set_max(p.max);
+      for (const std::string& c : p.choices) out->add_choices(c);
+      out->set_help(p.help);
+    }
+  }
   return grpc::Status::OK;
 }
 
@@ -177,7 +232,7 @@ grpc::Status SchedulerService::ListJobs(grpc::ServerContext*, const v1::ListJobs
       return ToGrpcStatus(absl::InvalidArgumentError("unknown job state"));
     filter.state = static_cast<JobState>(static_cast<int>(request->state()));
   }
-  filter.limit = request->limit() > 0 ? request->limit() : 100;
+  filter.limit = request->limit() > 0 ? std::min(request->limit(), 1000) : 100;
   absl::StatusOr<std::vector<Job>> jobs = queue_->List(filter);
   if (!jobs.ok()) return ToGrpcStatus(jobs.status());
   for (const Job& j : *jobs) ToProto(j, response->add_jobs());

@@ -1,7 +1,8 @@
 // services/scheduler/scheduler_service.h: the Scheduler gRPC service (scheduler.proto), a thin
-// adapter over a JobQueue plus the store (to check scene manifests at submission and job outputs
-// at completion). Owns the rescuer thread that returns expired leases, and wakes WatchJobs streams
-// whenever a job changes. Thread-safe.
+// adapter over the JobQueue core, the stage registry (pipelines are planned and parameters
+// validated through the stages' codecs at submission) and the store (to check scene manifests at
+// submission and job outputs at completion). Owns the rescuer thread that returns expired leases,
+// and wakes WatchJobs streams whenever a job changes. Thread-safe.
 #pragma once
 
 #include <condition_variable>
@@ -10,6 +11,7 @@
 
 #include "common/store/blob_store.h"
 #include "instascene/v1/scheduler.grpc.pb.h"
+#include "services/pipeline/registry.h"
 #include "services/scheduler/job_queue.h"
 
 namespace instascene::scheduler {
@@ -21,8 +23,8 @@ struct SchedulerServiceOptions {
 
 class SchedulerService final : public v1::Scheduler::Service {
  public:
-  // queue and store must outlive the service. Starts the rescuer.
-  SchedulerService(JobQueue* queue, store::BlobStore* store,
+  // queue, store and stages must outlive the service. Starts the rescuer.
+  SchedulerService(JobQueue* queue, store::BlobStore* store, const pipeline::StageRegistry* stages,
                    const SchedulerServiceOptions& options);
   ~SchedulerService() override;
   // Ends watch streams and the rescuer (call before the server drains).
@@ -40,6 +42,12 @@ class SchedulerService final : public v1::Scheduler::Service {
                        v1::FailJobResponse* response) override;
   grpc::Status CancelJob(grpc::ServerContext*, const v1::CancelJobRequest* request,
                          v1::Job* response) override;
+  grpc::Status CancelScene(grpc::ServerContext*, const v1::CancelSceneRequest* request,
+                           v1::CancelSceneResponse* response) override;
+  grpc::Status GetScene(grpc::ServerContext*, const v1::GetSceneRequest* request,
+                        v1::Scene* response) override;
+  grpc::Status ListStages(grpc::ServerContext*, const v1::ListStagesRequest* request,
+                          v1::ListStagesResponse* response) override;
   grpc::Status GetJob(grpc::ServerContext*, const v1::GetJobRequest* request,
                       v1::Job* response) override;
   grpc::Status ListJobs(grpc::ServerContext*, const v1::ListJobsRequest* request,
@@ -58,6 +66,7 @@ class SchedulerService final : public v1::Scheduler::Service {
 
   JobQueue* queue_;
   store::BlobStore* store_;
+  const pipeline::StageRegistry* stages_;
   SchedulerServiceOptions options_;
   std::mutex mutex_;
   std::condition_variable changed_;

@@ -22,7 +22,7 @@ using instascene::testing::RandomBytes;
 class StoreServiceTest : public ::testing::Test {
  protected:
   void SetUp() override {
-    root_ = testing::FreshTempDir("store_service");
+    root_ = temp_.str();
     store::StoreOptions options;
     options.max_blob_bytes = 8 << 20;
     options.max_batch_bytes = 64 << 10;
@@ -39,6 +39,7 @@ class StoreServiceTest : public ::testing::Test {
     stub_ = v1::ContentStore::NewStub(channel_);
   }
 
+  testing::ScopedTempDir temp_{"store_service"};  // first member: removed last
   std::string root_;
   std::unique_ptr<store::FilesystemBlobStore> local_;
   std::unique_ptr<StoreService> service_;

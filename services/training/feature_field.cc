@@ -15,6 +15,7 @@
 #include "common/core/timer.h"
 #include "common/eval/result.h"
 #include "common/raster/rasterizer.h"
+#include "common/scene/image_io.h"
 #include "services/training/contrastive_loss.h"
 
 namespace instascene::training {
@@ -85,28 +86,6 @@ double PixelTerm(const TrainingData& data, const std::vector<std::pair<int, uint
 }
 
 }  // namespace
-
-absl::StatusOr<Supervision> ParseSupervision(const std::string& name) {
-  if (name == "noisy2d") return Supervision::kNoisy2d;
-  if (name == "3d") return Supervision::k3d;
-  if (name == "3d+filtered2d") return Supervision::k3dFiltered2d;
-  if (name == "full") return Supervision::kFull;
-  return absl::InvalidArgumentError(
-      absl::StrCat("unknown supervision '", name, "' (noisy2d, 3d, 3d+filtered2d, full)"));
-}
-
-absl::Status TrainingOptions::Validate() const {
-  if (feature_dim < 2 || feature_dim > 64)
-    return absl::InvalidArgumentError("feature_dim must be in 2..64");
-  if (iterations < 0 || samples < 1 || pixel_pool < 1) {
-    return absl::InvalidArgumentError(
-        "iterations >= 0, samples >= 1 and pixel_pool >= 1 are required");
-  }
-  if (!(learning_rate > 0)) return absl::InvalidArgumentError("learning_rate must be positive");
-  if (multi_view_every < 1 || multi_view_window < 1)
-    return absl::InvalidArgumentError("multi-view settings must be >= 1");
-  return absl::OkStatus();
-}
 
 absl::StatusOr<TrainingData> PrepareTraining(const Scene& scene, const GaussianCloud& cloud,
                                              const std::string& decomposition_dir,

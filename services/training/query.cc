@@ -3,6 +3,7 @@
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
 #include "common/raster/label_render.h"
+#include "common/scene/image_io.h"
 
 namespace instascene::training {
 

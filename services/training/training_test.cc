@@ -128,8 +128,8 @@ TEST(Segmentation, AssignsByMeanFeatureWithThreshold) {
 }
 
 TEST(FeatureField, TrainingOnASyntheticSceneSeparatesInstances) {
-  const std::string dir = instascene::testing::FreshTempDir("training_scene") + "/scene";
-  std::filesystem::remove_all(dir);
+  const instascene::testing::ScopedTempDir temp("training_scene");
+  const std::string dir = temp.Sub("scene");
   absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("small"));
   ASSERT_TRUE(scene.ok());
   SceneWriteOptions write;
@@ -171,8 +171,8 @@ TEST(FeatureField, TrainingOnASyntheticSceneSeparatesInstances) {
 }
 
 TEST(Query, ClicksAndPointsReturnTheGroundTruthInstance) {
-  const std::string dir = instascene::testing::FreshTempDir("query_scene") + "/scene";
-  std::filesystem::remove_all(dir);
+  const instascene::testing::ScopedTempDir temp("query_scene");
+  const std::string dir = temp.Sub("scene");
   absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("tiny"));
   ASSERT_TRUE(scene.ok());
   ASSERT_TRUE(WriteClutterScene(*scene, dir, SceneWriteOptions{}).ok());

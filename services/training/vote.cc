@@ -5,6 +5,7 @@
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
 #include "common/raster/rasterizer.h"
+#include "common/scene/image_io.h"
 
 namespace instascene::training {
 

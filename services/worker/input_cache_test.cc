@@ -19,7 +19,8 @@ void MakeEntry(const fs::path& dir, size_t bytes, int age_s) {
 }
 
 TEST(InputCache, EvictsLeastRecentlyUsedFirstAndKeepsWhatTheJobNeeds) {
-  const fs::path root = testing::FreshTempDir("input_cache");
+  const testing::ScopedTempDir temp("input_cache");
+  const fs::path root = temp.path();
   MakeEntry(root / "scenes" / "a", 1000, 300);  // oldest
   MakeEntry(root / "scenes" / "b", 1000, 200);
   MakeEntry(root / "results" / "c", 1000, 100);
@@ -49,25 +50,40 @@ TEST(InputCache, EvictsLeastRecentlyUsedFirstAndKeepsWhatTheJobNeeds) {
 }
 
 TEST(WorkerOptions, Validate) {
+  // A registry with one runnable stage and one known only by its spec.
+  pipeline::StageRegistry stages;
+  auto spec = [](const std::string& kind) {
+    pipeline::StageSpec s;
+    s.kind = kind;
+    s.canonicalize = [](const nlohmann::json& p) -> absl::StatusOr<nlohmann::json> { return p; };
+    return s;
+  };
+  ASSERT_TRUE(stages
+                  .Add({spec("decompose"),
+                        [](const pipeline::StageContext&) { return pipeline::StageResult{}; }})
+                  .ok());
+  ASSERT_TRUE(stages.Add({spec("train"), nullptr}).ok());
   WorkerOptions o;
   o.kinds = {"decompose"};
-  o.work_dir = "/tmp/w";
-  EXPECT_TRUE(o.Validate().ok());
+  o.work_dir = "work";
+  EXPECT_TRUE(o.Validate(stages).ok());
   WorkerOptions bad = o;
   bad.kinds = {"render"};
-  EXPECT_EQ(bad.Validate().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(bad.Validate(stages).code(), absl::StatusCode::kInvalidArgument);
+  bad.kinds = {"train"};  // known, but this binary cannot run it
+  EXPECT_EQ(bad.Validate(stages).code(), absl::StatusCode::kInvalidArgument);
   bad = o;
   bad.kinds.clear();
-  EXPECT_EQ(bad.Validate().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(bad.Validate(stages).code(), absl::StatusCode::kInvalidArgument);
   bad = o;
   bad.work_dir.clear();
-  EXPECT_EQ(bad.Validate().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(bad.Validate(stages).code(), absl::StatusCode::kInvalidArgument);
   bad = o;
   bad.heartbeat_interval_ms = 0;
-  EXPECT_EQ(bad.Validate().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(bad.Validate(stages).code(), absl::StatusCode::kInvalidArgument);
   bad = o;
   bad.cache_bytes = -1;
-  EXPECT_EQ(bad.Validate().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(bad.Validate(stages).code(), absl::StatusCode::kInvalidArgument);
 }
 
 }  // namespace

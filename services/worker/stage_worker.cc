@@ -3,6 +3,7 @@
 #include <unistd.h>
 
 #include <filesystem>
+#include <set>
 
 #include <spdlog/spdlog.h>
 
@@ -12,7 +13,6 @@
 #include "common/core/timer.h"
 #include "common/rpc/status.h"
 #include "common/store/manifest.h"
-#include "services/pipeline/stages.h"
 #include "services/worker/input_cache.h"
 
 namespace instascene::worker {
@@ -20,10 +20,18 @@ namespace fs = std::filesystem;
 
 namespace {
 
-// Bad input or parameters will fail again: no retry. Everything else may be transient.
-bool IsRetryable(absl::StatusCode code) {
-  return code != absl::StatusCode::kInvalidArgument && code != absl::StatusCode::kNotFound &&
-         code != absl::StatusCode::kOutOfRange && code != absl::StatusCode::kUnimplemented;
+// Bad input or parameters will fail again: permanent. Everything else may be transient.
+v1::FailureKind FailureFor(absl::StatusCode code) {
+  switch (code) {
+    case absl::StatusCode::kInvalidArgument:
+    case absl::StatusCode::kFailedPrecondition:
+    case absl::StatusCode::kNotFound:
+    case absl::StatusCode::kOutOfRange:
+    case absl::StatusCode::kUnimplemented:
+      return v1::FAILURE_KIND_PERMANENT;
+    default:
+      return v1::FAILURE_KIND_RETRYABLE;
+  }
 }
 
 // Latest progress of the running stage with an ETA from the rate within the current phase.
@@ -56,9 +64,15 @@ class ProgressTracker {
 
 }  // namespace
 
-absl::Status WorkerOptions::Validate() const {
+absl::Status WorkerOptions::Validate(const pipeline::StageRegistry& stages) const {
   if (kinds.empty()) return absl::InvalidArgumentError("worker: no job kinds");
-  for (const std::string& k : kinds) RETURN_IF_ERROR(pipeline::StageInput(k).status());
+  for (const std::string& k : kinds) {
+    const pipeline::StageDefinition* stage = stages.Find(k);
+    if (stage == nullptr || !stage->run)
+      return absl::InvalidArgumentError(
+          absl::StrCat("worker: this binary cannot run stage '", k, "' (it runs ",
+                       absl::StrJoin(stages.RunnableKinds(), ", "), ")"));
+  }
   if (work_dir.empty()) return absl::InvalidArgumentError("worker: work_dir is empty");
   if (poll_interval_ms <= 0 || heartbeat_interval_ms <= 0)
     return absl::InvalidArgumentError("worker: intervals must be > 0");
@@ -66,8 +80,9 @@ absl::Status WorkerOptions::Validate() const {
   return absl::OkStatus();
 }
 
-StageWorker::StageWorker(WorkerOptions options, store::BlobStore* store)
-    : options_(std::move(options)), store_(store) {
+StageWorker::StageWorker(WorkerOptions options, store::BlobStore* store,
+                         const pipeline::StageRegistry* stages)
+    : options_(std::move(options)), store_(store), stages_(stages) {
   if (options_.worker_id.empty()) {
     char host[256] = "host";
     gethostname(host, sizeof(host) - 1);
@@ -134,7 +149,7 @@ void StageWorker::Loop() {
       v1::FailJobRequest back;
       back.set_job_id(lease.job().id());
       back.set_lease_token(lease.lease_token());
-      back.set_released(true);
+      back.set_kind(v1::FAILURE_KIND_RELEASED);
       back.set_error(absl::StrCat("handed back by worker ", options_.worker_id, " (draining)"));
       v1::FailJobResponse ignored;
       grpc::ClientContext back_context;
@@ -147,10 +162,9 @@ void StageWorker::Loop() {
 
 absl::Status StageWorker::Execute(const v1::LeaseJobResponse& lease, const std::string& job_dir,
                                   CancelFlag* cancel, const ProgressFn& progress,
-                                  store::Digest* output) {
+                                  store::Digest* output, int64_t* items) {
   const v1::Job& job = lease.job();
-  Stopwatch watch;
-  // Scene and input, cached by digest: a scene is fetched once per worker, not once per job.
+  // Scene and inputs, cached by digest: a scene is fetched once per worker, not once per job.
   // Each worker has its own cache (the workers of one process share work_dir).
   const store::Digest scene_digest = rpc::FromProto(job.scene_manifest());
   const fs::path cache = fs::path(options_.work_dir) / absl::StrJoin(options_.kinds, "+");
@@ -158,16 +172,15 @@ absl::Status StageWorker::Execute(const v1::LeaseJobResponse& lease, const std::
   const std::string results_root = (cache / "results").string();
   pipeline::StageContext context;
   context.scene_dir = (fs::path(scenes_root) / scene_digest.hash).string();
-  ASSIGN_OR_RETURN(std::string input_kind, pipeline::StageInput(job.kind()));
-  if (!input_kind.empty()) {
-    auto it = lease.inputs().find(input_kind);
-    if (it == lease.inputs().end())
-      return absl::InvalidArgumentError(absl::StrCat("lease has no '", input_kind, "' input"));
-    context.input_dir = (fs::path(results_root) / it->second.hash()).string();
+  std::set<std::string> keep = {context.scene_dir};
+  std::map<std::string, store::Digest> inputs;
+  for (const auto& [name, digest] : lease.inputs()) {
+    ASSIGN_OR_RETURN(inputs[name], rpc::ParseProtoDigest(digest, absl::StrCat("input ", name)));
+    context.inputs[name] = (fs::path(results_root) / digest.hash()).string();
+    keep.insert(context.inputs[name]);
   }
   ASSIGN_OR_RETURN(EvictionReport evicted,
-                   EvictCache({scenes_root, results_root}, options_.cache_bytes,
-                              {context.scene_dir, context.input_dir}));
+                   EvictCache({scenes_root, results_root}, options_.cache_bytes, keep));
   if (!evicted.evicted.empty()) {
     spdlog::info("worker {}: input cache {:.1f} -> {:.1f} MB, evicted {} entries",
                  options_.worker_id, evicted.bytes_before / 1e6, evicted.bytes_after / 1e6,
@@ -178,26 +191,29 @@ absl::Status StageWorker::Execute(const v1::LeaseJobResponse& lease, const std::
   RETURN_IF_ERROR(
       Annotate(store::MaterializeManifest(*store_, scene, context.scene_dir), "fetching scene"));
   TouchCacheEntry(context.scene_dir);
-  if (!input_kind.empty()) {
-    const store::Digest input = rpc::FromProto(lease.inputs().at(input_kind));
-    ASSIGN_OR_RETURN(store::Manifest manifest, store::ReadManifest(*store_, input));
-    RETURN_IF_ERROR(Annotate(store::MaterializeManifest(*store_, manifest, context.input_dir),
-                             "fetching input"));
-    TouchCacheEntry(context.input_dir);
+  for (const auto& [name, digest] : inputs) {
+    ASSIGN_OR_RETURN(store::Manifest manifest, store::ReadManifest(*store_, digest));
+    RETURN_IF_ERROR(Annotate(store::MaterializeManifest(*store_, manifest, context.inputs[name]),
+                             absl::StrCat("fetching input ", name)));
+    TouchCacheEntry(context.inputs[name]);
   }
   context.out_dir = job_dir;
   context.parameters = nlohmann::json::parse(job.parameters_json(), nullptr, false);
   if (context.parameters.is_discarded())
     return absl::InvalidArgumentError("job parameters are not JSON");
+  context.item = job.item();
   context.num_threads = options_.num_threads;
   context.cancel = cancel;
   context.progress = progress;
-  RETURN_IF_ERROR(pipeline::RunStage(job.kind(), context));
+  ASSIGN_OR_RETURN(pipeline::StageResult result, stages_->Run(job.kind(), context));
   RETURN_IF_ERROR(CheckCancelled(cancel, job.kind()));
+  *items = result.items;
   progress({"uploading", 0, 1, 0});
   ASSIGN_OR_RETURN(store::Manifest manifest, store::ManifestFromDirectory(job_dir, job.kind()));
   manifest.metadata["job"] = job.id();
   manifest.metadata["scene_manifest"] = scene_digest.ToString();
+  if (job.item() >= 0) manifest.metadata["item"] = job.item();
+  if (result.items >= 0) manifest.metadata["items"] = result.items;
   ASSIGN_OR_RETURN(store::UploadReport report, store::UploadManifest(*store_, manifest, job_dir));
   *output = report.manifest;
   return absl::OkStatus();
@@ -250,9 +266,10 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
   std::error_code ec;
   fs::remove_all(job_dir, ec);
   store::Digest output;
+  int64_t items = -1;
   const absl::Status status = Execute(
       lease, job_dir, &cancel, [&](const pipeline::StageProgress& p) { progress.Update(p); },
-      &output);
+      &output, &items);
   {
     std::lock_guard<std::mutex> lock(hb_mutex);
     stop_heartbeat = true;
@@ -275,6 +292,7 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
     request.set_job_id(job.id());
     request.set_lease_token(lease.lease_token());
     rpc::ToProto(output, request.mutable_output_manifest());
+    request.set_items(items);
     v1::CompleteJobResponse response;
     reply = scheduler_->CompleteJob(&context, request, &response);
     if (reply.ok()) ++succeeded_;
@@ -285,13 +303,13 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
     request.set_job_id(job.id());
     request.set_lease_token(lease.lease_token());
     if (cancel_requested) {
-      request.set_cancelled(true);
+      request.set_kind(v1::FAILURE_KIND_CANCELLED);
       request.set_error("cancelled by request");
     } else if (handed_back) {
-      request.set_released(true);
+      request.set_kind(v1::FAILURE_KIND_RELEASED);
       request.set_error(absl::StrCat("handed back by worker ", options_.worker_id, " (draining)"));
     } else {
-      request.set_retryable(IsRetryable(status.code()));
+      request.set_kind(FailureFor(status.code()));
       request.set_error(status.ToString());
     }
     v1::FailJobResponse response;

@@ -1,10 +1,10 @@
 // services/worker/stage_worker.h: the pull loop every stage service runs. It leases jobs of its
-// kinds from the scheduler, fetches the scene and the dependency's output from the store (cached by
-// digest under work_dir), runs the stage library (services/pipeline) with progress and cooperative
-// cancellation, uploads the output directory as a manifest and completes the job — or fails it,
-// marked retryable unless the input itself is bad. A heartbeat thread extends the lease, reports
-// progress with an ETA, and stops the stage when cancellation is requested or the lease is lost.
-// Thread-safe.
+// kinds from the scheduler, fetches the scene and every named input from the store (cached by
+// digest under work_dir), runs the stage through the registry (services/pipeline) with progress
+// and cooperative cancellation, uploads the output directory as a manifest and completes the job
+// (with its items, for a fan-out stage) — or fails it, permanently when the input itself is bad. A
+// heartbeat thread extends the lease, reports progress with an ETA, and stops the stage when
+// cancellation is requested or the lease is lost. Thread-safe.
 #pragma once
 
 #include <grpcpp/grpcpp.h>
@@ -20,13 +20,13 @@
 #include "common/core/cancel.h"
 #include "common/store/blob_store.h"
 #include "instascene/v1/scheduler.grpc.pb.h"
-#include "services/pipeline/stages.h"
+#include "services/pipeline/registry.h"
 
 namespace instascene::worker {
 
 struct WorkerOptions {
   std::string worker_id;                    // "" = <hostname>-<pid>-<kinds>
-  std::vector<std::string> kinds;           // job kinds to lease: decompose, train, segment
+  std::vector<std::string> kinds;           // job kinds to lease (runnable in the registry)
   std::string work_dir;                     // scene/input cache and job scratch space
   int num_threads = 0;                      // per job; 0 = all cores
   int poll_interval_ms = 300;               // wait between empty lease attempts
@@ -34,13 +34,14 @@ struct WorkerOptions {
   int lease_seconds = 0;                    // requested lease length; 0 = the scheduler's default
   int64_t cache_bytes = int64_t{20} << 30;  // input cache budget, LRU-evicted (0 = unlimited)
 
-  absl::Status Validate() const;
+  absl::Status Validate(const pipeline::StageRegistry& stages) const;
 };
 
 class StageWorker {
  public:
-  // `store` must outlive the worker.
-  StageWorker(WorkerOptions options, store::BlobStore* store);
+  // `store` and `stages` must outlive the worker.
+  StageWorker(WorkerOptions options, store::BlobStore* store,
+              const pipeline::StageRegistry* stages);
   ~StageWorker();
 
   // Starts the lease loop against the scheduler behind `scheduler`.
@@ -61,12 +62,14 @@ class StageWorker {
   using ProgressFn = std::function<void(const pipeline::StageProgress&)>;
   // Fetches inputs, runs the stage, uploads the output manifest.
   absl::Status Execute(const v1::LeaseJobResponse& lease, const std::string& job_dir,
-                       CancelFlag* cancel, const ProgressFn& progress, store::Digest* output);
+                       CancelFlag* cancel, const ProgressFn& progress, store::Digest* output,
+                       int64_t* items);
   bool SleepUnlessDraining(std::chrono::milliseconds duration);
 
   WorkerOptions options_;
   std::unique_ptr<v1::Scheduler::Stub> scheduler_;
   store::BlobStore* store_;
+  const pipeline::StageRegistry* stages_;
   std::thread thread_;
   mutable std::mutex mutex_;
   std::condition_variable wake_;

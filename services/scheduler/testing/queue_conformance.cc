@@ -1,81 +1,128 @@
 #include "services/scheduler/testing/queue_conformance.h"
 
-#include "common/core/testing/temp_dir.h"
+#include <set>
+
 #include "common/store/digest.h"
 
 namespace instascene::scheduler::testing {
 namespace {
 
-const std::vector<std::string> kAll = {"decompose", "train", "segment"};
+const std::vector<std::string> kAll = {"decompose", "train", "segment", "item", "join"};
 
-std::optional<Lease> MustLease(JobQueue& q, const std::vector<std::string>& kinds = kAll,
-                               const std::string& worker = "w1") {
-  auto lease = q.LeaseNext(kinds, worker, 0);
-  EXPECT_TRUE(lease.ok()) << lease.status();
-  return lease.ok() ? *lease : std::nullopt;
+store::Digest Out(const std::string& what) { return store::ComputeDigest(what); }
+
+PlannedStage Stage(const std::string& kind, std::vector<PlannedInput> inputs = {},
+                   nlohmann::json parameters = {{"p", 1}}) {
+  return {kind, std::move(parameters), std::move(inputs)};
+}
+
+// decompose -> train -> segment (fans out) -> item per instance -> join over all items.
+std::vector<PlannedStage> FanOutPipeline(const nlohmann::json& item_parameters = {{"p", 1}}) {
+  return {Stage("decompose"), Stage("train", {{"decompose", InputMode::kOne}}),
+          Stage("segment", {{"train", InputMode::kOne}}),
+          Stage("item", {{"segment", InputMode::kEach}, {"decompose", InputMode::kOne}},
+                item_parameters),
+          Stage("join", {{"item", InputMode::kAll}})};
 }
 
 }  // namespace
 
 void JobQueueConformanceTest::SetUp() {
-  directory_ = instascene::testing::FreshTempDir(
+  directory_ = std::make_unique<instascene::testing::ScopedTempDir>(
       std::string("queue_") + ::testing::UnitTest::GetInstance()->current_test_info()->name());
   options_.lease_ms = 10000;
+  options_.max_lease_ms = 60000;
   options_.backoff_base_ms = 1000;
   options_.backoff_cap_ms = 4000;
   queue_ = Open();
 }
 
 std::unique_ptr<JobQueue> JobQueueConformanceTest::Open() {
-  auto q = GetParam().open(directory_, options_, &clock_);
-  EXPECT_TRUE(q.ok()) << q.status();
-  return q.ok() ? std::move(*q) : nullptr;
+  auto store = GetParam().open(directory_->str());
+  EXPECT_TRUE(store.ok()) << store.status();
+  if (!store.ok()) return nullptr;
+  return std::make_unique<JobQueue>(std::move(*store), options_, &clock_);
 }
 
-JobSpec JobQueueConformanceTest::Spec(const std::string& scene, const std::string& kind,
-                                      const std::string& depends_on, int priority) {
-  JobSpec s;
-  s.scene = scene;
-  s.kind = kind;
-  s.scene_manifest = store::ComputeDigest(scene);
-  s.depends_on = depends_on;
-  s.priority = priority;
-  s.parameters = {{"iterations", 10}};
-  return s;
+std::map<std::string, std::string> JobQueueConformanceTest::SubmitStages(
+    const std::string& scene, const std::vector<PlannedStage>& stages, int priority) {
+  SubmitRequest r;
+  r.scene = scene;
+  r.scene_manifest = Out(scene);
+  r.stages = stages;
+  r.priority = priority;
+  auto results = queue_->Submit(r);
+  EXPECT_TRUE(results.ok()) << results.status();
+  std::map<std::string, std::string> ids;
+  if (results.ok())
+    for (const SubmitResult& s : *results) ids[s.job.kind] = s.job.id;
+  return ids;
+}
+
+std::string JobQueueConformanceTest::SubmitOne(const std::string& scene, const std::string& kind,
+                                               const nlohmann::json& parameters, int priority) {
+  return SubmitStages(scene, {Stage(kind, {}, parameters)}, priority)[kind];
+}
+
+std::optional<Lease> JobQueueConformanceTest::MustLease(const std::vector<std::string>& kinds,
+                                                        const std::string& worker,
+                                                        int64_t lease_ms) {
+  auto lease = queue_->LeaseNext(kinds, worker, lease_ms);
+  EXPECT_TRUE(lease.ok()) << lease.status();
+  return lease.ok() ? *lease : std::nullopt;
 }
 
 TEST_P(JobQueueConformanceTest, SubmitIsIdempotentByKey) {
-  auto a = queue_->Submit(Spec("s", "decompose"));
-  ASSERT_TRUE(a.ok()) << a.status();
-  EXPECT_TRUE(a->created);
-  EXPECT_EQ(a->job.state, JobState::kQueued);
-  auto b = queue_->Submit(Spec("s", "decompose"));
-  ASSERT_TRUE(b.ok());
-  EXPECT_FALSE(b->created);
-  EXPECT_EQ(b->job.id, a->job.id);
-  JobSpec other = Spec("s", "decompose");
-  other.parameters = {{"iterations", 11}};
-  EXPECT_NE(queue_->Submit(other)->job.id, a->job.id);
-  // A dependent's key includes its dependency's key.
-  auto t1 = queue_->Submit(Spec("s", "train", a->job.id));
-  auto t2 = queue_->Submit(Spec("s", "train", queue_->Submit(other)->job.id));
-  EXPECT_NE(t1->job.id, t2->job.id);
-  EXPECT_EQ(queue_->Submit(Spec("s", "train", "jnope")).status().code(),
-            absl::StatusCode::kNotFound);
-  JobSpec bad = Spec("s", "decompose");
+  auto first = SubmitStages("s", {Stage("decompose"), Stage("train", {{"decompose"}})});
+  ASSERT_EQ(first.size(), 2u);
+  SubmitRequest again;
+  again.scene = "s";
+  again.scene_manifest = Out("s");
+  again.stages = {Stage("decompose"), Stage("train", {{"decompose"}})};
+  auto r = queue_->Submit(again);
+  ASSERT_TRUE(r.ok());
+  for (const SubmitResult& s : *r) EXPECT_FALSE(s.created) << s.job.kind;
+  EXPECT_EQ((*r)[1].job.id, first["train"]);
+  EXPECT_EQ((*r)[1].job.dependencies,
+            (std::vector<JobDependency>{{"decompose", first["decompose"]}}));
+  EXPECT_EQ((*r)[1].job.pending, 1);
+  // A changed parameter changes that job and every job depending on it, not the others.
+  again.stages[0].parameters = {{"p", 2}};
+  auto changed = queue_->Submit(again);
+  EXPECT_NE((*changed)[0].job.id, first["decompose"]);
+  EXPECT_NE((*changed)[1].job.id, first["train"]);
+  again.stages[0].parameters = {{"p", 1}};
+  again.stages[1].parameters = {{"p", 3}};
+  changed = queue_->Submit(again);
+  EXPECT_EQ((*changed)[0].job.id, first["decompose"]);
+  EXPECT_FALSE((*changed)[0].created);
+  EXPECT_NE((*changed)[1].job.id, first["train"]);
+  // Malformed submissions create nothing.
+  const int64_t before = queue_->List({})->size();
+  SubmitRequest bad = again;
+  bad.stages = {Stage("decompose"), Stage("train", {{"missing"}})};
+  EXPECT_EQ(queue_->Submit(bad).status().code(), absl::StatusCode::kInvalidArgument);
+  bad.stages = {Stage("decompose", {}, {{"p", 9}}), Stage("decompose")};
+  EXPECT_EQ(queue_->Submit(bad).status().code(), absl::StatusCode::kInvalidArgument);
+  bad.stages = {Stage("decompose", {}, {{"p", 9}}),
+                Stage("join", {{"decompose", InputMode::kAll}})};
+  EXPECT_EQ(queue_->Submit(bad).status().code(), absl::StatusCode::kInvalidArgument);
+  bad = again;
   bad.scene_manifest.hash = "xyz";
   EXPECT_EQ(queue_->Submit(bad).status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(static_cast<int64_t>(queue_->List({})->size()), before);
 }
 
 TEST_P(JobQueueConformanceTest, LeaseHeartbeatComplete) {
-  const std::string id = queue_->Submit(Spec("s", "decompose"))->job.id;
-  EXPECT_FALSE(MustLease(*queue_, {"train"}).has_value());  // kind filter
-  auto lease = MustLease(*queue_, {"decompose"});
+  const std::string id = SubmitOne("s", "decompose");
+  EXPECT_FALSE(MustLease({"train"}).has_value());  // kind filter
+  auto lease = MustLease({"decompose"});
   ASSERT_TRUE(lease.has_value());
   EXPECT_EQ(lease->job.id, id);
   EXPECT_EQ(lease->job.state, JobState::kLeased);
   EXPECT_EQ(lease->job.attempts, 1);
-  EXPECT_FALSE(MustLease(*queue_).has_value());  // held jobs are not leased twice
+  EXPECT_TRUE(lease->inputs.empty());
+  EXPECT_FALSE(MustLease(kAll).has_value());  // held jobs are not leased twice
   JobProgress p;
   p.phase = "tracking";
   p.step = 3;
@@ -88,42 +135,50 @@ TEST_P(JobQueueConformanceTest, LeaseHeartbeatComplete) {
   // A wrong token is fenced off.
   EXPECT_EQ(queue_->Heartbeat(id, "bogus", p).status().code(),
             absl::StatusCode::kFailedPrecondition);
-  const store::Digest out = store::ComputeDigest("output");
-  EXPECT_EQ(queue_->Complete(id, "bogus", out).code(), absl::StatusCode::kFailedPrecondition);
-  ASSERT_TRUE(queue_->Complete(id, lease->token, out).ok());
+  EXPECT_EQ(queue_->Complete(id, "bogus", Out("output")).code(),
+            absl::StatusCode::kFailedPrecondition);
+  ASSERT_TRUE(queue_->Complete(id, lease->token, Out("output")).ok());
   auto done = queue_->Get(id);
   EXPECT_EQ(done->state, JobState::kSucceeded);
-  EXPECT_EQ(done->output_manifest, out);
+  EXPECT_EQ(done->output_manifest, Out("output"));
   // Completing twice, or failing after success, is refused.
-  EXPECT_FALSE(queue_->Complete(id, lease->token, out).ok());
-  EXPECT_FALSE(queue_->Fail(id, lease->token, "x", true, false).ok());
+  EXPECT_FALSE(queue_->Complete(id, lease->token, Out("output")).ok());
+  EXPECT_FALSE(queue_->Fail(id, lease->token, FailureKind::kRetryable, "x").ok());
   // Resubmission returns the cached result.
-  auto again = queue_->Submit(Spec("s", "decompose"));
-  EXPECT_FALSE(again->created);
-  EXPECT_EQ(again->job.state, JobState::kSucceeded);
+  SubmitRequest again;
+  again.scene = "s";
+  again.scene_manifest = Out("s");
+  again.stages = {Stage("decompose")};
+  auto r = queue_->Submit(again);
+  EXPECT_FALSE((*r)[0].created);
+  EXPECT_EQ((*r)[0].job.state, JobState::kSucceeded);
 }
 
-TEST_P(JobQueueConformanceTest, DependenciesGateLeasing) {
-  const std::string d = queue_->Submit(Spec("s", "decompose"))->job.id;
-  const std::string t = queue_->Submit(Spec("s", "train", d))->job.id;
-  EXPECT_FALSE(MustLease(*queue_, {"train"}).has_value());
-  auto lease = MustLease(*queue_);
-  ASSERT_EQ(lease->job.id, d);
-  EXPECT_FALSE(MustLease(*queue_).has_value());
-  ASSERT_TRUE(queue_->Complete(d, lease->token, store::ComputeDigest("o")).ok());
-  auto next = MustLease(*queue_);
-  ASSERT_TRUE(next.has_value());
-  EXPECT_EQ(next->job.id, t);
+TEST_P(JobQueueConformanceTest, FanInWaitsForEveryDependencyAndNamesItsInputs) {
+  auto ids = SubmitStages(
+      "s", {Stage("decompose"), Stage("train"), Stage("segment", {{"decompose"}, {"train"}})});
+  EXPECT_FALSE(MustLease({"segment"}).has_value());
+  for (const char* kind : {"decompose", "train"}) {
+    EXPECT_FALSE(MustLease({"segment"}).has_value()) << kind;
+    auto lease = MustLease({kind});
+    ASSERT_TRUE(lease.has_value()) << kind;
+    ASSERT_TRUE(queue_->Complete(lease->job.id, lease->token, Out(kind)).ok());
+  }
+  auto lease = MustLease({"segment"});
+  ASSERT_TRUE(lease.has_value());
+  EXPECT_EQ(lease->job.id, ids["segment"]);
+  EXPECT_EQ(lease->inputs, (std::vector<std::pair<std::string, store::Digest>>{
+                               {"decompose", Out("decompose")}, {"train", Out("train")}}));
 }
 
 TEST_P(JobQueueConformanceTest, RetriesWithCappedBackoffThenFails) {
-  const std::string d = queue_->Submit(Spec("s", "decompose"))->job.id;
-  const std::string t = queue_->Submit(Spec("s", "train", d))->job.id;
+  auto ids = SubmitStages("s", {Stage("decompose"), Stage("train", {{"decompose"}})});
+  const std::string d = ids["decompose"], t = ids["train"];
   for (int attempt = 1; attempt <= 3; ++attempt) {
-    auto lease = MustLease(*queue_);
+    auto lease = MustLease(kAll);
     ASSERT_TRUE(lease.has_value()) << attempt;
     EXPECT_EQ(lease->job.attempts, attempt);
-    ASSERT_TRUE(queue_->Fail(d, lease->token, "disk full", true, false).ok());
+    ASSERT_TRUE(queue_->Fail(d, lease->token, FailureKind::kRetryable, "disk full").ok());
     auto job = queue_->Get(d);
     if (attempt < 3) {
       EXPECT_EQ(job->state, JobState::kQueued);
@@ -131,7 +186,7 @@ TEST_P(JobQueueConformanceTest, RetriesWithCappedBackoffThenFails) {
       const int64_t full = std::min<int64_t>(1000 << (attempt - 1), 4000);
       EXPECT_LE(delay, full);
       EXPECT_GE(delay, static_cast<int64_t>(full * (1 - options_.backoff_jitter)) - 1);
-      EXPECT_FALSE(MustLease(*queue_).has_value());  // backing off
+      EXPECT_FALSE(MustLease(kAll).has_value());  // backing off
       clock_.Advance(delay);
     } else {
       EXPECT_EQ(job->state, JobState::kFailed);
@@ -142,43 +197,51 @@ TEST_P(JobQueueConformanceTest, RetriesWithCappedBackoffThenFails) {
   auto dependent = queue_->Get(t);
   EXPECT_EQ(dependent->state, JobState::kCancelled);
   EXPECT_NE(dependent->error.find("disk full"), std::string::npos);
-  // Resubmitting the failed pipeline queues it again from scratch.
-  auto again = queue_->Submit(Spec("s", "decompose"));
-  EXPECT_EQ(again->job.state, JobState::kQueued);
-  EXPECT_EQ(again->job.attempts, 0);
-  EXPECT_EQ(queue_->Submit(Spec("s", "train", d))->job.state, JobState::kQueued);
+  // Resubmitting the failed pipeline queues both again from scratch, in order.
+  auto again = SubmitStages("s", {Stage("decompose"), Stage("train", {{"decompose"}})});
+  EXPECT_EQ(queue_->Get(d)->state, JobState::kQueued);
+  EXPECT_EQ(queue_->Get(d)->attempts, 0);
+  EXPECT_EQ(queue_->Get(t)->state, JobState::kQueued);
+  EXPECT_EQ(queue_->Get(t)->pending, 1);
 }
 
 TEST_P(JobQueueConformanceTest, ReleaseRequeuesWithoutSpendingAnAttempt) {
-  const std::string d = queue_->Submit(Spec("s", "decompose"))->job.id;
-  auto lease = MustLease(*queue_);
-  ASSERT_TRUE(queue_->Release(d, lease->token, "worker shutting down").ok());
+  const std::string d = SubmitOne("s", "decompose");
+  auto lease = MustLease(kAll);
+  ASSERT_TRUE(queue_->Fail(d, lease->token, FailureKind::kReleased, "worker shutting down").ok());
   auto job = queue_->Get(d);
   EXPECT_EQ(job->state, JobState::kQueued);
   EXPECT_EQ(job->attempts, 0);
   EXPECT_EQ(job->error, "worker shutting down");
-  EXPECT_EQ(queue_->Release(d, lease->token, "again").code(),
+  EXPECT_EQ(queue_->Fail(d, lease->token, FailureKind::kReleased, "again").code(),
             absl::StatusCode::kFailedPrecondition);
-  auto again = MustLease(*queue_);  // no backoff
+  auto again = MustLease(kAll);  // no backoff
   ASSERT_TRUE(again.has_value());
   EXPECT_EQ(again->job.attempts, 1);
 }
 
-TEST_P(JobQueueConformanceTest, NonRetryableFailureFailsAtOnce) {
-  const std::string d = queue_->Submit(Spec("s", "decompose"))->job.id;
-  auto lease = MustLease(*queue_);
-  ASSERT_TRUE(queue_->Fail(d, lease->token, "bad PLY", false, false).ok());
+TEST_P(JobQueueConformanceTest, PermanentFailureFailsAtOnce) {
+  const std::string d = SubmitOne("s", "decompose");
+  auto lease = MustLease(kAll);
+  ASSERT_TRUE(queue_->Fail(d, lease->token, FailureKind::kPermanent, "bad PLY").ok());
   EXPECT_EQ(queue_->Get(d)->state, JobState::kFailed);
+  EXPECT_EQ(queue_->Get(d)->attempts, 1);
 }
 
-TEST_P(JobQueueConformanceTest, ExpiredLeasesAreRescued) {
-  const std::string d = queue_->Submit(Spec("s", "decompose"))->job.id;
-  auto lease = MustLease(*queue_, kAll, "doomed");
-  clock_.Advance(options_.lease_ms - 1);
+TEST_P(JobQueueConformanceTest, LeasesAreBoundedPersistedAndRescued) {
+  const std::string d = SubmitOne("s", "decompose");
+  // A worker asking for a lease of decades gets the server's maximum, kept with the job.
+  auto lease = MustLease(kAll, "doomed", int64_t{1} << 50);
+  ASSERT_TRUE(lease.has_value());
+  EXPECT_EQ(lease->job.lease_ms, options_.max_lease_ms);
+  EXPECT_EQ(lease->job.lease_expires_ms, clock_.NowMs() + options_.max_lease_ms);
+  clock_.Advance(options_.max_lease_ms - 1);
   EXPECT_EQ(*queue_->RescueExpired(), 0);
-  // A heartbeat extends the lease.
-  ASSERT_TRUE(queue_->Heartbeat(d, lease->token, {}).ok());
-  clock_.Advance(options_.lease_ms - 1);
+  // A heartbeat renews with the granted length, not the default.
+  auto hb = queue_->Heartbeat(d, lease->token, {});
+  ASSERT_TRUE(hb.ok());
+  EXPECT_EQ(hb->lease_expires_ms, clock_.NowMs() + options_.max_lease_ms);
+  clock_.Advance(options_.max_lease_ms - 1);
   EXPECT_EQ(*queue_->RescueExpired(), 0);
   clock_.Advance(2);
   EXPECT_EQ(*queue_->RescueExpired(), 1);
@@ -186,65 +249,61 @@ TEST_P(JobQueueConformanceTest, ExpiredLeasesAreRescued) {
   EXPECT_EQ(job->state, JobState::kQueued);
   EXPECT_NE(job->error.find("doomed"), std::string::npos);
   clock_.Advance(options_.backoff_cap_ms);
-  auto second = MustLease(*queue_, kAll, "w2");
+  auto second = MustLease(kAll, "w2", 1);  // too short: the minimum
   ASSERT_TRUE(second.has_value());
   EXPECT_EQ(second->job.attempts, 2);
+  EXPECT_EQ(second->job.lease_ms, options_.min_lease_ms);
   // The first worker comes back: fenced off, its result is not recorded.
-  EXPECT_EQ(queue_->Complete(d, lease->token, store::ComputeDigest("stale")).code(),
+  EXPECT_EQ(queue_->Complete(d, lease->token, Out("stale")).code(),
             absl::StatusCode::kFailedPrecondition);
-  ASSERT_TRUE(queue_->Complete(d, second->token, store::ComputeDigest("fresh")).ok());
-  EXPECT_EQ(queue_->Get(d)->output_manifest, store::ComputeDigest("fresh"));
+  ASSERT_TRUE(queue_->Complete(d, second->token, Out("fresh")).ok());
+  EXPECT_EQ(queue_->Get(d)->output_manifest, Out("fresh"));
 }
 
 TEST_P(JobQueueConformanceTest, CancellationReachesQueuedAndRunningJobs) {
-  const std::string a = queue_->Submit(Spec("a", "decompose"))->job.id;
-  const std::string a2 = queue_->Submit(Spec("a", "train", a))->job.id;
-  auto cancelled = queue_->Cancel(a);
+  auto a = SubmitStages("a", {Stage("decompose"), Stage("train", {{"decompose"}})});
+  auto cancelled = queue_->Cancel(a["decompose"]);
   ASSERT_TRUE(cancelled.ok());
   EXPECT_EQ(cancelled->state, JobState::kCancelled);
-  EXPECT_EQ(queue_->Get(a2)->state, JobState::kCancelled);
-  EXPECT_TRUE(queue_->Cancel(a).ok());  // idempotent
+  EXPECT_EQ(queue_->Get(a["train"])->state, JobState::kCancelled);
+  EXPECT_TRUE(queue_->Cancel(a["decompose"]).ok());  // idempotent
 
-  const std::string b = queue_->Submit(Spec("b", "decompose"))->job.id;
-  auto lease = MustLease(*queue_);
+  const std::string b = SubmitOne("b", "decompose");
+  auto lease = MustLease(kAll);
   ASSERT_EQ(lease->job.id, b);
   auto requested = queue_->Cancel(b);
   EXPECT_TRUE(requested->cancel_requested);
   EXPECT_EQ(requested->state, JobState::kLeased);
   auto hb = queue_->Heartbeat(b, lease->token, {});
   EXPECT_TRUE(hb->cancel_requested);
-  ASSERT_TRUE(queue_->Fail(b, lease->token, "stopped", true, true).ok());
+  ASSERT_TRUE(queue_->Fail(b, lease->token, FailureKind::kCancelled, "stopped").ok());
   EXPECT_EQ(queue_->Get(b)->state, JobState::kCancelled);
 
   // A job that finished cannot be cancelled; unknown ids are NotFound.
-  const std::string c = queue_->Submit(Spec("c", "decompose"))->job.id;
-  auto lc = MustLease(*queue_);
-  ASSERT_TRUE(queue_->Complete(c, lc->token, store::ComputeDigest("o")).ok());
+  const std::string c = SubmitOne("c", "decompose");
+  auto lc = MustLease(kAll);
+  ASSERT_TRUE(queue_->Complete(c, lc->token, Out("o")).ok());
   EXPECT_EQ(queue_->Cancel(c).status().code(), absl::StatusCode::kFailedPrecondition);
   EXPECT_EQ(queue_->Cancel("jmissing").status().code(), absl::StatusCode::kNotFound);
   // Reporting a cancellation nobody asked for is refused.
-  const std::string d = queue_->Submit(Spec("d", "decompose"))->job.id;
-  auto ld = MustLease(*queue_);
-  EXPECT_EQ(queue_->Fail(d, ld->token, "x", true, true).code(),
+  const std::string d = SubmitOne("d", "decompose");
+  auto ld = MustLease(kAll);
+  EXPECT_EQ(queue_->Fail(d, ld->token, FailureKind::kCancelled, "x").code(),
             absl::StatusCode::kFailedPrecondition);
 }
 
 TEST_P(JobQueueConformanceTest, PriorityThenFairnessBetweenScenes) {
   // Scene a submits three independent jobs first, then b and c one each.
+  for (int i = 0; i < 3; ++i) SubmitOne("a", "decompose", {{"i", i}});
+  SubmitOne("b", "decompose");
+  SubmitOne("c", "decompose");
+  SubmitOne("urgent", "decompose", {{"p", 1}}, /*priority=*/10);
   std::vector<std::string> order;
-  for (int i = 0; i < 3; ++i) {
-    JobSpec s = Spec("a", "decompose");
-    s.parameters = {{"i", i}};
-    ASSERT_TRUE(queue_->Submit(s).ok());
-  }
-  ASSERT_TRUE(queue_->Submit(Spec("b", "decompose")).ok());
-  ASSERT_TRUE(queue_->Submit(Spec("c", "decompose")).ok());
-  ASSERT_TRUE(queue_->Submit(Spec("urgent", "decompose", "", /*priority=*/10)).ok());
   for (int i = 0; i < 6; ++i) {
-    auto lease = MustLease(*queue_);
+    auto lease = MustLease(kAll);
     ASSERT_TRUE(lease.has_value());
     order.push_back(lease->job.scene);
-    ASSERT_TRUE(queue_->Complete(lease->job.id, lease->token, store::ComputeDigest("o")).ok());
+    ASSERT_TRUE(queue_->Complete(lease->job.id, lease->token, Out("o")).ok());
     clock_.Advance(1);
   }
   // Priority first, then round robin between scenes instead of draining scene a.
@@ -252,29 +311,30 @@ TEST_P(JobQueueConformanceTest, PriorityThenFairnessBetweenScenes) {
 }
 
 TEST_P(JobQueueConformanceTest, SurvivesReopen) {
-  const std::string d = queue_->Submit(Spec("s", "decompose"))->job.id;
-  const std::string t = queue_->Submit(Spec("s", "train", d))->job.id;
-  auto lease = MustLease(*queue_);
-  ASSERT_TRUE(queue_->Heartbeat(d, lease->token, {"tracking", 1, 2, 0, -1, ""}).ok());
+  auto ids = SubmitStages("s", FanOutPipeline());
+  auto lease = MustLease(kAll);
+  ASSERT_TRUE(
+      queue_->Heartbeat(ids["decompose"], lease->token, {"tracking", 1, 2, 0, -1, ""}).ok());
   queue_.reset();  // the scheduler process goes away
   queue_ = Open();
   ASSERT_NE(queue_, nullptr);
-  auto job = queue_->Get(d);
+  auto job = queue_->Get(ids["decompose"]);
   ASSERT_TRUE(job.ok());
   EXPECT_EQ(job->state, JobState::kRunning);
-  EXPECT_EQ(queue_->Get(t)->state, JobState::kQueued);
+  EXPECT_EQ(job->lease_ms, options_.lease_ms);
+  EXPECT_EQ(queue_->Get(ids["train"])->state, JobState::kQueued);
+  EXPECT_EQ(queue_->Get(ids["segment"])->plans.size(), 1u);
   // The worker that held the lease can still finish it...
-  ASSERT_TRUE(queue_->Complete(d, lease->token, store::ComputeDigest("o")).ok());
+  ASSERT_TRUE(queue_->Complete(ids["decompose"], lease->token, Out("o")).ok());
   // ...and the rest of the pipeline proceeds.
-  auto next = MustLease(*queue_);
+  auto next = MustLease(kAll);
   ASSERT_TRUE(next.has_value());
-  EXPECT_EQ(next->job.id, t);
+  EXPECT_EQ(next->job.id, ids["train"]);
 }
 
 TEST_P(JobQueueConformanceTest, ListAndStats) {
-  const std::string d = queue_->Submit(Spec("s", "decompose"))->job.id;
-  ASSERT_TRUE(queue_->Submit(Spec("s", "train", d)).ok());
-  ASSERT_TRUE(queue_->Submit(Spec("u", "decompose")).ok());
+  SubmitStages("s", {Stage("decompose"), Stage("train", {{"decompose"}})});
+  SubmitOne("u", "decompose");
   clock_.Advance(500);
   auto all = queue_->List({});
   ASSERT_TRUE(all.ok());
@@ -283,13 +343,172 @@ TEST_P(JobQueueConformanceTest, ListAndStats) {
   by_scene.scene = "s";
   EXPECT_EQ(queue_->List(by_scene)->size(), 2u);
   JobFilter by_ids;
-  by_ids.ids = {d};
-  EXPECT_EQ((*queue_->List(by_ids))[0].id, d);
+  by_ids.ids = {(*all)[0].id};
+  EXPECT_EQ((*queue_->List(by_ids))[0].id, (*all)[0].id);
   auto stats = queue_->Stats();
   ASSERT_TRUE(stats.ok());
   EXPECT_EQ(stats->scenes, 2);
   EXPECT_EQ(stats->jobs_by_state[0], (std::pair<std::string, int64_t>{"queued", 3}));
   EXPECT_EQ(stats->oldest_queued_age_ms, 500);
+}
+
+// Runs every leasable job of `kinds` to success; segment reports `items`.
+void Drain(JobQueue& q, const std::vector<std::string>& kinds, int64_t items, int* ran = nullptr) {
+  while (true) {
+    auto lease = q.LeaseNext(kinds, "w", 0);
+    ASSERT_TRUE(lease.ok()) << lease.status();
+    if (!lease->has_value()) return;
+    const Job& job = (*lease)->job;
+    ASSERT_TRUE(q.Complete(job.id, (*lease)->token,
+                           store::ComputeDigest(job.id + std::to_string(job.item)),
+                           job.kind == "segment" ? items : -1)
+                    .ok());
+    if (ran) ++*ran;
+  }
+}
+
+TEST_P(JobQueueConformanceTest, FanOutCreatesOneJobPerItemAndAJoin) {
+  auto ids = SubmitStages("s", FanOutPipeline());
+  EXPECT_EQ(ids.size(), 3u);  // item and join wait for segment's items
+  // Complete decompose and train; segment must report its items.
+  Drain(*queue_, {"decompose", "train"}, -1);
+  auto seg = MustLease({"segment"});
+  ASSERT_TRUE(seg.has_value());
+  EXPECT_EQ(queue_->Complete(seg->job.id, seg->token, Out("seg")).code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(queue_->Complete(seg->job.id, seg->token, Out("seg"), options_.max_items + 1).code(),
+            absl::StatusCode::kInvalidArgument);
+  ASSERT_TRUE(queue_->Complete(seg->job.id, seg->token, Out("seg"), 3).ok());
+  JobFilter filter;
+  filter.scene = "s";
+  auto jobs = queue_->List(filter);
+  ASSERT_EQ(jobs->size(), 3u + 3u + 1u);
+  std::vector<std::string> items;
+  std::string join;
+  for (const Job& j : *jobs) {
+    if (j.kind == "item") {
+      EXPECT_EQ(j.parent, ids["segment"]);
+      EXPECT_EQ(j.dependencies, (std::vector<JobDependency>{{"decompose", ids["decompose"]},
+                                                            {"segment", ids["segment"]}}));
+      EXPECT_EQ(j.pending, 0);
+      items.push_back(j.id);
+    }
+    if (j.kind == "join") {
+      join = j.id;
+      EXPECT_EQ(j.pending, 3);
+      EXPECT_EQ(j.dependencies.size(), 3u);
+    }
+  }
+  ASSERT_EQ(items.size(), 3u);
+  EXPECT_FALSE(MustLease({"join"}).has_value());
+  // The item jobs run (each sees its index), then the join, with every item's output by name.
+  std::set<int64_t> seen;
+  for (int i = 0; i < 3; ++i) {
+    auto lease = MustLease({"item"});
+    ASSERT_TRUE(lease.has_value());
+    seen.insert(lease->job.item);
+    ASSERT_TRUE(
+        queue_->Complete(lease->job.id, lease->token, Out(std::to_string(lease->job.item))).ok());
+  }
+  EXPECT_EQ(seen, (std::set<int64_t>{0, 1, 2}));
+  auto lj = MustLease({"join"});
+  ASSERT_TRUE(lj.has_value());
+  EXPECT_EQ(lj->job.id, join);
+  EXPECT_EQ(lj->inputs, (std::vector<std::pair<std::string, store::Digest>>{
+                            {"item/0", Out("0")}, {"item/1", Out("1")}, {"item/2", Out("2")}}));
+  ASSERT_TRUE(queue_->Complete(join, lj->token, Out("joined")).ok());
+
+  // Resubmission creates nothing and runs nothing.
+  const size_t total = queue_->List(filter)->size();
+  SubmitRequest again;
+  again.scene = "s";
+  again.scene_manifest = Out("s");
+  again.stages = FanOutPipeline();
+  auto r = queue_->Submit(again);
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->size(), 3u + 3u + 1u);  // segment succeeded: its children are returned too
+  for (const SubmitResult& s : *r) EXPECT_FALSE(s.created) << s.job.kind;
+  EXPECT_EQ(queue_->List(filter)->size(), total);
+  EXPECT_FALSE(MustLease(kAll).has_value());
+
+  // A changed per-item parameter recomputes exactly the items and the join.
+  again.stages = FanOutPipeline({{"p", 2}});
+  r = queue_->Submit(again);
+  int created = 0;
+  for (const SubmitResult& s : *r) {
+    created += s.created;
+    if (s.created) {
+      EXPECT_TRUE(s.job.kind == "item" || s.job.kind == "join") << s.job.kind;
+    }
+  }
+  EXPECT_EQ(created, 4);
+  int ran = 0;
+  Drain(*queue_, kAll, 3, &ran);
+  EXPECT_EQ(ran, 4);
+
+  // The scene: the latest output of each stage, per item for the items.
+  auto scene = queue_->GetScene("s");
+  ASSERT_TRUE(scene.ok()) << scene.status();
+  std::vector<std::pair<std::string, int64_t>> outputs;
+  for (const StageOutput& o : scene->outputs) outputs.emplace_back(o.kind, o.item);
+  EXPECT_EQ(outputs, (std::vector<std::pair<std::string, int64_t>>{{"decompose", -1},
+                                                                   {"item", 0},
+                                                                   {"item", 1},
+                                                                   {"item", 2},
+                                                                   {"join", -1},
+                                                                   {"segment", -1},
+                                                                   {"train", -1}}));
+  for (const StageOutput& o : scene->outputs) {
+    if (o.kind == "join") {
+      EXPECT_NE(o.job_id, join);  // the newer join
+    }
+  }
+  EXPECT_EQ(queue_->GetScene("nope").status().code(), absl::StatusCode::kNotFound);
+}
+
+TEST_P(JobQueueConformanceTest, ZeroItemsRunTheJoinAtOnce) {
+  SubmitStages("s", FanOutPipeline());
+  Drain(*queue_, {"decompose", "train", "segment"}, 0);
+  auto join = MustLease({"join"});
+  ASSERT_TRUE(join.has_value());
+  EXPECT_TRUE(join->inputs.empty());
+  EXPECT_FALSE(MustLease({"item"}).has_value());
+}
+
+TEST_P(JobQueueConformanceTest, FailureAndCancellationCascadeThroughTheDag) {
+  SubmitStages("s", FanOutPipeline());
+  Drain(*queue_, {"decompose", "train", "segment"}, 4);
+  // One item fails for good: its siblings go on, the join is cancelled naming the cause.
+  auto first = MustLease({"item"});
+  ASSERT_TRUE(
+      queue_->Fail(first->job.id, first->token, FailureKind::kPermanent, "no surface").ok());
+  JobFilter joins;
+  joins.scene = "s";
+  std::string join;
+  const std::vector<Job> listed = *queue_->List(joins);
+  for (const Job& j : listed)
+    if (j.kind == "join") join = j.id;
+  EXPECT_EQ(queue_->Get(join)->state, JobState::kCancelled);
+  EXPECT_NE(queue_->Get(join)->error.find("no surface"), std::string::npos);
+  // A child retried alone: one item's lease expires; only it runs again.
+  auto second = MustLease({"item"});
+  clock_.Advance(options_.lease_ms + 1);
+  EXPECT_EQ(*queue_->RescueExpired(), 1);
+  EXPECT_EQ(queue_->Get(second->job.id)->attempts, 1);
+  EXPECT_EQ(queue_->Get(second->job.id)->state, JobState::kQueued);
+  // Cancelling the scene cancels every pending child and asks the running one to stop.
+  auto running = MustLease({"item"});
+  ASSERT_TRUE(running.has_value());
+  auto cancelled = queue_->CancelScene("s");
+  ASSERT_TRUE(cancelled.ok()) << cancelled.status();
+  EXPECT_EQ(cancelled->size(), 3u);  // two queued items (one backing off), the running one
+  int queued = 0;
+  const std::vector<Job> after = *queue_->List(joins);
+  for (const Job& j : after) queued += j.state == JobState::kQueued;
+  EXPECT_EQ(queued, 0);
+  EXPECT_TRUE(queue_->Get(running->job.id)->cancel_requested);
+  EXPECT_FALSE(MustLease(kAll).has_value());
+  EXPECT_EQ(queue_->CancelScene("nope").status().code(), absl::StatusCode::kNotFound);
 }
 
 }  // namespace instascene::scheduler::testing

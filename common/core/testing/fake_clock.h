@@ -1,11 +1,12 @@
-// services/scheduler/testing/fake_clock.h: a manually advanced clock for queue tests. Thread-safe.
+// common/core/testing/fake_clock.h: a manually advanced clock for tests of leases, backoff and
+// retention. Thread-safe.
 #pragma once
 
 #include <atomic>
 
-#include "services/scheduler/job_queue.h"
+#include "common/core/clock.h"
 
-namespace instascene::scheduler::testing {
+namespace instascene::testing {
 
 class FakeClock final : public Clock {
  public:
@@ -17,4 +18,4 @@ class FakeClock final : public Clock {
   std::atomic<int64_t> now_;
 };
 
-}  // namespace instascene::scheduler::testing
+}  // namespace instascene::testing

@@ -1,0 +1,68 @@
+#include "services/decomposition/stage_params.h"
+
+namespace instascene::decomposition {
+
+absl::Status DecompositionOptions::Validate() const {
+  auto in01 = [](double v) { return v >= 0.0 && v <= 1.0; };
+  if (!in01(mask_visible_threshold) || !in01(contained_threshold) ||
+      !in01(undersegment_threshold) || !in01(view_consensus_threshold) ||
+      !in01(point_filter_threshold) || !in01(overlap_ratio) || !in01(remedy_ratio)) {
+    return absl::InvalidArgumentError("decomposition thresholds must lie in [0, 1]");
+  }
+  if (!(tracker_min_weight >= 0.0f && tracker_min_weight < 1.0f)) {
+    return absl::InvalidArgumentError("tracker_min_weight must lie in [0, 1)");
+  }
+  if (min_tracker_gaussians < 1)
+    return absl::InvalidArgumentError("min_tracker_gaussians must be >= 1");
+  if (!(dbscan_eps > 0.0) || dbscan_min_points < 1) {
+    return absl::InvalidArgumentError("dbscan_eps must be > 0 and dbscan_min_points >= 1");
+  }
+  return absl::OkStatus();
+}
+const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
+  using O = DecompositionOptions;
+  static const auto* codec = [] {
+    auto* c = new pipeline::ParamCodec<O>("decompose");
+    c->Enum("tracker_rule", &O::tracker_rule,
+            {{"weight", TrackerRule::kWeight}, {"median", TrackerRule::kMedianCrossing}},
+            "weight (w > tracker_min_weight, released code) or median (T crosses 0.5, paper)")
+        .Real("tracker_min_weight", &O::tracker_min_weight, 0.0, 0.999,
+              "Weight above which a Gaussian joins a mask's tracker")
+        .Int("min_tracker_gaussians", &O::min_tracker_gaussians, 1, 1000000000,
+             "Smaller mask trackers are ignored")
+        .Real("mask_visible_threshold", &O::mask_visible_threshold, 0.0, 1.0,
+              "A frame is skipped when more than this share of a tracker is unlabelled there")
+        .Real("contained_threshold", &O::contained_threshold, 0.0, 1.0,
+              "Top mask share of the non-zero labels that counts as containment")
+        .Real("undersegment_threshold", &O::undersegment_threshold, 0.0, 1.0,
+              "Split frames / visible frames above this marks an under-segmented mask")
+        .Real("view_consensus_threshold", &O::view_consensus_threshold, 0.0, 1.0,
+              "Graph edge when supporters / observers reach this")
+        .Real("point_filter_threshold", &O::point_filter_threshold, 0.0, 1.0,
+              "Keep a Gaussian in an instance when detected / appeared exceeds this")
+        .Real("dbscan_eps", &O::dbscan_eps, 1e-9, 1e6,
+              "DBSCAN radius: scene units, or a fraction of the scene diagonal when relative")
+        .Bool("dbscan_eps_relative", &O::dbscan_eps_relative,
+              "Interpret dbscan_eps relative to the robust scene diagonal")
+        .Int("dbscan_min_points", &O::dbscan_min_points, 1, 1000000,
+             "DBSCAN core size (the point itself counts)")
+        .Real("overlap_ratio", &O::overlap_ratio, 0.0, 1.0, "Duplicate-object removal overlap")
+        .Real("remedy_ratio", &O::remedy_ratio, 0.0, 1.0, "Under-segmentation remedy ratio")
+        .Check([](const O& o) { return o.Validate(); });
+    return c;
+  }();
+  return *codec;
+}
+
+pipeline::StageSpec DecomposeSpec() {
+  pipeline::StageSpec spec;
+  spec.kind = "decompose";
+  spec.directory = "decomposition";
+  spec.description =
+      "Spatial Gaussian trackers + view-consensus mask clustering: coarse 3D instances";
+  spec.parameters = DecomposeCodec().Schema();
+  spec.canonicalize = [](const nlohmann::json& p) { return DecomposeCodec().Canonicalize(p); };
+  return spec;
+}
+
+}  // namespace instascene::decomposition

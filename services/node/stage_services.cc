@@ -1,0 +1,31 @@
+#include "services/node/stage_services.h"
+
+#include "services/decomposition/decomposition_service.h"
+#include "services/training/training_service.h"
+
+namespace instascene::node {
+
+StageService DecompositionStageService() {
+  return {"decomposition",
+          "instascene.v1.Decomposition",
+          {"decompose"},
+          [](const worker::StageWorker* worker, store::BlobStore*, const std::string&) {
+            return std::make_unique<decomposition::DecompositionService>(worker);
+          }};
+}
+
+StageService TrainingStageService() {
+  return {
+      "training",
+      "instascene.v1.Training",
+      {"train", "segment"},
+      [](const worker::StageWorker* worker, store::BlobStore* store, const std::string& work_dir) {
+        return std::make_unique<training::TrainingService>(store, work_dir, worker);
+      }};
+}
+
+std::vector<StageService> AllStageServices() {
+  return {DecompositionStageService(), TrainingStageService()};
+}
+
+}  // namespace instascene::node

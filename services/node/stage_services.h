@@ -1,0 +1,16 @@
+// services/node/stage_services.h: the stage services this project ships, for the binaries that
+// host them: decomposition (decompose jobs) and training (train and segment jobs, click and point
+// queries). Links the stage libraries; the scheduler binary does not link this.
+#pragma once
+
+#include <vector>
+
+#include "services/node/node.h"
+
+namespace instascene::node {
+
+StageService DecompositionStageService();
+StageService TrainingStageService();
+std::vector<StageService> AllStageServices();
+
+}  // namespace instascene::node

@@ -1,0 +1,58 @@
+#include "services/pipeline/local_runner.h"
+
+#include <filesystem>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+
+namespace instascene::pipeline {
+
+absl::StatusOr<LocalRunResult> RunPipelineLocally(const StageRegistry& registry,
+                                                  const std::vector<PlannedStage>& plan,
+                                                  const LocalRunOptions& options) {
+  namespace fs = std::filesystem;
+  LocalRunResult result;
+  std::map<std::string, int64_t> item_count;  // per-item stage -> how many jobs it ran
+  for (const PlannedStage& stage : plan) {
+    const StageDefinition* def = registry.Find(stage.kind);
+    if (def == nullptr)
+      return absl::InvalidArgumentError(absl::StrCat("unknown stage ", stage.kind));
+    const std::string dir = (fs::path(options.out_dir) /
+                             (def->spec.directory.empty() ? stage.kind : def->spec.directory))
+                                .string();
+    StageContext c;
+    c.scene_dir = options.scene_dir;
+    c.parameters = stage.parameters;
+    c.num_threads = options.num_threads;
+    c.cancel = options.cancel;
+    std::string each;  // the fan-out source of a per-item stage
+    for (const PlannedInput& in : stage.inputs) {
+      if (in.mode == InputMode::kOne) {
+        c.inputs[in.stage] = result.outputs.at(in.stage);
+      } else if (in.mode == InputMode::kEach) {
+        each = in.stage;
+        c.inputs[in.stage] = result.outputs.at(in.stage);
+      } else {
+        for (int64_t i = 0; i < item_count.at(in.stage); ++i) {
+          const std::string name = absl::StrCat(in.stage, "/", i);
+          c.inputs[name] = result.outputs.at(name);
+        }
+      }
+    }
+    const int64_t runs = each.empty() ? 1 : result.items.at(each);
+    for (int64_t i = 0; i < runs; ++i) {
+      c.item = each.empty() ? -1 : i;
+      c.out_dir = each.empty() ? dir : (fs::path(dir) / std::to_string(i)).string();
+      c.progress = [&, i = c.item](const StageProgress& p) {
+        if (options.progress) options.progress(stage.kind, i, p);
+      };
+      ASSIGN_OR_RETURN(StageResult r, registry.Run(stage.kind, c));
+      result.outputs[each.empty() ? stage.kind : absl::StrCat(stage.kind, "/", i)] = c.out_dir;
+      if (def->spec.fans_out) result.items[stage.kind] = r.items;
+    }
+    if (!each.empty()) item_count[stage.kind] = runs;
+  }
+  return result;
+}
+
+}  // namespace instascene::pipeline

@@ -1,0 +1,93 @@
+#include "services/training/stage_params.h"
+
+#include "absl/strings/str_cat.h"
+
+namespace instascene::training {
+
+absl::StatusOr<Supervision> ParseSupervision(const std::string& name) {
+  if (name == "noisy2d") return Supervision::kNoisy2d;
+  if (name == "3d") return Supervision::k3d;
+  if (name == "3d+filtered2d") return Supervision::k3dFiltered2d;
+  if (name == "full") return Supervision::kFull;
+  return absl::InvalidArgumentError(
+      absl::StrCat("unknown supervision '", name, "' (noisy2d, 3d, 3d+filtered2d, full)"));
+}
+
+absl::Status TrainingOptions::Validate() const {
+  if (feature_dim < 2 || feature_dim > 64)
+    return absl::InvalidArgumentError("feature_dim must be in 2..64");
+  if (iterations < 0 || samples < 1 || pixel_pool < 1) {
+    return absl::InvalidArgumentError(
+        "iterations >= 0, samples >= 1 and pixel_pool >= 1 are required");
+  }
+  if (!(learning_rate > 0)) return absl::InvalidArgumentError("learning_rate must be positive");
+  if (multi_view_every < 1 || multi_view_window < 1)
+    return absl::InvalidArgumentError("multi-view settings must be >= 1");
+  return absl::OkStatus();
+}
+absl::Status SegmentStageOptions::Validate() const {
+  if (!(threshold > -1.0 && threshold <= 1.0))
+    return absl::InvalidArgumentError(absl::StrCat("threshold ", threshold, " is not in (-1, 1]"));
+  return absl::OkStatus();
+}
+
+const pipeline::ParamCodec<TrainStageOptions>& TrainCodec() {
+  using O = TrainStageOptions;
+  static const auto* codec = [] {
+    auto* c = new pipeline::ParamCodec<O>("train");
+    c->Int<int>("iterations", &O::iterations, 1, 1000000, "Optimisation steps")
+        .Int<int>("samples", &O::samples, 1, 1 << 20, "Samples per loss term and step")
+        .Int<int>("pixel_pool", &O::pixel_pool, 1, 1 << 20, "Traced pixels cached per view")
+        .Enum<Supervision>("supervision", &O::supervision,
+                           {{"noisy2d", Supervision::kNoisy2d},
+                            {"3d", Supervision::k3d},
+                            {"3d+filtered2d", Supervision::k3dFiltered2d},
+                            {"full", Supervision::kFull}},
+                           "Loss terms (paper Table 2)")
+        .Choice("method", &O::method, {"contrastive", "vote"},
+                "contrastive (the paper's feature field) or vote (training-free baseline)")
+        .Int<uint64_t>("seed", &O::seed, 0, int64_t{1} << 53, "Random seed")
+        .Check([](const O& o) { return o.Validate(); });
+    return c;
+  }();
+  return *codec;
+}
+
+const pipeline::ParamCodec<SegmentStageOptions>& SegmentCodec() {
+  using O = SegmentStageOptions;
+  static const auto* codec = [] {
+    auto* c = new pipeline::ParamCodec<O>("segment");
+    c->Real("threshold", &O::threshold, -1.0, 1.0,
+            "Segmentation threshold tau: a Gaussian joins an instance when its feature's "
+            "similarity to the instance mean exceeds it")
+        .Check([](const O& o) { return o.Validate(); });
+    return c;
+  }();
+  return *codec;
+}
+
+pipeline::StageSpec TrainSpec() {
+  pipeline::StageSpec spec;
+  spec.kind = "train";
+  spec.directory = "training";
+  spec.description =
+      "Spatial contrastive feature field on the decomposition (features + coarse labels)";
+  spec.inputs = {{"decompose", pipeline::InputMode::kOne}};
+  spec.parameters = TrainCodec().Schema();
+  spec.canonicalize = [](const nlohmann::json& p) { return TrainCodec().Canonicalize(p); };
+  return spec;
+}
+
+pipeline::StageSpec SegmentSpec() {
+  pipeline::StageSpec spec;
+  spec.kind = "segment";
+  spec.directory = "segmentation";
+  spec.description = "Final labels by the tau rule; one instance PLY per object (its items)";
+  spec.inputs = {{"train", pipeline::InputMode::kOne}};
+  spec.fans_out = true;
+  spec.parameters = SegmentCodec().Schema();
+  spec.canonicalize = [](const nlohmann::json& p) { return SegmentCodec().Canonicalize(p); };
+  return spec;
+}
+
+}  // namespace instascene::training
