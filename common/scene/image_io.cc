@@ -4,6 +4,7 @@
 
 #include <unistd.h>
 
+#include <OpenImageIO/filesystem.h>
 #include <OpenImageIO/imageio.h>
 
 #include <algorithm>
@@ -26,31 +27,23 @@ absl::Status OiioError(const std::string& path, const std::string& what,
       absl::StrCat(path, ": ", what, detail.empty() ? "" : ": ", detail));
 }
 
-// Temp name that keeps the extension (OIIO picks the format from it).
-std::string TempPath(const std::string& path) {
-  std::filesystem::path p(path);
-  return (p.parent_path() /
-          absl::StrCat(".", p.stem().string(), ".tmp", ::getpid(), p.extension().string()))
-      .string();
-}
-
+// Encodes in memory (the format follows the extension), then writes through the project's one
+// durable atomic write (common/core/file_io.h).
 absl::Status WritePixels(const std::string& path, int width, int height, int channels,
                          const OIIO::TypeDesc& format, const void* data) {
-  const std::string tmp = TempPath(path);
   auto out = OIIO::ImageOutput::create(path);
   if (!out) return OiioError(path, "no writer for this extension", OIIO::geterror());
+  if (!out->supports("ioproxy"))
+    return absl::InvalidArgumentError(
+        absl::StrCat(path, ": ", out->format_name(), " cannot be encoded in memory"));
+  std::vector<unsigned char> encoded;
+  OIIO::Filesystem::IOVecOutput proxy(encoded);
   OIIO::ImageSpec spec(width, height, channels, format);
-  if (!out->open(tmp, spec) || !out->write_image(format, data) || !out->close()) {
-    const std::string err = out->geterror();
-    std::remove(tmp.c_str());
-    return absl::UnavailableError(absl::StrCat(path, ": write failed: ", err));
-  }
-  // OpenImageIO writes the encoded file itself; it is then published like every other file
-  // (common/core/file_io.h): fsync, rename, fsync of the folder.
-  absl::Status s = SyncPath(tmp, /*directory=*/false);
-  if (s.ok()) s = RenameDurably(tmp, path);
-  if (!s.ok()) std::remove(tmp.c_str());
-  return s;
+  if (!out->set_ioproxy(&proxy) || !out->open(path, spec) || !out->write_image(format, data) ||
+      !out->close())
+    return absl::UnavailableError(absl::StrCat(path, ": encoding failed: ", out->geterror()));
+  return WriteFileAtomically(
+      path, absl::string_view(reinterpret_cast<const char*>(encoded.data()), encoded.size()));
 }
 
 }  // namespace

@@ -29,7 +29,7 @@ struct LabelMap {
 // Reads any format OpenImageIO knows (PNG, JPEG, EXR, ...).
 absl::StatusOr<Image> ReadImage(const std::string& path);
 // Writes 8-bit (or 16-bit when bits == 16) PNG/JPEG by extension; values clamped to [0, 1].
-// Written atomically (temp file + rename).
+// Encoded in memory and written atomically and durably (common/core/file_io.h).
 absl::Status WriteImage(const std::string& path, const Image& image, int bits = 8);
 
 // Reads a single-channel 8- or 16-bit integer label map; rejects multi-channel and float images.

@@ -89,6 +89,17 @@ TEST(ImageIo, ImagesAndLabelMapsRoundTrip) {
   ASSERT_TRUE(back.ok()) << back.status();
   for (size_t i = 0; i < image.pixels.size(); ++i)
     EXPECT_NEAR(back->pixels[i], image.pixels[i], 1.0 / 255);
+  // JPEG and 16-bit PNG encode in memory too; nothing but the files is left in the folder.
+  ASSERT_TRUE(WriteImage(dir + "/a.jpg", image).ok());
+  EXPECT_TRUE(ReadImage(dir + "/a.jpg").ok());
+  ASSERT_TRUE(WriteImage(dir + "/a16.png", image, 16).ok());
+  absl::StatusOr<Image> back16 = ReadImage(dir + "/a16.png");
+  ASSERT_TRUE(back16.ok());
+  EXPECT_NEAR(back16->pixels[5], image.pixels[5], 1.0 / 65535);
+  EXPECT_EQ(WriteImage(dir + "/a.unknownformat", image).code(), absl::StatusCode::kInvalidArgument);
+  size_t files = 0;
+  for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir)) ++files;
+  EXPECT_EQ(files, 3u);
   LabelMap labels{5, 2, {0, 1, 2, 300, 65535, 7, 7, 0, 9, 1000}};
   ASSERT_TRUE(WriteLabelMap(dir + "/m16.png", labels).ok());
   absl::StatusOr<LabelMap> labels_back = ReadLabelMap(dir + "/m16.png");
