@@ -94,7 +94,7 @@ echo
 echo "== Demo output =="
 echo "  demo-out/real/                         $(ls demo-out/real 2>/dev/null | wc -l) renders of the real captures (color, depth, surfel normals)"
 echo "  demo-out/synthetic/                    scene: images/, masks/ (noisy), gt/ (ground truth)"
-echo "  demo-out/synthetic/result/             fetched from the server: labels, features, instances/*.ply, scene_labelled.ply"
+echo "  demo-out/synthetic/stages/             every stage's output, fetched by scene name (result/ links to stages/segment/: labels, instances/*.ply)"
 echo "  demo-out/synthetic/instances_*.png     rendered instance maps"
 [ -d "$OUT/composite" ] && echo "  demo-out/composite/                    the real captures composed into one scene, and its result/"
 echo "  demo-out/server/                       the server's data: store/ (content-addressed blobs), jobs.db (SQLite queue)"

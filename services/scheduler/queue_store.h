@@ -41,8 +41,6 @@ class QueueTx {
   virtual absl::Status Update(const Job& job) = 0;
   // Ids of the jobs that list `id` as a dependency.
   virtual absl::StatusOr<std::vector<std::string>> Dependents(const std::string& id) = 0;
-  // Ids of the jobs a fan-out job created (parent = id).
-  virtual absl::StatusOr<std::vector<std::string>> Children(const std::string& id) = 0;
   // The next job to lease among queued jobs of `kinds` with pending == 0 and not_before <= now:
   // highest priority, then the scene with the fewest held jobs, then the scene leased least
   // recently, then submission order.

@@ -177,12 +177,6 @@ class SqliteTx final : public QueueTx {
     return Ids(s);
   }
 
-  absl::StatusOr<std::vector<std::string>> Children(const std::string& id) override {
-    Statement s(db_, "SELECT id FROM jobs WHERE parent = ? ORDER BY seq");
-    s.Bind(1, id);
-    return Ids(s);
-  }
-
   absl::StatusOr<std::optional<std::string>> NextReady(const std::vector<std::string>& kinds,
                                                        int64_t now_ms) override {
     std::vector<std::string> marks(kinds.size(), "?");
@@ -340,7 +334,6 @@ absl::Status SqliteQueueStore::Migrate(const std::string& path) {
       not_before_ms INTEGER NOT NULL, lease_expires_ms INTEGER NOT NULL, lease_ms INTEGER NOT NULL);
     CREATE INDEX jobs_ready ON jobs(state, pending, kind);
     CREATE INDEX jobs_by_scene ON jobs(scene);
-    CREATE INDEX jobs_by_parent ON jobs(parent);
     CREATE TABLE job_dependencies (job_id TEXT NOT NULL, name TEXT NOT NULL,
       dependency_id TEXT NOT NULL, PRIMARY KEY (job_id, name));
     CREATE INDEX dependencies_by_dependency ON job_dependencies(dependency_id);

@@ -53,9 +53,6 @@ class FailingTx final : public QueueTx {
   absl::StatusOr<std::vector<std::string>> Dependents(const std::string& id) override {
     return inner_.Dependents(id);
   }
-  absl::StatusOr<std::vector<std::string>> Children(const std::string& id) override {
-    return inner_.Children(id);
-  }
   absl::StatusOr<std::optional<std::string>> NextReady(const std::vector<std::string>& kinds,
                                                        int64_t now) override {
     return inner_.NextReady(kinds, now);
