@@ -1,0 +1,163 @@
+// HDBSCAN against brute-force references: core distances by sorting every distance, the MST's total
+// weight by Kruskal over all pairs, and clusterings whose right answer is known by construction.
+#include "services/training/hdbscan.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+#include <random>
+#include <set>
+
+namespace instascene::training {
+namespace {
+
+std::vector<float> Blobs(const std::vector<std::vector<float>>& centres, int per_blob, float sigma,
+                         int noise, uint64_t seed, int dim) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<float> g(0.0f, sigma);
+  std::uniform_real_distribution<float> u(-3.0f, 3.0f);
+  std::vector<float> p;
+  for (const auto& c : centres)
+    for (int i = 0; i < per_blob; ++i)
+      for (int d = 0; d < dim; ++d) p.push_back(c[d] + g(rng));
+  for (int i = 0; i < noise; ++i)
+    for (int d = 0; d < dim; ++d) p.push_back(u(rng));
+  return p;
+}
+
+double Dist(const float* a, const float* b, int dim) {
+  double s = 0;
+  for (int d = 0; d < dim; ++d) s += (a[d] - b[d]) * double(a[d] - b[d]);
+  return std::sqrt(s);
+}
+
+TEST(Hdbscan, CoreDistancesAndMstMatchBruteForce) {
+  const int dim = 5, n = 150;
+  std::mt19937_64 rng(3);
+  std::uniform_real_distribution<float> u(0, 1);
+  std::vector<float> p(n * dim);
+  for (float& x : p) x = u(rng);
+  const int k = 7;
+  const std::vector<double> core = CoreDistances(p.data(), n, dim, k, 2);
+  for (int i = 0; i < n; ++i) {
+    std::vector<double> d;
+    for (int j = 0; j < n; ++j)
+      if (j != i) d.push_back(Dist(&p[i * dim], &p[j * dim], dim));
+    std::sort(d.begin(), d.end());
+    EXPECT_NEAR(core[i], d[k - 1], 1e-5) << i;
+  }
+  const std::vector<MstEdge> mst = MutualReachabilityMst(p.data(), n, dim, core, 2);
+  ASSERT_EQ(mst.size(), size_t(n - 1));
+  // Kruskal over every pair of the mutual reachability graph.
+  struct E {
+    double w;
+    int a, b;
+  };
+  std::vector<E> edges;
+  for (int a = 0; a < n; ++a)
+    for (int b = a + 1; b < n; ++b)
+      edges.push_back({std::max({core[a], core[b], Dist(&p[a * dim], &p[b * dim], dim)}), a, b});
+  std::sort(edges.begin(), edges.end(), [](const E& x, const E& y) { return x.w < y.w; });
+  std::vector<int> parent(n);
+  std::iota(parent.begin(), parent.end(), 0);
+  std::function<int(int)> find = [&](int x) { return parent[x] == x ? x : parent[x] = find(parent[x]); };
+  double kruskal = 0;
+  for (const E& e : edges) {
+    const int a = find(e.a), b = find(e.b);
+    if (a != b) {
+      parent[a] = b;
+      kruskal += e.w;
+    }
+  }
+  double prim = 0;
+  std::set<uint32_t> touched;
+  for (const MstEdge& e : mst) {
+    prim += e.distance;
+    touched.insert(e.a);
+    touched.insert(e.b);
+  }
+  EXPECT_NEAR(prim, kruskal, 1e-4);
+  EXPECT_EQ(touched.size(), size_t(n));
+  // The same tree for any thread count.
+  const std::vector<MstEdge> one = MutualReachabilityMst(p.data(), n, dim, core, 1);
+  for (size_t i = 0; i < mst.size(); ++i) {
+    EXPECT_EQ(one[i].a, mst[i].a);
+    EXPECT_EQ(one[i].b, mst[i].b);
+  }
+}
+
+TEST(Hdbscan, SeparatedBlobsAreFoundAndScatteredPointsAreNoise) {
+  const int dim = 3;
+  const std::vector<std::vector<float>> centres = {{0, 0, 0}, {2, 0, 0}, {0, 2, 0}, {0, 0, 2}};
+  const std::vector<float> p = Blobs(centres, 80, 0.05f, 20, 7, dim);
+  HdbscanOptions o;
+  o.min_samples = 10;
+  o.min_cluster_size = 20;
+  o.cluster_selection_epsilon = 0;
+  o.allow_single_cluster = false;
+  auto labels = Hdbscan(p.data(), p.size() / dim, dim, o);
+  ASSERT_TRUE(labels.ok());
+  // Each blob is one cluster, different from the others.
+  std::set<int> ids;
+  for (int b = 0; b < 4; ++b) {
+    std::map<int, int> votes;
+    for (int i = 0; i < 80; ++i) ++votes[(*labels)[b * 80 + i]];
+    const auto best = std::max_element(votes.begin(), votes.end(),
+                                       [](auto& x, auto& y) { return x.second < y.second; });
+    EXPECT_NE(best->first, -1);
+    EXPECT_GE(best->second, 76) << "blob " << b;
+    ids.insert(best->first);
+  }
+  EXPECT_EQ(ids.size(), 4u);
+  EXPECT_EQ(*std::max_element(labels->begin(), labels->end()), 3);
+  int noise = 0;
+  for (int i = 320; i < 340; ++i) noise += (*labels)[i] == -1;
+  EXPECT_GE(noise, 15);  // scattered points are noise
+}
+
+TEST(Hdbscan, EpsilonMergesClustersCloserThanIt) {
+  const int dim = 2;
+  // Two pairs of blobs: inside a pair 0.3 apart, the pairs 5 apart.
+  const std::vector<std::vector<float>> centres = {{0, 0}, {0.3f, 0}, {5, 0}, {5.3f, 0}};
+  const std::vector<float> p = Blobs(centres, 60, 0.03f, 0, 11, dim);
+  HdbscanOptions o;
+  o.min_samples = 5;
+  o.min_cluster_size = 15;
+  o.allow_single_cluster = false;
+  o.cluster_selection_epsilon = 0;
+  auto fine = Hdbscan(p.data(), p.size() / dim, dim, o);
+  o.cluster_selection_epsilon = 1.0;
+  auto merged = Hdbscan(p.data(), p.size() / dim, dim, o);
+  ASSERT_TRUE(fine.ok() && merged.ok());
+  auto distinct = [](const std::vector<int>& l) {
+    std::set<int> s(l.begin(), l.end());
+    s.erase(-1);
+    return s.size();
+  };
+  EXPECT_EQ(distinct(*fine), 4u);
+  EXPECT_EQ(distinct(*merged), 2u);
+  EXPECT_EQ((*merged)[0], (*merged)[60]);    // blobs 0 and 1 together
+  EXPECT_NE((*merged)[0], (*merged)[120]);   // not with blob 2
+}
+
+TEST(Hdbscan, OneBlobIsASingleClusterOnlyWhenAllowed) {
+  const int dim = 4;
+  const std::vector<float> p = Blobs({{1, 1, 1, 1}}, 200, 0.1f, 0, 5, dim);
+  HdbscanOptions o;
+  o.min_samples = 10;
+  o.min_cluster_size = 30;
+  o.cluster_selection_epsilon = 0.5;
+  o.allow_single_cluster = true;
+  auto single = Hdbscan(p.data(), 200, dim, o);
+  ASSERT_TRUE(single.ok());
+  EXPECT_GE(std::count(single->begin(), single->end(), 0), 190);
+  EXPECT_EQ(*std::max_element(single->begin(), single->end()), 0);
+  EXPECT_FALSE(Hdbscan(p.data(), 1, dim, o).ok());
+  o.min_cluster_size = 1;
+  EXPECT_EQ(Hdbscan(p.data(), 200, dim, o).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace instascene::training
