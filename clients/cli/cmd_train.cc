@@ -71,8 +71,13 @@ absl::Status TrainAndSegment(const TrainArgs& args, const Scene& scene, const Ga
                    training::TrainFeatures(data, options, [&](int step, int total, double) {
                      if (step % 25 == 0 || step == total) bar.Update(step, total);
                    }));
-  SegmentationResult result = training::TrainedResult(trained, data, options.feature_dim,
-                                                      training::SegmentOptions{segment.threshold});
+  SegmentationResult result;
+  result.stage = "segment";
+  result.labels = data.labels3d;  // the coarse instances the labelling starts from
+  result.features = trained.features;
+  result.feature_dim = options.feature_dim;
+  ASSIGN_OR_RETURN(result.labels,
+                   training::FinalLabels(result, cloud, segment, args.threads, &result.metadata));
   result.metadata["supervision"] = training::TrainCodec().Encode(train)["supervision"];
   result.metadata["iterations"] = options.iterations;
   RETURN_IF_ERROR(WriteResult(args.out, result, cloud));
@@ -142,8 +147,7 @@ void AddTrainCommands(CLI::App& app, Action* action) {
             absl::StrCat(segment->features, ": result has no features"));
       SegmentationResult out = in;
       out.stage = "segment";
-      out.labels = training::SegmentByFeatures(in.features, in.feature_dim, in.labels,
-                                               training::SegmentOptions{options.threshold});
+      ASSIGN_OR_RETURN(out.labels, training::FinalLabels(in, cloud, options, 0, &out.metadata));
       RETURN_IF_ERROR(WriteResult(segment->out, out, cloud));
       RETURN_IF_ERROR(training::ExportInstances(segment->out, cloud, out.labels));
       std::fprintf(stderr, "segment: wrote %s\n", segment->out.c_str());

@@ -37,6 +37,8 @@ void StageFlags::Add(CLI::App* cmd, const pipeline::StageSpec& spec) {
       f.option = cmd->add_flag(f.flag, f.set, HelpText(p));
     } else {
       f.option = cmd->add_option(f.flag, f.text, HelpText(p));
+      static constexpr const char* kTypeNames[] = {"BOOL", "INT", "FLOAT", "TEXT"};
+      f.option->type_name(kTypeNames[static_cast<int>(p.type)]);
       if (!p.choices.empty()) f.option->check(CLI::IsMember(p.choices));
     }
   }

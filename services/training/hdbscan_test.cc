@@ -2,6 +2,8 @@
 // weight by Kruskal over all pairs, and clusterings whose right answer is known by construction.
 #include "services/training/hdbscan.h"
 
+#include "services/training/density_labels.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -157,6 +159,49 @@ TEST(Hdbscan, OneBlobIsASingleClusterOnlyWhenAllowed) {
   EXPECT_FALSE(Hdbscan(p.data(), 1, dim, o).ok());
   o.min_cluster_size = 1;
   EXPECT_EQ(Hdbscan(p.data(), 200, dim, o).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace instascene::training
+
+namespace instascene::training {
+namespace {
+
+TEST(DensityLabels, GroupsWithDistinctFeaturesBecomeInstancesForAnyVoxelBudget) {
+  // Three spatial groups of 600 Gaussians; the first two share one feature direction (one object
+  // split in space by nothing: same instance), the third has its own.
+  GaussianCloud cloud;
+  cloud.Resize(1800);
+  std::mt19937_64 rng(2);
+  std::normal_distribution<float> g(0.0f, 0.02f);
+  std::vector<float> features(1800 * 4, 0.0f);
+  for (int i = 0; i < 1800; ++i) {
+    const int group = i / 600;
+    const float cx = group == 0 ? -1.0f : group == 1 ? -0.8f : 1.0f;
+    cloud.positions[3 * i] = cx + 5 * g(rng);
+    cloud.positions[3 * i + 1] = 5 * g(rng);
+    cloud.positions[3 * i + 2] = 5 * g(rng);
+    features[i * 4 + (group == 2 ? 1 : 0)] = 1.0f;
+    for (int d = 0; d < 4; ++d) features[i * 4 + d] += g(rng);
+  }
+  for (int budget : {40000, 300}) {
+    DensityLabelOptions o;
+    o.max_points = budget;
+    o.hdbscan.allow_single_cluster = false;
+    auto labels = LabelByDensity(cloud, features, 4, o);
+    ASSERT_TRUE(labels.ok()) << labels.status();
+    EXPECT_LE(labels->clustered_points, size_t(budget));
+    EXPECT_EQ(labels->clusters, 2u) << budget;
+    std::vector<uint32_t> l = labels->labels;
+    EXPECT_EQ(std::count(l.begin(), l.end(), 0u), 0);  // noise joins its nearest cluster
+    EXPECT_EQ(std::count(l.begin(), l.begin() + 1200, l[0]), 1200) << budget;
+    EXPECT_EQ(std::count(l.begin() + 1200, l.end(), l[1200]), 600) << budget;
+    EXPECT_NE(l[0], l[1200]);
+    o.hdbscan.num_threads = 1;
+    EXPECT_EQ(LabelByDensity(cloud, features, 4, o)->labels, l);  // thread count never matters
+  }
+  EXPECT_EQ(LabelByDensity(cloud, std::vector<float>(10), 4, {}).status().code(),
+            absl::StatusCode::kInvalidArgument);
 }
 
 }  // namespace

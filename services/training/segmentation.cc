@@ -10,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
 #include "common/splat/gaussian_ply.h"
+#include "services/training/density_labels.h"
 #include "common/splat/ply.h"
 
 namespace instascene::training {
@@ -69,6 +70,32 @@ SegmentationResult TrainedResult(const TrainingResult& trained, const TrainingDa
   result.features = trained.features;
   result.feature_dim = dim;
   return result;
+}
+
+absl::StatusOr<std::vector<uint32_t>> FinalLabels(const SegmentationResult& trained,
+                                                  const GaussianCloud& cloud,
+                                                  const SegmentStageOptions& options,
+                                                  int num_threads, nlohmann::json* metadata) {
+  (*metadata)["labelling"] = options.labelling;
+  if (trained.feature_dim == 0) return trained.labels;  // e.g. the vote baseline: nothing to do
+  if (options.labelling == "tau") {
+    (*metadata)["threshold"] = options.threshold;
+    return SegmentByFeatures(trained.features, trained.feature_dim, trained.labels,
+                             SegmentOptions{options.threshold});
+  }
+  DensityLabelOptions o;
+  o.hdbscan.min_samples = options.min_samples;
+  o.hdbscan.min_cluster_size = options.min_cluster_size;
+  o.hdbscan.cluster_selection_epsilon = options.cluster_selection_epsilon;
+  o.hdbscan.num_threads = num_threads;
+  o.voxel = options.voxel;
+  o.max_points = options.max_points;
+  ASSIGN_OR_RETURN(DensityLabels labels,
+                   LabelByDensity(cloud, trained.features, trained.feature_dim, o));
+  (*metadata)["hdbscan"] = {{"clusters", labels.clusters},
+                            {"points", labels.clustered_points},
+                            {"voxel", labels.voxel}};
+  return labels.labels;
 }
 
 absl::Status ExportInstances(const std::string& directory, const GaussianCloud& cloud,

@@ -14,6 +14,7 @@
 #include "common/eval/result.h"
 #include "common/splat/gaussian_cloud.h"
 #include "services/training/feature_field.h"
+#include "services/training/stage_params.h"
 
 namespace instascene::training {
 
@@ -31,6 +32,13 @@ std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int 
 // the raw features kept for click queries and evaluation.
 SegmentationResult TrainedResult(const TrainingResult& trained, const TrainingData& data, int dim,
                                  const SegmentOptions& options);
+
+// Final labels of a trained result (features + coarse labels) by the segment stage's labelling;
+// what was done goes into `metadata`.
+absl::StatusOr<std::vector<uint32_t>> FinalLabels(const SegmentationResult& trained,
+                                                  const GaussianCloud& cloud,
+                                                  const SegmentStageOptions& options,
+                                                  int num_threads, nlohmann::json* metadata);
 
 // instances/<id>.ply (every original property), scene_labelled.ply (+ instance_id), instances.json.
 absl::Status ExportInstances(const std::string& directory, const GaussianCloud& cloud,

@@ -57,9 +57,20 @@ const pipeline::ParamCodec<SegmentStageOptions>& SegmentCodec() {
   using O = SegmentStageOptions;
   static const auto* codec = [] {
     auto* c = new pipeline::ParamCodec<O>("segment");
-    c->Real("threshold", &O::threshold, -1.0, 1.0,
-            "Segmentation threshold tau: a Gaussian joins an instance when its feature's "
-            "similarity to the instance mean exceeds it")
+    c->Choice("labelling", &O::labelling, {"tau", "hdbscan"},
+              "tau (coarse instances select Gaussians by feature similarity, paper) or hdbscan "
+              "(density clustering of the features, the released code's final labelling)")
+        .Real("threshold", &O::threshold, -1.0, 1.0,
+              "Segmentation threshold tau: a Gaussian joins an instance when its feature's "
+              "similarity to the instance mean exceeds it")
+        .Int("min_samples", &O::min_samples, 1, 1000, "hdbscan: neighbours of a core point")
+        .Int("min_cluster_size", &O::min_cluster_size, 2, 100000, "hdbscan: smallest cluster")
+        .Real("cluster_selection_epsilon", &O::cluster_selection_epsilon, 0.0, 2.0,
+              "hdbscan: clusters closer than this (feature distance) merge")
+        .Real("voxel", &O::voxel, 1e-4, 2.0,
+              "hdbscan: voxel side in the scene box normalised to [-1, 1]")
+        .Int("max_points", &O::max_points, 2, 40000,
+             "hdbscan: most voxels clustered (the voxel doubles until this holds; O(n^2) time)")
         .Check([](const O& o) { return o.Validate(); });
     return c;
   }();

@@ -15,7 +15,16 @@ struct TrainStageOptions : TrainingOptions {
 };
 
 struct SegmentStageOptions {
+  // "tau": each coarse instance selects the Gaussians whose feature matches its mean (paper);
+  // "hdbscan": density clustering of the features (the released code's final labelling).
+  std::string labelling = "tau";
   double threshold = 0.9;  // tau_seg (paper), against the un-normalised mean
+  // hdbscan (ALGORITHM.md 5.5; max_points bounds the O(n^2) clustering on CPU)
+  int min_samples = 30;
+  int min_cluster_size = 30;
+  double cluster_selection_epsilon = 0.1;
+  double voxel = 0.01;
+  int max_points = 12000;
   absl::Status Validate() const;
 };
 

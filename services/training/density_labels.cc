@@ -1,0 +1,109 @@
+#include "services/training/density_labels.h"
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+#include <tuple>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/geometry/point_index.h"
+
+namespace instascene::training {
+namespace {
+
+using VoxelKey = std::tuple<int, int, int>;
+
+// Voxel of every Gaussian (index into the sorted voxel list) at side `voxel`.
+std::vector<uint32_t> AssignVoxels(const std::vector<Eigen::Vector3f>& unit, double voxel,
+                                   size_t* count) {
+  std::map<VoxelKey, uint32_t> ids;
+  std::vector<VoxelKey> keys(unit.size());
+  for (size_t g = 0; g < unit.size(); ++g) {
+    const Eigen::Vector3f& p = unit[g];
+    keys[g] = {static_cast<int>(std::floor((p.x() + 1.0) / voxel)),
+               static_cast<int>(std::floor((p.y() + 1.0) / voxel)),
+               static_cast<int>(std::floor((p.z() + 1.0) / voxel))};
+    ids.emplace(keys[g], 0);
+  }
+  uint32_t next = 0;
+  for (auto& [key, id] : ids) id = next++;  // ordered by key: independent of Gaussian order
+  std::vector<uint32_t> voxel_of(unit.size());
+  for (size_t g = 0; g < unit.size(); ++g) voxel_of[g] = ids.at(keys[g]);
+  *count = ids.size();
+  return voxel_of;
+}
+
+}  // namespace
+
+absl::StatusOr<DensityLabels> LabelByDensity(const GaussianCloud& cloud,
+                                             const std::vector<float>& features, int dim,
+                                             const DensityLabelOptions& options) {
+  const size_t n = cloud.size();
+  if (dim < 1 || features.size() != n * static_cast<size_t>(dim))
+    return absl::InvalidArgumentError(absl::StrCat("density labels: ", features.size(),
+                                                   " feature values for ", n, " Gaussians of ",
+                                                   "dimension ", dim));
+  if (!(options.voxel > 0) || options.max_points < 2)
+    return absl::InvalidArgumentError("density labels: need voxel > 0 and max_points >= 2");
+  DensityLabels out;
+  out.labels.assign(n, 0);
+  if (n < 2) return out;
+  // Centres in [-1, 1] by the robust box.
+  const Eigen::AlignedBox3f box = RobustBounds(cloud);
+  const Eigen::Vector3f centre = box.center();
+  const float half = std::max(0.5f * box.sizes().maxCoeff(), 1e-6f);
+  std::vector<Eigen::Vector3f> unit(n);
+  for (size_t g = 0; g < n; ++g) {
+    const Eigen::Vector3f p(&cloud.positions[3 * g]);
+    unit[g] = ((p - centre) / half).cwiseMax(-1.0f).cwiseMin(1.0f);
+  }
+  double voxel = options.voxel;
+  size_t voxels = 0;
+  std::vector<uint32_t> voxel_of = AssignVoxels(unit, voxel, &voxels);
+  while (voxels > static_cast<size_t>(options.max_points)) {
+    voxel *= 2;
+    voxel_of = AssignVoxels(unit, voxel, &voxels);
+  }
+  // Mean normalised feature and centre per voxel.
+  std::vector<float> mean(voxels * dim, 0.0f);
+  std::vector<Eigen::Vector3f> centres(voxels, Eigen::Vector3f::Zero());
+  std::vector<uint32_t> members(voxels, 0);
+  for (size_t g = 0; g < n; ++g) {
+    const float* f = &features[g * dim];
+    double norm = 0;
+    for (int d = 0; d < dim; ++d) norm += double(f[d]) * f[d];
+    const float inv = static_cast<float>(1.0 / (std::sqrt(norm) + 1e-9));
+    float* m = &mean[voxel_of[g] * dim];
+    for (int d = 0; d < dim; ++d) m[d] += f[d] * inv;
+    centres[voxel_of[g]] += unit[g];
+    ++members[voxel_of[g]];
+  }
+  for (size_t v = 0; v < voxels; ++v) {
+    for (int d = 0; d < dim; ++d) mean[v * dim + d] /= static_cast<float>(members[v]);
+    centres[v] /= static_cast<float>(members[v]);
+  }
+  out.clustered_points = voxels;
+  out.voxel = voxel;
+  if (voxels < 2) return out;
+  ASSIGN_OR_RETURN(std::vector<int> clusters, Hdbscan(mean.data(), voxels, dim, options.hdbscan));
+  // Noise voxels take the cluster of the nearest clustered voxel.
+  std::vector<Eigen::Vector3f> clustered;
+  std::vector<int> clustered_label;
+  for (size_t v = 0; v < voxels; ++v) {
+    if (clusters[v] < 0) continue;
+    clustered.push_back(centres[v]);
+    clustered_label.push_back(clusters[v]);
+  }
+  if (clustered.empty()) return out;  // nothing clustered: every Gaussian stays 0
+  PointIndex3 index(std::move(clustered));
+  for (size_t v = 0; v < voxels; ++v) {
+    if (clusters[v] >= 0) continue;
+    clusters[v] = clustered_label[index.Nearest(centres[v]).first];
+  }
+  out.clusters = static_cast<size_t>(*std::max_element(clusters.begin(), clusters.end()) + 1);
+  for (size_t g = 0; g < n; ++g) out.labels[g] = static_cast<uint32_t>(clusters[voxel_of[g]] + 1);
+  return out;
+}
+
+}  // namespace instascene::training
