@@ -12,8 +12,19 @@
 //   px
 //      width; we scale that to the image), and ids are shuffled per view (ids carry no meaning
 //      across views).
-// Level "none" keeps only step 6 (ground truth with random ids). Deterministic from the seed.
-// Stateless, thread-safe.
+// Level "none" keeps only step 6 (ground truth with random ids).
+//
+// A second, independent family ("sam-low", "sam-medium", "sam-high") simulates a part-aware
+// segmenter (SAM-style automatic masks), so that methods tuned on the first family can be reported
+// on one they never saw. Per view, independently (so views disagree):
+//   a. part splits: an instance is cut into 2-3 parts along its longer image axis at random
+//      quantiles (caps, handles, heads), not by a line through the centroid;
+//   b. merges of touching instances, and of non-touching instances of similar image area (identical
+//      objects segmented as one "kind of thing");
+//   c. misses of small instances;
+//   d. boundary bleed: a mask grows `bleed_px` into the instance it touches (not into background);
+//   e. label flicker: a few small holes punched into masks;
+//   then step 6 above. Deterministic from the seed. Stateless, thread-safe.
 #pragma once
 
 #include <cstdint>
@@ -33,9 +44,16 @@ struct MaskNoiseOptions {
   float spurious_per_view = 0.0f;      // expected spurious background masks per view
   float min_area_fraction = 0.00025f;  // masks under this fraction of the image are removed
                                        // (CropFormer's 400 px at 1600x1000)
+  // The part-aware family ("sam-*"): when true, the steps a-e above replace steps 1-5.
+  bool part_family = false;
+  float part_split_probability = 0.0f;    // per instance: cut into 2-3 parts
+  float similar_merge_probability = 0.0f;  // per non-touching pair of similar area (within 25 %)
+  int bleed_px = 0;                        // a mask grows this far into a touching instance
+  float flicker_probability = 0.0f;        // per instance: small holes punched into its mask
 
   // Presets calibrated to the failure rates reported for class-agnostic segmenters on cluttered
-  // indoor scenes (docs/SYNTHETIC.md): none, low, medium, high.
+  // indoor scenes (docs/SYNTHETIC.md): none, low, medium, high; and the part-aware family
+  // sam-low, sam-medium, sam-high.
   static absl::StatusOr<MaskNoiseOptions> Level(const std::string& level);
 };
 

@@ -205,6 +205,57 @@ TEST(MaskNoise, MergesSplitsAndMissesHappenAtTheirRates) {
             SimulateSegmenter(gt, *MaskNoiseOptions::Level("high"), 9).labels);
 }
 
+TEST(MaskNoise, PartFamilySplitsIntoPartsMergesLookAlikesBleedsAndFlickers) {
+  // A square (3) touching a wider rectangle (7), and a far square of about the size of 3 (5).
+  LabelMap gt{80, 60, std::vector<uint16_t>(80 * 60, 0)};
+  for (int y = 10; y < 30; ++y)
+    for (int x = 10; x < 60; ++x) gt.labels[y * 80 + x] = x < 30 ? 3 : 7;
+  for (int y = 40; y < 58; ++y)
+    for (int x = 55; x < 77; ++x) gt.labels[y * 80 + x] = 5;
+  auto count = [](const LabelMap& m) {
+    std::set<uint16_t> ids(m.labels.begin(), m.labels.end());
+    ids.erase(0);
+    return ids.size();
+  };
+  MaskNoiseOptions parts;
+  parts.part_family = true;
+  parts.part_split_probability = 1.0f;
+  const LabelMap split = SimulateSegmenter(gt, parts, 3);
+  EXPECT_GE(count(split), 6u);  // every square in 2-3 parts
+  // Parts are bands along the longer axis: square 3 (20 wide, 20 tall) splits along y.
+  MaskNoiseOptions lookalike;
+  lookalike.part_family = true;
+  lookalike.similar_merge_probability = 1.0f;
+  const LabelMap merged = SimulateSegmenter(gt, lookalike, 4);
+  EXPECT_EQ(merged.labels[20 * 80 + 15], merged.labels[50 * 80 + 60]);  // 3 and far 5: one mask
+  EXPECT_NE(merged.labels[20 * 80 + 15], merged.labels[20 * 80 + 45]);  // touching 7 is not
+  MaskNoiseOptions bleed;
+  bleed.part_family = true;
+  bleed.bleed_px = 3;
+  int moved = 0;
+  for (uint64_t seed = 0; seed < 10; ++seed) {
+    const LabelMap b = SimulateSegmenter(gt, bleed, seed);
+    // Column 30 belongs to 7; a bleed of 3 replaces it by 3's mask in some views.
+    moved += b.labels[20 * 80 + 30] == b.labels[20 * 80 + 25];
+    EXPECT_EQ(b.labels[5 * 80 + 5], 0);  // background never bleeds
+  }
+  EXPECT_GT(moved, 0);
+  MaskNoiseOptions flicker;
+  flicker.part_family = true;
+  flicker.flicker_probability = 1.0f;
+  const LabelMap f = SimulateSegmenter(gt, flicker, 5);
+  size_t holes = 0;
+  for (size_t p = 0; p < gt.labels.size(); ++p) holes += gt.labels[p] != 0 && f.labels[p] == 0;
+  EXPECT_GT(holes, 0u);
+  // The presets exist, differ from the first family and are deterministic.
+  for (const char* level : {"sam-low", "sam-medium", "sam-high"}) {
+    auto o = MaskNoiseOptions::Level(level);
+    ASSERT_TRUE(o.ok()) << level;
+    EXPECT_TRUE(o->part_family);
+    EXPECT_EQ(SimulateSegmenter(gt, *o, 9).labels, SimulateSegmenter(gt, *o, 9).labels);
+  }
+}
+
 TEST(SceneWriter, WritesImagesMasksAndGroundTruth) {
   const instascene::testing::ScopedTempDir temp("synth_writer");
   const std::string dir = temp.Sub("scene");
