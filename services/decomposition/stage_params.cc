@@ -55,14 +55,10 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
 }
 
 pipeline::StageSpec DecomposeSpec() {
-  pipeline::StageSpec spec;
-  spec.kind = "decompose";
-  spec.directory = "decomposition";
-  spec.description =
-      "Spatial Gaussian trackers + view-consensus mask clustering: coarse 3D instances";
-  spec.parameters = DecomposeCodec().Schema();
-  spec.canonicalize = [](const nlohmann::json& p) { return DecomposeCodec().Canonicalize(p); };
-  return spec;
+  return pipeline::MakeStageSpec(
+      "decompose", "decomposition",
+      "Spatial Gaussian trackers + view-consensus mask clustering: coarse 3D instances", {},
+      /*fans_out=*/false, DecomposeCodec());
 }
 
 }  // namespace instascene::decomposition

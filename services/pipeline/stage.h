@@ -62,6 +62,22 @@ struct StageSpec {
   std::function<absl::StatusOr<nlohmann::json>(const nlohmann::json&)> canonicalize;
 };
 
+// A spec whose parameters and canonicaliser come from `codec` (which must outlive the spec).
+template <typename O>
+StageSpec MakeStageSpec(std::string kind, std::string directory, std::string description,
+                        std::vector<PlannedInput> inputs, bool fans_out,
+                        const ParamCodec<O>& codec) {
+  StageSpec spec;
+  spec.kind = std::move(kind);
+  spec.directory = std::move(directory);
+  spec.description = std::move(description);
+  spec.inputs = std::move(inputs);
+  spec.fans_out = fans_out;
+  spec.parameters = codec.Schema();
+  spec.canonicalize = [&codec](const nlohmann::json& p) { return codec.Canonicalize(p); };
+  return spec;
+}
+
 struct StageDefinition {
   StageSpec spec;
   RunFunction run;  // null: this binary validates the stage's parameters but cannot run it

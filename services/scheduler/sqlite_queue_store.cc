@@ -141,30 +141,12 @@ class SqliteTx final : public QueueTx {
   }
 
   absl::Status Update(const Job& j) override {
-    Statement s(db_,
-                "UPDATE jobs SET pending=?, items=?, plans=?, state=?, priority=?, attempts=?, "
-                "max_attempts=?, output=?, error=?, worker=?, lease_token=?, progress=?, "
-                "cancel_requested=?, updated_ms=?, not_before_ms=?, lease_expires_ms=?, "
-                "lease_ms=? WHERE id=?");
-    int i = 1;
-    s.Bind(i++, int64_t{j.pending});
-    s.Bind(i++, j.items);
-    s.Bind(i++, j.plans.dump());
-    s.Bind(i++, Code(j.state));
-    s.Bind(i++, int64_t{j.priority});
-    s.Bind(i++, int64_t{j.attempts});
-    s.Bind(i++, int64_t{j.max_attempts});
-    s.Bind(i++, DigestText(j.output_manifest));
-    s.Bind(i++, j.error);
-    s.Bind(i++, j.worker_id);
-    s.Bind(i++, j.lease_token);
-    s.Bind(i++, j.progress.ToJson().dump());
-    s.Bind(i++, int64_t{j.cancel_requested});
-    s.Bind(i++, j.updated_ms);
-    s.Bind(i++, j.not_before_ms);
-    s.Bind(i++, j.lease_expires_ms);
-    s.Bind(i++, j.lease_ms);
-    s.Bind(i++, j.id);
+    // Every column from the job (the immutable ones are rewritten with their own values).
+    std::vector<std::string> marks(26, "?");
+    Statement s(db_, absl::StrCat("UPDATE jobs SET (", kColumns, ") = (", absl::StrJoin(marks, ","),
+                                  ") WHERE id = ?"));
+    BindJob(s, j, 1);
+    s.Bind(27, j.id);
     RETURN_IF_ERROR(s.Step().status());
     if (sqlite3_changes(db_) != 1)
       return absl::NotFoundError(absl::StrCat("job ", j.id, " not found"));

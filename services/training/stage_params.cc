@@ -78,27 +78,17 @@ const pipeline::ParamCodec<SegmentStageOptions>& SegmentCodec() {
 }
 
 pipeline::StageSpec TrainSpec() {
-  pipeline::StageSpec spec;
-  spec.kind = "train";
-  spec.directory = "training";
-  spec.description =
-      "Spatial contrastive feature field on the decomposition (features + coarse labels)";
-  spec.inputs = {{"decompose", pipeline::InputMode::kOne}};
-  spec.parameters = TrainCodec().Schema();
-  spec.canonicalize = [](const nlohmann::json& p) { return TrainCodec().Canonicalize(p); };
-  return spec;
+  return pipeline::MakeStageSpec(
+      "train", "training",
+      "Spatial contrastive feature field on the decomposition (features + coarse labels)",
+      {{"decompose", pipeline::InputMode::kOne}}, /*fans_out=*/false, TrainCodec());
 }
 
 pipeline::StageSpec SegmentSpec() {
-  pipeline::StageSpec spec;
-  spec.kind = "segment";
-  spec.directory = "segmentation";
-  spec.description = "Final labels by the tau rule; one instance PLY per object (its items)";
-  spec.inputs = {{"train", pipeline::InputMode::kOne}};
-  spec.fans_out = true;
-  spec.parameters = SegmentCodec().Schema();
-  spec.canonicalize = [](const nlohmann::json& p) { return SegmentCodec().Canonicalize(p); };
-  return spec;
+  return pipeline::MakeStageSpec(
+      "segment", "segmentation",
+      "Final labels (tau rule or HDBSCAN); one instance PLY per object (its items)",
+      {{"train", pipeline::InputMode::kOne}}, /*fans_out=*/true, SegmentCodec());
 }
 
 }  // namespace instascene::training
