@@ -23,9 +23,9 @@ build: deps configure
 	cmake --build $(BUILD_DIR) -j $(JOBS)
 
 # Tests run with TMPDIR set to a fresh directory that must be empty again afterwards: no test may
-# leave anything behind.
+# leave anything behind. It is world-readable: the PostgreSQL test server runs as the postgres user.
 test: build
-	@tmp=$$(mktemp -d) && cd $(BUILD_DIR) && status=0; \
+	@tmp=$$(mktemp -d) && chmod 755 $$tmp && cd $(BUILD_DIR) && status=0; \
 	  TMPDIR=$$tmp ctest --output-on-failure -j $(JOBS) || status=$$?; \
 	  left=$$(find $$tmp -mindepth 1 -maxdepth 2 | head -20); \
 	  if [ -n "$$left" ]; then echo "tests left files behind in TMPDIR:"; echo "$$left"; status=1; fi; \

@@ -24,7 +24,7 @@ PACKAGES=(
   libssl-dev
   libnanoflann-dev
   libcpp-httplib-dev
-  libpqxx-dev
+  libpqxx-dev postgresql-15
   zlib1g-dev libpng-dev
 )
 

@@ -57,6 +57,7 @@ nlohmann::json JobJson(const v1::Job& j) {
                         {"scene", j.scene()},
                         {"state", scheduler::StateName(j.state())},
                         {"attempts", j.attempts()},
+                        {"worker", j.worker_id()},
                         {"item", j.item()},
                         {"parent", j.parent()},
                         {"error", j.error()},

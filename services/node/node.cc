@@ -10,6 +10,8 @@
 #include "common/core/file_io.h"
 #include "common/core/status.h"
 #include "common/rpc/server.h"
+#include "absl/strings/match.h"
+#include "services/scheduler/postgres_queue_store.h"
 #include "services/scheduler/scheduler_service.h"
 #include "services/scheduler/sqlite_queue_store.h"
 #include "services/store/remote_blob_store.h"
@@ -30,6 +32,24 @@ absl::Status NodeOptions::Validate() const {
   if (drain_seconds < 0) return absl::InvalidArgumentError("--drain-seconds must be >= 0");
   return store_options.Validate();
 }
+
+namespace {
+
+absl::StatusOr<std::unique_ptr<scheduler::JobQueue>> OpenQueue(
+    const NodeOptions& options, const scheduler::QueueOptions& queue_options) {
+  const std::string& q = options.queue;
+  if (q.empty())
+    return scheduler::OpenSqliteJobQueue((fs::path(options.data_dir) / "jobs.db").string(),
+                                         queue_options);
+  if (absl::StartsWith(q, "sqlite:"))
+    return scheduler::OpenSqliteJobQueue(q.substr(7), queue_options);
+  if (absl::StartsWith(q, "postgres://") || absl::StartsWith(q, "postgresql://"))
+    return scheduler::OpenPostgresJobQueue(q, queue_options);
+  return absl::InvalidArgumentError(
+      absl::StrCat("--queue: expected sqlite:PATH or postgres://..., not '", q.substr(0, 80), "'"));
+}
+
+}  // namespace
 
 absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& stages,
                      const std::vector<StageService>& available) {
@@ -81,8 +101,7 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
     scheduler::QueueOptions queue_options;
     queue_options.lease_ms = int64_t{options.lease_seconds} * 1000;
     queue_options.max_lease_ms = std::max(queue_options.max_lease_ms, queue_options.lease_ms);
-    ASSIGN_OR_RETURN(queue, scheduler::OpenSqliteJobQueue(
-                                (fs::path(options.data_dir) / "jobs.db").string(), queue_options));
+    ASSIGN_OR_RETURN(queue, OpenQueue(options, queue_options));
     scheduler::SchedulerServiceOptions scheduler_options;
     scheduler_options.rescue_interval_ms = std::min(1000, options.lease_seconds * 250);
     scheduler_svc = std::make_unique<scheduler::SchedulerService>(queue.get(), blob_store, &stages,

@@ -32,6 +32,10 @@ struct NodeOptions {
   bool run_scheduler = true;
   std::vector<std::string> workers;  // stage services to run here, by name (see StageService)
   std::string store_address;         // where the store is when !run_store
+  // The job queue's storage: "" or "sqlite:PATH" (embedded default: DATA/jobs.db), or a PostgreSQL
+  // URI "postgres://HOST[:PORT]/DB?..." (scale-out; several schedulers may share it). Passwords
+  // come from PGPASSWORD or ~/.pgpass, never from this flag.
+  std::string queue;
   std::string scheduler_address;     // where the scheduler is when !run_scheduler
   int lease_seconds = 30;            // job lease length; heartbeats renew it every lease/4
   int drain_seconds = 30;            // SIGTERM: how long running jobs may take to finish

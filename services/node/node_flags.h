@@ -21,6 +21,9 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
   if (needs_scheduler_address)
     app.add_option("--scheduler", o->scheduler_address, "Address of the scheduler service")
         ->required();
+  app.add_option("--queue", o->queue,
+                 "Job queue storage: sqlite:PATH (default DATA/jobs.db) or postgres://HOST[:PORT]/DB "
+                 "(password from PGPASSWORD or ~/.pgpass)");
   app.add_option("--lease-seconds", o->lease_seconds, "Job lease length in seconds")
       ->capture_default_str();
   app.add_option("--drain-seconds", o->drain_seconds,

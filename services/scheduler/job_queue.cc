@@ -534,16 +534,20 @@ absl::StatusOr<SceneSummary> JobQueue::GetScene(const std::string& scene) {
 absl::StatusOr<int> JobQueue::RescueExpired() {
   int handled = 0;
   RETURN_IF_ERROR(store_->Transact(false, [&](QueueTx& tx) -> absl::Status {
-    ASSIGN_OR_RETURN(std::vector<std::string> expired, tx.Expired(clock_->NowMs()));
+    const int64_t now = clock_->NowMs();
+    ASSIGN_OR_RETURN(std::vector<std::string> expired, tx.Expired(now));
+    handled = 0;
     for (const std::string& id : expired) {
       ASSIGN_OR_RETURN(Job job, Load(tx, id));
+      // Another scheduler replica may have completed, rescued or renewed it meanwhile.
+      if (!IsHeld(job.state) || job.lease_expires_ms >= now) continue;
+      ++handled;
       RETURN_IF_ERROR(
           RetryOrFail(tx, &job,
                       absl::StrCat("lease of worker '", job.worker_id, "' expired (attempt ",
                                    job.attempts, " of ", job.max_attempts, ")"),
                       /*retryable=*/true));
     }
-    handled = static_cast<int>(expired.size());
     return absl::OkStatus();
   }));
   return handled;
