@@ -30,6 +30,8 @@ absl::Status NodeOptions::Validate() const {
     return absl::InvalidArgumentError("nothing to run");
   if (lease_seconds < 2) return absl::InvalidArgumentError("--lease-seconds must be >= 2");
   if (drain_seconds < 0) return absl::InvalidArgumentError("--drain-seconds must be >= 0");
+  if (!(retention_hours >= 0 && retention_hours <= 24 * 3650))
+    return absl::InvalidArgumentError("--retention-hours must be in [0, 87600]");
   return store_options.Validate();
 }
 
@@ -104,6 +106,7 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
     ASSIGN_OR_RETURN(queue, OpenQueue(options, queue_options));
     scheduler::SchedulerServiceOptions scheduler_options;
     scheduler_options.rescue_interval_ms = std::min(1000, options.lease_seconds * 250);
+    scheduler_options.retention_ms = static_cast<int64_t>(options.retention_hours * 3600e3);
     scheduler_svc = std::make_unique<scheduler::SchedulerService>(queue.get(), blob_store, &stages,
                                                                   scheduler_options);
     services.push_back(scheduler_svc.get());

@@ -37,6 +37,7 @@ struct NodeOptions {
   // come from PGPASSWORD or ~/.pgpass, never from this flag.
   std::string queue;
   std::string scheduler_address;     // where the scheduler is when !run_scheduler
+  double retention_hours = 0;     // scheduler: prune jobs finished longer ago (0 = keep)
   int lease_seconds = 30;            // job lease length; heartbeats renew it every lease/4
   int drain_seconds = 30;            // SIGTERM: how long running jobs may take to finish
   int num_threads = 0;               // per job; 0 = all cores

@@ -105,6 +105,9 @@ class JobQueue {
   absl::StatusOr<SceneSummary> GetScene(const std::string& scene);
   // Returns expired leases to the queue (or fails / cancels them); the number handled.
   absl::StatusOr<int> RescueExpired();
+  // Retention: deletes jobs finished more than `retention_ms` ago that no unfinished job depends
+  // on. A pruned result is recomputed if its pipeline is submitted again. Returns how many.
+  absl::StatusOr<int> PruneFinished(int64_t retention_ms);
 
   const QueueOptions& options() const { return options_; }
 

@@ -51,6 +51,9 @@ class QueueTx {
   // Held (leased or running) jobs whose lease expired before now.
   virtual absl::StatusOr<std::vector<std::string>> Expired(int64_t now_ms) = 0;
   virtual absl::StatusOr<std::vector<Job>> List(const JobFilter& filter) = 0;
+  // Deletes finished jobs (succeeded, failed, cancelled) last changed before `cutoff_ms` that no
+  // unfinished job depends on, with their dependency rows; returns how many.
+  virtual absl::StatusOr<int> DeleteFinishedBefore(int64_t cutoff_ms) = 0;
   virtual absl::StatusOr<QueueStats> Stats(int64_t now_ms) = 0;
 };
 

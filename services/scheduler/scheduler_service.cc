@@ -3,7 +3,10 @@
 #include <set>
 
 #include "absl/strings/str_cat.h"
+#include <spdlog/spdlog.h>
+
 #include "common/core/status.h"
+#include "common/core/timer.h"
 #include "common/rpc/status.h"
 #include "common/store/manifest.h"
 #include "services/scheduler/job_proto.h"
@@ -39,12 +42,22 @@ void SchedulerService::Notify() {
 }
 
 void SchedulerService::RescueLoop() {
+  Stopwatch prune_watch;
   std::unique_lock<std::mutex> lock(mutex_);
   while (!stopping_) {
     changed_.wait_for(lock, std::chrono::milliseconds(options_.rescue_interval_ms));
     if (stopping_) break;
     lock.unlock();
     absl::StatusOr<int> rescued = queue_->RescueExpired();
+    if (options_.retention_ms > 0 && prune_watch.ElapsedSeconds() * 1000 >= options_.prune_interval_ms) {
+      prune_watch = Stopwatch();
+      absl::StatusOr<int> pruned = queue_->PruneFinished(options_.retention_ms);
+      if (pruned.ok() && *pruned > 0)
+        spdlog::info("scheduler: pruned {} jobs finished over {} s ago", *pruned,
+                     options_.retention_ms / 1000);
+      else if (!pruned.ok())
+        spdlog::warn("scheduler: pruning failed: {}", pruned.status().ToString());
+    }
     lock.lock();
     if (rescued.ok() && *rescued > 0) {
       ++version_;

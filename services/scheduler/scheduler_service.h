@@ -19,6 +19,8 @@ namespace instascene::scheduler {
 struct SchedulerServiceOptions {
   int rescue_interval_ms = 1000;  // how often expired leases are looked for
   int max_attempts = 3;           // per job, for submitted pipelines
+  int64_t retention_ms = 0;       // finished jobs older than this are pruned (0 = kept for ever)
+  int prune_interval_ms = 60000;  // how often the rescuer thread prunes
 };
 
 class SchedulerService final : public v1::Scheduler::Service {

@@ -223,6 +223,21 @@ class SqliteTx final : public QueueTx {
     return jobs;
   }
 
+  absl::StatusOr<int> DeleteFinishedBefore(int64_t cutoff_ms) override {
+    Statement pick(db_, "SELECT id FROM jobs WHERE state IN (4, 5, 6) AND updated_ms < ? AND NOT EXISTS (SELECT 1 FROM job_dependencies e JOIN jobs d ON d.id = e.job_id WHERE e.dependency_id = jobs.id AND d.state IN (1, 2, 3))");
+    pick.Bind(1, cutoff_ms);
+    ASSIGN_OR_RETURN(std::vector<std::string> ids, Ids(pick));
+    for (const std::string& id : ids) {
+      Statement deps(db_, "DELETE FROM job_dependencies WHERE job_id = ?");
+      deps.Bind(1, id);
+      RETURN_IF_ERROR(deps.Step().status());
+      Statement job(db_, "DELETE FROM jobs WHERE id = ?");
+      job.Bind(1, id);
+      RETURN_IF_ERROR(job.Step().status());
+    }
+    return static_cast<int>(ids.size());
+  }
+
   absl::StatusOr<QueueStats> Stats(int64_t now_ms) override {
     QueueStats stats;
     for (JobState st : {JobState::kQueued, JobState::kLeased, JobState::kRunning,

@@ -64,6 +64,9 @@ class FailingTx final : public QueueTx {
     return inner_.Expired(now);
   }
   absl::StatusOr<std::vector<Job>> List(const JobFilter& f) override { return inner_.List(f); }
+  absl::StatusOr<int> DeleteFinishedBefore(int64_t cutoff) override {
+    return inner_.DeleteFinishedBefore(cutoff);
+  }
   absl::StatusOr<QueueStats> Stats(int64_t now) override { return inner_.Stats(now); }
 
  private:

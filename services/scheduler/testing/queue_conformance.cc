@@ -352,6 +352,31 @@ TEST_P(JobQueueConformanceTest, ListAndStats) {
   EXPECT_EQ(stats->oldest_queued_age_ms, 500);
 }
 
+TEST_P(JobQueueConformanceTest, PruningRemovesOldFinishedJobsNothingStillNeeded) {
+  auto ids = SubmitStages("s", {Stage("decompose"), Stage("train", {{"decompose"}})});
+  auto lease = MustLease({"decompose"});
+  ASSERT_TRUE(queue_->Complete(ids["decompose"], lease->token, Out("d")).ok());
+  const std::string other = SubmitOne("u", "decompose");
+  auto lu = MustLease({"decompose"});
+  ASSERT_TRUE(queue_->Fail(other, lu->token, FailureKind::kPermanent, "bad").ok());
+  clock_.Advance(10000);
+  // decompose is old and finished, but train (queued) still needs it; "u" goes.
+  EXPECT_EQ(*queue_->PruneFinished(5000), 1);
+  EXPECT_EQ(queue_->Get(other).status().code(), absl::StatusCode::kNotFound);
+  EXPECT_TRUE(queue_->Get(ids["decompose"]).ok());
+  auto lt = MustLease({"train"});
+  ASSERT_TRUE(queue_->Complete(ids["train"], lt->token, Out("t")).ok());
+  EXPECT_EQ(*queue_->PruneFinished(5000), 1);  // decompose now; train finished just now stays
+  clock_.Advance(10000);
+  EXPECT_EQ(*queue_->PruneFinished(5000), 1);
+  EXPECT_TRUE(queue_->List({})->empty());
+  // A pruned result is recomputed when submitted again, under the same ids.
+  auto again = SubmitStages("s", {Stage("decompose"), Stage("train", {{"decompose"}})});
+  EXPECT_EQ(again, ids);
+  EXPECT_EQ(queue_->Get(ids["decompose"])->state, JobState::kQueued);
+  EXPECT_EQ(queue_->PruneFinished(-1).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
 // Runs every leasable job of `kinds` to success; segment reports `items`.
 void Drain(JobQueue& q, const std::vector<std::string>& kinds, int64_t items, int* ran = nullptr) {
   while (true) {
