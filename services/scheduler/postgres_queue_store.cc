@@ -30,7 +30,7 @@ const char* const kMigrations[] = {
       worker TEXT NOT NULL, lease_token TEXT NOT NULL, progress TEXT NOT NULL,
       cancel_requested INTEGER NOT NULL, created_ms BIGINT NOT NULL, updated_ms BIGINT NOT NULL,
       not_before_ms BIGINT NOT NULL, lease_expires_ms BIGINT NOT NULL, lease_ms BIGINT NOT NULL);
-    CREATE INDEX jobs_ready ON jobs (kind, priority DESC, seq) WHERE state = 1 AND pending = 0;
+    CREATE INDEX jobs_ready ON jobs (scene, priority DESC, seq) WHERE state = 1 AND pending = 0;
     CREATE INDEX jobs_held ON jobs (lease_expires_ms) WHERE state IN (2, 3);
     CREATE INDEX jobs_by_scene ON jobs (scene, seq);
     CREATE TABLE job_dependencies (job_id TEXT NOT NULL, name TEXT NOT NULL,
@@ -155,21 +155,36 @@ class PostgresTx final : public QueueTx {
     std::vector<std::string> quoted;
     for (const std::string& k : kinds) quoted.push_back(tx_.quote(k));  // escaped literals
     const std::string list = absl::StrJoin(quoted, ",");
-    // Candidates other replicas hold locked are skipped, not waited for.
-    const pqxx::result r = tx_.exec_params(
-        absl::StrCat("WITH held AS (SELECT scene, COUNT(*) AS n FROM jobs WHERE state IN (2, 3) "
-                     "GROUP BY scene) "
-                     "SELECT j.id FROM jobs j LEFT JOIN scenes s ON s.scene = j.scene "
-                     "LEFT JOIN held h ON h.scene = j.scene "
-                     "WHERE j.state = 1 AND j.pending = 0 AND j.not_before_ms <= $1 "
-                     "AND j.kind IN (",
-                     list,
-                     ") ORDER BY j.priority DESC, COALESCE(h.n, 0) ASC, "
-                     "COALESCE(s.last_lease_ms, 0) ASC, j.seq ASC "
-                     "LIMIT 1 FOR UPDATE OF j SKIP LOCKED"),
-        now_ms);
-    if (r.empty()) return std::optional<std::string>();
-    return std::optional<std::string>(r[0][0].as<std::string>());
+    // Within one scene the fairness terms are equal, so the best job overall is among each scene's
+    // best (priority, then submission order): rank those few instead of every ready job. The pick
+    // is then locked with SKIP LOCKED; one another replica holds is excluded and the next tried.
+    std::vector<std::string> skipped;
+    for (int tries = 0; tries < 16; ++tries) {
+      std::vector<std::string> excluded;
+      for (const std::string& id : skipped) excluded.push_back(tx_.quote(id));
+      const pqxx::result r = tx_.exec_params(
+          absl::StrCat(
+              "WITH best AS (SELECT DISTINCT ON (scene) id, scene, priority, seq FROM jobs "
+              "WHERE state = 1 AND pending = 0 AND not_before_ms <= $1 AND kind IN (",
+              list, ")",
+              excluded.empty() ? "" : absl::StrCat(" AND id NOT IN (", absl::StrJoin(excluded, ","), ")"),
+              " ORDER BY scene, priority DESC, seq ASC), "
+              "held AS (SELECT scene, COUNT(*) AS n FROM jobs WHERE state IN (2, 3) "
+              "AND scene IN (SELECT scene FROM best) GROUP BY scene) "
+              "SELECT b.id FROM best b LEFT JOIN scenes s ON s.scene = b.scene "
+              "LEFT JOIN held h ON h.scene = b.scene "
+              "ORDER BY b.priority DESC, COALESCE(h.n, 0) ASC, COALESCE(s.last_lease_ms, 0) ASC, "
+              "b.seq ASC LIMIT 1"),
+          now_ms);
+      if (r.empty()) return std::optional<std::string>();
+      const std::string id = r[0][0].as<std::string>();
+      const pqxx::result locked = tx_.exec_params(
+          "SELECT id FROM jobs WHERE id = $1 AND state = 1 AND pending = 0 FOR UPDATE SKIP LOCKED",
+          id);
+      if (!locked.empty()) return std::optional<std::string>(id);
+      skipped.push_back(id);  // another replica is leasing it (or it just changed)
+    }
+    return std::optional<std::string>();  // heavy contention: the worker polls again
   }
 
   absl::Status TouchScene(const std::string& scene, int64_t now_ms) override {

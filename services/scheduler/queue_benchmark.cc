@@ -1,25 +1,47 @@
-// Throughput of the SQLite job queue (durable: WAL + synchronous=FULL, one fsync per commit):
-// a full job cycle (submit, lease, heartbeat, complete) and a lease scan over a deep queue.
+// Throughput of the job queue on both storage backends: SQLite (durable: WAL + synchronous=FULL,
+// one fsync per commit) and PostgreSQL (a server this benchmark starts on a Unix socket, fsync off
+// as in the tests, so the figure is the queue's own cost, not the disk's): a full job cycle
+// (submit, lease, heartbeat, complete) and a lease over a deep queue. Argument 0 = SQLite,
+// 1 = PostgreSQL.
 #include <benchmark/benchmark.h>
 
 #include <unistd.h>
 
+#include <cstdio>
 #include <filesystem>
 
 #include "common/store/digest.h"
+#include "services/scheduler/postgres_queue_store.h"
 #include "services/scheduler/sqlite_queue_store.h"
+#include "services/scheduler/testing/postgres_server.h"
 
 namespace instascene::scheduler {
 namespace {
 
-// A queue in a fresh directory, removed when the benchmark ends.
+testing::PostgresServer* Postgres() {
+  static std::unique_ptr<testing::PostgresServer> server = [] {
+    auto s = testing::PostgresServer::Start();
+    if (!s.ok()) std::fprintf(stderr, "no PostgreSQL: %s\n", s.status().ToString().c_str());
+    return s.ok() ? std::move(*s) : nullptr;
+  }();
+  return server.get();
+}
+
+// A queue in a fresh directory (SQLite) or schema (PostgreSQL), removed when the benchmark ends.
 struct BenchQueue {
-  explicit BenchQueue(const std::string& name)
+  BenchQueue(const std::string& name, int backend)
       : dir(std::filesystem::temp_directory_path() /
             ("queue_bench_" + name + "_" + std::to_string(::getpid()))) {
     std::filesystem::remove_all(dir);
     std::filesystem::create_directories(dir);
-    queue = std::move(*OpenSqliteJobQueue((dir / "jobs.db").string(), QueueOptions{}));
+    if (backend == 0) {
+      queue = std::move(*OpenSqliteJobQueue((dir / "jobs.db").string(), QueueOptions{}));
+    } else {
+      static int schemas = 0;
+      auto store = PostgresQueueStore::Open(Postgres()->conninfo(),
+                                            "bench_" + name + std::to_string(schemas++));
+      queue = std::make_unique<JobQueue>(std::move(*store), QueueOptions{});
+    }
   }
   ~BenchQueue() {
     queue.reset();
@@ -39,7 +61,7 @@ SubmitRequest Spec(int64_t i) {
 }
 
 void BM_JobCycle(benchmark::State& state) {
-  BenchQueue queue("cycle");
+  BenchQueue queue("cycle", static_cast<int>(state.range(0)));
   int64_t i = 0;
   for (auto _ : state) {
     auto submitted = queue->Submit(Spec(i++));
@@ -50,12 +72,12 @@ void BM_JobCycle(benchmark::State& state) {
   }
   state.SetItemsProcessed(state.iterations());
 }
-BENCHMARK(BM_JobCycle)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_JobCycle)->Arg(0)->Arg(1)->Unit(benchmark::kMillisecond);
 
 // Leasing from a queue holding `depth` ready jobs of 16 scenes (the fairness ordering scans them).
 void BM_LeaseFromDeepQueue(benchmark::State& state) {
-  BenchQueue queue("deep");
-  const int64_t depth = state.range(0);
+  BenchQueue queue("deep", static_cast<int>(state.range(0)));
+  const int64_t depth = state.range(1);
   for (int64_t i = 0; i < depth; ++i) benchmark::DoNotOptimize(queue->Submit(Spec(i)));
   int64_t next = depth;
   for (auto _ : state) {
@@ -67,7 +89,12 @@ void BM_LeaseFromDeepQueue(benchmark::State& state) {
     state.ResumeTiming();
   }
 }
-BENCHMARK(BM_LeaseFromDeepQueue)->Arg(100)->Arg(10000)->Unit(benchmark::kMillisecond);
+BENCHMARK(BM_LeaseFromDeepQueue)
+    ->Args({0, 100})
+    ->Args({0, 10000})
+    ->Args({1, 100})
+    ->Args({1, 10000})
+    ->Unit(benchmark::kMillisecond);
 
 }  // namespace
 }  // namespace instascene::scheduler
