@@ -96,6 +96,29 @@ TEST(Registry, PlansPipelinesAndRefusesBadOnes) {
             absl::StatusCode::kUnimplemented);
 }
 
+TEST(Registry, AStageThatThrowsFailsItsJobNotTheProcess) {
+  StageRegistry r;
+  auto spec = [](const std::string& kind) {
+    StageSpec s;
+    s.kind = kind;
+    s.canonicalize = [](const nlohmann::json& p) -> absl::StatusOr<nlohmann::json> { return p; };
+    return s;
+  };
+  ASSERT_TRUE(r.Add({spec("hungry"), [](const StageContext&) -> absl::StatusOr<StageResult> {
+                       throw std::bad_alloc();
+                     }})
+                  .ok());
+  ASSERT_TRUE(r.Add({spec("broken"), [](const StageContext&) -> absl::StatusOr<StageResult> {
+                       throw std::runtime_error("index out of range");
+                     }})
+                  .ok());
+  const auto hungry = r.Run("hungry", StageContext{});
+  EXPECT_EQ(hungry.status().code(), absl::StatusCode::kResourceExhausted);
+  const auto broken = r.Run("broken", StageContext{});
+  EXPECT_EQ(broken.status().code(), absl::StatusCode::kInternal);
+  EXPECT_NE(broken.status().message().find("index out of range"), std::string::npos);
+}
+
 TEST(LocalRunner, ThreeStagesGiveTheTauRuleLabelsAndCancelStops) {
   const testing::ScopedTempDir temp("pipeline_stages");
   const std::string root = temp.str();

@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <filesystem>
+#include <new>
+#include <stdexcept>
 #include <set>
 
 #include "absl/strings/str_cat.h"
@@ -139,7 +141,20 @@ absl::StatusOr<StageResult> StageRegistry::Run(const std::string& kind,
     return absl::InvalidArgumentError(
         absl::StrCat("stage ", kind, " runs per item: no item given"));
   RETURN_IF_ERROR(CheckCancelled(context.cancel, kind));
-  ASSIGN_OR_RETURN(StageResult result, stage->run(context));
+  // The one exception boundary of every stage: whatever a stage throws fails its job, never the
+  // process that hosts it (an allocation failure is RESOURCE_EXHAUSTED, and not retried).
+  absl::StatusOr<StageResult> ran;
+  try {
+    ran = stage->run(context);
+  } catch (const std::bad_alloc&) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat("stage ", kind, ": out of memory (the input or parameters are too large)"));
+  } catch (const std::exception& e) {
+    return absl::InternalError(absl::StrCat("stage ", kind, " failed: ", e.what()));
+  } catch (...) {
+    return absl::InternalError(absl::StrCat("stage ", kind, " failed with an unknown exception"));
+  }
+  ASSIGN_OR_RETURN(StageResult result, std::move(ran));
   RETURN_IF_ERROR(CheckCancelled(context.cancel, kind));
   if (stage->spec.fans_out && result.items < 0)
     return absl::InternalError(absl::StrCat("stage ", kind, " fans out but reported no items"));

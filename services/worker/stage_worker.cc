@@ -28,6 +28,7 @@ v1::FailureKind FailureFor(absl::StatusCode code) {
     case absl::StatusCode::kNotFound:
     case absl::StatusCode::kOutOfRange:
     case absl::StatusCode::kUnimplemented:
+    case absl::StatusCode::kResourceExhausted:  // too large for this worker: will not fit next time
       return v1::FAILURE_KIND_PERMANENT;
     default:
       return v1::FAILURE_KIND_RETRYABLE;
