@@ -25,6 +25,7 @@ PACKAGES=(
   libnanoflann-dev
   libcpp-httplib-dev
   libpqxx-dev postgresql-15
+  yamllint nodejs
   zlib1g-dev libpng-dev
 )
 

@@ -1,0 +1,39 @@
+// Checks rendered manifests against the build and the Dockerfile: every container's command is a
+// binary the build produced (in BIN_DIR) and an ENTRYPOINT of docker/Dockerfile, and every
+// container port is the port its --listen argument binds. Usage: node consistency.mjs BIN_DIR
+// DOCKERFILE FILE.yaml... Prints "N passed, N failed"; exits 1 on any mismatch.
+import { existsSync, readFileSync } from "node:fs";
+import { basename, join } from "node:path";
+import yaml from "js-yaml";
+
+const [binDir, dockerfile, ...files] = process.argv.slice(2);
+const docker = readFileSync(dockerfile, "utf8");
+let passed = 0;
+let failed = 0;
+const check = (ok, what) => {
+  if (ok) passed++;
+  else {
+    failed++;
+    console.log(`FAIL ${what}`);
+  }
+};
+for (const file of files) {
+  for (const doc of yaml.loadAll(readFileSync(file, "utf8")).filter((d) => d)) {
+    if (doc.kind !== "Deployment") continue;
+    for (const c of doc.spec.template.spec.containers) {
+      const what = `${file}: ${doc.metadata.name}/${c.name}`;
+      const command = (c.command ?? [])[0] ?? "";
+      check(existsSync(join(binDir, basename(command))), `${what}: ${command} is not in ${binDir}`);
+      check(docker.includes(`ENTRYPOINT ["${command}"]`), `${what}: no Dockerfile ENTRYPOINT ${command}`);
+      const listen = (c.args ?? []).map((a) => a.replace(/^--listen=/, "")).find((a, i, all) =>
+        (c.args[i].startsWith("--listen=")) || (i > 0 && c.args[i - 1] === "--listen"));
+      const port = listen ? Number(listen.split(":").pop()) : NaN;
+      for (const p of c.ports ?? [])
+        check(p.containerPort === port, `${what}: containerPort ${p.containerPort} but --listen ${listen}`);
+      for (const probe of [c.readinessProbe, c.livenessProbe])
+        check(probe?.grpc?.port === port, `${what}: a gRPC probe is not on port ${port}`);
+    }
+  }
+}
+console.log(`${passed} passed, ${failed} failed`);
+process.exit(failed === 0 ? 0 : 1);
