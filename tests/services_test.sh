@@ -19,6 +19,10 @@ check "synth scene B" "$BIN" synth --out "$WORK/b" --preset tiny --seed 4
 start serve "$WORK/ready" "$BIN" serve --data "$WORK/data" --listen 127.0.0.1:0 --ready-file "$WORK/ready" --lease-seconds 2
 SERVE=$LAST_PID
 ADDR=$(cat "$WORK/ready")
+check_fails "a second serve on the same data folder is refused" "in use by another process" \
+  "$BIN" serve --data "$WORK/data" --listen 127.0.0.1:0
+check_fails "a second serve on the same port is refused" "cannot listen on $ADDR" \
+  "$BIN" serve --data "$WORK/data-other" --listen "$ADDR"
 check "submit scene A" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params "$SMALL" --json
 cp "$WORK/out.txt" "$WORK/submit1.json"
 check "submit json has scene and 3 jobs" test "$(json_get "$WORK/submit1.json" "d['scene'] + str(len(d['jobs']))")" = "a3"

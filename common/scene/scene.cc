@@ -23,6 +23,8 @@ bool IsSafeRelativePath(const std::string& path) {
   return true;
 }
 
+constexpr int64_t kMaxViewSide = 16384;  // pixels per image side
+
 absl::StatusOr<SceneView> ParseView(const json& j, size_t index) {
   auto fail = [&](const std::string& what) {
     return absl::InvalidArgumentError(absl::StrCat("views[", index, "]: ", what));
@@ -33,6 +35,13 @@ absl::StatusOr<SceneView> ParseView(const json& j, size_t index) {
     view.name = j.at("name").get<std::string>();
     view.image = j.value("image", std::string());
     view.mask = j.value("mask", std::string());
+    // Sizes are read as what they are: 4294967392 must not wrap to 96.
+    for (const char* key : {"width", "height"}) {
+      const json& v = j.at(key);
+      if (!v.is_number_integer() || v.get<int64_t>() < 1 || v.get<int64_t>() > kMaxViewSide ||
+          (v.is_number_unsigned() && v.get<uint64_t>() > static_cast<uint64_t>(kMaxViewSide)))
+        return fail(absl::StrCat(key, " ", v.dump(), " is not an integer in [1, ", kMaxViewSide, "]"));
+    }
     view.camera.width = j.at("width").get<int>();
     view.camera.height = j.at("height").get<int>();
     view.camera.fx = j.at("fx").get<double>();

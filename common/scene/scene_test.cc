@@ -77,6 +77,12 @@ TEST(SceneJson, RejectsMalformedManifests) {
   std::string escape = view;
   escape.insert(1, R"("image":"/etc/passwd",)");
   ExpectBadScene(R"({"format":"instascene.scene/1","views":[)" + escape + "]}", "unsafe path");
+  // Sizes are read as given, never wrapped or truncated.
+  for (const char* width : {"4294967392", "0", "-3", "16385", "\"12\"", "12.5"}) {
+    std::string sized = view;
+    sized.replace(sized.find("\"width\":4"), 9, std::string("\"width\":") + width);
+    ExpectBadScene(R"({"format":"instascene.scene/1","views":[)" + sized + "]}", "width");
+  }
 }
 
 TEST(ImageIo, ImagesAndLabelMapsRoundTrip) {

@@ -284,9 +284,11 @@ absl::StatusOr<PlyHeader> ParsePlyHeader(absl::string_view data, absl::string_vi
       have_format = true;
     } else if (tok[0] == "element") {
       int64_t count = -1;
-      if (tok.size() != 3 ||
-          std::from_chars(tok[2].data(), tok[2].data() + tok[2].size(), count).ec != std::errc() ||
-          count < 0) {
+      const char* count_end = tok.size() == 3 ? tok[2].data() + tok[2].size() : nullptr;
+      std::from_chars_result parsed{};
+      if (tok.size() == 3) parsed = std::from_chars(tok[2].data(), count_end, count);
+      // The whole token must be the count: "8e3" is not 8.
+      if (tok.size() != 3 || parsed.ec != std::errc() || parsed.ptr != count_end || count < 0) {
         return error(line_no, "malformed 'element' line (expected: element NAME COUNT)");
       }
       header.elements.push_back({std::string(tok[1]), count, {}});

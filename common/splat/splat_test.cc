@@ -103,6 +103,16 @@ std::string TinyHeader(absl::string_view format, int count) {
                       "property float f_dc_0\nproperty int label\nend_header\n");
 }
 
+TEST(GaussianPly, ElementCountsMustBeWholeIntegers) {
+  for (const char* count : {"8e3", "8.0", "0x10", "8 9", "-1"}) {
+    std::string data = TinyHeader("ascii", 2);
+    data.replace(data.find("element vertex 2"), 16, std::string("element vertex ") + count);
+    const absl::Status s = ParseGaussianPly(data, "counts.ply").status();
+    EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << count;
+    EXPECT_NE(s.message().find("element"), std::string::npos) << s;
+  }
+}
+
 TEST(GaussianPly, ReadsAsciiWithAnyPropertyOrderAndSkipsOtherElements) {
   std::string data = TinyHeader("ascii", 2) +
                      "2 0.5 0.25\n"

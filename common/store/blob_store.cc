@@ -89,11 +89,14 @@ absl::StatusOr<std::unique_ptr<FilesystemBlobStore>> FilesystemBlobStore::Open(
     fs::create_directories(fs::path(root) / sub, ec);
     if (ec) return absl::UnavailableError(absl::StrCat(root, "/", sub, ": ", ec.message()));
   }
+  ASSIGN_OR_RETURN(FileLock lock,
+                   FileLock::Acquire((fs::path(root) / ".lock").string(), "store " + root));
   // Temp files of writes interrupted by a crash were never published: drop them.
   for (const auto& entry : fs::directory_iterator(fs::path(root) / "tmp", ec)) {
     fs::remove(entry.path(), ec);
   }
-  return std::unique_ptr<FilesystemBlobStore>(new FilesystemBlobStore(root, options));
+  return std::unique_ptr<FilesystemBlobStore>(
+      new FilesystemBlobStore(root, options, std::move(lock)));
 }
 
 std::string FilesystemBlobStore::BlobPath(const Digest& digest) const {

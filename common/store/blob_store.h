@@ -14,6 +14,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "common/core/file_lock.h"
 #include "common/store/digest.h"
 
 namespace instascene::store {
@@ -84,8 +85,8 @@ class FilesystemBlobStore final : public BlobStore {
   std::string BlobPath(const Digest& digest) const;
 
  private:
-  FilesystemBlobStore(std::string root, StoreOptions options)
-      : root_(std::move(root)), options_(options) {}
+  FilesystemBlobStore(std::string root, StoreOptions options, FileLock lock)
+      : root_(std::move(root)), options_(options), lock_(std::move(lock)) {}
   std::string PartPath(const Digest& digest) const;
   absl::Status CheckWritable(const Digest& digest) const;
   bool Contains(const Digest& digest) const;
@@ -94,6 +95,7 @@ class FilesystemBlobStore final : public BlobStore {
 
   const std::string root_;
   const StoreOptions options_;
+  FileLock lock_;            // one process owns the folder (it clears tmp/ at open)
   std::mutex upload_mutex_;  // serialises Append / FinishUpload (one part file per digest)
   std::mutex temp_mutex_;
   uint64_t temp_counter_ = 0;

@@ -108,8 +108,23 @@ absl::StatusOr<Manifest> SceneManifestFromDirectory(const std::string& scene_dir
   ASSIGN_OR_RETURN(Scene scene, ReadScene(scene_directory));
   Manifest m;
   m.kind = "scene";
+  std::error_code ec;
+  const fs::path root = fs::canonical(scene_directory, ec);
   for (const std::string& rel : SceneReferences(scene)) {
-    ASSIGN_OR_RETURN(m.files[rel], DigestFile(scene.Path(rel)));
+    // Only regular files inside the scene folder: a FIFO or a device would hang or never end, a
+    // symlink out of the folder would upload a file the user did not mean to share.
+    const fs::path path = scene.Path(rel);
+    const fs::path target = fs::canonical(path, ec);
+    if (ec) return absl::NotFoundError(absl::StrCat(path.string(), ": ", ec.message()));
+    if (!fs::is_regular_file(target))
+      return absl::InvalidArgumentError(
+          absl::StrCat(path.string(), ": not a regular file (scene files must be plain files)"));
+    const std::string inside = target.lexically_relative(root).string();
+    if (inside.empty() || inside.rfind("..", 0) == 0)
+      return absl::InvalidArgumentError(
+          absl::StrCat(path.string(), ": resolves to ", target.string(),
+                       ", outside the scene folder"));
+    ASSIGN_OR_RETURN(m.files[rel], DigestFile(target.string()));
   }
   m.metadata["views"] = scene.views.size();
   return m;

@@ -1,4 +1,7 @@
 #include <gtest/gtest.h>
+#include <sys/stat.h>
+
+#include "common/scene/scene.h"
 
 #include <filesystem>
 #include <fstream>
@@ -204,6 +207,31 @@ TEST(ManifestTest, SceneUploadSendsOnlyWhatIsMissing) {
                                                                  : broken.files.begin());
   const absl::Status s = ValidateSceneManifest(*store, broken);
   EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << s;
+  // Only regular files inside the scene folder are uploaded: a FIFO would block for ever, a
+  // symlink out of the folder would share a file the user did not mean to.
+  auto scene = ReadScene(copy);
+  const std::string mask = scene->Path(scene->views[0].mask);
+  fs::remove(mask);
+  ASSERT_EQ(::mkfifo(mask.c_str(), 0644), 0);
+  auto fifo = SceneManifestFromDirectory(copy);
+  EXPECT_EQ(fifo.status().code(), absl::StatusCode::kInvalidArgument) << fifo.status();
+  EXPECT_NE(fifo.status().message().find("not a regular file"), std::string::npos);
+  fs::remove(mask);
+  fs::create_symlink(fs::path(root) / "scene" / scene->views[0].mask, mask);  // outside: refused
+  auto outside = SceneManifestFromDirectory(copy);
+  EXPECT_EQ(outside.status().code(), absl::StatusCode::kInvalidArgument) << outside.status();
+  EXPECT_NE(outside.status().message().find("outside the scene folder"), std::string::npos);
+}
+
+TEST(BlobStoreTest, OneProcessOwnsAStoreFolder) {
+  const testing::ScopedTempDir temp("store_lock");
+  auto first = FilesystemBlobStore::Open(temp.str(), StoreOptions{});
+  ASSERT_TRUE(first.ok());
+  auto second = FilesystemBlobStore::Open(temp.str(), StoreOptions{});
+  EXPECT_EQ(second.status().code(), absl::StatusCode::kFailedPrecondition) << second.status();
+  EXPECT_NE(second.status().message().find("in use by another process"), std::string::npos);
+  first->reset();
+  EXPECT_TRUE(FilesystemBlobStore::Open(temp.str(), StoreOptions{}).ok());  // released
 }
 
 }  // namespace

@@ -278,6 +278,7 @@ class SqliteTx final : public QueueTx {
 SqliteQueueStore::~SqliteQueueStore() { sqlite3_close(db_); }
 
 absl::StatusOr<std::unique_ptr<SqliteQueueStore>> SqliteQueueStore::Open(const std::string& path) {
+  ASSIGN_OR_RETURN(FileLock lock, FileLock::Acquire(path + ".lock", "job database " + path));
   sqlite3* db = nullptr;
   if (sqlite3_open_v2(path.c_str(), &db,
                       SQLITE_OPEN_READWRITE | SQLITE_OPEN_CREATE | SQLITE_OPEN_FULLMUTEX,
@@ -288,7 +289,7 @@ absl::StatusOr<std::unique_ptr<SqliteQueueStore>> SqliteQueueStore::Open(const s
   }
   sqlite3_busy_timeout(db, 5000);
   sqlite3_extended_result_codes(db, 1);
-  std::unique_ptr<SqliteQueueStore> store(new SqliteQueueStore(db));
+  std::unique_ptr<SqliteQueueStore> store(new SqliteQueueStore(db, std::move(lock)));
   RETURN_IF_ERROR(Annotate(Exec(db, "PRAGMA journal_mode=WAL; PRAGMA synchronous=FULL;"), path));
   RETURN_IF_ERROR(store->Migrate(path));
   return store;

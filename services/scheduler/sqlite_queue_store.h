@@ -11,6 +11,7 @@
 #include <mutex>
 #include <string>
 
+#include "common/core/file_lock.h"
 #include "services/scheduler/job_queue.h"
 
 namespace instascene::scheduler {
@@ -23,10 +24,11 @@ class SqliteQueueStore final : public QueueStore {
   absl::Status Transact(bool read_only, const std::function<absl::Status(QueueTx&)>& body) override;
 
  private:
-  explicit SqliteQueueStore(sqlite3* db) : db_(db) {}
+  SqliteQueueStore(sqlite3* db, FileLock lock) : db_(db), lock_(std::move(lock)) {}
   absl::Status Migrate(const std::string& path);
 
   sqlite3* db_;
+  FileLock lock_;  // one scheduler process owns the file
   std::mutex mutex_;
 };
 

@@ -111,6 +111,14 @@ TEST(SqliteQueueStore, SubmissionIsOneTransaction) {
   EXPECT_EQ(queue.List({})->size(), 3u);
 }
 
+TEST(SqliteQueueStore, OneSchedulerOwnsTheFile) {
+  const instascene::testing::ScopedTempDir temp("owner");
+  auto first = SqliteQueueStore::Open(temp.Sub("jobs.db"));
+  ASSERT_TRUE(first.ok());
+  EXPECT_EQ(SqliteQueueStore::Open(temp.Sub("jobs.db")).status().code(),
+            absl::StatusCode::kFailedPrecondition);
+}
+
 TEST(SqliteQueueStore, MigratesVersionOneDatabases) {
   const instascene::testing::ScopedTempDir temp("migrate");
   const std::string path = temp.Sub("jobs.db");

@@ -16,9 +16,11 @@ inline std::string RandomBytes(size_t n, uint64_t seed) {
   return s;
 }
 
+// Regular files under `dir`, not counting lock files (a store or queue holds `.lock` while open).
 inline size_t CountFiles(const std::filesystem::path& dir) {
   size_t n = 0;
-  for (const auto& e : std::filesystem::recursive_directory_iterator(dir)) n += e.is_regular_file();
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir))
+    n += e.is_regular_file() && e.path().filename() != ".lock" && e.path().extension() != ".lock";
   return n;
 }
 
