@@ -225,7 +225,16 @@ TEST_F(ServicesTest, BadRequestsAreRejectedAndLeaveNoTrace) {
   no_scene_json.files["gaussians.ply"] = store::ComputeDigest("x");
   store::Manifest missing_blob = *store::ReadManifest(*store_, scene_manifest_);
   missing_blob.files["extra.bin"] = store::ComputeDigest("never uploaded");
+  // A scene whose first view claims 16384 x 16384 pixels: over the per-view limit.
+  store::Manifest huge_scene = *store::ReadManifest(*store_, scene_manifest_);
+  nlohmann::json scene_json =
+      nlohmann::json::parse(*store_->Read(huge_scene.files.at("scene.json")));
+  scene_json["views"][0]["width"] = 16384;
+  scene_json["views"][0]["height"] = 16384;
+  huge_scene.files["scene.json"] = put(scene_json.dump());
   const std::vector<Case> cases = {
+      {"a view of 268 megapixels", put(store::SerializeManifest(huge_scene)), "",
+       grpc::StatusCode::RESOURCE_EXHAUSTED, "scene too large"},
       {"garbage manifest", put("this is not json"), "", grpc::StatusCode::INVALID_ARGUMENT,
        "malformed manifest"},
       {"scene manifest without scene.json", put(store::SerializeManifest(no_scene_json)), "",
@@ -239,6 +248,15 @@ TEST_F(ServicesTest, BadRequestsAreRejectedAndLeaveNoTrace) {
       {"parameters not JSON", scene_manifest_, "{train", grpc::StatusCode::INVALID_ARGUMENT,
        "not valid JSON"},
   };
+  {  // A scene name of 130 KB is refused (it would break every later job listing).
+    v1::SubmitPipelineRequest request;
+    rpc::ToProto(scene_manifest_, request.mutable_scene_manifest());
+    request.set_scene(std::string(130000, 'n'));
+    v1::SubmitPipelineResponse response;
+    grpc::ClientContext context;
+    const grpc::Status s = scheduler_->SubmitPipeline(&context, request, &response);
+    EXPECT_EQ(s.error_code(), grpc::StatusCode::INVALID_ARGUMENT) << s.error_message();
+  }
   for (const Case& c : cases) {
     v1::SubmitPipelineResponse response;
     const grpc::Status s = Submit(c.manifest, c.params, &response);
@@ -276,7 +294,7 @@ TEST_F(ServicesTest, BadRequestsAreRejectedAndLeaveNoTrace) {
     EXPECT_EQ(now.state(), v1::JOB_STATE_QUEUED);
     EXPECT_EQ(now.attempts(), 0);
   }
-  EXPECT_EQ(store_->Stats()->blob_count, blobs_before + 3);  // the three manifests put above
+  EXPECT_EQ(store_->Stats()->blob_count, blobs_before + 5);  // the blobs put above
   EXPECT_EQ(CountFiles(root_ + "/store/uploads"), 0u);
   EXPECT_EQ(CountFiles(root_ + "/store/tmp"), 0u);
 }

@@ -9,6 +9,7 @@
 #include "absl/strings/str_split.h"
 #include "common/core/status.h"
 #include "common/scene/scene.h"
+#include "common/splat/ply.h"
 
 namespace instascene::store {
 namespace fs = std::filesystem;
@@ -130,7 +131,8 @@ absl::StatusOr<Manifest> SceneManifestFromDirectory(const std::string& scene_dir
   return m;
 }
 
-absl::Status ValidateSceneManifest(BlobStore& store, const Manifest& manifest) {
+absl::Status ValidateSceneManifest(BlobStore& store, const Manifest& manifest,
+                                   const SceneLimits& limits) {
   auto bad = [](absl::string_view why) {
     return absl::InvalidArgumentError(absl::StrCat("malformed scene manifest: ", why));
   };
@@ -148,6 +150,30 @@ absl::Status ValidateSceneManifest(BlobStore& store, const Manifest& manifest) {
   for (const std::string& rel : SceneReferences(*scene)) {
     if (!manifest.files.count(rel))
       return bad(absl::StrCat("scene.json refers to '", rel, "', which is not in the manifest"));
+  }
+  auto too_large = [](const std::string& what) {
+    return absl::ResourceExhaustedError(absl::StrCat("scene too large: ", what));
+  };
+  if (static_cast<int64_t>(scene->views.size()) > limits.max_views)
+    return too_large(absl::StrCat(scene->views.size(), " views (at most ", limits.max_views, ")"));
+  int64_t total = 0;
+  for (const SceneView& v : scene->views) {
+    const int64_t pixels = int64_t{v.camera.width} * v.camera.height;
+    if (pixels > limits.max_pixels_per_view)
+      return too_large(absl::StrCat("view '", v.name, "' has ", pixels, " pixels (at most ",
+                                    limits.max_pixels_per_view, ")"));
+    total += pixels;
+  }
+  if (total > limits.max_total_pixels)
+    return too_large(absl::StrCat(total, " pixels in all views (at most ", limits.max_total_pixels, ")"));
+  // The Gaussian count from the splat's header (the first MiB holds any sane header).
+  const Digest splat = manifest.files.at(scene->gaussians);
+  ASSIGN_OR_RETURN(std::string head, store.Read(splat, 0, std::min<int64_t>(splat.size_bytes, 1 << 20)));
+  absl::StatusOr<PlyHeader> header = ParsePlyHeader(head, scene->gaussians);
+  if (!header.ok()) return bad(header.status().message());
+  for (const PlyElement& e : header->elements) {
+    if (e.name == "vertex" && e.count > limits.max_gaussians)
+      return too_large(absl::StrCat(e.count, " Gaussians (at most ", limits.max_gaussians, ")"));
   }
   return absl::OkStatus();
 }

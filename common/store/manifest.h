@@ -42,9 +42,19 @@ absl::StatusOr<Manifest> ManifestFromDirectory(const std::string& directory,
 // The upload form of a scene directory: scene.json and exactly the files it references (the splat,
 // images, masks); ground truth and anything else stay local.
 absl::StatusOr<Manifest> SceneManifestFromDirectory(const std::string& scene_directory);
+// What one submitted scene may hold; over a limit is RESOURCE_EXHAUSTED naming it.
+struct SceneLimits {
+  int64_t max_views = 4096;
+  int64_t max_pixels_per_view = int64_t{8192} * 8192;  // 67 MP
+  int64_t max_total_pixels = int64_t{1} << 32;           // over every view
+  int64_t max_gaussians = 20'000'000;
+};
+
 // Checks that a scene manifest is a scene: scene.json present and valid, every file it references
-// in the manifest. Reads scene.json from the store.
-absl::Status ValidateSceneManifest(BlobStore& store, const Manifest& manifest);
+// in the manifest, and within `limits` (views, pixels per view and in all, Gaussians: the count is
+// read from the splat's PLY header in the store, without loading it).
+absl::Status ValidateSceneManifest(BlobStore& store, const Manifest& manifest,
+                                   const SceneLimits& limits = {});
 
 // Uploads the files of `manifest` (found under `directory`) that the store lacks, then the manifest
 // blob itself; returns the manifest's digest. `progress` counts bytes actually sent.

@@ -195,6 +195,18 @@ TEST(ManifestTest, SceneUploadSendsOnlyWhatIsMissing) {
   auto read = ReadManifest(*store, first->manifest);
   ASSERT_TRUE(read.ok());
   EXPECT_TRUE(ValidateSceneManifest(*store, *read).ok());
+  // Limits: the Gaussian count comes from the splat's header in the store.
+  SceneLimits few;
+  few.max_gaussians = 10;
+  const absl::Status gaussians = ValidateSceneManifest(*store, *read, few);
+  EXPECT_EQ(gaussians.code(), absl::StatusCode::kResourceExhausted) << gaussians;
+  EXPECT_NE(gaussians.message().find("Gaussians"), std::string::npos) << gaussians;
+  few = SceneLimits{};
+  few.max_views = 1;
+  EXPECT_EQ(ValidateSceneManifest(*store, *read, few).code(), absl::StatusCode::kResourceExhausted);
+  few = SceneLimits{};
+  few.max_total_pixels = 100;
+  EXPECT_EQ(ValidateSceneManifest(*store, *read, few).code(), absl::StatusCode::kResourceExhausted);
   // Materialised, it is the same scene.
   const std::string copy = (fs::path(root) / "copy").string();
   ASSERT_TRUE(MaterializeManifest(*store, *read, copy).ok());

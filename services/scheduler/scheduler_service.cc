@@ -1,5 +1,6 @@
 #include "services/scheduler/scheduler_service.h"
 
+#include <algorithm>
 #include <set>
 
 #include "absl/strings/str_cat.h"
@@ -78,6 +79,11 @@ absl::Status SchedulerService::Submit(const v1::SubmitPipelineRequest& request,
     if (parameters.is_discarded())
       return absl::InvalidArgumentError("parameters_json is not valid JSON");
   }
+  if (request.scene().size() > 256 ||
+      std::any_of(request.scene().begin(), request.scene().end(),
+                  [](char c) { return static_cast<unsigned char>(c) < 0x20 || c == 0x7f; }))
+    return absl::InvalidArgumentError(
+        "scene name: at most 256 bytes, no control characters");
   SubmitRequest submit;
   submit.scene_manifest = manifest_digest;
   submit.scene = request.scene().empty() ? manifest_digest.hash.substr(0, 12) : request.scene();
