@@ -41,6 +41,12 @@ check "offline run" "$BIN" run --scene "$WORK/a" --out "$WORK/offline" --iterati
 check "service labels == offline labels" cmp "$WORK/fetched/labels.ply" "$WORK/offline/segmentation/labels.ply"
 check "jobs table" "$BIN" jobs --server "$ADDR"
 check "jobs table lists succeeded" grep -q "succeeded 3" "$WORK/out.txt"
+check "jobs in pages of 2" "$BIN" jobs --server "$ADDR" --limit 2 --json
+TOKEN=$(json_get "$WORK/out.txt" "d['next_page_token']")
+check "a page token is given" test -n "$TOKEN"
+check "the next page" "$BIN" jobs --server "$ADDR" --limit 2 --page-token "$TOKEN" --json
+check "the next page holds the oldest job" test "$(json_get "$WORK/out.txt" "[j['kind'] for j in d['jobs']]")" = "['decompose']"
+check_fails "a malformed page token" "INVALID_ARGUMENT" "$BIN" jobs --server "$ADDR" --page-token nope
 
 # 2. Resubmitting computes nothing new and uploads nothing.
 check "resubmit" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params "$SMALL" --json

@@ -282,7 +282,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
 
   // jobs
   struct JobsArgs {
-    std::string server = kDefaultServer, scene, state;
+    std::string server = kDefaultServer, scene, state, page_token;
     int limit = 50;
     bool json = false;
   };
@@ -292,7 +292,9 @@ void AddClientCommands(CLI::App& app, Action* action) {
   l->add_option("--scene", list->scene, "Only this scene");
   l->add_option("--state", list->state, "Only this state")
       ->check(CLI::IsMember({"queued", "leased", "running", "succeeded", "failed", "cancelled"}));
-  l->add_option("--limit", list->limit, "At most this many (newest first)");
+  l->add_option("--limit", list->limit, "At most this many (newest first; at most 1000)");
+  l->add_option("--page-token", list->page_token,
+                "Continue after the previous page (its next_page_token)");
   l->add_flag("--json", list->json, "Print {\"jobs\", \"stats\"} as the last stdout line");
   l->callback([list, action] {
     *action = [list]() -> absl::Status {
@@ -300,6 +302,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
       v1::ListJobsRequest request;
       request.set_scene(list->scene);
       request.set_limit(list->limit);
+      request.set_page_token(list->page_token);
       if (!list->state.empty()) {
         for (int st = v1::JOB_STATE_QUEUED; st <= v1::JOB_STATE_CANCELLED; ++st) {
           if (scheduler::StateName(static_cast<v1::JobState>(st)) == list->state)
@@ -350,8 +353,11 @@ void AddClientCommands(CLI::App& app, Action* action) {
       }
       std::printf("queue: %s| scenes %lld | oldest queued %.1f s\n", line.c_str(),
                   static_cast<long long>(stats.scenes()), stats.oldest_queued_age_ms() / 1000.0);
+      if (!response.next_page_token().empty())
+        std::printf("more: --page-token %s\n", response.next_page_token().c_str());
       if (list->json)
         PrintJsonLine(nlohmann::json({{"jobs", jobs},
+                                      {"next_page_token", response.next_page_token()},
                                       {"stats",
                                        {{"jobs_by_state", by_state},
                                         {"scenes", stats.scenes()},

@@ -97,6 +97,7 @@ struct Job {
   bool cancel_requested = false;
   int64_t created_ms = 0, updated_ms = 0, not_before_ms = 0, lease_expires_ms = 0;
   int64_t lease_ms = 0;  // the lease length granted at the last lease; heartbeats renew with it
+  int64_t seq = 0;       // submission order in the store (list pagination); set by the store
 
   const JobDependency* FindDependency(absl::string_view name) const;
 };

@@ -78,6 +78,7 @@ Job RowToJob(const pqxx::row& r) {
   j.not_before_ms = r[c++].as<int64_t>();
   j.lease_expires_ms = r[c++].as<int64_t>();
   j.lease_ms = r[c++].as<int64_t>();
+  j.seq = r[c++].as<int64_t>();
   return j;
 }
 
@@ -117,7 +118,7 @@ class PostgresTx final : public QueueTx {
   absl::StatusOr<std::optional<Job>> Get(const std::string& id) override {
     // A writing transaction locks what it reads: concurrent changes of one job serialise.
     const pqxx::result r =
-        tx_.exec_params(absl::StrCat("SELECT ", kColumns, " FROM jobs WHERE id = $1",
+        tx_.exec_params(absl::StrCat("SELECT ", kColumns, ", seq FROM jobs WHERE id = $1",
                                      read_only_ ? "" : " FOR UPDATE"),
                         id);
     if (r.empty()) return std::optional<Job>();
@@ -206,7 +207,7 @@ class PostgresTx final : public QueueTx {
     if (!filter.ids.empty()) {
       for (const std::string& id : filter.ids) {
         const pqxx::result r =
-            tx_.exec_params(absl::StrCat("SELECT ", kColumns, " FROM jobs WHERE id = $1"), id);
+            tx_.exec_params(absl::StrCat("SELECT ", kColumns, ", seq FROM jobs WHERE id = $1"), id);
         if (r.empty()) return absl::NotFoundError(absl::StrCat("job ", id, " not found"));
         jobs.push_back(RowToJob(r[0]));
       }
@@ -214,9 +215,9 @@ class PostgresTx final : public QueueTx {
       const int state = filter.state ? Code(*filter.state) : 0;
       const pqxx::result r = tx_.exec_params(
           absl::StrCat("SELECT ", kColumns,
-                       " FROM jobs WHERE ($1 = '' OR scene = $1) AND ($2 = 0 OR state = $2) "
-                       "ORDER BY seq DESC LIMIT $3"),
-          filter.scene, state, int64_t{filter.limit > 0 ? filter.limit : 100});
+                       ", seq FROM jobs WHERE ($1 = '' OR scene = $1) AND ($2 = 0 OR state = $2) "
+                       "AND ($3 = 0 OR seq < $3) ORDER BY seq DESC LIMIT $4"),
+          filter.scene, state, filter.before_seq, int64_t{filter.limit > 0 ? filter.limit : 100});
       for (const pqxx::row& row : r) jobs.push_back(RowToJob(row));
     }
     for (Job& j : jobs) LoadDependencies(&j);

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <set>
 
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include <spdlog/spdlog.h>
 
@@ -252,9 +253,15 @@ grpc::Status SchedulerService::ListJobs(grpc::ServerContext*, const v1::ListJobs
     filter.state = static_cast<JobState>(static_cast<int>(request->state()));
   }
   filter.limit = request->limit() > 0 ? std::min(request->limit(), 1000) : 100;
+  if (!request->page_token().empty()) {
+    if (!absl::SimpleAtoi(request->page_token(), &filter.before_seq) || filter.before_seq <= 0)
+      return ToGrpcStatus(absl::InvalidArgumentError("ListJobs: malformed page_token"));
+  }
   absl::StatusOr<std::vector<Job>> jobs = queue_->List(filter);
   if (!jobs.ok()) return ToGrpcStatus(jobs.status());
   for (const Job& j : *jobs) ToProto(j, response->add_jobs());
+  if (static_cast<int>(jobs->size()) == filter.limit && !jobs->empty())
+    response->set_next_page_token(std::to_string(jobs->back().seq));
   return grpc::Status::OK;
 }
 

@@ -63,6 +63,7 @@ Job RowToJob(const Statement& s) {
   j.not_before_ms = s.Int(c++);
   j.lease_expires_ms = s.Int(c++);
   j.lease_ms = s.Int(c++);
+  j.seq = s.Int(c++);
   return j;
 }
 
@@ -112,7 +113,7 @@ class SqliteTx final : public QueueTx {
   explicit SqliteTx(sqlite3* db) : db_(db) {}
 
   absl::StatusOr<std::optional<Job>> Get(const std::string& id) override {
-    Statement s(db_, absl::StrCat("SELECT ", kColumns, " FROM jobs WHERE id = ?"));
+    Statement s(db_, absl::StrCat("SELECT ", kColumns, ", seq FROM jobs WHERE id = ?"));
     s.Bind(1, id);
     ASSIGN_OR_RETURN(bool row, s.Step());
     if (!row) return std::optional<Job>();
@@ -209,11 +210,12 @@ class SqliteTx final : public QueueTx {
       return jobs;
     }
     Statement s(db_, absl::StrCat("SELECT ", kColumns,
-                                  " FROM jobs WHERE (? = '' OR scene = ?) AND (? = 0 OR state = ?) "
-                                  "ORDER BY seq DESC LIMIT ?"));
+                                  ", seq FROM jobs WHERE (? = '' OR scene = ?) AND (? = 0 OR state = ?) "
+                                  "AND (? = 0 OR seq < ?) ORDER BY seq DESC LIMIT ?"));
     const int64_t state = filter.state ? Code(*filter.state) : 0;
     s.Bind(1, filter.scene).Bind(2, filter.scene).Bind(3, state).Bind(4, state);
-    s.Bind(5, int64_t{filter.limit > 0 ? filter.limit : 100});
+    s.Bind(5, filter.before_seq).Bind(6, filter.before_seq);
+    s.Bind(7, int64_t{filter.limit > 0 ? filter.limit : 100});
     while (true) {
       ASSIGN_OR_RETURN(bool row, s.Step());
       if (!row) break;

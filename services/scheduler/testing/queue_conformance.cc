@@ -342,6 +342,16 @@ TEST_P(JobQueueConformanceTest, ListAndStats) {
   JobFilter by_scene;
   by_scene.scene = "s";
   EXPECT_EQ(queue_->List(by_scene)->size(), 2u);
+  // Pages: newest first, each page continuing below the last seq of the previous one.
+  JobFilter page;
+  page.limit = 2;
+  auto first = queue_->List(page);
+  ASSERT_EQ(first->size(), 2u);
+  page.before_seq = first->back().seq;
+  auto second = queue_->List(page);
+  ASSERT_EQ(second->size(), 1u);
+  EXPECT_EQ((*second)[0].id, (*all)[2].id);
+  EXPECT_GT((*first)[1].seq, (*second)[0].seq);
   JobFilter by_ids;
   by_ids.ids = {(*all)[0].id};
   EXPECT_EQ((*queue_->List(by_ids))[0].id, (*all)[0].id);
