@@ -41,7 +41,8 @@ void AddSynthCommand(CLI::App& app, Action* action) {
   cmd->add_option("--mask-noise", args->mask_noise,
                   "Simulated 2D segmenter noise: none, low, medium (default), high; the "
                   "independent part-aware family: sam-low, sam-medium, sam-high")
-      ->check(CLI::IsMember({"none", "low", "medium", "high", "sam-low", "sam-medium", "sam-high"}));
+      ->check(
+          CLI::IsMember({"none", "low", "medium", "high", "sam-low", "sam-medium", "sam-high"}));
   cmd->add_option(
          "--from-splats", args->from_splats,
          "Compose real captures (comma-separated .ply files) instead of procedural objects")

@@ -15,7 +15,8 @@ absl::StatusOr<FileLock> FileLock::Acquire(const std::string& path, const std::s
   const int fd = ::open(path.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
   if (fd < 0)
     return absl::UnavailableError(absl::StrCat(
-        path, ": cannot open lock file: ", std::error_code(errno, std::generic_category()).message()));
+        path,
+        ": cannot open lock file: ", std::error_code(errno, std::generic_category()).message()));
   if (::flock(fd, LOCK_EX | LOCK_NB) != 0) {
     const int err = errno;
     ::close(fd);

@@ -40,7 +40,8 @@ absl::StatusOr<SceneView> ParseView(const json& j, size_t index) {
       const json& v = j.at(key);
       if (!v.is_number_integer() || v.get<int64_t>() < 1 || v.get<int64_t>() > kMaxViewSide ||
           (v.is_number_unsigned() && v.get<uint64_t>() > static_cast<uint64_t>(kMaxViewSide)))
-        return fail(absl::StrCat(key, " ", v.dump(), " is not an integer in [1, ", kMaxViewSide, "]"));
+        return fail(
+            absl::StrCat(key, " ", v.dump(), " is not an integer in [1, ", kMaxViewSide, "]"));
     }
     view.camera.width = j.at("width").get<int>();
     view.camera.height = j.at("height").get<int>();

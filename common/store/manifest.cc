@@ -122,9 +122,8 @@ absl::StatusOr<Manifest> SceneManifestFromDirectory(const std::string& scene_dir
           absl::StrCat(path.string(), ": not a regular file (scene files must be plain files)"));
     const std::string inside = target.lexically_relative(root).string();
     if (inside.empty() || inside.rfind("..", 0) == 0)
-      return absl::InvalidArgumentError(
-          absl::StrCat(path.string(), ": resolves to ", target.string(),
-                       ", outside the scene folder"));
+      return absl::InvalidArgumentError(absl::StrCat(
+          path.string(), ": resolves to ", target.string(), ", outside the scene folder"));
     ASSIGN_OR_RETURN(m.files[rel], DigestFile(target.string()));
   }
   m.metadata["views"] = scene.views.size();
@@ -165,10 +164,12 @@ absl::Status ValidateSceneManifest(BlobStore& store, const Manifest& manifest,
     total += pixels;
   }
   if (total > limits.max_total_pixels)
-    return too_large(absl::StrCat(total, " pixels in all views (at most ", limits.max_total_pixels, ")"));
+    return too_large(
+        absl::StrCat(total, " pixels in all views (at most ", limits.max_total_pixels, ")"));
   // The Gaussian count from the splat's header (the first MiB holds any sane header).
   const Digest splat = manifest.files.at(scene->gaussians);
-  ASSIGN_OR_RETURN(std::string head, store.Read(splat, 0, std::min<int64_t>(splat.size_bytes, 1 << 20)));
+  ASSIGN_OR_RETURN(std::string head,
+                   store.Read(splat, 0, std::min<int64_t>(splat.size_bytes, 1 << 20)));
   absl::StatusOr<PlyHeader> header = ParsePlyHeader(head, scene->gaussians);
   if (!header.ok()) return bad(header.status().message());
   for (const PlyElement& e : header->elements) {

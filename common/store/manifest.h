@@ -46,7 +46,7 @@ absl::StatusOr<Manifest> SceneManifestFromDirectory(const std::string& scene_dir
 struct SceneLimits {
   int64_t max_views = 4096;
   int64_t max_pixels_per_view = int64_t{8192} * 8192;  // 67 MP
-  int64_t max_total_pixels = int64_t{1} << 32;           // over every view
+  int64_t max_total_pixels = int64_t{1} << 32;         // over every view
   int64_t max_gaussians = 20'000'000;
 };
 

@@ -80,7 +80,8 @@ LabelMap SimulatePartSegmenter(const LabelMap& gt, const MaskNoiseOptions& o, st
       if (touching.count({i->first, j->first})) continue;
       const double ratio = static_cast<double>(std::min(i->second, j->second)) /
                            static_cast<double>(std::max(i->second, j->second));
-      if (ratio >= 0.75 && uni(rng) < o.similar_merge_probability && root(i->first) != root(j->first))
+      if (ratio >= 0.75 && uni(rng) < o.similar_merge_probability &&
+          root(i->first) != root(j->first))
         merged_into[root(j->first)] = root(i->first);
     }
   }

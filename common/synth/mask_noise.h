@@ -46,7 +46,7 @@ struct MaskNoiseOptions {
                                        // (CropFormer's 400 px at 1600x1000)
   // The part-aware family ("sam-*"): when true, the steps a-e above replace steps 1-5.
   bool part_family = false;
-  float part_split_probability = 0.0f;    // per instance: cut into 2-3 parts
+  float part_split_probability = 0.0f;     // per instance: cut into 2-3 parts
   float similar_merge_probability = 0.0f;  // per non-touching pair of similar area (within 25 %)
   int bleed_px = 0;                        // a mask grows this far into a touching instance
   float flicker_probability = 0.0f;        // per instance: small holes punched into its mask

@@ -5,12 +5,12 @@
 
 #include <spdlog/spdlog.h>
 
+#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "common/core/file_io.h"
 #include "common/core/status.h"
 #include "common/rpc/server.h"
-#include "absl/strings/match.h"
 #include "services/scheduler/postgres_queue_store.h"
 #include "services/scheduler/scheduler_service.h"
 #include "services/scheduler/sqlite_queue_store.h"

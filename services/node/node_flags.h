@@ -21,12 +21,14 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
   if (needs_scheduler_address)
     app.add_option("--scheduler", o->scheduler_address, "Address of the scheduler service")
         ->required();
-  app.add_option("--queue", o->queue,
-                 "Job queue storage: sqlite:PATH (default DATA/jobs.db) or postgres://HOST[:PORT]/DB "
-                 "(password from PGPASSWORD or ~/.pgpass)");
-  app.add_option("--retention-hours", o->retention_hours,
-                 "Scheduler: prune jobs finished longer ago than this (0 = keep for ever); a pruned "
-                 "result is recomputed when its pipeline is submitted again")
+  app.add_option(
+      "--queue", o->queue,
+      "Job queue storage: sqlite:PATH (default DATA/jobs.db) or postgres://HOST[:PORT]/DB "
+      "(password from PGPASSWORD or ~/.pgpass)");
+  app.add_option(
+         "--retention-hours", o->retention_hours,
+         "Scheduler: prune jobs finished longer ago than this (0 = keep for ever); a pruned "
+         "result is recomputed when its pipeline is submitted again")
       ->capture_default_str();
   app.add_option("--lease-seconds", o->lease_seconds, "Job lease length in seconds")
       ->capture_default_str();

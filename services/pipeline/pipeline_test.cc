@@ -36,23 +36,23 @@ TEST(Registry, CodecsValidateAndCanonicalize) {
     nlohmann::json p;
     std::string says;
   };
-  for (const Bad& c :
-       std::vector<Bad>{{"train", {{"iterations", "many"}}, "'iterations' must be an integer"},
-                        {"train", {{"iterations", 0}}, "outside [1, 1e+06]"},
-                        {"train", {{"iterations", -1}}, "iterations"},
-                        {"train", {{"samples", 2147483647}}, "samples"},
-                        {"train", {{"iterations", 10.5}}, "must be an integer"},
-                        {"train", {{"supervision", "psychic"}}, "psychic"},
-                        {"train", {{"method", "magic"}}, "magic"},
-                        {"segment", {{"threshold", 2.0}}, "threshold"},
-                        {"segment", {{"threshold", -1.0}}, "not in (-1, 1]"},
-                        {"segment", {{"tau", 0.9}}, "unknown parameter 'tau' (known: labelling, threshold"},
+  for (const Bad& c : std::vector<Bad>{
+           {"train", {{"iterations", "many"}}, "'iterations' must be an integer"},
+           {"train", {{"iterations", 0}}, "outside [1, 1e+06]"},
+           {"train", {{"iterations", -1}}, "iterations"},
+           {"train", {{"samples", 2147483647}}, "samples"},
+           {"train", {{"iterations", 10.5}}, "must be an integer"},
+           {"train", {{"supervision", "psychic"}}, "psychic"},
+           {"train", {{"method", "magic"}}, "magic"},
+           {"segment", {{"threshold", 2.0}}, "threshold"},
+           {"segment", {{"threshold", -1.0}}, "not in (-1, 1]"},
+           {"segment", {{"tau", 0.9}}, "unknown parameter 'tau' (known: labelling, threshold"},
            {"segment", {{"labelling", "kmeans"}}, "kmeans"},
            {"segment", {{"max_points", 50000}}, "max_points"},
-                        {"decompose", {{"dbscan_eps", -1.0}}, "stage decompose"},
-                        {"decompose", {{"dbscan_eps_relative", 1}}, "true or false"},
-                        {"render", nlohmann::json::object(), "unknown stage 'render'"},
-                        {"segment", nlohmann::json::array(), "must be a JSON object"}}) {
+           {"decompose", {{"dbscan_eps", -1.0}}, "stage decompose"},
+           {"decompose", {{"dbscan_eps_relative", 1}}, "true or false"},
+           {"render", nlohmann::json::object(), "unknown stage 'render'"},
+           {"segment", nlohmann::json::array(), "must be a JSON object"}}) {
     const absl::Status s = r.Canonicalize(c.kind, c.p).status();
     EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << c.p.dump();
     EXPECT_NE(s.message().find(c.says), std::string::npos) << s;
@@ -104,11 +104,12 @@ TEST(Registry, AStageThatThrowsFailsItsJobNotTheProcess) {
     s.canonicalize = [](const nlohmann::json& p) -> absl::StatusOr<nlohmann::json> { return p; };
     return s;
   };
-  ASSERT_TRUE(r.Add({spec("hungry"), [](const StageContext&) -> absl::StatusOr<StageResult> {
-                       throw std::bad_alloc();
-                     }})
-                  .ok());
-  ASSERT_TRUE(r.Add({spec("broken"), [](const StageContext&) -> absl::StatusOr<StageResult> {
+  ASSERT_TRUE(
+      r.Add({spec("hungry"),
+             [](const StageContext&) -> absl::StatusOr<StageResult> { throw std::bad_alloc(); }})
+          .ok());
+  ASSERT_TRUE(r.Add({spec("broken"),
+                     [](const StageContext&) -> absl::StatusOr<StageResult> {
                        throw std::runtime_error("index out of range");
                      }})
                   .ok());

@@ -3,8 +3,8 @@
 #include <algorithm>
 #include <filesystem>
 #include <new>
-#include <stdexcept>
 #include <set>
+#include <stdexcept>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"

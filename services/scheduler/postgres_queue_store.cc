@@ -9,7 +9,7 @@
 namespace instascene::scheduler {
 namespace {
 
-constexpr int kRetries = 8;             // whole-transaction retries on conflicts between replicas
+constexpr int kRetries = 8;  // whole-transaction retries on conflicts between replicas
 constexpr int64_t kMigrationLock = 0x1a57a5ce;  // pg_advisory_xact_lock key of the migrations
 
 constexpr char kColumns[] =
@@ -71,7 +71,8 @@ Job RowToJob(const pqxx::row& r) {
   j.error = r[c++].as<std::string>();
   j.worker_id = r[c++].as<std::string>();
   j.lease_token = r[c++].as<std::string>();
-  j.progress = JobProgress::FromJson(nlohmann::json::parse(r[c++].as<std::string>(), nullptr, false));
+  j.progress =
+      JobProgress::FromJson(nlohmann::json::parse(r[c++].as<std::string>(), nullptr, false));
   j.cancel_requested = r[c++].as<int>() != 0;
   j.created_ms = r[c++].as<int64_t>();
   j.updated_ms = r[c++].as<int64_t>();
@@ -93,13 +94,12 @@ std::vector<std::string> Ids(const pqxx::result& r) {
 template <typename... Extra>
 pqxx::result ExecWithJob(pqxx::transaction_base& tx, const std::string& sql, const Job& j,
                          Extra&&... extra) {
-  return tx.exec_params(sql, j.id, j.key, j.scene, j.kind, j.parameters_json,
-                        DigestText(j.scene_manifest), j.parent, j.item, j.pending, j.items,
-                        j.plans.dump(), Code(j.state), j.priority, j.attempts, j.max_attempts,
-                        DigestText(j.output_manifest), j.error, j.worker_id, j.lease_token,
-                        j.progress.ToJson().dump(), int{j.cancel_requested}, j.created_ms,
-                        j.updated_ms, j.not_before_ms, j.lease_expires_ms, j.lease_ms,
-                        std::forward<Extra>(extra)...);
+  return tx.exec_params(
+      sql, j.id, j.key, j.scene, j.kind, j.parameters_json, DigestText(j.scene_manifest), j.parent,
+      j.item, j.pending, j.items, j.plans.dump(), Code(j.state), j.priority, j.attempts,
+      j.max_attempts, DigestText(j.output_manifest), j.error, j.worker_id, j.lease_token,
+      j.progress.ToJson().dump(), int{j.cancel_requested}, j.created_ms, j.updated_ms,
+      j.not_before_ms, j.lease_expires_ms, j.lease_ms, std::forward<Extra>(extra)...);
 }
 
 const std::string& Placeholders() {
@@ -132,14 +132,16 @@ class PostgresTx final : public QueueTx {
                 absl::StrCat("INSERT INTO jobs (", kColumns, ") VALUES (", Placeholders(), ")"),
                 job);  // a duplicate id throws unique_violation: the store retries the transaction
     for (const JobDependency& d : job.dependencies)
-      tx_.exec_params("INSERT INTO job_dependencies (job_id, name, dependency_id) VALUES ($1,$2,$3)",
-                      job.id, d.name, d.job_id);
+      tx_.exec_params(
+          "INSERT INTO job_dependencies (job_id, name, dependency_id) VALUES ($1,$2,$3)", job.id,
+          d.name, d.job_id);
     return absl::OkStatus();
   }
 
   absl::Status Update(const Job& job) override {
     const pqxx::result r = ExecWithJob(
-        tx_, absl::StrCat("UPDATE jobs SET (", kColumns, ") = (", Placeholders(), ") WHERE id = $27"),
+        tx_,
+        absl::StrCat("UPDATE jobs SET (", kColumns, ") = (", Placeholders(), ") WHERE id = $27"),
         job, job.id);
     if (r.affected_rows() != 1)
       return absl::NotFoundError(absl::StrCat("job ", job.id, " not found"));
@@ -168,7 +170,9 @@ class PostgresTx final : public QueueTx {
               "WITH best AS (SELECT DISTINCT ON (scene) id, scene, priority, seq FROM jobs "
               "WHERE state = 1 AND pending = 0 AND not_before_ms <= $1 AND kind IN (",
               list, ")",
-              excluded.empty() ? "" : absl::StrCat(" AND id NOT IN (", absl::StrJoin(excluded, ","), ")"),
+              excluded.empty()
+                  ? ""
+                  : absl::StrCat(" AND id NOT IN (", absl::StrJoin(excluded, ","), ")"),
               " ORDER BY scene, priority DESC, seq ASC), "
               "held AS (SELECT scene, COUNT(*) AS n FROM jobs WHERE state IN (2, 3) "
               "AND scene IN (SELECT scene FROM best) GROUP BY scene) "
@@ -226,7 +230,9 @@ class PostgresTx final : public QueueTx {
 
   absl::StatusOr<int> DeleteFinishedBefore(int64_t cutoff_ms) override {
     const pqxx::result r = tx_.exec_params(
-        "WITH doomed AS (SELECT id FROM jobs WHERE state IN (4, 5, 6) AND updated_ms < $1 AND NOT EXISTS (SELECT 1 FROM job_dependencies e JOIN jobs d ON d.id = e.job_id WHERE e.dependency_id = jobs.id AND d.state IN (1, 2, 3)) FOR UPDATE SKIP LOCKED), "
+        "WITH doomed AS (SELECT id FROM jobs WHERE state IN (4, 5, 6) AND updated_ms < $1 AND NOT "
+        "EXISTS (SELECT 1 FROM job_dependencies e JOIN jobs d ON d.id = e.job_id WHERE "
+        "e.dependency_id = jobs.id AND d.state IN (1, 2, 3)) FOR UPDATE SKIP LOCKED), "
         "gone AS (DELETE FROM job_dependencies WHERE job_id IN (SELECT id FROM doomed)) "
         "DELETE FROM jobs WHERE id IN (SELECT id FROM doomed)",
         cutoff_ms);
@@ -304,12 +310,13 @@ absl::Status PostgresQueueStore::Migrate() {
     tx.exec(
         "CREATE TABLE IF NOT EXISTS schema_migrations (version INTEGER PRIMARY KEY, "
         "applied_unix_ms BIGINT NOT NULL)");
-    const int have = tx.exec("SELECT COALESCE(MAX(version), 0) FROM schema_migrations")[0][0].as<int>();
+    const int have =
+        tx.exec("SELECT COALESCE(MAX(version), 0) FROM schema_migrations")[0][0].as<int>();
     const int known = static_cast<int>(std::size(kMigrations));
     if (have > known)
-      return absl::FailedPreconditionError(absl::StrCat(
-          "postgres: the queue schema is at version ", have, "; this build knows up to ", known,
-          " (a newer scheduler migrated it)"));
+      return absl::FailedPreconditionError(absl::StrCat("postgres: the queue schema is at version ",
+                                                        have, "; this build knows up to ", known,
+                                                        " (a newer scheduler migrated it)"));
     for (int v = have + 1; v <= known; ++v) {
       tx.exec(kMigrations[v - 1]);
       tx.exec_params(
@@ -345,12 +352,12 @@ absl::Status PostgresQueueStore::Transact(bool read_only,
       return result;
     } catch (const pqxx::transaction_rollback& e) {  // serialisation failure, deadlock
       if (attempt >= kRetries)
-        return absl::AbortedError(absl::StrCat("postgres: gave up after ", attempt,
-                                               " conflicting attempts: ", e.what()));
+        return absl::AbortedError(
+            absl::StrCat("postgres: gave up after ", attempt, " conflicting attempts: ", e.what()));
     } catch (const pqxx::unique_violation& e) {  // another replica inserted the same job
       if (attempt >= kRetries)
-        return absl::AbortedError(absl::StrCat("postgres: gave up after ", attempt,
-                                               " conflicting attempts: ", e.what()));
+        return absl::AbortedError(
+            absl::StrCat("postgres: gave up after ", attempt, " conflicting attempts: ", e.what()));
     } catch (const pqxx::broken_connection& e) {
       connection_.reset();  // the next transaction reconnects
       return absl::UnavailableError(absl::StrCat("postgres: connection lost: ", e.what()));

@@ -24,8 +24,7 @@ class PostgresQueueStore final : public QueueStore {
                                                                   const std::string& schema = "");
   ~PostgresQueueStore() override;
 
-  absl::Status Transact(bool read_only,
-                        const std::function<absl::Status(QueueTx&)>& body) override;
+  absl::Status Transact(bool read_only, const std::function<absl::Status(QueueTx&)>& body) override;
 
  private:
   PostgresQueueStore(std::string conninfo, std::string schema);

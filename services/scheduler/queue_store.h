@@ -21,7 +21,7 @@ struct JobFilter {
   std::optional<JobState> state;  // unset = all
   std::vector<std::string> ids;   // non-empty: exactly these (NotFound if one is missing)
   int limit = 100;                // newest first
-  int64_t before_seq = 0;         // pagination: only jobs older than this Job::seq (0 = from newest)
+  int64_t before_seq = 0;  // pagination: only jobs older than this Job::seq (0 = from newest)
 };
 
 struct QueueStats {

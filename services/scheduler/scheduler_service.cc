@@ -3,9 +3,9 @@
 #include <algorithm>
 #include <set>
 
+#include <spdlog/spdlog.h>
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
-#include <spdlog/spdlog.h>
 
 #include "common/core/status.h"
 #include "common/core/timer.h"
@@ -51,7 +51,8 @@ void SchedulerService::RescueLoop() {
     if (stopping_) break;
     lock.unlock();
     absl::StatusOr<int> rescued = queue_->RescueExpired();
-    if (options_.retention_ms > 0 && prune_watch.ElapsedSeconds() * 1000 >= options_.prune_interval_ms) {
+    if (options_.retention_ms > 0 &&
+        prune_watch.ElapsedSeconds() * 1000 >= options_.prune_interval_ms) {
       prune_watch = Stopwatch();
       absl::StatusOr<int> pruned = queue_->PruneFinished(options_.retention_ms);
       if (pruned.ok() && *pruned > 0)
@@ -83,8 +84,7 @@ absl::Status SchedulerService::Submit(const v1::SubmitPipelineRequest& request,
   if (request.scene().size() > 256 ||
       std::any_of(request.scene().begin(), request.scene().end(),
                   [](char c) { return static_cast<unsigned char>(c) < 0x20 || c == 0x7f; }))
-    return absl::InvalidArgumentError(
-        "scene name: at most 256 bytes, no control characters");
+    return absl::InvalidArgumentError("scene name: at most 256 bytes, no control characters");
   SubmitRequest submit;
   submit.scene_manifest = manifest_digest;
   submit.scene = request.scene().empty() ? manifest_digest.hash.substr(0, 12) : request.scene();

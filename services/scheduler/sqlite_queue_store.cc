@@ -209,9 +209,10 @@ class SqliteTx final : public QueueTx {
       }
       return jobs;
     }
-    Statement s(db_, absl::StrCat("SELECT ", kColumns,
-                                  ", seq FROM jobs WHERE (? = '' OR scene = ?) AND (? = 0 OR state = ?) "
-                                  "AND (? = 0 OR seq < ?) ORDER BY seq DESC LIMIT ?"));
+    Statement s(db_,
+                absl::StrCat("SELECT ", kColumns,
+                             ", seq FROM jobs WHERE (? = '' OR scene = ?) AND (? = 0 OR state = ?) "
+                             "AND (? = 0 OR seq < ?) ORDER BY seq DESC LIMIT ?"));
     const int64_t state = filter.state ? Code(*filter.state) : 0;
     s.Bind(1, filter.scene).Bind(2, filter.scene).Bind(3, state).Bind(4, state);
     s.Bind(5, filter.before_seq).Bind(6, filter.before_seq);
@@ -226,7 +227,10 @@ class SqliteTx final : public QueueTx {
   }
 
   absl::StatusOr<int> DeleteFinishedBefore(int64_t cutoff_ms) override {
-    Statement pick(db_, "SELECT id FROM jobs WHERE state IN (4, 5, 6) AND updated_ms < ? AND NOT EXISTS (SELECT 1 FROM job_dependencies e JOIN jobs d ON d.id = e.job_id WHERE e.dependency_id = jobs.id AND d.state IN (1, 2, 3))");
+    Statement pick(db_,
+                   "SELECT id FROM jobs WHERE state IN (4, 5, 6) AND updated_ms < ? AND NOT EXISTS "
+                   "(SELECT 1 FROM job_dependencies e JOIN jobs d ON d.id = e.job_id WHERE "
+                   "e.dependency_id = jobs.id AND d.state IN (1, 2, 3))");
     pick.Bind(1, cutoff_ms);
     ASSIGN_OR_RETURN(std::vector<std::string> ids, Ids(pick));
     for (const std::string& id : ids) {

@@ -55,8 +55,8 @@ std::vector<Merge> SingleLinkage(std::vector<MstEdge> mst, size_t n) {
   return merges;
 }
 
-// The condensed tree: rows (parent cluster, child, lambda = 1 / distance, child size), where a child
-// below n is a point falling out of its cluster. Cluster ids start at n (the root).
+// The condensed tree: rows (parent cluster, child, lambda = 1 / distance, child size), where a
+// child below n is a point falling out of its cluster. Cluster ids start at n (the root).
 struct CondensedRow {
   size_t parent, child;
   double lambda;
@@ -124,22 +124,22 @@ std::vector<CondensedRow> Condense(const std::vector<Merge>& merges, size_t n,
 
 }  // namespace
 
-std::vector<double> CoreDistances(const float* points, size_t n, int dim, int k,
-                                  int num_threads) {
+std::vector<double> CoreDistances(const float* points, size_t n, int dim, int k, int num_threads) {
   std::vector<double> core(n, 0.0);
   if (n < 2) return core;
   const size_t kk = std::min<size_t>(static_cast<size_t>(std::max(k, 1)), n - 1);
   RunWithThreads(num_threads, [&] {
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 64), [&](const tbb::blocked_range<size_t>& r) {
-      std::vector<double> d(n);
-      for (size_t i = r.begin(); i < r.end(); ++i) {
-        for (size_t j = 0; j < n; ++j)
-          d[j] = SquaredDistance(points + i * dim, points + j * dim, dim);
-        // d[i] = 0 is the smallest: the kk-th other point is at sorted index kk.
-        std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(kk), d.end());
-        core[i] = std::sqrt(d[kk]);
-      }
-    });
+    tbb::parallel_for(
+        tbb::blocked_range<size_t>(0, n, 64), [&](const tbb::blocked_range<size_t>& r) {
+          std::vector<double> d(n);
+          for (size_t i = r.begin(); i < r.end(); ++i) {
+            for (size_t j = 0; j < n; ++j)
+              d[j] = SquaredDistance(points + i * dim, points + j * dim, dim);
+            // d[i] = 0 is the smallest: the kk-th other point is at sorted index kk.
+            std::nth_element(d.begin(), d.begin() + static_cast<std::ptrdiff_t>(kk), d.end());
+            core[i] = std::sqrt(d[kk]);
+          }
+        });
   });
   return core;
 }
@@ -174,8 +174,7 @@ std::vector<MstEdge> MutualReachabilityMst(const float* points, size_t n, int di
           [&](const tbb::blocked_range<size_t>& r, Best acc) {
             for (size_t j = r.begin(); j < r.end(); ++j) {
               if (in_tree[j]) continue;
-              const double mr =
-                  std::max({cc, core2[j], SquaredDistance(c, points + j * dim, dim)});
+              const double mr = std::max({cc, core2[j], SquaredDistance(c, points + j * dim, dim)});
               if (mr < best[j]) {
                 best[j] = mr;
                 from[j] = static_cast<uint32_t>(current);
@@ -220,7 +219,8 @@ std::vector<int> ClustersFromMst(std::vector<MstEdge> mst, size_t n,
   }
   for (const CondensedRow& r : tree) {
     const double lambda = std::isinf(r.lambda) ? birth[r.parent - root] : r.lambda;
-    stability[r.parent - root] += (lambda - birth[r.parent - root]) * static_cast<double>(r.child_size);
+    stability[r.parent - root] +=
+        (lambda - birth[r.parent - root]) * static_cast<double>(r.child_size);
   }
   // Excess of mass: from the leaves up, a cluster is selected unless its children together are
   // more stable.

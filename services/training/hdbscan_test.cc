@@ -64,7 +64,9 @@ TEST(Hdbscan, CoreDistancesAndMstMatchBruteForce) {
   std::sort(edges.begin(), edges.end(), [](const E& x, const E& y) { return x.w < y.w; });
   std::vector<int> parent(n);
   std::iota(parent.begin(), parent.end(), 0);
-  std::function<int(int)> find = [&](int x) { return parent[x] == x ? x : parent[x] = find(parent[x]); };
+  std::function<int(int)> find = [&](int x) {
+    return parent[x] == x ? x : parent[x] = find(parent[x]);
+  };
   double kruskal = 0;
   for (const E& e : edges) {
     const int a = find(e.a), b = find(e.b);
@@ -140,8 +142,8 @@ TEST(Hdbscan, EpsilonMergesClustersCloserThanIt) {
   };
   EXPECT_EQ(distinct(*fine), 4u);
   EXPECT_EQ(distinct(*merged), 2u);
-  EXPECT_EQ((*merged)[0], (*merged)[60]);    // blobs 0 and 1 together
-  EXPECT_NE((*merged)[0], (*merged)[120]);   // not with blob 2
+  EXPECT_EQ((*merged)[0], (*merged)[60]);   // blobs 0 and 1 together
+  EXPECT_NE((*merged)[0], (*merged)[120]);  // not with blob 2
 }
 
 TEST(Hdbscan, OneBlobIsASingleClusterOnlyWhenAllowed) {

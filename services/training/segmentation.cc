@@ -10,8 +10,8 @@
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
 #include "common/splat/gaussian_ply.h"
-#include "services/training/density_labels.h"
 #include "common/splat/ply.h"
+#include "services/training/density_labels.h"
 
 namespace instascene::training {
 
@@ -92,9 +92,8 @@ absl::StatusOr<std::vector<uint32_t>> FinalLabels(const SegmentationResult& trai
   o.max_points = options.max_points;
   ASSIGN_OR_RETURN(DensityLabels labels,
                    LabelByDensity(cloud, trained.features, trained.feature_dim, o));
-  (*metadata)["hdbscan"] = {{"clusters", labels.clusters},
-                            {"points", labels.clustered_points},
-                            {"voxel", labels.voxel}};
+  (*metadata)["hdbscan"] = {
+      {"clusters", labels.clusters}, {"points", labels.clustered_points}, {"voxel", labels.voxel}};
   return labels.labels;
 }
 

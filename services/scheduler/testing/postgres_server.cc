@@ -42,9 +42,8 @@ absl::StatusOr<std::unique_ptr<PostgresServer>> PostgresServer::Start() {
                        "' -U postgres --auth=trust -E UTF8 --no-sync > '", root,
                        "/initdb.log' 2>&1")) != 0)
     return absl::InternalError(absl::StrCat("initdb failed (", root, "/initdb.log)"));
-  const std::string options =
-      absl::StrCat("-c listen_addresses='' -c unix_socket_directories='", root,
-                   "' -c fsync=off -c max_connections=50 -p 5433");
+  const std::string options = absl::StrCat("-c listen_addresses='' -c unix_socket_directories='",
+                                           root, "' -c fsync=off -c max_connections=50 -p 5433");
   if (Run(absl::StrCat(s->as_user_, s->bin_, "/pg_ctl -D '", s->data_, "' -o \"", options,
                        "\" -l '", root, "/server.log' -w -t 60 start > /dev/null 2>&1")) != 0)
     return absl::InternalError(absl::StrCat("pg_ctl start failed (", root, "/server.log)"));
@@ -55,7 +54,8 @@ absl::StatusOr<std::unique_ptr<PostgresServer>> PostgresServer::Start() {
 
 PostgresServer::~PostgresServer() {
   if (started_)
-    Run(absl::StrCat(as_user_, bin_, "/pg_ctl -D '", data_, "' -m immediate -w stop > /dev/null 2>&1"));
+    Run(absl::StrCat(as_user_, bin_, "/pg_ctl -D '", data_,
+                     "' -m immediate -w stop > /dev/null 2>&1"));
 }
 
 }  // namespace instascene::scheduler::testing
