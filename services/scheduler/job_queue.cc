@@ -151,6 +151,10 @@ absl::StatusOr<SubmitResult> JobQueue::SubmitOne(QueueTx& tx, const SubmitReques
 
 absl::Status JobQueue::Expand(QueueTx& tx, const Job& source, const nlohmann::json& plan,
                               std::vector<SubmitResult>* results) {
+  if (source.items < 0)
+    return absl::FailedPreconditionError(
+        absl::StrCat("job ", source.id, " (", source.kind,
+                     ") succeeded without reporting its items; per-item stages cannot follow it"));
   SubmitRequest request;
   request.scene = source.scene;
   request.scene_manifest = source.scene_manifest;
