@@ -11,7 +11,7 @@ PACKAGES=(
   libgrpc++-dev protobuf-compiler-grpc libprotobuf-dev protobuf-compiler
   libeigen3-dev
   libopencv-dev
-  libembree-dev
+  libembree-dev libopen3d-dev
   libopenimageio-dev openimageio-tools
   libdraco-dev
   libtbb-dev

@@ -1,7 +1,7 @@
 // common/geometry/triangle_mesh.h: an indexed triangle mesh with optional per-vertex UVs.
 //
-// Used for procedural ground-truth geometry (synthetic scenes), completion metrics and, later,
-// Embree ray casting and mesh export. Value type; thread-safe for concurrent reads.
+// Used for procedural ground-truth geometry (synthetic scenes), completion metrics, Embree ray
+// casting (common/mesh) and mesh export. Value type; thread-safe for concurrent reads.
 #pragma once
 
 #include <array>
@@ -17,7 +17,8 @@ namespace instascene {
 
 struct TriangleMesh {
   std::vector<Eigen::Vector3f> vertices;
-  std::vector<Eigen::Vector2f> uvs;  // empty, or one per vertex
+  std::vector<Eigen::Vector2f> uvs;     // empty, or one per vertex
+  std::vector<Eigen::Vector3f> colors;  // empty, or one linear RGB in [0, 1] per vertex
   std::vector<std::array<uint32_t, 3>> triangles;
 
   float TriangleArea(size_t t) const {
@@ -40,11 +41,17 @@ struct TriangleMesh {
   void Append(const TriangleMesh& other) {
     const uint32_t base = static_cast<uint32_t>(vertices.size());
     const bool keep_uv = uvs.size() == vertices.size() && other.uvs.size() == other.vertices.size();
+    const bool keep_colors =
+        colors.size() == vertices.size() && other.colors.size() == other.vertices.size();
     vertices.insert(vertices.end(), other.vertices.begin(), other.vertices.end());
     if (keep_uv)
       uvs.insert(uvs.end(), other.uvs.begin(), other.uvs.end());
     else
       uvs.clear();
+    if (keep_colors)
+      colors.insert(colors.end(), other.colors.begin(), other.colors.end());
+    else
+      colors.clear();
     for (const auto& t : other.triangles)
       triangles.push_back({t[0] + base, t[1] + base, t[2] + base});
   }

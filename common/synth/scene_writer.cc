@@ -7,6 +7,7 @@
 #include "absl/strings/str_format.h"
 #include "common/core/status.h"
 #include "common/eval/result.h"
+#include "common/mesh/mesh_ply.h"
 #include "common/raster/label_render.h"
 #include "common/raster/rasterizer.h"
 #include "common/scene/image_io.h"
@@ -19,24 +20,6 @@
 
 namespace instascene {
 namespace {
-
-// Binary little-endian triangle-mesh PLY (vertex x y z, face vertex_indices).
-std::string EncodeMeshPly(const TriangleMesh& mesh) {
-  std::string out =
-      absl::StrCat("ply\nformat binary_little_endian 1.0\nelement vertex ", mesh.vertices.size(),
-                   "\nproperty float x\nproperty float y\nproperty float z\nelement face ",
-                   mesh.triangles.size(), "\nproperty list uchar int vertex_indices\nend_header\n");
-  for (const Eigen::Vector3f& v : mesh.vertices)
-    out.append(reinterpret_cast<const char*>(v.data()), 12);
-  for (const auto& t : mesh.triangles) {
-    out.push_back(3);
-    for (uint32_t i : t) {
-      const int32_t index = static_cast<int32_t>(i);
-      out.append(reinterpret_cast<const char*>(&index), 4);
-    }
-  }
-  return out;
-}
 
 nlohmann::json ObjectJson(const SynthObject& o, const GaussianCloud& cloud) {
   nlohmann::json pose = nlohmann::json::array();

@@ -1,0 +1,36 @@
+// common/mesh/depth_fusion.h: a watertight-where-observed surface from depth maps by TSDF fusion
+// and marching cubes (ALGORITHM.md 7.1: the 2DGS `extract_mesh_bounded` recipe), done by Open3D's
+// ScalableTSDFVolume (Debian's libopen3d 0.16: a maintained implementation of exactly this recipe,
+// so the project writes no TSDF or marching-cubes code of its own), followed by the 2DGS clean-up
+// (keep the largest connected components). Open3D is confined to this file's implementation.
+// Stateless, thread-safe.
+#pragma once
+
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "common/geometry/camera.h"
+#include "common/geometry/triangle_mesh.h"
+
+namespace instascene {
+
+struct DepthView {
+  PinholeCamera camera;
+  std::vector<float> depth;  // HxW camera-z depth; 0 or non-finite = no surface
+  std::vector<float> color;  // HxWx3 linear RGB in [0, 1], or empty (grey)
+};
+
+struct DepthFusionOptions {
+  float voxel = 0.0f;                // voxel edge, scene units (> 0)
+  float sdf_trunc = 0.0f;            // truncation distance, scene units; 0 = 5 voxels (2DGS)
+  float depth_trunc = 0.0f;          // ignore depth beyond this, scene units (> 0)
+  int keep_components = 50;          // keep at most this many largest connected components
+  int min_component_triangles = 50;  // and drop smaller ones (2DGS post_process_mesh)
+};
+
+// Fuses the views into one mesh with vertex colours. Fails (InvalidArgument) on bad options or a
+// view whose buffers do not match its camera.
+absl::StatusOr<TriangleMesh> FuseDepthMaps(const std::vector<DepthView>& views,
+                                           const DepthFusionOptions& options);
+
+}  // namespace instascene
