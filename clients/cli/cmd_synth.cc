@@ -11,6 +11,7 @@
 #include "common/scene/image_io.h"
 #include "common/splat/gaussian_ply.h"
 #include "common/synth/cluttered_scene.h"
+#include "common/synth/observed_surfels.h"
 #include "common/synth/scene_writer.h"
 #include "common/synth/splat_composite.h"
 
@@ -20,7 +21,7 @@ namespace instascene::cli {
 
 void AddSynthCommand(CLI::App& app, Action* action) {
   struct Args {
-    std::string out, preset = "small", mask_noise = "medium";
+    std::string out, preset = "small", mask_noise = "medium", unseen = "keep";
     std::vector<std::string> from_splats;
     double object_height = 0.5;
     int64_t seed = -1, objects = -1, views = -1, width = -1, height = -1, gaussians = -1;
@@ -49,6 +50,10 @@ void AddSynthCommand(CLI::App& app, Action* action) {
       ->delimiter(',');
   cmd->add_option("--object-height", args->object_height,
                   "With --from-splats: height each capture is scaled to");
+  cmd->add_option("--unseen", args->unseen,
+                  "Surfels no view sees: keep (default: every surface is covered) or drop (what "
+                  "a model trained on the images would hold; for completion experiments)")
+      ->check(CLI::IsMember({"keep", "drop"}));
   cmd->add_option("--threads", args->threads, "Rendering threads (0 = all cores)");
   cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
   cmd->callback([args, action] {
@@ -81,6 +86,7 @@ void AddSynthCommand(CLI::App& app, Action* action) {
         ASSIGN_OR_RETURN(scene, ComposeSplats(clouds, names, composite));
         options.objects = static_cast<int>(clouds.size());
       }
+      if (args->unseen == "drop") RETURN_IF_ERROR(DropUnseenSurfels(&scene, 0.01f, args->threads));
       ProgressBar bar("synth: rendering views");
       SceneWriteOptions write;
       write.num_threads = args->threads;

@@ -42,6 +42,24 @@ std::pair<uint32_t, float> PointIndex3::Nearest(const Eigen::Vector3f& query) co
   return {index, dist_sq};
 }
 
+std::vector<std::pair<uint32_t, float>> PointIndex3::KNearest(const Eigen::Vector3f& query,
+                                                              size_t k) const {
+  k = std::min(k, points_.size());
+  std::vector<uint32_t> indices(k);
+  std::vector<float> dist_sq(k);
+  if (k > 0) {
+    nanoflann::KNNResultSet<float, uint32_t> result(k);
+    result.init(indices.data(), dist_sq.data());
+    tree_->index.findNeighbors(result, query.data(), nanoflann::SearchParams());
+  }
+  std::vector<std::pair<uint32_t, float>> out(k);
+  for (size_t i = 0; i < k; ++i) out[i] = {indices[i], dist_sq[i]};
+  std::stable_sort(out.begin(), out.end(), [](const auto& a, const auto& b) {
+    return a.second < b.second || (a.second == b.second && a.first < b.first);
+  });
+  return out;
+}
+
 std::vector<uint32_t> PointIndex3::WithinRadius(const Eigen::Vector3f& query, float radius) const {
   std::vector<std::pair<uint32_t, float>> matches;
   if (!points_.empty()) {

@@ -24,6 +24,9 @@ class PointIndex3 {
 
   // Index of and squared distance to the nearest point; the index is size() when empty.
   std::pair<uint32_t, float> Nearest(const Eigen::Vector3f& query) const;
+  // The k nearest points (fewer when the index is smaller) as (index, squared distance), nearest
+  // first; ties broken by index.
+  std::vector<std::pair<uint32_t, float>> KNearest(const Eigen::Vector3f& query, size_t k) const;
   // Indices of all points within `radius` (inclusive), in increasing index order.
   std::vector<uint32_t> WithinRadius(const Eigen::Vector3f& query, float radius) const;
 

@@ -57,6 +57,9 @@ struct ClutterScene {
   std::vector<uint16_t> instance_ids;  // per Gaussian: 0 = stuff, else object id
   std::vector<SynthObject> objects;
   TriangleMesh stuff_mesh;  // floor, wall, table (world frame)
+  // Per object (same order), only after DropUnseenSurfels: its complete surfels before the unseen
+  // ones were dropped (the appearance ground truth of completion).
+  std::vector<GaussianCloud> complete_surfels;
   std::vector<PinholeCamera> cameras;
   Eigen::Vector3d focus;  // point the cameras look at
 };

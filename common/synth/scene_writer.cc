@@ -79,21 +79,37 @@ absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& dir
   gt_result.labels.assign(scene.instance_ids.begin(), scene.instance_ids.end());
   RETURN_IF_ERROR(WriteResult(out.Path("gt"), gt_result, scene.cloud));
   nlohmann::json objects = nlohmann::json::array();
-  for (const SynthObject& o : scene.objects) {
+  for (size_t k = 0; k < scene.objects.size(); ++k) {
+    const SynthObject& o = scene.objects[k];
     objects.push_back(ObjectJson(o, scene.cloud));
+    if (k < scene.complete_surfels.size()) {
+      fs::create_directories(fs::path(directory) / "gt/complete", ec);
+      if (ec)
+        return absl::UnavailableError(absl::StrCat(directory, "/gt/complete: ", ec.message()));
+      const std::string file = absl::StrCat("gt/complete/", o.id, ".ply");
+      RETURN_IF_ERROR(WriteGaussianPly(out.Path(file), scene.complete_surfels[k]));
+      objects.back()["complete_surfels"] = file;
+    }
     if (!o.mesh.triangles.empty()) {  // real-capture composites have no complete geometry
       RETURN_IF_ERROR(WriteFileAtomically(out.Path(absl::StrCat("gt/meshes/", o.id, ".ply")),
                                           EncodeMeshPly(o.mesh)));
     }
   }
   RETURN_IF_ERROR(WriteFileAtomically(out.Path("gt/objects.json"), objects.dump(1)));
-  out.metadata["gt"] = {{"format", "instascene.gt/1"},
-                        {"objects", "gt/objects.json"},
-                        {"gaussian_instances", "gt/labels.ply"},
-                        {"masks", "gt/masks"},
-                        {"meshes", "gt/meshes"},
-                        {"mask_noise", options.mask_noise},
-                        {"seed", options.seed}};
+  if (!scene.stuff_mesh.triangles.empty()) {
+    RETURN_IF_ERROR(WriteMeshPly(out.Path("gt/meshes/stuff.ply"), scene.stuff_mesh));
+  }
+  out.metadata["gt"] = {
+      {"format", "instascene.gt/1"},
+      {"objects", "gt/objects.json"},
+      {"gaussian_instances", "gt/labels.ply"},
+      {"masks", "gt/masks"},
+      {"meshes", "gt/meshes"},
+      {"stuff_mesh", scene.stuff_mesh.triangles.empty() ? nlohmann::json(nullptr)
+                                                        : nlohmann::json("gt/meshes/stuff.ply")},
+      {"unseen_surfels", scene.complete_surfels.empty() ? "kept" : "dropped"},
+      {"mask_noise", options.mask_noise},
+      {"seed", options.seed}};
   RenderOptions render;
   render.num_threads = options.num_threads;
   render.trace.enabled =

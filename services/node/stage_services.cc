@@ -1,6 +1,7 @@
 #include "services/node/stage_services.h"
 
 #include "services/decomposition/decomposition_service.h"
+#include "services/generation/generation_service.h"
 #include "services/training/training_service.h"
 
 namespace instascene::node {
@@ -24,8 +25,17 @@ StageService TrainingStageService() {
       }};
 }
 
+StageService GenerationStageService() {
+  return {"generation",
+          "instascene.v1.Generation",
+          {"complete"},
+          [](const worker::StageWorker* worker, store::BlobStore*, const std::string&) {
+            return std::make_unique<generation::GenerationService>(worker);
+          }};
+}
+
 std::vector<StageService> AllStageServices() {
-  return {DecompositionStageService(), TrainingStageService()};
+  return {DecompositionStageService(), TrainingStageService(), GenerationStageService()};
 }
 
 }  // namespace instascene::node

@@ -1,6 +1,6 @@
 // services/node/stage_services.h: the stage services this project ships, for the binaries that
-// host them: decomposition (decompose jobs) and training (train and segment jobs, click and point
-// queries). Links the stage libraries; the scheduler binary does not link this.
+// host them: decomposition (decompose jobs), training (train and segment jobs, click and point
+// queries) and generation (complete jobs, one per object). Links the stage libraries; the scheduler binary does not link this.
 #pragma once
 
 #include <vector>
@@ -11,6 +11,7 @@ namespace instascene::node {
 
 StageService DecompositionStageService();
 StageService TrainingStageService();
+StageService GenerationStageService();
 std::vector<StageService> AllStageServices();
 
 }  // namespace instascene::node

@@ -8,7 +8,7 @@
 
 namespace instascene::stages {
 
-// decompose -> train -> segment, specs only.
+// decompose -> train -> segment -> complete (per object), specs only.
 absl::Status RegisterStageSpecs(pipeline::StageRegistry* registry);
 // The same stages with their run functions.
 absl::Status RegisterStages(pipeline::StageRegistry* registry);

@@ -1,5 +1,6 @@
 #include "common/core/status.h"
 #include "services/decomposition/stage_params.h"
+#include "services/generation/stage_params.h"
 #include "services/stages/all_stages.h"
 #include "services/training/stage_params.h"
 
@@ -8,7 +9,8 @@ namespace instascene::stages {
 absl::Status RegisterStageSpecs(pipeline::StageRegistry* registry) {
   RETURN_IF_ERROR(registry->Add({decomposition::DecomposeSpec(), nullptr}));
   RETURN_IF_ERROR(registry->Add({training::TrainSpec(), nullptr}));
-  return registry->Add({training::SegmentSpec(), nullptr});
+  RETURN_IF_ERROR(registry->Add({training::SegmentSpec(), nullptr}));
+  return registry->Add({generation::CompleteSpec(), nullptr});
 }
 
 }  // namespace instascene::stages

@@ -1,5 +1,6 @@
 #include "common/core/status.h"
 #include "services/decomposition/stage.h"
+#include "services/generation/stage.h"
 #include "services/stages/all_stages.h"
 #include "services/training/stage.h"
 
@@ -8,7 +9,8 @@ namespace instascene::stages {
 absl::Status RegisterStages(pipeline::StageRegistry* registry) {
   RETURN_IF_ERROR(registry->Add(decomposition::DecomposeStage()));
   RETURN_IF_ERROR(registry->Add(training::TrainStage()));
-  return registry->Add(training::SegmentStage());
+  RETURN_IF_ERROR(registry->Add(training::SegmentStage()));
+  return registry->Add(generation::CompleteStage());
 }
 
 }  // namespace instascene::stages

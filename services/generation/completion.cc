@@ -1,0 +1,227 @@
+#include "services/generation/completion.h"
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/mesh/mesh_checks.h"
+#include "common/mesh/mesh_ply.h"
+#include "common/mesh/surfel_mesh.h"
+#include "common/scene/image_io.h"
+#include "common/splat/gaussian_ply.h"
+
+namespace instascene::generation {
+namespace {
+
+// Observed surfels followed by completed ones, core attributes only, with the provenance channel.
+GaussianCloud MergeWithProvenance(const GaussianCloud& observed, const GaussianCloud& added) {
+  GaussianCloud out;
+  out.num_scales = 2;
+  out.sh_degree = observed.sh_degree;
+  auto append = [&](const GaussianCloud& c) {
+    out.positions.insert(out.positions.end(), c.positions.begin(), c.positions.end());
+    out.log_scales.insert(out.log_scales.end(), c.log_scales.begin(), c.log_scales.end());
+    out.rotations.insert(out.rotations.end(), c.rotations.begin(), c.rotations.end());
+    out.opacity_logits.insert(out.opacity_logits.end(), c.opacity_logits.begin(),
+                              c.opacity_logits.end());
+    out.sh.insert(out.sh.end(), c.sh.begin(), c.sh.end());
+  };
+  append(observed);
+  append(added);
+  std::vector<float> provenance(observed.size(), 0.0f);
+  provenance.resize(observed.size() + added.size(), 1.0f);
+  out.SetExtra(kProvenanceChannel, ScalarType::kUint8, std::move(provenance));
+  return out;
+}
+
+nlohmann::json Vec(const Eigen::Vector3f& v) { return {v.x(), v.y(), v.z()}; }
+
+// world_from_object: rotation = the frame's basis (x, y, up), translation = the centre.
+nlohmann::json Pose(const ObjectFrame& frame) {
+  const Eigen::Matrix3f r = frame.Basis();
+  nlohmann::json m = nlohmann::json::array();
+  for (int i = 0; i < 3; ++i) m.push_back({r(i, 0), r(i, 1), r(i, 2), frame.center[i]});
+  return m;
+}
+
+// Oriented bounding box in the object frame.
+nlohmann::json OrientedBox(const GaussianCloud& cloud, const ObjectFrame& frame) {
+  const Eigen::Matrix3f basis = frame.Basis();
+  Eigen::AlignedBox3f box;
+  for (size_t g = 0; g < cloud.size(); ++g) {
+    box.extend(basis.transpose() * (Eigen::Vector3f(&cloud.positions[3 * g]) - frame.center));
+  }
+  return {{"min", Vec(box.min())}, {"max", Vec(box.max())}, {"extent", Vec(box.sizes())}};
+}
+
+nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& options,
+                        const std::vector<PinholeCamera>& cameras) {
+  nlohmann::json ring = nlohmann::json::array();
+  int known = 0;
+  for (size_t k = 0; k < o.ring.size(); ++k) {
+    const ViewVisibility& v = o.ring_visibility[k];
+    known += v.known;
+    ring.push_back({{"azimuth_deg", 360.0 * k / o.ring.size()},
+                    {"elevation_deg", options.ring.elevation_deg},
+                    {"score", v.score},
+                    {"self_visible", v.self_visible},
+                    {"known", v.known}});
+  }
+  const size_t observed = o.raw.size(), completed = o.object.size() - o.raw.size();
+  nlohmann::json m = {
+      {"format", kObjectFormat},
+      {"id", o.id},
+      {"world_from_object", Pose(o.frame)},
+      {"frame",
+       {{"center", Vec(o.frame.center)},
+        {"up", Vec(o.frame.up)},
+        {"radius", o.frame.radius},
+        {"spacing", o.frame.spacing},
+        {"support",
+         o.frame.has_support ? nlohmann::json(o.frame.support_height) : nlohmann::json(nullptr)}}},
+      {"bounding_box", OrientedBox(o.object, o.frame)},
+      {"prior", options.prior},
+      {"abstained", o.prior.abstained},
+      {"prior_summary", o.prior.reason},
+      {"prior_report", o.prior.report},
+      {"gaussians",
+       {{"observed", observed},
+        {"completed", completed},
+        {"completed_share",
+         o.object.size() ? static_cast<double>(completed) / o.object.size() : 0}}},
+      {"ring", ring},
+      {"known_views", known},
+      {"unknown_views", static_cast<int>(o.ring.size()) - known},
+      {"training_views", o.training_views},
+      {"mesh",
+       {{"file", "mesh.ply"},
+        {"vertices", o.mesh.vertices.size()},
+        {"triangles", o.mesh.triangles.size()},
+        {"closed", IsClosedManifold(o.mesh)}}},
+      {"refinement",
+       {{"status", "not run"},
+        {"reason", "the 2DGS backward pass (GENERATION.md step 5) is not built yet"}}},
+      {"seed", options.seed},
+  };
+  (void)cameras;
+  return m;
+}
+
+}  // namespace
+
+absl::StatusOr<CompletedObject> CompleteObject(const std::vector<PinholeCamera>& cameras,
+                                               const GaussianCloud& surfels,
+                                               const std::vector<uint32_t>& labels, uint32_t id,
+                                               const CompletionOptions& options,
+                                               const CompletionProgress& progress) {
+  auto report = [&](const std::string& phase, int step, int total) {
+    if (progress) progress(phase, step, total);
+  };
+  if (labels.size() != surfels.size()) {
+    return absl::InvalidArgumentError(absl::StrCat("segmentation has ", labels.size(),
+                                                   " labels for ", surfels.size(), " Gaussians"));
+  }
+  if (surfels.num_scales != 2) return absl::InvalidArgumentError("completion needs 2DGS surfels");
+  ASSIGN_OR_RETURN(std::unique_ptr<CompletionPrior> prior, MakePrior(options.prior));
+  report("framing", 0, 6);
+  ASSIGN_OR_RETURN(InstanceSplit split, SplitInstance(labels, id, options.min_gaussians));
+  CompletedObject out;
+  out.id = id;
+  out.raw = surfels.Subset(split.instance);
+  out.raw.extras.clear();
+  out.frame = ComputeObjectFrame(surfels, split, cameras);
+  if (!(out.frame.radius > 0) || !(out.frame.spacing > 0)) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("instance ", id, " is degenerate: its Gaussians span no volume"));
+  }
+  report("scoring views", 1, 6);
+  ASSIGN_OR_RETURN(std::unique_ptr<OcclusionScorer> scorer,
+                   OcclusionScorer::Create(surfels, split, out.frame, options.visibility));
+  out.training_views = scorer->RankViews(cameras, options.top_training_views);
+  if (out.training_views.empty()) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("instance ", id, " is seen by no real view (no unoccluded point)"));
+  }
+  out.ring = RingCameras(out.frame, options.ring);
+  for (const PinholeCamera& c : out.ring) out.ring_visibility.push_back(scorer->Score(c));
+  RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
+  report("carving free space", 2, 6);
+  std::vector<uint32_t> everything(surfels.size());
+  for (uint32_t g = 0; g < everything.size(); ++g) everything[g] = g;
+  ASSIGN_OR_RETURN(std::unique_ptr<RayCaster> scene_caster,
+                   RayCaster::Create(SurfelDiscs(surfels, everything, SurfelDiscOptions{})));
+  ASSIGN_OR_RETURN(FreeSpaceGrid free_space,
+                   FreeSpaceGrid::Carve(cameras, *scene_caster, out.frame, options.free_space));
+  RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
+  report("rendering conditions", 3, 6);
+  PriorInput input;
+  input.instance = &out.raw;
+  input.frame = out.frame;
+  input.free_space = &free_space;
+  input.seed = options.seed;
+  input.cancel = options.cancel;
+  for (size_t k = 0; k < out.ring.size(); ++k) {
+    if (out.ring_visibility[k].known) {
+      ASSIGN_OR_RETURN(ViewImages view,
+                       RenderObjectView(out.raw, out.ring[k], out.frame, options.num_threads));
+      input.conditions.push_back(std::move(view));
+    } else {
+      input.targets.push_back(out.ring[k]);
+    }
+  }
+  report("completing", 4, 6);
+  ASSIGN_OR_RETURN(out.prior, prior->Complete(input));
+  out.object = MergeWithProvenance(out.raw, out.prior.added);
+  RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
+  report("meshing", 5, 6);
+  ASSIGN_OR_RETURN(out.mesh,
+                   MeshObject(out.object, out.frame, options.meshing, options.num_threads));
+  out.manifest = Manifest(out, options, cameras);
+  report("done", 6, 6);
+  return out;
+}
+
+absl::Status WriteCompletedObject(const std::string& directory, const CompletedObject& object,
+                                  int num_threads) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  fs::create_directories(fs::path(directory) / "views", ec);
+  if (ec) return absl::UnavailableError(absl::StrCat(directory, ": cannot create: ", ec.message()));
+  RETURN_IF_ERROR(WriteGaussianPly((fs::path(directory) / "object.ply").string(), object.object));
+  RETURN_IF_ERROR(WriteMeshPly((fs::path(directory) / "mesh.ply").string(), object.mesh));
+  // The least-known ring view: where the prior had to work hardest.
+  size_t worst = 0;
+  for (size_t k = 1; k < object.ring_visibility.size(); ++k) {
+    if (object.ring_visibility[k].score < object.ring_visibility[worst].score) worst = k;
+  }
+  if (!object.ring.empty()) {
+    ASSIGN_OR_RETURN(ViewImages raw,
+                     RenderObjectView(object.raw, object.ring[worst], object.frame, num_threads));
+    ASSIGN_OR_RETURN(ViewImages done, RenderObjectView(object.object, object.ring[worst],
+                                                       object.frame, num_threads));
+    const int w = object.ring[worst].width, h = object.ring[worst].height;
+    Image side_by_side{2 * w, h, 3, std::vector<float>(static_cast<size_t>(6) * w * h)};
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        for (int c = 0; c < 3; ++c) {
+          side_by_side.pixels[(static_cast<size_t>(y) * 2 * w + x) * 3 + c] =
+              raw.rgb[(static_cast<size_t>(y) * w + x) * 3 + c];
+          side_by_side.pixels[(static_cast<size_t>(y) * 2 * w + w + x) * 3 + c] =
+              done.rgb[(static_cast<size_t>(y) * w + x) * 3 + c];
+        }
+      }
+    }
+    RETURN_IF_ERROR(
+        WriteImage((fs::path(directory) / "views" / "compare_unknown.png").string(), side_by_side));
+  }
+  nlohmann::json manifest = object.manifest;
+  manifest["files"] = {{"object", "object.ply"},
+                       {"mesh", "mesh.ply"},
+                       {"compare_unknown", "views/compare_unknown.png"}};
+  manifest["compare_view"] = worst;
+  return WriteFileAtomically((fs::path(directory) / "manifest.json").string(), manifest.dump(1));
+}
+
+}  // namespace instascene::generation

@@ -1,0 +1,140 @@
+#include "services/generation/free_space.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <mutex>
+
+#include "absl/strings/str_cat.h"
+
+namespace instascene::generation {
+namespace {
+
+// Entry / exit distances of a ray through an axis-aligned box (slab test); false when it misses.
+bool ClipToBox(const Eigen::Vector3f& o, const Eigen::Vector3f& d, const Eigen::Vector3f& lo,
+               const Eigen::Vector3f& hi, float* t0, float* t1) {
+  float near = 0, far = std::numeric_limits<float>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    if (std::abs(d[a]) < 1e-12f) {
+      if (o[a] < lo[a] || o[a] > hi[a]) return false;
+      continue;
+    }
+    float ta = (lo[a] - o[a]) / d[a], tb = (hi[a] - o[a]) / d[a];
+    if (ta > tb) std::swap(ta, tb);
+    near = std::max(near, ta);
+    far = std::min(far, tb);
+  }
+  *t0 = near;
+  *t1 = far;
+  return near < far;
+}
+
+}  // namespace
+
+int64_t FreeSpaceGrid::VoxelOf(const Eigen::Vector3f& p) const {
+  const Eigen::Vector3f cell = (p - origin_) / voxel_;
+  if ((cell.array() < 0).any()) return -1;
+  const int64_t i = static_cast<int64_t>(cell.x()), j = static_cast<int64_t>(cell.y()),
+                k = static_cast<int64_t>(cell.z());
+  if (i >= resolution_ || j >= resolution_ || k >= resolution_) return -1;
+  return (k * resolution_ + j) * resolution_ + i;
+}
+
+int FreeSpaceGrid::FreeViews(const Eigen::Vector3f& p) const {
+  const int64_t v = VoxelOf(p);
+  return v < 0 ? 0 : free_views_[v];
+}
+
+bool FreeSpaceGrid::IsFree(const Eigen::Vector3f& p) const { return FreeViews(p) >= min_views_; }
+
+double FreeSpaceGrid::FreeFraction() const {
+  if (free_views_.empty()) return 0;
+  size_t free = 0;
+  for (uint16_t c : free_views_) free += c >= min_views_;
+  return static_cast<double>(free) / free_views_.size();
+}
+
+absl::StatusOr<FreeSpaceGrid> FreeSpaceGrid::Carve(const std::vector<PinholeCamera>& cameras,
+                                                   const RayCaster& surfaces,
+                                                   const ObjectFrame& frame,
+                                                   const FreeSpaceOptions& options) {
+  if (options.resolution < 4 || options.resolution > 512 || !(options.extent_radii > 0) ||
+      options.min_views < 1 || !(frame.radius > 0)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("free space: bad options (resolution ", options.resolution, ", extent ",
+                     options.extent_radii, ", radius ", frame.radius, ")"));
+  }
+  FreeSpaceGrid grid;
+  grid.resolution_ = options.resolution;
+  grid.min_views_ = options.min_views;
+  const float half = options.extent_radii * frame.radius;
+  grid.origin_ = frame.center - Eigen::Vector3f::Constant(half);
+  grid.voxel_ = 2.0f * half / options.resolution;
+  const size_t voxels =
+      static_cast<size_t>(options.resolution) * options.resolution * options.resolution;
+  grid.free_views_.assign(voxels, 0);
+  const Eigen::Vector3f lo = grid.origin_, hi = grid.origin_ + Eigen::Vector3f::Constant(2 * half);
+  std::mutex merge;
+  tbb::parallel_for(size_t{0}, cameras.size(), [&](size_t c) {
+    const PinholeCamera& camera = cameras[c];
+    const Eigen::Vector3f eye = camera.CenterInWorld().cast<float>();
+    const double distance = std::max(1e-6f, (frame.center - eye).norm());
+    // Only pixels whose rays can reach the cube: the bounding box of its projected corners.
+    double x0 = 0, y0 = 0, x1 = camera.width, y1 = camera.height;
+    bool all_in_front = true;
+    Eigen::AlignedBox2d footprint;
+    for (int corner = 0; corner < 8; ++corner) {
+      const Eigen::Vector3d p((corner & 1) ? hi.x() : lo.x(), (corner & 2) ? hi.y() : lo.y(),
+                              (corner & 4) ? hi.z() : lo.z());
+      const Eigen::Vector3d in_camera = camera.camera_from_world * p;
+      if (in_camera.z() <= 1e-6) {
+        all_in_front = false;
+        break;
+      }
+      footprint.extend(camera.ProjectFromCamera(in_camera));
+    }
+    if (all_in_front) {
+      x0 = std::clamp(footprint.min().x(), 0.0, static_cast<double>(camera.width));
+      y0 = std::clamp(footprint.min().y(), 0.0, static_cast<double>(camera.height));
+      x1 = std::clamp(footprint.max().x(), 0.0, static_cast<double>(camera.width));
+      y1 = std::clamp(footprint.max().y(), 0.0, static_cast<double>(camera.height));
+    }
+    // Rays about half a voxel apart at the object (every pixel when pixels are coarser), bounded
+    // by the per-view ray budget.
+    double stride = std::max(1.0, 0.5 * grid.voxel_ * camera.fx / distance);
+    const double area = std::max(0.0, (x1 - x0) * (y1 - y0));
+    stride = std::max(stride, std::sqrt(area / options.max_rays_per_view));
+    const Eigen::Matrix3d camera_to_world = camera.camera_from_world.rotation.transpose();
+    std::vector<uint8_t> seen(voxels, 0);
+    const float step = 0.5f * grid.voxel_;
+    for (double y = y0 + 0.5 * stride; y < y1; y += stride) {
+      for (double x = x0 + 0.5 * stride; x < x1; x += stride) {
+        const Eigen::Vector3f dir =
+            (camera_to_world *
+             Eigen::Vector3d((x - camera.cx) / camera.fx, (y - camera.cy) / camera.fy, 1.0))
+                .normalized()
+                .cast<float>();
+        float t0, t1;
+        if (!ClipToBox(eye, dir, lo, hi, &t0, &t1)) continue;
+        const RayHit hit = surfaces.Cast(eye, dir);
+        const float end =
+            std::min(t1, hit.hit ? hit.distance - options.margin_voxels * grid.voxel_ : t1);
+        for (float t = t0 + 0.5f * step; t < end; t += step) {
+          const int64_t v = grid.VoxelOf(eye + t * dir);
+          if (v >= 0) seen[v] = 1;
+        }
+      }
+    }
+    std::lock_guard<std::mutex> lock(merge);  // integer sums: the order does not matter
+    for (size_t v = 0; v < voxels; ++v) {
+      if (seen[v] && grid.free_views_[v] < std::numeric_limits<uint16_t>::max()) {
+        ++grid.free_views_[v];
+      }
+    }
+  });
+  return grid;
+}
+
+}  // namespace instascene::generation

@@ -1,0 +1,258 @@
+#include "services/generation/geometric_prior.h"
+
+#include <algorithm>
+#include <cmath>
+#include <unordered_map>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/geometry/point_index.h"
+#include "common/geometry/rigid.h"
+
+namespace instascene::generation {
+namespace {
+
+Eigen::Matrix3f SurfelRotation(const GaussianCloud& cloud, size_t g) {
+  const float* q = &cloud.rotations[4 * g];
+  return RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).cast<float>();
+}
+
+// Positions already holding a surfel, hashed on a grid of the cover distance: the "already
+// covered" test for surfels added so far (observed ones use a k-d tree).
+class CoverSet {
+ public:
+  explicit CoverSet(float radius) : radius_(radius) {}
+  bool Covered(const Eigen::Vector3f& p) const {
+    const Eigen::Vector3i c = Cell(p);
+    for (int dz = -1; dz <= 1; ++dz) {
+      for (int dy = -1; dy <= 1; ++dy) {
+        for (int dx = -1; dx <= 1; ++dx) {
+          const auto it = cells_.find(Key(c + Eigen::Vector3i(dx, dy, dz)));
+          if (it == cells_.end()) continue;
+          for (const Eigen::Vector3f& q : it->second) {
+            if ((q - p).squaredNorm() <= radius_ * radius_) return true;
+          }
+        }
+      }
+    }
+    return false;
+  }
+  void Add(const Eigen::Vector3f& p) { cells_[Key(Cell(p))].push_back(p); }
+
+ private:
+  Eigen::Vector3i Cell(const Eigen::Vector3f& p) const {
+    return (p / radius_).array().floor().cast<int>();
+  }
+  static int64_t Key(const Eigen::Vector3i& c) {
+    return ((static_cast<int64_t>(c.x()) & 0x1FFFFF) << 42) |
+           ((static_cast<int64_t>(c.y()) & 0x1FFFFF) << 21) |
+           (static_cast<int64_t>(c.z()) & 0x1FFFFF);
+  }
+  float radius_;
+  std::unordered_map<int64_t, std::vector<Eigen::Vector3f>> cells_;
+};
+
+// Surfels being added: position, rotation, and the observed surfel lending its appearance.
+struct Candidate {
+  Eigen::Vector3f position;
+  Eigen::Matrix3f rotation;
+  uint32_t source = 0;
+  float scale_u = -1, scale_v = -1;  // log-scales; < -0.5 sentinel not used: see has_scale
+  bool has_scale = false;
+};
+
+GaussianCloud BuildSurfels(const GaussianCloud& instance, const std::vector<Candidate>& added) {
+  GaussianCloud out;
+  out.num_scales = 2;
+  out.sh_degree = instance.sh_degree;
+  out.Resize(added.size());
+  const int stride = instance.sh_stride();
+  for (size_t i = 0; i < added.size(); ++i) {
+    const Candidate& c = added[i];
+    for (int k = 0; k < 3; ++k) out.positions[3 * i + k] = c.position[k];
+    const Eigen::Vector4d q = QuaternionWxyzFromRotation(c.rotation.cast<double>());
+    for (int k = 0; k < 4; ++k) out.rotations[4 * i + k] = static_cast<float>(q[k]);
+    if (c.has_scale) {
+      out.log_scales[2 * i] = c.scale_u;
+      out.log_scales[2 * i + 1] = c.scale_v;
+    } else {
+      out.log_scales[2 * i] = instance.log_scales[instance.num_scales * c.source];
+      out.log_scales[2 * i + 1] = instance.log_scales[instance.num_scales * c.source + 1];
+    }
+    out.opacity_logits[i] = instance.opacity_logits[c.source];
+    // View-dependent SH terms would have to be mirrored / rotated with the surfel; completed
+    // surfels keep the view-independent colour (DC) only.
+    for (int k = 0; k < 3; ++k) out.sh[stride * i + k] = instance.sh[stride * c.source + k];
+  }
+  return out;
+}
+
+}  // namespace
+
+absl::StatusOr<PriorOutput> NoPrior::Complete(const PriorInput& input) const {
+  PriorOutput out;
+  out.added.num_scales = 2;
+  out.added.sh_degree = input.instance->sh_degree;
+  out.abstained = true;
+  out.reason = "prior 'none': the object is the closed crop";
+  return out;
+}
+
+absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) const {
+  const GaussianCloud& instance = *input.instance;
+  const ObjectFrame& frame = input.frame;
+  std::vector<Eigen::Vector3f> points(instance.size()), normals(instance.size());
+  for (size_t g = 0; g < instance.size(); ++g) {
+    points[g] = Eigen::Vector3f(&instance.positions[3 * g]);
+    normals[g] = SurfelRotation(instance, g).col(2);
+  }
+  const std::vector<SymmetryHypothesis> hypotheses =
+      DetectSymmetries(points, normals, frame, *input.free_space, options_.symmetry);
+  RETURN_IF_ERROR(CheckCancelled(input.cancel, "complete"));
+  const PointIndex3 observed(points);
+  const float cover = options_.cover_spacings * std::max(frame.spacing, 1e-6f);
+  CoverSet added_set(cover);
+  std::vector<Candidate> added;
+  int rejected_free = 0, rejected_covered = 0, rejected_below = 0;
+  auto consider = [&](const Candidate& c) {
+    if (frame.has_support &&
+        frame.up.dot(c.position) < frame.support_height - 0.5f * frame.spacing) {
+      ++rejected_below;
+      return;
+    }
+    if (input.free_space->IsFree(c.position)) {
+      ++rejected_free;
+      return;
+    }
+    if (observed.Nearest(c.position).second <= cover * cover || added_set.Covered(c.position)) {
+      ++rejected_covered;
+      return;
+    }
+    added_set.Add(c.position);
+    added.push_back(c);
+  };
+  nlohmann::json tried = nlohmann::json::array();
+  int accepted = 0;
+  std::map<std::string, int> added_by;
+  for (const SymmetryHypothesis& h : hypotheses) {
+    tried.push_back(h.Describe());
+    if (!h.accepted) continue;
+    ++accepted;
+    const size_t before = added.size();
+    for (int k = 0; k < h.copies; ++k) {
+      const Eigen::Matrix3f linear = h.Linear(k);
+      for (uint32_t g = 0; g < instance.size(); ++g) {
+        const Eigen::Matrix3f r = SurfelRotation(instance, g);
+        Candidate c;
+        c.position = h.MapPoint(points[g], k);
+        const Eigen::Vector3f u = linear * r.col(0), v = linear * r.col(1);
+        c.rotation << u, v, u.cross(v);
+        c.source = g;
+        consider(c);
+      }
+      RETURN_IF_ERROR(CheckCancelled(input.cancel, "complete"));
+    }
+    added_by[h.kind == SymmetryKind::kPlane ? "mirrored" : "revolved"] +=
+        static_cast<int>(added.size() - before);
+  }
+  PriorOutput out;
+  out.report["hypotheses"] = tried;
+  if (accepted == 0) {
+    out.abstained = true;
+    out.reason = hypotheses.empty() ? "too few observed surfels to test any symmetry"
+                                    : "no symmetry hypothesis passed";
+    out.added = BuildSurfels(instance, {});
+    out.report["added"] = 0;
+    return out;
+  }
+  // The underside: surfels on the support plane inside the footprint of everything so far.
+  if (options_.support_cap && frame.has_support &&
+      frame.bottom_height - frame.support_height <= options_.max_support_gap_radii * frame.radius) {
+    const Eigen::Matrix3f basis = frame.Basis();
+    const float cell = std::max(1.5f * frame.spacing, frame.radius / 64.0f);
+    const int half = static_cast<int>(std::ceil(1.5f * frame.radius / cell));
+    const int side = 2 * half + 1;
+    std::vector<uint8_t> occupied(static_cast<size_t>(side) * side, 0);
+    auto mark = [&](const Eigen::Vector3f& p) {
+      const Eigen::Vector3f q = basis.transpose() * (p - frame.center);
+      const int i = static_cast<int>(std::floor(q.x() / cell)) + half;
+      const int j = static_cast<int>(std::floor(q.y() / cell)) + half;
+      if (i >= 0 && j >= 0 && i < side && j < side) occupied[j * side + i] = 1;
+    };
+    // The contact contour: surfels within a tenth of a radius of the support.
+    const float contact = frame.support_height + 0.1f * frame.radius;
+    for (const Eigen::Vector3f& p : points) {
+      if (frame.up.dot(p) <= contact) mark(p);
+    }
+    for (const Candidate& c : added) {
+      if (frame.up.dot(c.position) <= contact) mark(c.position);
+    }
+    // Outside = reachable from the border through empty cells; the rest is the footprint.
+    std::vector<uint8_t> outside(occupied.size(), 0);
+    std::vector<int> stack;
+    for (int i = 0; i < side; ++i) {
+      for (int border : {i, (side - 1) * side + i, i * side, i * side + side - 1}) {
+        if (!occupied[border] && !outside[border]) {
+          outside[border] = 1;
+          stack.push_back(border);
+        }
+      }
+    }
+    while (!stack.empty()) {
+      const int c = stack.back();
+      stack.pop_back();
+      const int i = c % side, j = c / side;
+      for (auto [di, dj] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+        const int ni = i + di, nj = j + dj;
+        if (ni < 0 || nj < 0 || ni >= side || nj >= side) continue;
+        const int n = nj * side + ni;
+        if (!occupied[n] && !outside[n]) {
+          outside[n] = 1;
+          stack.push_back(n);
+        }
+      }
+    }
+    const size_t before = added.size();
+    const Eigen::Vector3f plane_origin =
+        frame.center +
+        (frame.support_height + 0.25f * frame.spacing - frame.up.dot(frame.center)) * frame.up;
+    for (int j = 0; j < side; ++j) {
+      for (int i = 0; i < side; ++i) {
+        if (outside[j * side + i]) continue;
+        Candidate c;
+        c.position = plane_origin + basis.col(0) * ((i - half + 0.5f) * cell) +
+                     basis.col(1) * ((j - half + 0.5f) * cell);
+        c.rotation = basis;
+        c.source = observed.Nearest(c.position).first;
+        c.has_scale = true;
+        c.scale_u = c.scale_v = std::log(0.6f * cell);
+        // Support seen from above through a hole (a torus, a ring) is table, not underside.
+        const float lift = 3.0f * input.free_space->voxel();
+        if (input.free_space->IsFree(c.position + lift * frame.up)) {
+          ++rejected_free;
+          continue;
+        }
+        consider(c);
+      }
+    }
+    added_by["support"] = static_cast<int>(added.size() - before);
+  }
+  out.added = BuildSurfels(instance, added);
+  out.reason =
+      absl::StrCat(accepted, " symmetry hypothesis(es) accepted; ", added.size(), " surfels added");
+  out.report["added"] = added.size();
+  out.report["added_by"] = added_by;
+  out.report["rejected"] = {{"observed_free", rejected_free},
+                            {"already_covered", rejected_covered},
+                            {"below_support", rejected_below}};
+  return out;
+}
+
+absl::StatusOr<std::unique_ptr<CompletionPrior>> MakePrior(const std::string& name) {
+  if (name == "geometric") return std::make_unique<GeometricPrior>();
+  if (name == "none") return std::make_unique<NoPrior>();
+  return absl::InvalidArgumentError(
+      absl::StrCat("unknown completion prior '", name, "' (known: geometric, none)"));
+}
+
+}  // namespace instascene::generation

@@ -1,0 +1,46 @@
+// services/generation/object_frame.h: the instance / occluder split of a segmented scene and the
+// object's local frame (ALGORITHM.md 7.1): centre (AABB centre of the instance's Gaussians), up
+// (the cameras' mean up: the scene is never rotated), radius (largest distance from the centre),
+// and the support plane under the object when the occluders show one. Value types, thread-safe.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "absl/status/statusor.h"
+#include "common/geometry/camera.h"
+#include "common/splat/gaussian_cloud.h"
+
+namespace instascene::generation {
+
+struct ObjectFrame {
+  Eigen::Vector3f center = Eigen::Vector3f::Zero();  // world frame
+  Eigen::Vector3f up = Eigen::Vector3f::UnitZ();     // unit, world frame
+  float radius = 0;                                  // scene units
+  bool has_support = false;
+  float support_height = 0;  // support plane: {x : up . x = support_height}
+  float bottom_height = 0;   // lowest instance point along up
+  float spacing = 0;         // median nearest-neighbour distance of the instance's Gaussians
+
+  // Orthonormal basis (x, y, up) of the frame; x is any direction orthogonal to up.
+  Eigen::Matrix3f Basis() const;
+};
+
+struct InstanceSplit {
+  std::vector<uint32_t> instance;   // Gaussians labelled with the instance id, scene order
+  std::vector<uint32_t> occluders;  // every other Gaussian
+};
+
+// Splits by label. FailedPrecondition when the instance has fewer than `min_gaussians` members
+// (empty or degenerate instance): the message names the instance.
+absl::StatusOr<InstanceSplit> SplitInstance(const std::vector<uint32_t>& labels, uint32_t id,
+                                            size_t min_gaussians);
+
+// The frame of `split.instance` in `cloud` (surfels). Support: occluder surfels facing up within
+// the object's footprint, just below its lowest point (median of their heights).
+ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& split,
+                               const std::vector<PinholeCamera>& cameras);
+
+}  // namespace instascene::generation

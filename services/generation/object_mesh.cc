@@ -1,0 +1,62 @@
+#include "services/generation/object_mesh.h"
+
+#include "common/core/status.h"
+#include "common/mesh/depth_fusion.h"
+#include "common/raster/rasterizer.h"
+#include "services/generation/viewpoints.h"
+
+namespace instascene::generation {
+
+absl::StatusOr<ViewImages> RenderObjectView(const GaussianCloud& object,
+                                            const PinholeCamera& camera, const ObjectFrame& frame,
+                                            int num_threads) {
+  RenderOptions options;
+  options.depth = true;
+  options.num_threads = num_threads;
+  for (float& b : options.background) b = 1.0f;
+  // The ring sits a few radii away: the default 0.2-unit near plane would cull small objects.
+  const float distance = (camera.CenterInWorld().cast<float>() - frame.center).norm();
+  options.near_plane = std::max(1e-6f, 0.01f * distance);
+  ASSIGN_OR_RETURN(RenderResult render, Render(object, camera, options));
+  ViewImages view;
+  view.camera = camera;
+  view.rgb = std::move(render.color);
+  view.alpha = std::move(render.alpha);
+  view.mask.resize(view.alpha.size());
+  view.depth.assign(view.alpha.size(), 0.0f);
+  for (size_t i = 0; i < view.alpha.size(); ++i) {
+    view.mask[i] = view.alpha[i] > 0.5f;
+    if (view.mask[i]) view.depth[i] = render.median_depth[i];
+  }
+  return view;
+}
+
+std::vector<PinholeCamera> MeshingCameras(const ObjectFrame& frame, const MeshingOptions& options) {
+  std::vector<PinholeCamera> cameras;
+  RingOptions ring;
+  ring.views = options.azimuths;
+  ring.size_px = options.size_px;
+  ring.focal_px = 280.0 * options.size_px / 256.0;
+  for (double elevation : {-60.0, -30.0, 0.0, 30.0, 60.0, 89.0, -89.0}) {
+    ring.elevation_deg = elevation;
+    if (std::abs(elevation) > 80) ring.views = 1;
+    for (const PinholeCamera& c : RingCameras(frame, ring)) cameras.push_back(c);
+  }
+  return cameras;
+}
+
+absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& object, const ObjectFrame& frame,
+                                        const MeshingOptions& options, int num_threads) {
+  std::vector<DepthView> views;
+  for (const PinholeCamera& camera : MeshingCameras(frame, options)) {
+    ASSIGN_OR_RETURN(ViewImages render, RenderObjectView(object, camera, frame, num_threads));
+    views.push_back({camera, std::move(render.depth), std::move(render.rgb)});
+  }
+  DepthFusionOptions fusion;
+  fusion.voxel = options.voxel_radii * frame.radius;
+  fusion.depth_trunc = 3.0f * frame.radius + 2.0f * frame.radius;
+  fusion.min_component_triangles = 50;
+  return FuseDepthMaps(views, fusion);
+}
+
+}  // namespace instascene::generation

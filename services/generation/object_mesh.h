@@ -1,0 +1,35 @@
+// services/generation/object_mesh.h: renders an object's surfels alone and turns them into a
+// closed, coloured triangle mesh (GENERATION.md step 6: TSDF fusion of depth maps + marching
+// cubes, common/mesh/depth_fusion.h). The meshing views cover the whole sphere around the object
+// (five elevation rings and both poles), so a completed object yields a closed mesh; the raw crop
+// meshed the same way is the "closed crop" baseline. Thread-safe.
+#pragma once
+
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "common/geometry/triangle_mesh.h"
+#include "common/splat/gaussian_cloud.h"
+#include "services/generation/object_frame.h"
+#include "services/generation/prior.h"
+
+namespace instascene::generation {
+
+// The instance rendered alone at `camera` on white (RGB, median depth, alpha, mask alpha > 0.5).
+absl::StatusOr<ViewImages> RenderObjectView(const GaussianCloud& object,
+                                            const PinholeCamera& camera, const ObjectFrame& frame,
+                                            int num_threads);
+
+struct MeshingOptions {
+  int size_px = 160;              // meshing view size
+  int azimuths = 12;              // per elevation ring
+  float voxel_radii = 1.0f / 40;  // TSDF voxel in object radii
+};
+
+// The meshing cameras: elevations -60, -30, 0, 30, 60 degrees x `azimuths`, plus both poles.
+std::vector<PinholeCamera> MeshingCameras(const ObjectFrame& frame, const MeshingOptions& options);
+
+absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& object, const ObjectFrame& frame,
+                                        const MeshingOptions& options, int num_threads);
+
+}  // namespace instascene::generation

@@ -1,0 +1,61 @@
+// services/generation/prior.h: the completion prior interface (GENERATION.md step 4). A prior gets
+// the observed instance, its frame, the space real views saw empty and the ring's known (condition)
+// and unknown (target) views with their condition images; it returns completed surfels and/or
+// images for the target views. The built-in `geometric` prior (geometric_prior.h) returns surfels;
+// a `diffusion` backend returns RGB, depth and mask per target, which refinement back-projects.
+// Implementations must be thread-compatible (one Complete at a time per object).
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <nlohmann/json.hpp>
+
+#include "absl/status/statusor.h"
+#include "common/core/cancel.h"
+#include "common/geometry/camera.h"
+#include "common/splat/gaussian_cloud.h"
+#include "services/generation/free_space.h"
+#include "services/generation/object_frame.h"
+
+namespace instascene::generation {
+
+// One rendered view of the instance alone (white background), ALGORITHM.md 7.4.
+struct ViewImages {
+  PinholeCamera camera;
+  std::vector<float> rgb;     // HxWx3 in [0, 1]
+  std::vector<float> depth;   // HxW median depth, 0 where the mask is empty
+  std::vector<float> alpha;   // HxW
+  std::vector<uint8_t> mask;  // HxW, alpha > 0.5
+};
+
+struct PriorInput {
+  const GaussianCloud* instance = nullptr;  // observed surfels, scene frame (not owned)
+  ObjectFrame frame;
+  const FreeSpaceGrid* free_space = nullptr;  // not owned
+  std::vector<ViewImages> conditions;         // known ring views
+  std::vector<PinholeCamera> targets;         // unknown ring views
+  uint64_t seed = 1;
+  const CancelFlag* cancel = nullptr;
+};
+
+struct PriorOutput {
+  GaussianCloud added;  // completed surfels (same SH degree as the instance), may be empty
+  std::vector<ViewImages> generated;  // images at the target views, or empty
+  bool abstained = false;             // no hypothesis passed: the object stays a closed crop
+  std::string reason;                 // why it abstained, or what it did
+  nlohmann::json report = nlohmann::json::object();  // prior-specific details for the manifest
+};
+
+class CompletionPrior {
+ public:
+  virtual ~CompletionPrior() = default;
+  virtual std::string name() const = 0;
+  virtual absl::StatusOr<PriorOutput> Complete(const PriorInput& input) const = 0;
+};
+
+// The prior named `name` ("geometric" or "none"); InvalidArgument for an unknown name.
+absl::StatusOr<std::unique_ptr<CompletionPrior>> MakePrior(const std::string& name);
+
+}  // namespace instascene::generation

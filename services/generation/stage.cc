@@ -1,0 +1,83 @@
+#include "services/generation/stage.h"
+
+#include <filesystem>
+#include <fstream>
+
+#include <nlohmann/json.hpp>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/file_io.h"
+#include "common/core/status.h"
+#include "common/eval/result.h"
+#include "common/scene/scene.h"
+#include "services/generation/completion.h"
+#include "services/generation/stage_params.h"
+
+namespace instascene::generation {
+namespace {
+
+// The instance id of item `item` of a segment output: instances.json lists them in id order.
+absl::StatusOr<uint32_t> InstanceOfItem(const std::string& segment_dir, int64_t item) {
+  const std::string path = (std::filesystem::path(segment_dir) / "instances.json").string();
+  ASSIGN_OR_RETURN(std::string text, ReadFileBounded(path, 64 << 20));
+  const nlohmann::json instances = nlohmann::json::parse(text, nullptr, false);
+  if (!instances.is_array()) return absl::DataLossError(absl::StrCat(path, ": not a JSON array"));
+  if (item < 0 || item >= static_cast<int64_t>(instances.size())) {
+    return absl::OutOfRangeError(
+        absl::StrCat("item ", item, " outside the ", instances.size(), " instances of ", path));
+  }
+  const nlohmann::json& entry = instances[item];
+  if (!entry.is_object() || !entry.contains("id") || !entry["id"].is_number_unsigned()) {
+    return absl::DataLossError(absl::StrCat(path, ": entry ", item, " has no id"));
+  }
+  return entry["id"].get<uint32_t>();
+}
+
+}  // namespace
+
+CompletionOptions ToCompletionOptions(const CompleteStageOptions& o) {
+  CompletionOptions options;
+  options.prior = o.prior;
+  options.ring.views = o.ring_views;
+  options.ring.elevation_deg = o.ring_elevation;
+  options.ring.size_px = o.ring_size;
+  options.ring.focal_px = 280.0 * o.ring_size / 256.0;
+  options.top_training_views = o.top_training_views;
+  options.free_space.resolution = o.free_space_resolution;
+  options.meshing.size_px = o.mesh_size;
+  options.min_gaussians = static_cast<size_t>(o.min_gaussians);
+  options.seed = o.seed;
+  return options;
+}
+
+namespace {
+
+absl::StatusOr<pipeline::StageResult> RunComplete(const pipeline::StageContext& c) {
+  ASSIGN_OR_RETURN(CompleteStageOptions o, CompleteCodec().Decode(c.parameters));
+  ASSIGN_OR_RETURN(std::string segment, c.Input("segment"));
+  ASSIGN_OR_RETURN(uint32_t id, InstanceOfItem(segment, c.item));
+  CompletionOptions options = ToCompletionOptions(o);
+  options.num_threads = c.num_threads;
+  options.cancel = c.cancel;
+  c.Report("loading", 0, 1);
+  ASSIGN_OR_RETURN(Scene scene, ReadScene(c.scene_dir));
+  ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
+  cloud = ToSurfels(cloud);
+  ASSIGN_OR_RETURN(SegmentationResult result, ReadResult(segment, cloud.size()));
+  std::vector<PinholeCamera> cameras;
+  for (const SceneView& view : scene.views) cameras.push_back(view.camera);
+  ASSIGN_OR_RETURN(CompletedObject object,
+                   CompleteObject(cameras, cloud, result.labels, id, options,
+                                  [&](const std::string& phase, int step, int total) {
+                                    c.Report(absl::StrCat("object ", id, ": ", phase), step, total);
+                                  }));
+  RETURN_IF_ERROR(CheckCancelled(c.cancel, "complete"));
+  RETURN_IF_ERROR(WriteCompletedObject(c.out_dir, object, c.num_threads));
+  return pipeline::StageResult{};
+}
+
+}  // namespace
+
+pipeline::StageDefinition CompleteStage() { return {CompleteSpec(), RunComplete}; }
+
+}  // namespace instascene::generation

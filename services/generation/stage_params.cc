@@ -1,0 +1,37 @@
+#include "services/generation/stage_params.h"
+
+namespace instascene::generation {
+
+const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
+  using O = CompleteStageOptions;
+  static const auto* codec = [] {
+    auto* c = new pipeline::ParamCodec<O>("complete");
+    c->Choice("prior", &O::prior, {"geometric", "none"},
+              "Completion prior: geometric (symmetry + support, no weights) or none (closed crop)")
+        .Int("ring_views", &O::ring_views, 4, 64, "Cameras on the viewpoint ring")
+        .Real("ring_elevation", &O::ring_elevation, -80.0, 80.0, "Ring elevation, degrees")
+        .Int("ring_size", &O::ring_size, 32, 1024, "Ring image size, px")
+        .Int("top_training_views", &O::top_training_views, 1, 100,
+             "Real views kept for refinement (best unoccluded visibility)")
+        .Int("free_space_resolution", &O::free_space_resolution, 16, 256,
+             "Free-space grid voxels per axis")
+        .Real("min_agreement", &O::min_agreement, 0.5, 1.0,
+              "Symmetry hypotheses need this share of decided points to agree")
+        .Int("mesh_size", &O::mesh_size, 32, 1024, "Meshing view size, px")
+        .Int("min_gaussians", &O::min_gaussians, 1, 1000000,
+             "Instances with fewer Gaussians fail as degenerate")
+        .Int<uint64_t>("prior_seed", &O::seed, 0, int64_t{1} << 53,
+                       "Random seed of the completion prior");
+    return c;
+  }();
+  return *codec;
+}
+
+pipeline::StageSpec CompleteSpec() {
+  return pipeline::MakeStageSpec(
+      "complete", "objects",
+      "In-situ completion of one object: viewpoint ring, free space, completion prior, mesh",
+      {{"segment", pipeline::InputMode::kEach}}, /*fans_out=*/false, CompleteCodec());
+}
+
+}  // namespace instascene::generation

@@ -1,0 +1,29 @@
+// services/generation/stage_params.h: the `complete` stage as every binary can link it: its spec
+// and one parameter codec. Light: no ray casting, no meshing library.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+#include "services/pipeline/stage.h"
+
+namespace instascene::generation {
+
+// What a complete job takes (a subset of CompletionOptions, the rest are the documented defaults).
+struct CompleteStageOptions {
+  std::string prior = "geometric";  // geometric | none
+  int ring_views = 16;              // viewpoint ring (ALGORITHM.md 7.2)
+  double ring_elevation = 30.0;     // degrees
+  int ring_size = 256;              // px
+  int top_training_views = 10;
+  int free_space_resolution = 64;  // voxels per axis
+  double min_agreement = 0.85;     // symmetry acceptance
+  int mesh_size = 160;             // meshing view size, px
+  int min_gaussians = 50;          // fewer: a degenerate object (fails permanently)
+  uint64_t seed = 1;
+};
+
+const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec();
+pipeline::StageSpec CompleteSpec();  // input: each item of segment
+
+}  // namespace instascene::generation

@@ -1,0 +1,181 @@
+#include "services/generation/symmetry.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <memory>
+
+#include "absl/strings/str_format.h"
+#include "common/geometry/point_index.h"
+
+namespace instascene::generation {
+namespace {
+
+constexpr double kPi = 3.14159265358979323846;
+
+// Distance of p from the plane / axis: points closer than the match distance map onto themselves.
+float DistanceToElement(const SymmetryHypothesis& h, const Eigen::Vector3f& p) {
+  const Eigen::Vector3f offset = p - h.point;
+  if (h.kind == SymmetryKind::kPlane) return std::abs(offset.dot(h.direction));
+  return (offset - offset.dot(h.direction) * h.direction).norm();
+}
+
+// Vertical axis through the least-squares common centre of the horizontal circles the points lie
+// on (Kasa fit with one radius per height bin): the axis of a solid of revolution.
+Eigen::Vector3f FitAxisPoint(const std::vector<Eigen::Vector3f>& points, const ObjectFrame& frame) {
+  const Eigen::Matrix3f basis = frame.Basis();
+  constexpr int kBins = 16;
+  struct Bin {
+    double n = 0, x = 0, y = 0, r2 = 0;
+  };
+  std::vector<Bin> bins(kBins);
+  std::vector<Eigen::Vector3d> local;
+  std::vector<int> bin_of;
+  for (const Eigen::Vector3f& p : points) {
+    const Eigen::Vector3d q = (basis.transpose() * (p - frame.center)).cast<double>();
+    const int b =
+        std::clamp(static_cast<int>((q.z() / frame.radius + 1.0) * 0.5 * kBins), 0, kBins - 1);
+    local.push_back(q);
+    bin_of.push_back(b);
+    bins[b].n += 1;
+    bins[b].x += q.x();
+    bins[b].y += q.y();
+    bins[b].r2 += q.x() * q.x() + q.y() * q.y();
+  }
+  // Minimise sum ((r2 - mean r2) - 2a (x - mean x) - 2b (y - mean y))^2 over (a, b).
+  Eigen::Matrix2d ata = Eigen::Matrix2d::Zero();
+  Eigen::Vector2d atb = Eigen::Vector2d::Zero();
+  for (size_t i = 0; i < local.size(); ++i) {
+    const Bin& bin = bins[bin_of[i]];
+    const Eigen::Vector2d a(2 * (local[i].x() - bin.x / bin.n), 2 * (local[i].y() - bin.y / bin.n));
+    const double r = local[i].x() * local[i].x() + local[i].y() * local[i].y() - bin.r2 / bin.n;
+    ata += a * a.transpose();
+    atb += a * r;
+  }
+  Eigen::Vector2d ab = Eigen::Vector2d::Zero();
+  if (std::abs(ata.determinant()) > 1e-18) ab = ata.ldlt().solve(atb);
+  // Keep the axis inside the object's extent (a degenerate fit must not leave it).
+  if (ab.norm() > frame.radius) ab *= frame.radius / ab.norm();
+  return frame.center + basis.col(0) * static_cast<float>(ab.x()) +
+         basis.col(1) * static_cast<float>(ab.y());
+}
+
+bool Better(const SymmetryHypothesis& a, const SymmetryHypothesis& b) {
+  if (a.accepted != b.accepted) return a.accepted;
+  const double sa = a.agreement * std::min(1.0, a.evidence * 2);
+  const double sb = b.agreement * std::min(1.0, b.evidence * 2);
+  return sa > sb;
+}
+
+}  // namespace
+
+Eigen::Matrix3f SymmetryHypothesis::Linear(int k) const {
+  if (kind == SymmetryKind::kPlane) {
+    return Eigen::Matrix3f::Identity() - 2.0f * direction * direction.transpose();
+  }
+  const double angle = 2.0 * kPi * (k + 1) / (copies + 1);
+  return Eigen::AngleAxisf(static_cast<float>(angle), direction).toRotationMatrix();
+}
+
+Eigen::Vector3f SymmetryHypothesis::MapPoint(const Eigen::Vector3f& p, int k) const {
+  return point + Linear(k) * (p - point);
+}
+
+std::string SymmetryHypothesis::Describe() const {
+  return absl::StrFormat(
+      "%s through (%.4f, %.4f, %.4f) %s (%.4f, %.4f, %.4f): agreement %.3f, "
+      "evidence %.3f, %s",
+      kind == SymmetryKind::kPlane ? "plane" : "axis", point.x(), point.y(), point.z(),
+      kind == SymmetryKind::kPlane ? "normal" : "direction", direction.x(), direction.y(),
+      direction.z(), agreement, evidence, accepted ? "accepted" : "rejected");
+}
+
+namespace {
+
+void ScoreWithIndex(const std::vector<Eigen::Vector3f>& points,
+                    const std::vector<Eigen::Vector3f>& normals, const PointIndex3& index,
+                    const ObjectFrame& frame, const FreeSpaceGrid& free_space,
+                    const SymmetryOptions& options, SymmetryHypothesis* h) {
+  const float match = options.match_spacings * std::max(frame.spacing, 1e-6f);
+  h->scored = h->agree = h->contradict = 0;
+  for (size_t i = 0; i < points.size(); ++i) {
+    if (DistanceToElement(*h, points[i]) < match) continue;
+    ++h->scored;
+    for (int k = 0; k < h->copies; ++k) {
+      const Eigen::Vector3f image = h->MapPoint(points[i], k);
+      const auto [nearest, dist_sq] = index.Nearest(image);
+      if (dist_sq <= match * match &&
+          std::abs((h->Linear(k) * normals[i]).dot(normals[nearest])) >= options.normal_agreement) {
+        ++h->agree;
+      } else if (free_space.IsFree(image)) {
+        ++h->contradict;
+      }
+    }
+  }
+  const int decided = h->agree + h->contradict;
+  h->agreement = decided > 0 ? static_cast<double>(h->agree) / decided : 0.0;
+  h->evidence = h->scored > 0 ? static_cast<double>(decided) / (h->scored * h->copies) : 0.0;
+  h->accepted = h->agreement >= options.min_agreement && h->evidence >= options.min_evidence;
+}
+
+}  // namespace
+
+void ScoreHypothesis(const std::vector<Eigen::Vector3f>& points,
+                     const std::vector<Eigen::Vector3f>& normals, const ObjectFrame& frame,
+                     const FreeSpaceGrid& free_space, const SymmetryOptions& options,
+                     SymmetryHypothesis* h) {
+  const PointIndex3 index(points);
+  ScoreWithIndex(points, normals, index, frame, free_space, options, h);
+}
+
+std::vector<SymmetryHypothesis> DetectSymmetries(const std::vector<Eigen::Vector3f>& all_points,
+                                                 const std::vector<Eigen::Vector3f>& all_normals,
+                                                 const ObjectFrame& frame,
+                                                 const FreeSpaceGrid& free_space,
+                                                 const SymmetryOptions& options) {
+  std::vector<Eigen::Vector3f> points, normals;
+  const size_t stride =
+      std::max<size_t>(1, all_points.size() / static_cast<size_t>(std::max(1, options.max_points)));
+  for (size_t i = 0; i < all_points.size(); i += stride) {
+    points.push_back(all_points[i]);
+    normals.push_back(all_normals[i]);
+  }
+  if (points.size() < 10) return {};
+  const PointIndex3 index(points);
+  const Eigen::Matrix3f basis = frame.Basis();
+  // Planes: every (angle, offset) pair, scored in parallel into fixed slots (thread-count free).
+  const int angles = std::max(1, options.plane_angles),
+            offsets = std::max(1, options.plane_offsets);
+  std::vector<SymmetryHypothesis> planes(static_cast<size_t>(angles) * offsets);
+  tbb::parallel_for(size_t{0}, planes.size(), [&](size_t slot) {
+    const int a = static_cast<int>(slot) / offsets, o = static_cast<int>(slot) % offsets;
+    const double theta = kPi * a / angles;
+    SymmetryHypothesis& h = planes[slot];
+    h.kind = SymmetryKind::kPlane;
+    h.direction = (basis.col(0) * static_cast<float>(std::cos(theta)) +
+                   basis.col(1) * static_cast<float>(std::sin(theta)))
+                      .normalized();
+    const float offset = offsets == 1 ? 0.0f
+                                      : options.offset_range_radii * frame.radius *
+                                            (2.0f * o / (offsets - 1) - 1.0f);
+    h.point = frame.center + offset * h.direction;
+    h.copies = 1;
+    ScoreWithIndex(points, normals, index, frame, free_space, options, &h);
+  });
+  SymmetryHypothesis best_plane = planes[0];
+  for (const SymmetryHypothesis& h : planes) {
+    if (Better(h, best_plane)) best_plane = h;
+  }
+  SymmetryHypothesis axis;
+  axis.kind = SymmetryKind::kAxis;
+  axis.direction = frame.up;
+  axis.point = FitAxisPoint(all_points, frame);
+  axis.copies = std::max(1, options.axis_steps - 1);
+  ScoreWithIndex(points, normals, index, frame, free_space, options, &axis);
+  std::vector<SymmetryHypothesis> out = {axis, best_plane};
+  std::stable_sort(out.begin(), out.end(), Better);
+  return out;
+}
+
+}  // namespace instascene::generation

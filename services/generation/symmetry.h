@@ -1,0 +1,69 @@
+// services/generation/symmetry.h: reflective symmetry planes and rotation axes of the observed part
+// of an object (GENERATION.md step 4), the hypotheses the geometric prior completes with.
+//
+// Objects rest on a support under gravity, so only vertical planes (normal orthogonal to up) and
+// vertical axes are searched. A hypothesis is scored by transforming every sampled observed surfel:
+// its image *agrees* when an observed surfel lies within `match_spacings` instance spacings with a
+// compatible normal, *contradicts* when it falls in space real views saw empty (FreeSpaceGrid), and
+// is *unknown* otherwise (never observed). agreement = agree / (agree + contradict); evidence =
+// (agree + contradict) / scored points. Points within that distance of the plane or axis map onto
+// themselves and are not scored. Accepted when agreement >= min_agreement and evidence >=
+// min_evidence. Pure functions, thread-safe.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "services/generation/free_space.h"
+#include "services/generation/object_frame.h"
+
+namespace instascene::generation {
+
+enum class SymmetryKind { kPlane, kAxis };
+
+struct SymmetryHypothesis {
+  SymmetryKind kind = SymmetryKind::kPlane;
+  Eigen::Vector3f point = Eigen::Vector3f::Zero();       // on the plane / axis, world frame
+  Eigen::Vector3f direction = Eigen::Vector3f::UnitX();  // plane normal / axis direction (unit)
+  int copies = 1;  // images per point: 1 for a plane, steps - 1 for an axis
+  int scored = 0;  // points scored (off the plane / axis)
+  int agree = 0, contradict = 0;
+  double agreement = 0;  // agree / (agree + contradict)
+  double evidence = 0;   // (agree + contradict) / (scored * copies)
+  bool accepted = false;
+
+  // The k-th image (k in [0, copies)) of a point / of a direction.
+  Eigen::Vector3f MapPoint(const Eigen::Vector3f& p, int k) const;
+  Eigen::Matrix3f Linear(int k) const;  // rotation (axis) or reflection (plane) matrix
+  std::string Describe() const;
+};
+
+struct SymmetryOptions {
+  double min_agreement = 0.85;
+  double min_evidence = 0.2;
+  int plane_angles = 36;   // normal directions over 180 degrees
+  int plane_offsets = 21;  // offsets per direction over +- offset_range_radii
+  float offset_range_radii = 0.5f;
+  int axis_steps = 12;            // revolution sampled every 360 / axis_steps degrees
+  float match_spacings = 2.5f;    // agreement distance in instance spacings
+  float normal_agreement = 0.5f;  // |cos| between an image's normal and its match's
+  int max_points = 1500;          // observed surfels scored (deterministic stride)
+};
+
+// The best plane and the best axis found (each reported even when rejected, so the manifest can
+// say what was tried), accepted first. `points` / `normals`: the observed instance surfels.
+std::vector<SymmetryHypothesis> DetectSymmetries(const std::vector<Eigen::Vector3f>& points,
+                                                 const std::vector<Eigen::Vector3f>& normals,
+                                                 const ObjectFrame& frame,
+                                                 const FreeSpaceGrid& free_space,
+                                                 const SymmetryOptions& options);
+
+// Scores one hypothesis in place (exposed for tests).
+void ScoreHypothesis(const std::vector<Eigen::Vector3f>& points,
+                     const std::vector<Eigen::Vector3f>& normals, const ObjectFrame& frame,
+                     const FreeSpaceGrid& free_space, const SymmetryOptions& options,
+                     SymmetryHypothesis* hypothesis);
+
+}  // namespace instascene::generation
