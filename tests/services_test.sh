@@ -4,13 +4,15 @@
 # the services gives the same labels as `instascene run`; resubmission computes nothing; a worker
 # killed with SIGKILL mid-job (lease expires, retry succeeds, one result); the server killed with
 # SIGKILL and restarted (every job survives); cancellation; SIGTERM drain handing a job back; bad
-# requests rejected with the right status. Prints "N passed, N failed"; exits 1 on any failure.
+# requests rejected with the right status; per-object completion jobs on the generation worker
+# (a degenerate object fails only its own job). Prints "N passed, N failed"; exits 1 on any failure.
 set -uo pipefail
 BIN=$1      # the instascene command
-BINDIR=$2   # folder with instascene-store, -scheduler, -decomposition, -training
+BINDIR=$2   # folder with instascene-store, -scheduler, -decomposition, -training, -generation
 source "$(dirname "$0")/test_lib.sh"
 
 SMALL='{"train":{"iterations":60,"samples":512,"pixel_pool":1024}}'
+PIPE="--stages decompose,train,segment"  # sections 1-7; section 8 adds per-object completion
 slow() { echo "{\"train\":{\"iterations\":$1,\"samples\":512,\"pixel_pool\":1024}}"; }  # ~1.5 ms/step
 check "synth scene A" "$BIN" synth --out "$WORK/a" --preset tiny --seed 3
 check "synth scene B" "$BIN" synth --out "$WORK/b" --preset tiny --seed 4
@@ -23,7 +25,7 @@ check_fails "a second serve on the same data folder is refused" "in use by anoth
   "$BIN" serve --data "$WORK/data" --listen 127.0.0.1:0
 check_fails "a second serve on the same port is refused" "cannot listen on $ADDR" \
   "$BIN" serve --data "$WORK/data-other" --listen "$ADDR"
-check "submit scene A" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params "$SMALL" --json
+check "submit scene A" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params "$SMALL" $PIPE --json
 cp "$WORK/out.txt" "$WORK/submit1.json"
 check "submit json has scene and 3 jobs" test "$(json_get "$WORK/submit1.json" "d['scene'] + str(len(d['jobs']))")" = "a3"
 SEG=$(json_get "$WORK/submit1.json" "d['jobs'][2]['id']")
@@ -49,7 +51,7 @@ check "the next page holds the oldest job" test "$(json_get "$WORK/out.txt" "[j[
 check_fails "a malformed page token" "INVALID_ARGUMENT" "$BIN" jobs --server "$ADDR" --page-token nope
 
 # 2. Resubmitting computes nothing new and uploads nothing.
-check "resubmit" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params "$SMALL" --json
+check "resubmit" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params "$SMALL" $PIPE --json
 cp "$WORK/out.txt" "$WORK/submit2.json"
 check "resubmit uploads nothing" test "$(json_get "$WORK/submit2.json" "d['uploaded_files']")" = "0"
 check "resubmit returns the same finished jobs" test \
@@ -67,7 +69,7 @@ check_fails "no server" "unreachable" "$BIN" jobs --server 127.0.0.1:1
 check "bad requests queued nothing" test "$(json_get <("$BIN" jobs --server "$ADDR" --json) "len(d['jobs'])")" = "3"
 
 # 4. Cancellation reaches a running job and its dependents.
-check "submit scene B (long)" "$BIN" submit --scene "$WORK/b" --server "$ADDR" --iterations 100000 --json
+check "submit scene B (long)" "$BIN" submit --scene "$WORK/b" --server "$ADDR" --iterations 100000 $PIPE --json
 cp "$WORK/out.txt" "$WORK/submit3.json"
 BTRAIN=$(json_get "$WORK/submit3.json" "d['jobs'][1]['id']")
 BSEG=$(json_get "$WORK/submit3.json" "d['jobs'][2]['id']")
@@ -78,11 +80,11 @@ check "cancelled job state" test "$(job_field "$ADDR" "$BTRAIN" state)" = "cance
 check "dependent cancelled" test "$(job_field "$ADDR" "$BSEG" state)" = "cancelled"
 
 # 5. The server killed with SIGKILL mid-job and restarted: every job survives and finishes.
-check "resubmit B with other parameters" "$BIN" submit --scene "$WORK/b" --server "$ADDR" --params "$SMALL" --json
+check "resubmit B with other parameters" "$BIN" submit --scene "$WORK/b" --server "$ADDR" --params "$SMALL" $PIPE --json
 cp "$WORK/out.txt" "$WORK/submit4.json"
 B4TRAIN=$(json_get "$WORK/submit4.json" "d['jobs'][1]['id']")
 B4SEG=$(json_get "$WORK/submit4.json" "d['jobs'][2]['id']")
-check "submit slow pipeline on A" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params "$(slow 4000)" --json
+check "submit slow pipeline on A" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params "$(slow 4000)" $PIPE --json
 cp "$WORK/out.txt" "$WORK/submit5.json"
 SLOW=$(json_get "$WORK/submit5.json" "d['jobs'][1]['id']")
 SLOWSEG=$(json_get "$WORK/submit5.json" "d['jobs'][2]['id']")
@@ -97,7 +99,7 @@ check "the interrupted job was retried once" test "$(job_field "$ADDR" "$SLOW" a
 check "first pipeline untouched" test "$(job_field "$ADDR" "$SEG" state)/$(job_field "$ADDR" "$SEG" attempts)" = "succeeded/1"
 
 # 6. SIGTERM with a zero drain deadline hands the running job back; it finishes after a restart.
-check "submit another slow pipeline" "$BIN" submit --scene "$WORK/b" --server "$ADDR" --params "$(slow 4001)" --json
+check "submit another slow pipeline" "$BIN" submit --scene "$WORK/b" --server "$ADDR" --params "$(slow 4001)" $PIPE --json
 cp "$WORK/out.txt" "$WORK/submit6.json"
 DRAIN=$(json_get "$WORK/submit6.json" "d['jobs'][1]['id']")
 check "it runs" wait_state "$ADDR" "$DRAIN" running training
@@ -123,6 +125,27 @@ check "exactly one result recorded" test -n "$(job_field "$SCHED" "$DRAIN" outpu
 DRAINSEG=$(json_get "$WORK/submit6.json" "d['jobs'][2]['id']")
 check "its segment job runs on worker 2 too" "$BIN" watch "$DRAINSEG" --server "$SCHED"
 check "worker 2's 1-byte input cache evicted what the next job did not need" grep -q "evicted" "$WORK/trainer2.log"
+
+# 8. Per-object completion: the generation worker takes one complete job per segmented object; a
+# degenerate object fails its own job permanently with a message, the others succeed.
+start generator "$WORK/ready-g" "$BINDIR/instascene-generation" --data "$WORK/w3" --store "$STORE" --scheduler "$SCHED" --ready-file "$WORK/ready-g"
+# (The parameters of A's latest pipeline, so that `fetch --scene` shows its objects.)
+check "submit A with completion" "$BIN" submit --scene "$WORK/a" --server "$SCHED" --store "$STORE" --params "$(slow 4000)" --json
+cp "$WORK/out.txt" "$WORK/submit7.json"
+COMPLETE=$(json_get "$WORK/submit7.json" "' '.join(j['id'] for j in d['jobs'] if j['kind'] == 'complete')")
+"$BIN" watch $COMPLETE --server "$SCHED" >/dev/null 2>&1
+STATES=$(for j in $COMPLETE; do job_field "$SCHED" "$j" state; done | sort | uniq -c | tr -s ' ')
+check "every complete job finished" test -z "$(for j in $COMPLETE; do job_field "$SCHED" "$j" state; done | grep -v -e succeeded -e failed)"
+check "some objects completed" grep -q succeeded <<<"$STATES"
+for j in $COMPLETE; do
+  if [ "$(job_field "$SCHED" "$j" state)" = failed ]; then
+    check "a failed object says why" grep -q "degenerate\|seen by no real view" <<<"$(job_field "$SCHED" "$j" error)"
+    check "and is not retried" test "$(job_field "$SCHED" "$j" attempts)" = "1"
+  fi
+done
+check "fetch the scene with its objects" "$BIN" fetch --scene a --out "$WORK/scene-a2" --server "$SCHED" --store "$STORE" --json
+check "one complete job per instance" test "$(echo $COMPLETE | wc -w)" = "$(python3 -c "import json,sys; print(len(json.load(open(sys.argv[1]))))" "$WORK/scene-a2/segment/instances.json")"
+check "objects have manifests and meshes" test -n "$(ls "$WORK"/scene-a2/complete/*/manifest.json)" -a -n "$(ls "$WORK"/scene-a2/complete/*/mesh.ply)"
 
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

@@ -155,6 +155,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
   // submit
   struct SubmitArgs {
     std::string server = kDefaultServer, store, scene, name, params;
+    std::vector<std::string> stages;
     int priority = 0, iterations = 0;
     bool json = false, wait = false;
   };
@@ -162,7 +163,8 @@ void AddClientCommands(CLI::App& app, Action* action) {
   CLI::App* s =
       app.add_subcommand("submit",
                          "Upload a scene (only the blobs the store lacks) and submit its pipeline "
-                         "decompose -> train -> segment; prints the job ids");
+                         "decompose -> train -> segment -> complete (one job per object); prints "
+                         "the job ids");
   s->add_option("--scene", submit->scene, "Scene directory")->required();
   s->add_option("--server", submit->server, "Scheduler address")->capture_default_str();
   s->add_option("--store", submit->store, "Store address (default: --server)");
@@ -170,6 +172,10 @@ void AddClientCommands(CLI::App& app, Action* action) {
   s->add_option("--params", submit->params,
                 R"(Stage parameters as JSON, e.g. '{"train":{"iterations":500}}')");
   s->add_option("--iterations", submit->iterations, "Shortcut for train.iterations");
+  s->add_option("--stages", submit->stages,
+                "Only these stages, comma-separated (their inputs included), e.g. "
+                "decompose,train,segment; default: every stage")
+      ->delimiter(',');
   s->add_option("--priority", submit->priority, "Higher runs first (interactive requests)");
   s->add_flag("--wait", submit->wait, "Watch the jobs until they finish");
   s->add_flag("--json", submit->json, "Print {\"scene\", \"jobs\", ...} as the last stdout line");
@@ -213,6 +219,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
       request.set_scene(name);
       request.set_parameters_json(params.dump());
       request.set_priority(a.priority);
+      for (const std::string& stage : a.stages) request.add_stages(stage);
       v1::SubmitPipelineResponse response;
       grpc::ClientContext context;
       SetDeadline(&context);

@@ -26,7 +26,8 @@ namespace {
 
 struct TrainArgs {
   std::string scene, decomposition, out;
-  StageFlags flags;  // the stages' parameters, from their codecs
+  std::vector<std::string> stages;  // run: a subset of the pipeline (empty = all)
+  StageFlags flags;                 // the stages' parameters, from their codecs
   int threads = 0;
   bool json = false;
 };
@@ -158,14 +159,18 @@ void AddTrainCommands(CLI::App& app, Action* action) {
   auto run = std::make_shared<TrainArgs>();
   CLI::App* r = app.add_subcommand(
       "run",
-      "All stages offline, the same stage code the services run: decompose, train, segment "
-      "(results under --out: decomposition/, training/, segmentation/)");
+      "All stages offline, the same stage code the services run: decompose, train, segment, "
+      "complete (results under --out: decomposition/, training/, segmentation/, objects/<item>/)");
   r->add_option("--scene", run->scene, "Scene directory (images, masks, gaussians.ply)")
       ->required();
   r->add_option("--out", run->out,
                 "Output directory: one folder per stage (decomposition/, training/, "
-                "segmentation/)")
+                "segmentation/, objects/)")
       ->required();
+  r->add_option("--stages", run->stages,
+                "Run only these stages (comma-separated, each with its inputs: e.g. "
+                "decompose,train,segment skips completion); default: all")
+      ->delimiter(',');
   auto registry = std::make_shared<pipeline::StageRegistry>();
   if (absl::Status s = stages::RegisterStages(registry.get()); !s.ok())
     throw std::logic_error(s.ToString());
@@ -177,7 +182,8 @@ void AddTrainCommands(CLI::App& app, Action* action) {
       Stopwatch watch;
       const std::filesystem::path out(run->out);
       ASSIGN_OR_RETURN(nlohmann::json parameters, run->flags.Parameters());
-      ASSIGN_OR_RETURN(std::vector<pipeline::PlannedStage> plan, registry->Plan({}, parameters));
+      ASSIGN_OR_RETURN(std::vector<pipeline::PlannedStage> plan,
+                       registry->Plan(run->stages, parameters));
       pipeline::LocalRunOptions options;
       options.scene_dir = run->scene;
       options.out_dir = run->out;
@@ -194,7 +200,14 @@ void AddTrainCommands(CLI::App& app, Action* action) {
         }
         if (bar) bar->Update(static_cast<int>(p.step), static_cast<int>(p.total));
       };
-      RETURN_IF_ERROR(pipeline::RunPipelineLocally(*registry, plan, options).status());
+      ASSIGN_OR_RETURN(pipeline::LocalRunResult ran,
+                       pipeline::RunPipelineLocally(*registry, plan, options));
+      nlohmann::json failed = nlohmann::json::object();
+      for (const auto& [job, status] : ran.failures) {
+        std::fprintf(stderr, "run: %s failed (the other items ran): %s\n", job.c_str(),
+                     status.ToString().c_str());
+        failed[job] = status.ToString();
+      }
       const std::string result = (out / "segmentation").string();
       ASSIGN_OR_RETURN(Scene scene, ReadScene(run->scene));
       ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
@@ -209,6 +222,8 @@ void AddTrainCommands(CLI::App& app, Action* action) {
                                       {"coarse_instances", coarse_ids.size()},
                                       {"decomposition", (out / "decomposition").string()},
                                       {"out", result},
+                                      {"objects", (out / "objects").string()},
+                                      {"failed", failed},
                                       {"seconds", watch.ElapsedSeconds()}};
       std::fprintf(stderr,
                    "run: %zu instances (%zu coarse) in %.1f s; results in %s (evaluate with "

@@ -3,7 +3,10 @@
 #include <filesystem>
 
 #include "absl/strings/str_cat.h"
+#include "common/core/file_io.h"
 #include "common/core/status.h"
+
+#include <nlohmann/json.hpp>
 
 namespace instascene::pipeline {
 
@@ -35,22 +38,41 @@ absl::StatusOr<LocalRunResult> RunPipelineLocally(const StageRegistry& registry,
       } else {
         for (int64_t i = 0; i < item_count.at(in.stage); ++i) {
           const std::string name = absl::StrCat(in.stage, "/", i);
+          if (auto failed = result.failures.find(name); failed != result.failures.end()) {
+            return absl::FailedPreconditionError(
+                absl::StrCat(stage.kind, ": input ", name, " failed: ", failed->second.message()));
+          }
           c.inputs[name] = result.outputs.at(name);
         }
       }
     }
     const int64_t runs = each.empty() ? 1 : result.items.at(each);
+    nlohmann::json failures = nlohmann::json::object();
     for (int64_t i = 0; i < runs; ++i) {
       c.item = each.empty() ? -1 : i;
       c.out_dir = each.empty() ? dir : (fs::path(dir) / std::to_string(i)).string();
       c.progress = [&, i = c.item](const StageProgress& p) {
         if (options.progress) options.progress(stage.kind, i, p);
       };
-      ASSIGN_OR_RETURN(StageResult r, registry.Run(stage.kind, c));
+      absl::StatusOr<StageResult> run = registry.Run(stage.kind, c);
+      if (!run.ok() && !each.empty() && run.status().code() != absl::StatusCode::kCancelled &&
+          !IsCancelled(options.cancel)) {
+        std::error_code ec;
+        fs::remove_all(c.out_dir, ec);
+        result.failures[absl::StrCat(stage.kind, "/", i)] = run.status();
+        failures[std::to_string(i)] = run.status().ToString();
+        continue;
+      }
+      if (!run.ok()) return run.status();
+      const StageResult& r = *run;
       result.outputs[each.empty() ? stage.kind : absl::StrCat(stage.kind, "/", i)] = c.out_dir;
       if (def->spec.fans_out) result.items[stage.kind] = r.items;
     }
     if (!each.empty()) item_count[stage.kind] = runs;
+    if (!failures.empty()) {
+      RETURN_IF_ERROR(
+          WriteFileAtomically((fs::path(dir) / "failures.json").string(), failures.dump(1)));
+    }
   }
   return result;
 }

@@ -22,7 +22,7 @@ StageRegistry Stages() {
 
 TEST(Registry, CodecsValidateAndCanonicalize) {
   const StageRegistry r = Stages();
-  EXPECT_EQ(r.Kinds(), (std::vector<std::string>{"decompose", "train", "segment"}));
+  EXPECT_EQ(r.Kinds(), (std::vector<std::string>{"decompose", "train", "segment", "complete"}));
   // Defaults are filled in: {} and the explicit defaults are the same job.
   auto a = r.Canonicalize("train", nlohmann::json::object());
   auto b = r.Canonicalize("train", {{"iterations", 1500}, {"supervision", "full"}});
@@ -52,7 +52,9 @@ TEST(Registry, CodecsValidateAndCanonicalize) {
            {"decompose", {{"dbscan_eps", -1.0}}, "stage decompose"},
            {"decompose", {{"dbscan_eps_relative", 1}}, "true or false"},
            {"render", nlohmann::json::object(), "unknown stage 'render'"},
-           {"segment", nlohmann::json::array(), "must be a JSON object"}}) {
+           {"segment", nlohmann::json::array(), "must be a JSON object"},
+           {"complete", {{"prior", "diffusion"}}, "diffusion"},
+           {"complete", {{"ring_views", 1000}}, "ring_views"}}) {
     const absl::Status s = r.Canonicalize(c.kind, c.p).status();
     EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << c.p.dump();
     EXPECT_NE(s.message().find(c.says), std::string::npos) << s;
@@ -63,10 +65,12 @@ TEST(Registry, PlansPipelinesAndRefusesBadOnes) {
   const StageRegistry r = Stages();
   auto plan = r.Plan({}, {{"train", {{"iterations", 50}}}});
   ASSERT_TRUE(plan.ok()) << plan.status();
-  ASSERT_EQ(plan->size(), 3u);
+  ASSERT_EQ(plan->size(), 4u);
   EXPECT_EQ((*plan)[1].parameters["iterations"], 50);
   EXPECT_EQ((*plan)[2].inputs.size(), 1u);
   EXPECT_EQ((*plan)[2].inputs[0].stage, "train");
+  EXPECT_EQ((*plan)[3].inputs[0].stage, "segment");
+  EXPECT_EQ((*plan)[3].inputs[0].mode, InputMode::kEach);
   EXPECT_EQ(r.Plan({"decompose"}, nlohmann::json::object())->size(), 1u);
   for (const auto& [stages, params] :
        std::vector<std::pair<std::vector<std::string>, nlohmann::json>>{
