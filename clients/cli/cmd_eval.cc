@@ -8,12 +8,52 @@
 #include "common/core/timer.h"
 #include "common/eval/click_eval.h"
 #include "common/scene/image_io.h"
+#include "services/generation/completion_eval.h"
 
 namespace instascene::cli {
+namespace {
+
+absl::Status EvaluateCompletionCommand(const std::string& scene, const std::string& objects,
+                                       int threads, bool json) {
+  Stopwatch watch;
+  generation::CompletionEvalOptions options;
+  options.num_threads = threads;
+  ASSIGN_OR_RETURN(std::vector<generation::ObjectCompletionEval> evals,
+                   generation::EvaluateCompletion(scene, objects, options));
+  for (const generation::ObjectCompletionEval& e : evals) {
+    std::printf(
+        "%-14s %-8s chamfer%% raw %.2f closed %.2f completed %.2f | F1@2%% %.3f %.3f "
+        "%.3f | vIoU %.3f %.3f %.3f | hidden recall %.3f %.3f %.3f | PSNR unknown "
+        "%.2f -> %.2f | violations %d%s\n",
+        e.gt_name.c_str(), e.shape.c_str(), 100 * e.raw.chamfer, 100 * e.closed.chamfer,
+        100 * e.completed.chamfer, e.raw.f1.size() > 1 ? e.raw.f1[1] : 0,
+        e.closed.f1.size() > 1 ? e.closed.f1[1] : 0,
+        e.completed.f1.size() > 1 ? e.completed.f1[1] : 0, e.raw.volume_iou, e.closed.volume_iou,
+        e.completed.volume_iou, e.raw.hidden_recall, e.closed.hidden_recall,
+        e.completed.hidden_recall, e.raw.psnr_unknown, e.completed.psnr_unknown,
+        e.completed.free_space_violations, e.abstained ? " (abstained)" : "");
+  }
+  const nlohmann::json j = generation::CompletionEvalJson(evals, options);
+  for (const char* v : {"raw", "closed", "completed"}) {
+    if (!j["mean"].contains(v)) continue;
+    const nlohmann::json& m = j["mean"][v];
+    std::printf(
+        "mean %-9s chamfer %.4f  vIoU %.3f  hidden recall %.3f  PSNR known %.2f unknown "
+        "%.2f  violations %d\n",
+        v, m["chamfer"].get<double>(), m["volume_iou"].get<double>(),
+        m["hidden_recall"].get<double>(), m["psnr_known"].get<double>(),
+        m["psnr_unknown"].get<double>(), static_cast<int>(m["free_space_violations"]));
+  }
+  std::printf("(%d objects matched, %.1f s)\n", j["matched"].get<int>(), watch.ElapsedSeconds());
+  if (json) PrintJsonLine(j.dump());
+  return absl::OkStatus();
+}
+
+}  // namespace
 
 void AddEvalCommand(CLI::App& app, Action* action) {
   struct Args {
-    std::string scene, result;
+    std::string scene, result, completion;
     ClickEvalOptions options;
     bool labels_only = false, json = false;
   };
@@ -24,8 +64,10 @@ void AddEvalCommand(CLI::App& app, Action* action) {
   cmd->add_option("--scene", args->scene, "Scene directory with ground truth")->required();
   cmd->add_option("--result", args->result,
                   "Result directory (result.json + labels.ply [+ features.ply]); <scene>/gt scores "
-                  "the ground truth")
-      ->required();
+                  "the ground truth");
+  cmd->add_option("--completion", args->completion,
+                  "Instead: score completed objects (a folder of per-object folders, e.g. "
+                  "<run>/objects) for the raw crop, the closed crop and the completed object");
   cmd->add_option("--threshold", args->options.feature_threshold,
                   "Cosine threshold of feature masks (default 0.9)");
   cmd->add_option("--min-visible", args->options.min_visible_pixels,
@@ -36,6 +78,13 @@ void AddEvalCommand(CLI::App& app, Action* action) {
   cmd->callback([args, action] {
     *action = [args]() -> absl::Status {
       Stopwatch watch;
+      if (args->result.empty() == args->completion.empty()) {
+        return absl::InvalidArgumentError("give exactly one of --result and --completion");
+      }
+      if (!args->completion.empty()) {
+        return EvaluateCompletionCommand(args->scene, args->completion, args->options.num_threads,
+                                         args->json);
+      }
       ClickEvalOptions options = args->options;
       options.use_features = !args->labels_only;
       ASSIGN_OR_RETURN(ClickEvaluation eval,

@@ -29,6 +29,7 @@ int Run(int argc, char** argv) {
   AddDecomposeCommand(app, &action);
   AddTrainCommands(app, &action);
   AddQueryCommand(app, &action);
+  AddCompleteCommand(app, &action);
   AddEvalCommand(app, &action);
   AddBenchCommand(app, &action);
   AddServeCommand(app, &action);

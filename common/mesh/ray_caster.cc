@@ -121,19 +121,24 @@ RayHit RayCaster::Cast(const Eigen::Vector3f& origin, const Eigen::Vector3f& dir
   return out;
 }
 
-int RayCaster::CountCrossings(const Eigen::Vector3f& origin, const Eigen::Vector3f& direction,
-                              float t_near) const {
-  int crossings = 0;
+std::vector<float> RayCaster::AllHits(const Eigen::Vector3f& origin,
+                                      const Eigen::Vector3f& direction, float t_near) const {
+  std::vector<float> hits;
   float t = t_near;
   // Each hit restarts just past itself; the step is relative so large scenes do not stall.
   for (int guard = 0; guard < 4096; ++guard) {
     const RayHit hit = Cast(origin, direction, t);
     if (!hit.hit) break;
-    ++crossings;
+    hits.push_back(hit.distance);
     t = std::nextafter(hit.distance, std::numeric_limits<float>::infinity()) +
         1e-6f * std::max(1.0f, hit.distance);
   }
-  return crossings;
+  return hits;
+}
+
+int RayCaster::CountCrossings(const Eigen::Vector3f& origin, const Eigen::Vector3f& direction,
+                              float t_near) const {
+  return static_cast<int>(AllHits(origin, direction, t_near).size());
 }
 
 }  // namespace instascene

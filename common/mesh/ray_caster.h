@@ -45,6 +45,10 @@ class RayCaster {
   int CountCrossings(const Eigen::Vector3f& origin, const Eigen::Vector3f& direction,
                      float t_near = 0.0f) const;
 
+  // Distances of every surface crossing along the ray (t >= t_near), increasing.
+  std::vector<float> AllHits(const Eigen::Vector3f& origin, const Eigen::Vector3f& direction,
+                             float t_near = 0.0f) const;
+
   size_t num_triangles() const { return num_triangles_; }
 
  private:

@@ -88,10 +88,19 @@ nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& optio
       {"prior_report", o.prior.report},
       {"gaussians",
        {{"observed", observed},
+        {"stray_removed", o.stray_removed},
         {"completed", completed},
         {"completed_share",
          o.object.size() ? static_cast<double>(completed) / o.object.size() : 0}}},
       {"ring", ring},
+      {"meshing",
+       {{"size_px", options.meshing.size_px},
+        {"azimuths", options.meshing.azimuths},
+        {"voxel_radii", options.meshing.voxel_radii}}},
+      {"ring_camera",
+       {{"size_px", options.ring.size_px},
+        {"focal_px", options.ring.focal_px},
+        {"distance_radii", options.ring.distance_radii}}},
       {"known_views", known},
       {"unknown_views", static_cast<int>(o.ring.size()) - known},
       {"training_views", o.training_views},
@@ -127,8 +136,10 @@ absl::StatusOr<CompletedObject> CompleteObject(const std::vector<PinholeCamera>&
   ASSIGN_OR_RETURN(std::unique_ptr<CompletionPrior> prior, MakePrior(options.prior));
   report("framing", 0, 6);
   ASSIGN_OR_RETURN(InstanceSplit split, SplitInstance(labels, id, options.min_gaussians));
+  RemoveStrayGaussians(surfels, &split);
   CompletedObject out;
   out.id = id;
+  out.stray_removed = split.outliers;
   out.raw = surfels.Subset(split.instance);
   out.raw.extras.clear();
   out.frame = ComputeObjectFrame(surfels, split, cameras);

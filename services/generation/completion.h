@@ -48,7 +48,8 @@ using CompletionProgress = std::function<void(const std::string& phase, int step
 struct CompletedObject {
   uint32_t id = 0;
   ObjectFrame frame;
-  GaussianCloud raw;     // the observed instance (the raw crop)
+  GaussianCloud raw;  // the observed instance (the raw crop), stray Gaussians removed
+  size_t stray_removed = 0;
   GaussianCloud object;  // observed + completed, with the provenance channel
   TriangleMesh mesh;     // closed mesh of `object`
   std::vector<PinholeCamera> ring;

@@ -52,14 +52,7 @@ class CoverSet {
   std::unordered_map<int64_t, std::vector<Eigen::Vector3f>> cells_;
 };
 
-// Surfels being added: position, rotation, and the observed surfel lending its appearance.
-struct Candidate {
-  Eigen::Vector3f position;
-  Eigen::Matrix3f rotation;
-  uint32_t source = 0;
-  float scale_u = -1, scale_v = -1;  // log-scales; < -0.5 sentinel not used: see has_scale
-  bool has_scale = false;
-};
+using Candidate = SurfelCandidate;
 
 GaussianCloud BuildSurfels(const GaussianCloud& instance, const std::vector<Candidate>& added) {
   GaussianCloud out;
@@ -73,8 +66,8 @@ GaussianCloud BuildSurfels(const GaussianCloud& instance, const std::vector<Cand
     const Eigen::Vector4d q = QuaternionWxyzFromRotation(c.rotation.cast<double>());
     for (int k = 0; k < 4; ++k) out.rotations[4 * i + k] = static_cast<float>(q[k]);
     if (c.has_scale) {
-      out.log_scales[2 * i] = c.scale_u;
-      out.log_scales[2 * i + 1] = c.scale_v;
+      out.log_scales[2 * i] = c.log_scale_u;
+      out.log_scales[2 * i + 1] = c.log_scale_v;
     } else {
       out.log_scales[2 * i] = instance.log_scales[instance.num_scales * c.source];
       out.log_scales[2 * i + 1] = instance.log_scales[instance.num_scales * c.source + 1];
@@ -112,6 +105,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   const PointIndex3 observed(points);
   const float cover = options_.cover_spacings * std::max(frame.spacing, 1e-6f);
   CoverSet added_set(cover);
+  const float exact_tolerance = 1.5f * frame.spacing;
   std::vector<Candidate> added;
   int rejected_free = 0, rejected_covered = 0, rejected_below = 0;
   auto consider = [&](const Candidate& c) {
@@ -126,6 +120,11 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     }
     if (observed.Nearest(c.position).second <= cover * cover || added_set.Covered(c.position)) {
       ++rejected_covered;
+      return;
+    }
+    // The exact test last (it costs one ray per real view): the grid is coarse.
+    if (options_.exact_free_space && input.free_space->SeenThrough(c.position, exact_tolerance)) {
+      ++rejected_free;
       return;
     }
     added_set.Add(c.position);
@@ -165,77 +164,34 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     out.report["added"] = 0;
     return out;
   }
-  // The underside: surfels on the support plane inside the footprint of everything so far.
+  // The support: walls extended down to it, then the underside closed on it.
   if (options_.support_cap && frame.has_support &&
       frame.bottom_height - frame.support_height <= options_.max_support_gap_radii * frame.radius) {
-    const Eigen::Matrix3f basis = frame.Basis();
-    const float cell = std::max(1.5f * frame.spacing, frame.radius / 64.0f);
-    const int half = static_cast<int>(std::ceil(1.5f * frame.radius / cell));
-    const int side = 2 * half + 1;
-    std::vector<uint8_t> occupied(static_cast<size_t>(side) * side, 0);
-    auto mark = [&](const Eigen::Vector3f& p) {
-      const Eigen::Vector3f q = basis.transpose() * (p - frame.center);
-      const int i = static_cast<int>(std::floor(q.x() / cell)) + half;
-      const int j = static_cast<int>(std::floor(q.y() / cell)) + half;
-      if (i >= 0 && j >= 0 && i < side && j < side) occupied[j * side + i] = 1;
+    std::vector<Eigen::Vector3f> positions = points;
+    std::vector<Eigen::Matrix3f> rotations;
+    std::vector<uint32_t> sources;
+    for (uint32_t g = 0; g < instance.size(); ++g) {
+      rotations.push_back(SurfelRotation(instance, g));
+      sources.push_back(g);
+    }
+    auto gather = [&] {
+      positions.resize(points.size());
+      rotations.resize(points.size());
+      sources.resize(points.size());
+      for (const Candidate& c : added) {
+        positions.push_back(c.position);
+        rotations.push_back(c.rotation);
+        sources.push_back(c.source);
+      }
     };
-    // The contact contour: surfels within a tenth of a radius of the support.
-    const float contact = frame.support_height + 0.1f * frame.radius;
-    for (const Eigen::Vector3f& p : points) {
-      if (frame.up.dot(p) <= contact) mark(p);
-    }
-    for (const Candidate& c : added) {
-      if (frame.up.dot(c.position) <= contact) mark(c.position);
-    }
-    // Outside = reachable from the border through empty cells; the rest is the footprint.
-    std::vector<uint8_t> outside(occupied.size(), 0);
-    std::vector<int> stack;
-    for (int i = 0; i < side; ++i) {
-      for (int border : {i, (side - 1) * side + i, i * side, i * side + side - 1}) {
-        if (!occupied[border] && !outside[border]) {
-          outside[border] = 1;
-          stack.push_back(border);
-        }
-      }
-    }
-    while (!stack.empty()) {
-      const int c = stack.back();
-      stack.pop_back();
-      const int i = c % side, j = c / side;
-      for (auto [di, dj] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
-        const int ni = i + di, nj = j + dj;
-        if (ni < 0 || nj < 0 || ni >= side || nj >= side) continue;
-        const int n = nj * side + ni;
-        if (!occupied[n] && !outside[n]) {
-          outside[n] = 1;
-          stack.push_back(n);
-        }
-      }
-    }
-    const size_t before = added.size();
-    const Eigen::Vector3f plane_origin =
-        frame.center +
-        (frame.support_height + 0.25f * frame.spacing - frame.up.dot(frame.center)) * frame.up;
-    for (int j = 0; j < side; ++j) {
-      for (int i = 0; i < side; ++i) {
-        if (outside[j * side + i]) continue;
-        Candidate c;
-        c.position = plane_origin + basis.col(0) * ((i - half + 0.5f) * cell) +
-                     basis.col(1) * ((j - half + 0.5f) * cell);
-        c.rotation = basis;
-        c.source = observed.Nearest(c.position).first;
-        c.has_scale = true;
-        c.scale_u = c.scale_v = std::log(0.6f * cell);
-        // Support seen from above through a hole (a torus, a ring) is table, not underside.
-        const float lift = 3.0f * input.free_space->voxel();
-        if (input.free_space->IsFree(c.position + lift * frame.up)) {
-          ++rejected_free;
-          continue;
-        }
-        consider(c);
-      }
-    }
-    added_by["support"] = static_cast<int>(added.size() - before);
+    gather();
+    size_t before = added.size();
+    for (const Candidate& c : WallExtension(positions, rotations, sources, frame)) consider(c);
+    added_by["support_walls"] = static_cast<int>(added.size() - before);
+    gather();
+    before = added.size();
+    for (const Candidate& c : SupportCap(positions, sources, frame, *input.free_space)) consider(c);
+    added_by["support_cap"] = static_cast<int>(added.size() - before);
   }
   out.added = BuildSurfels(instance, added);
   out.reason =

@@ -1,23 +1,24 @@
 // services/generation/geometric_prior.h: the completion prior that needs no weights (GENERATION.md
 // step 4, `geometric`). It detects vertical symmetry planes and axes of the observed part
-// (symmetry.h), adds the mirrored / revolved images of observed surfels, and closes the underside
-// with surfels on the support plane inside the contour where the object meets it (unless the space
-// just above was seen empty: a hole, not an underside); a candidate is added only where
+// (symmetry.h), adds the mirrored / revolved images of observed surfels, extends walls down to the
+// support and closes the underside on it (support_completion.h); a candidate is added only where
 // space is neither observed-empty (FreeSpaceGrid) nor already covered by a surfel, with appearance
 // (DC colour, opacity, scales) taken from its source surfel. When no hypothesis passes it abstains
 // and says so. Thread-safe (stateless apart from options).
 #pragma once
 
 #include "services/generation/prior.h"
+#include "services/generation/support_completion.h"
 #include "services/generation/symmetry.h"
 
 namespace instascene::generation {
 
 struct GeometricPriorOptions {
   SymmetryOptions symmetry;
-  float cover_spacings = 1.5f;  // a candidate within this many spacings of a surfel is redundant
-  bool support_cap = true;      // close the underside on the support plane
-  float max_support_gap_radii = 0.25f;  // no cap when the support is farther below the object
+  float cover_spacings = 1.5f;    // a candidate within this many spacings of a surfel is redundant
+  bool support_cap = true;        // close the underside on the support plane
+  bool exact_free_space = false;  // also test each candidate against every view's depth map
+  float max_support_gap_radii = 1.0f;  // no support completion when it is farther below
 };
 
 class GeometricPrior final : public CompletionPrior {

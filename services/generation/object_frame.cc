@@ -62,6 +62,49 @@ absl::StatusOr<InstanceSplit> SplitInstance(const std::vector<uint32_t>& labels,
   return split;
 }
 
+void RemoveStrayGaussians(const GaussianCloud& cloud, InstanceSplit* split, float link_spacings,
+                          float min_share) {
+  std::vector<Eigen::Vector3f> points;
+  points.reserve(split->instance.size());
+  for (uint32_t g : split->instance) points.emplace_back(&cloud.positions[3 * g]);
+  const float link = link_spacings * MedianSpacing(points);
+  if (!(link > 0)) return;
+  const PointIndex3 index(points);
+  std::vector<int> component(points.size(), -1);
+  std::vector<size_t> sizes;
+  std::vector<uint32_t> stack;
+  for (uint32_t seed = 0; seed < points.size(); ++seed) {
+    if (component[seed] >= 0) continue;
+    const int c = static_cast<int>(sizes.size());
+    sizes.push_back(0);
+    component[seed] = c;
+    stack.push_back(seed);
+    while (!stack.empty()) {
+      const uint32_t i = stack.back();
+      stack.pop_back();
+      ++sizes[c];
+      for (uint32_t j : index.WithinRadius(points[i], link)) {
+        if (component[j] < 0) {
+          component[j] = c;
+          stack.push_back(j);
+        }
+      }
+    }
+  }
+  const size_t largest = *std::max_element(sizes.begin(), sizes.end());
+  std::vector<uint32_t> kept;
+  for (size_t i = 0; i < points.size(); ++i) {
+    if (sizes[component[i]] >= min_share * largest) {
+      kept.push_back(split->instance[i]);
+    } else {
+      split->occluders.push_back(split->instance[i]);
+    }
+  }
+  split->outliers += split->instance.size() - kept.size();
+  split->instance = std::move(kept);
+  std::sort(split->occluders.begin(), split->occluders.end());
+}
+
 ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& split,
                                const std::vector<PinholeCamera>& cameras) {
   ObjectFrame frame;
@@ -127,21 +170,40 @@ ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& 
       frame.bottom_height = std::min(frame.bottom_height, frame.up.dot(p));
     }
   }
-  // 2. Support: occluder surfels that face up, within two radii (what lies right under the
-  // object is rarely reconstructed), at most a quarter radius below the bottom.
+  // 2. Support: occluder surfels that face up, within four radii (what lies right under the
+  // object is rarely reconstructed), below the bottom by at most one radius (the object's lower
+  // part may be hidden).
   std::vector<float> heights;
-  const float below = 0.25f * frame.radius, above = 0.05f * frame.radius;
+  const float below = frame.radius, above = 0.05f * frame.radius;
   for (uint32_t g : split.occluders) {
     const Eigen::Vector3f p(&cloud.positions[3 * g]);
     const float h = frame.up.dot(p);
     if (h < frame.bottom_height - below || h > frame.bottom_height + above) continue;
-    if (!in_footprint(p, 2.0f * frame.radius)) continue;
+    if (!in_footprint(p, 4.0f * frame.radius)) continue;
     if (std::abs(normal_of(g).dot(frame.up)) < 0.9f) continue;
     heights.push_back(h);
   }
-  if (heights.size() >= 20) {
-    frame.has_support = true;
-    frame.support_height = Median(std::move(heights));
+  // Counts per one-bin window starting at each height (descending); the highest window holding
+  // at least a quarter of the fullest one's count (and 10) wins: the plane right under the object,
+  // not the underside of the table top some rays leak through to.
+  const float bin = std::max(2.0f * frame.spacing, 0.02f * frame.radius);
+  std::sort(heights.begin(), heights.end(), std::greater<float>());
+  std::vector<size_t> window_end(heights.size());
+  size_t fullest = 0;
+  for (size_t i = 0, j = 0; i < heights.size(); ++i) {
+    j = std::max(j, i);
+    while (j < heights.size() && heights[j] >= heights[i] - bin) ++j;
+    window_end[i] = j;
+    fullest = std::max(fullest, j - i);
+  }
+  for (size_t i = 0; i < heights.size(); ++i) {
+    const size_t count = window_end[i] - i;
+    if (count >= 10 && 4 * count >= fullest) {
+      frame.has_support = true;
+      frame.support_height =
+          Median(std::vector<float>(heights.begin() + i, heights.begin() + window_end[i]));
+      break;
+    }
   }
   return frame;
 }

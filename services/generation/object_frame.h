@@ -31,12 +31,20 @@ struct ObjectFrame {
 struct InstanceSplit {
   std::vector<uint32_t> instance;   // Gaussians labelled with the instance id, scene order
   std::vector<uint32_t> occluders;  // every other Gaussian
+  size_t outliers = 0;              // instance Gaussians moved to the occluders (see below)
 };
 
 // Splits by label. FailedPrecondition when the instance has fewer than `min_gaussians` members
 // (empty or degenerate instance): the message names the instance.
 absl::StatusOr<InstanceSplit> SplitInstance(const std::vector<uint32_t>& labels, uint32_t id,
                                             size_t min_gaussians);
+
+// Segmentations carry stray Gaussians (floaters, a few surfels of the support or a neighbour);
+// completing them would mirror and revolve them into rings of garbage. Keeps the connected
+// components of the instance (link: `link_spacings` median spacings) holding at least
+// `min_share` of the largest one's Gaussians; the rest become occluders.
+void RemoveStrayGaussians(const GaussianCloud& cloud, InstanceSplit* split,
+                          float link_spacings = 4.0f, float min_share = 0.2f);
 
 // The frame of `split.instance` in `cloud` (surfels). Support: occluder surfels facing up within
 // the object's footprint, just below its lowest point (median of their heights).

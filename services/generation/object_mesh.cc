@@ -9,8 +9,9 @@ namespace instascene::generation {
 
 absl::StatusOr<ViewImages> RenderObjectView(const GaussianCloud& object,
                                             const PinholeCamera& camera, const ObjectFrame& frame,
-                                            int num_threads) {
+                                            int num_threads, float scale_modifier) {
   RenderOptions options;
+  options.scale_modifier = scale_modifier;
   options.depth = true;
   options.num_threads = num_threads;
   for (float& b : options.background) b = 1.0f;
@@ -49,7 +50,8 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& object, const Objec
                                         const MeshingOptions& options, int num_threads) {
   std::vector<DepthView> views;
   for (const PinholeCamera& camera : MeshingCameras(frame, options)) {
-    ASSIGN_OR_RETURN(ViewImages render, RenderObjectView(object, camera, frame, num_threads));
+    ASSIGN_OR_RETURN(ViewImages render,
+                     RenderObjectView(object, camera, frame, num_threads, options.scale_modifier));
     views.push_back({camera, std::move(render.depth), std::move(render.rgb)});
   }
   DepthFusionOptions fusion;

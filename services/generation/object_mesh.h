@@ -16,14 +16,17 @@
 namespace instascene::generation {
 
 // The instance rendered alone at `camera` on white (RGB, median depth, alpha, mask alpha > 0.5).
+// `scale_modifier` > 1 inflates every surfel (meshing: closes the gaps a sparse shell has, which
+// would otherwise let depth maps see its inner side and fuse a hollow mesh).
 absl::StatusOr<ViewImages> RenderObjectView(const GaussianCloud& object,
                                             const PinholeCamera& camera, const ObjectFrame& frame,
-                                            int num_threads);
+                                            int num_threads, float scale_modifier = 1.0f);
 
 struct MeshingOptions {
   int size_px = 160;              // meshing view size
   int azimuths = 12;              // per elevation ring
   float voxel_radii = 1.0f / 40;  // TSDF voxel in object radii
+  float scale_modifier = 1.0f;    // surfel inflation of the meshing renders
 };
 
 // The meshing cameras: elevations -60, -30, 0, 30, 60 degrees x `azimuths`, plus both poles.

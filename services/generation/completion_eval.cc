@@ -1,0 +1,456 @@
+#include "services/generation/completion_eval.h"
+
+#include <tbb/parallel_for.h>
+
+#include <algorithm>
+#include <cmath>
+#include <filesystem>
+#include <map>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/file_io.h"
+#include "common/core/status.h"
+#include "common/eval/geometry_metrics.h"
+#include "common/eval/metrics.h"
+#include "common/geometry/point_index.h"
+#include "common/mesh/mesh_checks.h"
+#include "common/mesh/mesh_ply.h"
+#include "common/mesh/mesh_volume.h"
+#include "common/mesh/ray_caster.h"
+#include "common/scene/image_io.h"
+#include "common/scene/scene.h"
+#include "common/splat/gaussian_ply.h"
+#include "services/generation/completion.h"
+#include "services/generation/object_mesh.h"
+#include "services/generation/viewpoints.h"
+
+namespace instascene::generation {
+namespace {
+
+namespace fs = std::filesystem;
+
+struct GroundTruthObject {
+  int id = 0;
+  std::string name, shape;
+  TriangleMesh mesh;
+  std::vector<Eigen::Vector3f> samples;
+  std::vector<uint8_t> seen;  // per sample: some real view sees it
+  double diagonal = 0;
+  std::string complete_surfels;  // relative path, or empty
+};
+
+absl::StatusOr<nlohmann::json> ReadJson(const std::string& path) {
+  ASSIGN_OR_RETURN(std::string text, ReadFileBounded(path, 256 << 20));
+  nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
+  if (j.is_discarded()) return absl::DataLossError(absl::StrCat(path, ": not JSON"));
+  return j;
+}
+
+Eigen::Vector3f Vec3(const nlohmann::json& j) {
+  return {j.at(0).get<float>(), j.at(1).get<float>(), j.at(2).get<float>()};
+}
+
+// A real view sees p when p is in its image and nothing of the GT scene lies in front of it.
+bool SeenBySomeView(const Eigen::Vector3f& p, const std::vector<PinholeCamera>& cameras,
+                    const RayCaster& scene, float tolerance) {
+  for (const PinholeCamera& c : cameras) {
+    const Eigen::Vector3d in_camera = c.camera_from_world * p.cast<double>();
+    if (in_camera.z() <= 0) continue;
+    const Eigen::Vector2d px = c.ProjectFromCamera(in_camera);
+    if (px.x() < 0 || px.y() < 0 || px.x() >= c.width || px.y() >= c.height) continue;
+    const Eigen::Vector3f o = c.CenterInWorld().cast<float>();
+    const float line = (p - o).norm();
+    if (!scene.Cast(o, (p - o) / line, 0.0f, line - tolerance).hit) return true;
+  }
+  return false;
+}
+
+// Some real view saw through p: p is in its image and every ray from the camera through p's
+// one-pixel footprint (p and p moved by half a pixel left, right, up, down at its depth) reaches
+// more than `tolerance` beyond p before the first GT surface. A view observes free space at its
+// pixel resolution; an exact ray alone would call points within a pixel of a silhouette seen.
+bool InObservedFreeSpace(const Eigen::Vector3f& p, const std::vector<PinholeCamera>& cameras,
+                         const RayCaster& scene, float tolerance) {
+  for (const PinholeCamera& c : cameras) {
+    const Eigen::Vector3d in_camera = c.camera_from_world * p.cast<double>();
+    if (in_camera.z() <= 0) continue;
+    const Eigen::Vector2d px = c.ProjectFromCamera(in_camera);
+    if (px.x() < 0 || px.y() < 0 || px.x() >= c.width || px.y() >= c.height) continue;
+    const Eigen::Vector3f o = c.CenterInWorld().cast<float>();
+    const Eigen::Matrix3d to_world = c.camera_from_world.rotation.transpose();
+    const double half_x = 0.5 * in_camera.z() / c.fx, half_y = 0.5 * in_camera.z() / c.fy;
+    bool all_clear = true;
+    for (const Eigen::Vector3d& offset :
+         {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(half_x, 0, 0), Eigen::Vector3d(-half_x, 0, 0),
+          Eigen::Vector3d(0, half_y, 0), Eigen::Vector3d(0, -half_y, 0)}) {
+      const Eigen::Vector3f q = p + (to_world * offset).cast<float>();
+      const float line = (q - o).norm();
+      if (scene.Cast(o, (q - o) / line, 0.0f, line + tolerance).hit) {
+        all_clear = false;
+        break;
+      }
+    }
+    if (all_clear) return true;
+  }
+  return false;
+}
+
+std::vector<uint8_t> ShellVoxels(const std::vector<Eigen::Vector3f>& points,
+                                 const Eigen::AlignedBox3f& box, int r) {
+  std::vector<uint8_t> voxels(static_cast<size_t>(r) * r * r, 0);
+  const Eigen::Vector3f cell = box.sizes() / static_cast<float>(r);
+  for (const Eigen::Vector3f& p : points) {
+    const Eigen::Vector3i c = ((p - box.min()).array() / cell.array()).floor().cast<int>();
+    if ((c.array() < 0).any() || (c.array() >= r).any()) continue;
+    voxels[(static_cast<size_t>(c.z()) * r + c.y()) * r + c.x()] = 1;
+  }
+  return voxels;
+}
+
+double Iou(const std::vector<uint8_t>& a, const std::vector<uint8_t>& b) {
+  size_t inter = 0, uni = 0;
+  for (size_t i = 0; i < a.size(); ++i) {
+    inter += a[i] && b[i];
+    uni += a[i] || b[i];
+  }
+  return uni ? static_cast<double>(inter) / uni : 0.0;
+}
+
+Image ToImage(const ViewImages& v) { return Image{v.camera.width, v.camera.height, 3, v.rgb}; }
+
+struct ViewScores {
+  double psnr_known = 0, psnr_unknown = 0, ssim_known = 0, ssim_unknown = 0;
+};
+
+absl::StatusOr<ViewScores> ScoreViews(const GaussianCloud& prediction, const GaussianCloud& truth,
+                                      const std::vector<PinholeCamera>& ring,
+                                      const std::vector<bool>& known, const ObjectFrame& frame,
+                                      int threads) {
+  ViewScores s;
+  int nk = 0, nu = 0;
+  for (size_t k = 0; k < ring.size(); ++k) {
+    ASSIGN_OR_RETURN(ViewImages a, RenderObjectView(prediction, ring[k], frame, threads));
+    ASSIGN_OR_RETURN(ViewImages b, RenderObjectView(truth, ring[k], frame, threads));
+    ASSIGN_OR_RETURN(double psnr, Psnr(ToImage(a), ToImage(b)));
+    ASSIGN_OR_RETURN(double ssim, Ssim(ToImage(a), ToImage(b)));
+    psnr = std::min(psnr, 100.0);
+    if (known[k]) {
+      s.psnr_known += psnr;
+      s.ssim_known += ssim;
+      ++nk;
+    } else {
+      s.psnr_unknown += psnr;
+      s.ssim_unknown += ssim;
+      ++nu;
+    }
+  }
+  if (nk) s.psnr_known /= nk, s.ssim_known /= nk;
+  if (nu) s.psnr_unknown /= nu, s.ssim_unknown /= nu;
+  return s;
+}
+
+VersionScores Geometry(const std::vector<Eigen::Vector3f>& points, const GroundTruthObject& gt,
+                       const CompletionEvalOptions& o) {
+  VersionScores v;
+  for (double tau : o.tau_fractions) {
+    const PointCloudComparison c = ComparePointClouds(points, gt.samples, tau * gt.diagonal);
+    v.f1.push_back(c.f1);
+    v.chamfer = c.chamfer / gt.diagonal;
+  }
+  if (!points.empty()) {
+    const PointIndex3 index(points);
+    const float tau = static_cast<float>(o.hidden_tau_fraction * gt.diagonal);
+    size_t hidden = 0, covered = 0;
+    for (size_t i = 0; i < gt.samples.size(); ++i) {
+      if (gt.seen[i]) continue;
+      ++hidden;
+      covered += index.Nearest(gt.samples[i]).second <= tau * tau;
+    }
+    v.hidden_recall = hidden ? static_cast<double>(covered) / hidden : 1.0;
+  }
+  return v;
+}
+
+std::vector<Eigen::Vector3f> Centres(const GaussianCloud& cloud) {
+  std::vector<Eigen::Vector3f> out(cloud.size());
+  for (size_t g = 0; g < cloud.size(); ++g) out[g] = Eigen::Vector3f(&cloud.positions[3 * g]);
+  return out;
+}
+
+ObjectFrame FrameFromManifest(const nlohmann::json& m) {
+  ObjectFrame f;
+  const nlohmann::json& j = m.at("frame");
+  f.center = Vec3(j.at("center"));
+  f.up = Vec3(j.at("up"));
+  f.radius = j.at("radius").get<float>();
+  f.spacing = j.at("spacing").get<float>();
+  f.has_support = !j.at("support").is_null();
+  if (f.has_support) f.support_height = j.at("support").get<float>();
+  return f;
+}
+
+absl::StatusOr<std::vector<GroundTruthObject>> ReadGroundTruth(const Scene& scene,
+                                                               const CompletionEvalOptions& o,
+                                                               std::unique_ptr<RayCaster>* caster) {
+  ASSIGN_OR_RETURN(nlohmann::json objects, ReadJson(scene.Path("gt/objects.json")));
+  std::vector<GroundTruthObject> out;
+  TriangleMesh everything;
+  if (fs::exists(scene.Path("gt/meshes/stuff.ply"))) {
+    ASSIGN_OR_RETURN(everything, ReadMeshPly(scene.Path("gt/meshes/stuff.ply")));
+  }
+  for (const nlohmann::json& j : objects) {
+    if (!j.contains("mesh") || j["mesh"].is_null()) {
+      return absl::FailedPreconditionError(
+          absl::StrCat(scene.directory, ": object ", j.value("name", "?"),
+                       " has no ground-truth mesh (completion needs a synthetic scene)"));
+    }
+    GroundTruthObject gt;
+    gt.id = j.at("id").get<int>();
+    gt.name = j.value("name", "");
+    gt.shape = j.value("shape", "");
+    gt.complete_surfels = j.value("complete_surfels", "");
+    ASSIGN_OR_RETURN(gt.mesh, ReadMeshPly(scene.Path(j.at("mesh").get<std::string>())));
+    gt.diagonal = gt.mesh.Bounds().diagonal().norm();
+    gt.samples = SampleSurface(gt.mesh, o.samples, o.seed * 7919 + gt.id);
+    everything.Append(gt.mesh);
+    out.push_back(std::move(gt));
+  }
+  if (!fs::exists(scene.Path("gt/meshes/stuff.ply"))) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        scene.directory, ": gt/meshes/stuff.ply missing (regenerate the scene with synth)"));
+  }
+  everything.colors.clear();
+  ASSIGN_OR_RETURN(*caster, RayCaster::Create(everything));
+  std::vector<PinholeCamera> cameras;
+  for (const SceneView& v : scene.views) cameras.push_back(v.camera);
+  for (GroundTruthObject& gt : out) {
+    gt.seen.assign(gt.samples.size(), 0);
+    const float tolerance = static_cast<float>(0.002 * gt.diagonal);
+    tbb::parallel_for(size_t{0}, gt.samples.size(), [&](size_t i) {
+      gt.seen[i] = SeenBySomeView(gt.samples[i], cameras, **caster, tolerance);
+    });
+  }
+  return out;
+}
+
+}  // namespace
+
+absl::StatusOr<std::vector<ObjectCompletionEval>> EvaluateCompletion(
+    const std::string& scene_dir, const std::string& objects_dir, const CompletionEvalOptions& o) {
+  ASSIGN_OR_RETURN(Scene scene, ReadScene(scene_dir));
+  std::vector<PinholeCamera> cameras;
+  for (const SceneView& v : scene.views) cameras.push_back(v.camera);
+  std::unique_ptr<RayCaster> caster;
+  ASSIGN_OR_RETURN(std::vector<GroundTruthObject> truth, ReadGroundTruth(scene, o, &caster));
+  // Dense samples of every GT surface (objects and stuff), for "is p on some surface".
+  TriangleMesh all_meshes;
+  if (fs::exists(scene.Path("gt/meshes/stuff.ply"))) {
+    ASSIGN_OR_RETURN(all_meshes, ReadMeshPly(scene.Path("gt/meshes/stuff.ply")));
+  }
+  for (const GroundTruthObject& gt : truth) all_meshes.Append(gt.mesh);
+  const PointIndex3 surfaces(SampleSurface(all_meshes, 400000, o.seed + 3));
+  std::vector<std::unique_ptr<PointIndex3>> truth_index;
+  for (const GroundTruthObject& gt : truth) {
+    truth_index.push_back(std::make_unique<PointIndex3>(gt.samples));
+  }
+  std::vector<std::string> dirs;
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(objects_dir, ec)) {
+    if (entry.is_directory() && fs::exists(entry.path() / "manifest.json")) {
+      dirs.push_back(entry.path().string());
+    }
+  }
+  if (ec) return absl::NotFoundError(absl::StrCat(objects_dir, ": ", ec.message()));
+  std::sort(dirs.begin(), dirs.end(), [](const std::string& a, const std::string& b) {
+    const std::string na = fs::path(a).filename().string(), nb = fs::path(b).filename().string();
+    return na.size() != nb.size() ? na.size() < nb.size() : na < nb;
+  });
+  std::vector<ObjectCompletionEval> results;
+  for (const std::string& dir : dirs) {
+    ObjectCompletionEval e;
+    e.directory = dir;
+    ASSIGN_OR_RETURN(nlohmann::json m, ReadJson((fs::path(dir) / "manifest.json").string()));
+    ASSIGN_OR_RETURN(GaussianCloud object,
+                     ReadGaussianPly((fs::path(dir) / "object.ply").string()));
+    ASSIGN_OR_RETURN(TriangleMesh completed_mesh,
+                     ReadMeshPly((fs::path(dir) / "mesh.ply").string()));
+    const ExtraChannel* provenance = object.FindExtra(kProvenanceChannel);
+    if (provenance == nullptr) {
+      return absl::DataLossError(absl::StrCat(dir, "/object.ply has no provenance property"));
+    }
+    std::vector<uint32_t> observed, added;
+    for (uint32_t g = 0; g < object.size(); ++g) {
+      (provenance->values[g] == 0 ? observed : added).push_back(g);
+    }
+    const GaussianCloud raw = object.Subset(observed);
+    const std::vector<Eigen::Vector3f> raw_points = Centres(raw);
+    e.id = m.at("id").get<uint32_t>();
+    e.abstained = m.value("abstained", false);
+    e.completed_share = object.size() ? static_cast<double>(added.size()) / object.size() : 0;
+    const ObjectFrame frame = FrameFromManifest(m);
+    // The ground-truth object most of the raw crop lies on.
+    size_t best = truth.size(), best_count = 0;
+    for (size_t t = 0; t < truth.size(); ++t) {
+      const float tau = static_cast<float>(0.02 * truth[t].diagonal);
+      size_t count = 0;
+      for (const Eigen::Vector3f& p : raw_points) {
+        count += truth_index[t]->Nearest(p).second <= tau * tau;
+      }
+      if (count > best_count) {
+        best = t;
+        best_count = count;
+      }
+    }
+    if (best == truth.size()) {
+      results.push_back(e);  // nothing matched: reported with gt_id 0
+      continue;
+    }
+    const GroundTruthObject& gt = truth[best];
+    e.gt_id = gt.id;
+    e.gt_name = gt.name;
+    e.shape = gt.shape;
+    size_t hidden = 0;
+    for (uint8_t s : gt.seen) hidden += !s;
+    e.hidden_share = static_cast<double>(hidden) / std::max<size_t>(1, gt.seen.size());
+    MeshingOptions meshing;
+    if (m.contains("meshing")) meshing.size_px = m["meshing"].value("size_px", meshing.size_px);
+    ASSIGN_OR_RETURN(TriangleMesh closed_mesh, MeshObject(raw, frame, meshing, o.num_threads));
+    const std::vector<Eigen::Vector3f> closed_points =
+        SampleSurface(closed_mesh, o.samples, o.seed + 1);
+    const std::vector<Eigen::Vector3f> completed_points =
+        SampleSurface(completed_mesh, o.samples, o.seed + 2);
+    e.raw = Geometry(raw_points, gt, o);
+    e.closed = Geometry(closed_points, gt, o);
+    e.completed = Geometry(completed_points, gt, o);
+    // Volume IoU on one grid per object spanning the truth and all three versions.
+    Eigen::AlignedBox3f box = gt.mesh.Bounds();
+    for (const Eigen::Vector3f& p : raw_points) box.extend(p);
+    box.extend(closed_mesh.Bounds());
+    box.extend(completed_mesh.Bounds());
+    box.extend(box.min() - 0.01f * box.sizes());
+    box.extend(box.max() + 0.01f * box.sizes());
+    const int r = o.volume_resolution;
+    ASSIGN_OR_RETURN(const std::vector<uint8_t> truth_voxels, VoxelizeByRayParity(gt.mesh, box, r));
+    ASSIGN_OR_RETURN(const std::vector<uint8_t> closed_voxels,
+                     VoxelizeByRayParity(closed_mesh, box, r));
+    ASSIGN_OR_RETURN(const std::vector<uint8_t> completed_voxels,
+                     VoxelizeByRayParity(completed_mesh, box, r));
+    e.raw.volume_iou = Iou(ShellVoxels(raw_points, box, r), truth_voxels);
+    e.closed.volume_iou = Iou(closed_voxels, truth_voxels);
+    e.completed.volume_iou = Iou(completed_voxels, truth_voxels);
+    // Free space: completed surfels a real view saw through, away from every GT surface (a
+    // surfel on a surface is no violation, whatever the pixel quantisation of the views).
+    const float tolerance = static_cast<float>(0.01 * gt.diagonal);
+    for (uint32_t g : added) {
+      const Eigen::Vector3f p(&object.positions[3 * g]);
+      e.completed.free_space_violations += InObservedFreeSpace(p, cameras, *caster, tolerance) &&
+                                           surfaces.Nearest(p).second > tolerance * tolerance;
+    }
+    // Appearance at the ring views.
+    const nlohmann::json& ring_json = m.at("ring");
+    RingOptions ring;
+    ring.views = static_cast<int>(ring_json.size());
+    if (!ring_json.empty()) ring.elevation_deg = ring_json[0].value("elevation_deg", 30.0);
+    if (m.contains("ring_camera")) {
+      ring.size_px = m["ring_camera"].value("size_px", ring.size_px);
+      ring.focal_px = m["ring_camera"].value("focal_px", ring.focal_px);
+      ring.distance_radii = m["ring_camera"].value("distance_radii", ring.distance_radii);
+    }
+    std::vector<bool> known;
+    for (const nlohmann::json& v : ring_json) {
+      known.push_back(v.value("known", false));
+      (known.back() ? e.known_views : e.unknown_views)++;
+    }
+    if (!gt.complete_surfels.empty()) {
+      ASSIGN_OR_RETURN(GaussianCloud complete, ReadGaussianPly(scene.Path(gt.complete_surfels)));
+      const std::vector<PinholeCamera> cameras_ring = RingCameras(frame, ring);
+      ASSIGN_OR_RETURN(ViewScores raw_views,
+                       ScoreViews(raw, complete, cameras_ring, known, frame, o.num_threads));
+      ASSIGN_OR_RETURN(ViewScores done_views,
+                       ScoreViews(object, complete, cameras_ring, known, frame, o.num_threads));
+      for (VersionScores* v : {&e.raw, &e.closed}) {
+        v->psnr_known = raw_views.psnr_known;
+        v->psnr_unknown = raw_views.psnr_unknown;
+        v->ssim_known = raw_views.ssim_known;
+        v->ssim_unknown = raw_views.ssim_unknown;
+      }
+      e.completed.psnr_known = done_views.psnr_known;
+      e.completed.psnr_unknown = done_views.psnr_unknown;
+      e.completed.ssim_known = done_views.ssim_known;
+      e.completed.ssim_unknown = done_views.ssim_unknown;
+    }
+    results.push_back(std::move(e));
+  }
+  return results;
+}
+
+nlohmann::json CompletionEvalJson(const std::vector<ObjectCompletionEval>& objects,
+                                  const CompletionEvalOptions& o) {
+  auto version = [&](const VersionScores& v) {
+    nlohmann::json f1 = nlohmann::json::object();
+    for (size_t t = 0; t < v.f1.size(); ++t) f1[absl::StrCat(o.tau_fractions[t])] = v.f1[t];
+    return nlohmann::json{{"chamfer", v.chamfer},
+                          {"f1", f1},
+                          {"volume_iou", v.volume_iou},
+                          {"hidden_recall", v.hidden_recall},
+                          {"psnr_known", v.psnr_known},
+                          {"psnr_unknown", v.psnr_unknown},
+                          {"ssim_known", v.ssim_known},
+                          {"ssim_unknown", v.ssim_unknown},
+                          {"free_space_violations", v.free_space_violations}};
+  };
+  nlohmann::json list = nlohmann::json::array();
+  std::map<std::string, std::vector<double>> sums;
+  int matched = 0;
+  for (const ObjectCompletionEval& e : objects) {
+    list.push_back({{"id", e.id},
+                    {"gt_id", e.gt_id},
+                    {"gt_name", e.gt_name},
+                    {"shape", e.shape},
+                    {"abstained", e.abstained},
+                    {"completed_share", e.completed_share},
+                    {"hidden_share", e.hidden_share},
+                    {"known_views", e.known_views},
+                    {"unknown_views", e.unknown_views},
+                    {"raw", version(e.raw)},
+                    {"closed", version(e.closed)},
+                    {"completed", version(e.completed)}});
+    if (e.gt_id == 0) continue;
+    ++matched;
+    for (const auto& [name, v] :
+         {std::pair{"raw", &e.raw}, {"closed", &e.closed}, {"completed", &e.completed}}) {
+      auto& s = sums[name];
+      s.resize(8 + v->f1.size(), 0.0);
+      s[0] += v->chamfer;
+      s[1] += v->volume_iou;
+      s[2] += v->hidden_recall;
+      s[3] += v->psnr_known;
+      s[4] += v->psnr_unknown;
+      s[5] += v->ssim_known;
+      s[6] += v->ssim_unknown;
+      s[7] += v->free_space_violations;
+      for (size_t t = 0; t < v->f1.size(); ++t) s[8 + t] += v->f1[t];
+    }
+  }
+  nlohmann::json mean = nlohmann::json::object();
+  for (const auto& [name, s] : sums) {
+    nlohmann::json f1 = nlohmann::json::object();
+    for (size_t t = 8; t < s.size(); ++t) f1[absl::StrCat(o.tau_fractions[t - 8])] = s[t] / matched;
+    mean[name] = {{"chamfer", s[0] / matched},
+                  {"volume_iou", s[1] / matched},
+                  {"hidden_recall", s[2] / matched},
+                  {"psnr_known", s[3] / matched},
+                  {"psnr_unknown", s[4] / matched},
+                  {"ssim_known", s[5] / matched},
+                  {"ssim_unknown", s[6] / matched},
+                  {"free_space_violations", s[7]},
+                  {"f1", f1}};
+  }
+  return {{"objects", list},
+          {"matched", matched},
+          {"mean", mean},
+          {"tau_fractions", o.tau_fractions},
+          {"hidden_tau_fraction", o.hidden_tau_fraction}};
+}
+
+}  // namespace instascene::generation

@@ -1,0 +1,137 @@
+#include "services/generation/support_completion.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "common/geometry/point_index.h"
+
+namespace instascene::generation {
+
+std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& positions,
+                                           const std::vector<Eigen::Matrix3f>& rotations,
+                                           const std::vector<uint32_t>& sources,
+                                           const ObjectFrame& frame) {
+  std::vector<SurfelCandidate> out;
+  if (!frame.has_support || positions.empty()) return out;
+  // The lowest surfel per azimuth sector around the centre: how far down each side was seen.
+  constexpr int kSectors = 72;
+  const Eigen::Matrix3f basis = frame.Basis();
+  auto sector_of = [&](const Eigen::Vector3f& p) {
+    const Eigen::Vector3f q = basis.transpose() * (p - frame.center);
+    const float angle = std::atan2(q.y(), q.x());  // [-pi, pi]
+    return std::clamp(static_cast<int>((angle + 3.14159265f) / (2 * 3.14159265f) * kSectors), 0,
+                      kSectors - 1);
+  };
+  std::vector<float> lowest(kSectors, std::numeric_limits<float>::infinity());
+  for (const Eigen::Vector3f& p : positions) {
+    float& l = lowest[sector_of(p)];
+    l = std::min(l, frame.up.dot(p));
+  }
+  const float step = std::max(frame.spacing, 1e-6f);
+  const float floor = frame.support_height + 0.5f * step;
+  const float band = std::max(3.0f * step, 0.05f * frame.radius);
+  for (size_t i = 0; i < positions.size(); ++i) {
+    const float h = frame.up.dot(positions[i]);
+    const float sector_lowest = lowest[sector_of(positions[i])];
+    if (h > sector_lowest + band || sector_lowest - floor < step) continue;
+    if (std::abs(rotations[i].col(2).dot(frame.up)) > 0.7f) continue;  // not wall-like
+    for (float drop = step; h - drop >= floor; drop += step) {
+      SurfelCandidate c;
+      c.position = positions[i] - drop * frame.up;
+      c.rotation = rotations[i];
+      c.source = sources[i];
+      out.push_back(c);
+    }
+  }
+  return out;
+}
+
+std::vector<SurfelCandidate> SupportCap(const std::vector<Eigen::Vector3f>& positions,
+                                        const std::vector<uint32_t>& sources,
+                                        const ObjectFrame& frame, const FreeSpaceGrid& free_space) {
+  std::vector<SurfelCandidate> out;
+  if (!frame.has_support || positions.empty()) return out;
+  const Eigen::Matrix3f basis = frame.Basis();
+  const float cell = std::max(1.5f * frame.spacing, frame.radius / 64.0f);
+  const int half = static_cast<int>(std::ceil(1.5f * frame.radius / cell));
+  const int side = 2 * half + 1;
+  std::vector<uint8_t> occupied(static_cast<size_t>(side) * side, 0);
+  // The footprint: what the lower quarter of the object covers seen from above (its walls, once
+  // extended down to the support), with holes filled.
+  float top = -std::numeric_limits<float>::infinity();
+  for (const Eigen::Vector3f& p : positions) top = std::max(top, frame.up.dot(p));
+  const float contact = frame.support_height + 0.25f * (top - frame.support_height);
+  std::vector<Eigen::Vector3f> low;
+  std::vector<uint32_t> low_sources;
+  for (size_t k = 0; k < positions.size(); ++k) {
+    if (frame.up.dot(positions[k]) > contact) continue;
+    low.push_back(positions[k]);
+    low_sources.push_back(sources[k]);
+    const Eigen::Vector3f q = basis.transpose() * (positions[k] - frame.center);
+    const int i = static_cast<int>(std::floor(q.x() / cell)) + half;
+    const int j = static_cast<int>(std::floor(q.y() / cell)) + half;
+    if (i >= 0 && j >= 0 && i < side && j < side) occupied[j * side + i] = 1;
+  }
+  if (low.empty()) return out;
+  // Gaps between surfels must not let the outside leak in: the barrier is dilated by one cell.
+  std::vector<uint8_t> barrier = occupied;
+  for (int j = 0; j < side; ++j) {
+    for (int i = 0; i < side; ++i) {
+      if (!occupied[j * side + i]) continue;
+      for (int dj = -1; dj <= 1; ++dj) {
+        for (int di = -1; di <= 1; ++di) {
+          const int ni = i + di, nj = j + dj;
+          if (ni >= 0 && nj >= 0 && ni < side && nj < side) barrier[nj * side + ni] = 1;
+        }
+      }
+    }
+  }
+  occupied = std::move(barrier);
+  // Outside = reachable from the border through empty cells; the rest is the footprint.
+  std::vector<uint8_t> outside(occupied.size(), 0);
+  std::vector<int> stack;
+  for (int i = 0; i < side; ++i) {
+    for (int border : {i, (side - 1) * side + i, i * side, i * side + side - 1}) {
+      if (!occupied[border] && !outside[border]) {
+        outside[border] = 1;
+        stack.push_back(border);
+      }
+    }
+  }
+  while (!stack.empty()) {
+    const int c = stack.back();
+    stack.pop_back();
+    const int i = c % side, j = c / side;
+    for (auto [di, dj] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
+      const int ni = i + di, nj = j + dj;
+      if (ni < 0 || nj < 0 || ni >= side || nj >= side) continue;
+      const int n = nj * side + ni;
+      if (!occupied[n] && !outside[n]) {
+        outside[n] = 1;
+        stack.push_back(n);
+      }
+    }
+  }
+  const PointIndex3 low_index(low);
+  const Eigen::Vector3f plane_origin =
+      frame.center +
+      (frame.support_height + 0.25f * frame.spacing - frame.up.dot(frame.center)) * frame.up;
+  const float lift = 3.0f * free_space.voxel();
+  for (int j = 0; j < side; ++j) {
+    for (int i = 0; i < side; ++i) {
+      if (outside[j * side + i]) continue;
+      SurfelCandidate c;
+      c.position = plane_origin + basis.col(0) * ((i - half + 0.5f) * cell) +
+                   basis.col(1) * ((j - half + 0.5f) * cell);
+      if (free_space.IsFree(c.position + lift * frame.up)) continue;  // seen through: a hole
+      c.rotation = basis;
+      c.source = low_sources[low_index.Nearest(c.position).first];
+      c.has_scale = true;
+      c.log_scale_u = c.log_scale_v = std::log(0.6f * cell);
+      out.push_back(c);
+    }
+  }
+  return out;
+}
+
+}  // namespace instascene::generation

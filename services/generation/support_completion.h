@@ -1,0 +1,46 @@
+// services/generation/support_completion.h: the support part of the geometric prior. Objects rest
+// on a support, and the parts next to it are the ones no view sees: the underside always, often
+// the lower part of the sides too. Two proposals, both checked by the caller against free space
+// and coverage like every other completed surfel:
+//   - wall extension: in each azimuth sector around the object, the surfels of the lowest band
+//     seen there whose normal is roughly horizontal are repeated straight down, one spacing at a
+//     time, to the support (a vertical-wall prior: exact
+//     for cylinders, bottles, boxes; it adds a skirt under a sphere, which the docs report);
+//   - cap: surfels on the support plane inside the footprint of the object's lower quarter seen
+//     from above (holes filled), except where the space just above was seen empty (a torus'
+//     hole is table, not underside). Under a sphere this overestimates the contact.
+// Pure functions, thread-safe.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "services/generation/free_space.h"
+#include "services/generation/object_frame.h"
+
+namespace instascene::generation {
+
+// A proposed surfel: position, rotation (columns: tangent u, tangent v, normal), the observed
+// surfel lending its appearance, and its log-scales (copied from the source when !has_scale).
+struct SurfelCandidate {
+  Eigen::Vector3f position = Eigen::Vector3f::Zero();
+  Eigen::Matrix3f rotation = Eigen::Matrix3f::Identity();
+  uint32_t source = 0;
+  bool has_scale = false;
+  float log_scale_u = 0, log_scale_v = 0;
+};
+
+// `positions` / `rotations` / `sources`: every surfel so far (observed and added), with the
+// observed surfel each one takes its appearance from.
+std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& positions,
+                                           const std::vector<Eigen::Matrix3f>& rotations,
+                                           const std::vector<uint32_t>& sources,
+                                           const ObjectFrame& frame);
+
+std::vector<SurfelCandidate> SupportCap(const std::vector<Eigen::Vector3f>& positions,
+                                        const std::vector<uint32_t>& sources,
+                                        const ObjectFrame& frame, const FreeSpaceGrid& free_space);
+
+}  // namespace instascene::generation
