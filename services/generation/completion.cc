@@ -5,6 +5,7 @@
 #include <filesystem>
 
 #include "absl/strings/str_cat.h"
+#include "common/core/parallel.h"
 #include "common/core/status.h"
 #include "common/mesh/mesh_checks.h"
 #include "common/mesh/mesh_ply.h"
@@ -120,11 +121,12 @@ nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& optio
 
 }  // namespace
 
-absl::StatusOr<CompletedObject> CompleteObject(const std::vector<PinholeCamera>& cameras,
-                                               const GaussianCloud& surfels,
-                                               const std::vector<uint32_t>& labels, uint32_t id,
-                                               const CompletionOptions& options,
-                                               const CompletionProgress& progress) {
+static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<PinholeCamera>& cameras,
+                                                       const GaussianCloud& surfels,
+                                                       const std::vector<uint32_t>& labels,
+                                                       uint32_t id,
+                                                       const CompletionOptions& options,
+                                                       const CompletionProgress& progress) {
   auto report = [&](const std::string& phase, int step, int total) {
     if (progress) progress(phase, step, total);
   };
@@ -192,6 +194,17 @@ absl::StatusOr<CompletedObject> CompleteObject(const std::vector<PinholeCamera>&
   out.manifest = Manifest(out, options, cameras);
   report("done", 6, 6);
   return out;
+}
+
+absl::StatusOr<CompletedObject> CompleteObject(const std::vector<PinholeCamera>& cameras,
+                                               const GaussianCloud& surfels,
+                                               const std::vector<uint32_t>& labels, uint32_t id,
+                                               const CompletionOptions& options,
+                                               const CompletionProgress& progress) {
+  // Every TBB loop inside runs in an arena of num_threads (the results never depend on it).
+  return RunWithThreads(options.num_threads, [&] {
+    return CompleteInArena(cameras, surfels, labels, id, options, progress);
+  });
 }
 
 absl::Status WriteCompletedObject(const std::string& directory, const CompletedObject& object,

@@ -1,22 +1,257 @@
+#include <cmath>
+#include <random>
+
 #include <gtest/gtest.h>
 
+#include "common/geometry/camera.h"
+#include "common/mesh/mesh_volume.h"
+#include "common/mesh/ray_caster.h"
+#include "common/mesh/surfel_mesh.h"
+#include "common/splat/gaussian_ply.h"
 #include "common/synth/cluttered_scene.h"
+#include "common/synth/observed_surfels.h"
+#include "common/synth/primitives.h"
+#include "common/synth/surfels.h"
 #include "services/generation/completion.h"
+#include "services/generation/symmetry.h"
 
 namespace instascene::generation {
 namespace {
 
-TEST(Completion, Smoke) {
-  auto preset = ClutterPreset("small");
-  ASSERT_TRUE(preset.ok());
-  auto scene = GenerateClutterScene(*preset);
-  ASSERT_TRUE(scene.ok());
-  std::vector<uint32_t> labels(scene->instance_ids.begin(), scene->instance_ids.end());
-  for (const SynthObject& o : scene->objects) {
-    auto done = CompleteObject(scene->cameras, scene->cloud, labels, o.id, CompletionOptions{});
-    ASSERT_TRUE(done.ok()) << done.status();
-    std::cout << o.name << " " << done->manifest.dump().substr(0, 1500) << "\n";
+constexpr double kPi = 3.14159265358979323846;
+
+// One object on a table (z = 0 plane), seen by cameras on the front half only (azimuth -70..70 deg
+// around +x): the back and the underside are never seen. Surfels facing away from every camera are
+// dropped (the object is convex or nearly so, so that is its visible part).
+struct PartialObject {
+  GaussianCloud cloud;           // table + observed object surfels
+  std::vector<uint32_t> labels;  // 1 = object
+  std::vector<PinholeCamera> cameras;
+};
+
+PartialObject MakePartialObject(const TriangleMesh& object_mesh, size_t count, uint64_t seed,
+                                double front_half_angle_deg = 70) {
+  PartialObject out;
+  out.cloud.num_scales = 2;
+  out.cloud.sh_degree = 0;
+  std::mt19937_64 rng(seed);
+  Appearance appearance;
+  appearance.pattern = TexturePattern::kSolid;
+  TriangleMesh table = MakeRectangle(1.5f, 1.5f, 8, 8);
+  GaussianCloud all;
+  all.num_scales = 2;
+  AppendSurfels(table, 6000, appearance, SurfelSampling{}, rng, &all);
+  const size_t table_count = all.size();
+  AppendSurfels(object_mesh, count, appearance, SurfelSampling{}, rng, &all);
+  for (int k = 0; k < 9; ++k) {
+    const double azimuth = -front_half_angle_deg + 2 * front_half_angle_deg * k / 8.0;
+    out.cameras.push_back(
+        OrbitCamera({0, 0, 0.1}, {0, 0, 1}, 1.2, azimuth, 20.0 + 10 * (k % 3), 128, 96, 55.0));
   }
+  std::vector<uint32_t> keep;
+  for (uint32_t g = 0; g < all.size(); ++g) {
+    if (g < table_count) {
+      keep.push_back(g);
+      continue;
+    }
+    const Eigen::Vector3f p(&all.positions[3 * g]);
+    const float* q = &all.rotations[4 * g];
+    const Eigen::Vector3f n =
+        RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).col(2).cast<float>();
+    bool facing = false;
+    for (const PinholeCamera& c : out.cameras) {
+      const Eigen::Vector3f to_camera = c.CenterInWorld().cast<float>() - p;
+      // Outward normals: the mesh normal of a closed lathe / box points out.
+      facing |= n.dot(to_camera) > 0.05f * to_camera.norm();
+    }
+    if (facing) keep.push_back(g);
+  }
+  out.cloud = all.Subset(keep);
+  out.labels.assign(out.cloud.size(), 0);
+  for (size_t i = 0; i < keep.size(); ++i) out.labels[i] = keep[i] >= table_count ? 1 : 0;
+  return out;
+}
+
+TriangleMesh Bottle() {
+  ShapeSpec spec;
+  spec.kind = ShapeKind::kBottle;
+  spec.size = {0.05f, 0, 0.25f};
+  return MakeShapeMesh(spec, 48);
+}
+
+// An L of two boxes of different heights: no vertical mirror plane, no axis.
+TriangleMesh LBlock() {
+  ShapeSpec a, b;
+  a.kind = b.kind = ShapeKind::kBox;
+  a.size = {0.20f, 0.06f, 0.12f};
+  b.size = {0.06f, 0.14f, 0.07f};
+  TriangleMesh mesh = MakeShapeMesh(a);
+  TriangleMesh arm = MakeShapeMesh(b);
+  Rigid3d shift;
+  shift.translation = {0.07, 0.10, 0.0};
+  arm.Transform(shift);
+  mesh.Append(arm);
+  return mesh;
+}
+
+struct Detected {
+  ObjectFrame frame;
+  std::vector<SymmetryHypothesis> hypotheses;
+};
+
+Detected Detect(const PartialObject& scene) {
+  auto split = SplitInstance(scene.labels, 1, 50);
+  EXPECT_TRUE(split.ok());
+  Detected d;
+  d.frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
+  std::vector<uint32_t> all(scene.cloud.size());
+  for (uint32_t g = 0; g < all.size(); ++g) all[g] = g;
+  auto caster = RayCaster::Create(SurfelDiscs(scene.cloud, all, SurfelDiscOptions{}));
+  EXPECT_TRUE(caster.ok());
+  auto grid = FreeSpaceGrid::Carve(scene.cameras, **caster, d.frame, FreeSpaceOptions{});
+  EXPECT_TRUE(grid.ok());
+  std::vector<Eigen::Vector3f> points, normals;
+  for (uint32_t g : split->instance) {
+    points.emplace_back(&scene.cloud.positions[3 * g]);
+    const float* q = &scene.cloud.rotations[4 * g];
+    normals.push_back(RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).col(2).cast<float>());
+  }
+  d.hypotheses = DetectSymmetries(points, normals, d.frame, *grid, SymmetryOptions{});
+  return d;
+}
+
+TEST(ObjectFrame, UpFromTheSupportAndSupportHeight) {
+  const PartialObject scene = MakePartialObject(Bottle(), 4000, 3);
+  auto split = SplitInstance(scene.labels, 1, 50);
+  ASSERT_TRUE(split.ok());
+  const ObjectFrame frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
+  EXPECT_GT(frame.up.z(), std::cos(2 * kPi / 180));  // within 2 degrees of the truth
+  ASSERT_TRUE(frame.has_support);
+  EXPECT_NEAR(frame.support_height, 0.0f, 0.005f);
+  EXPECT_GT(frame.spacing, 0);
+}
+
+TEST(Symmetry, RecoversTheAxisOfAPartlySeenBottle) {
+  // 10-70 % occlusion: cameras over 140, 100 and 60 degrees of azimuth.
+  for (double half_angle : {70.0, 50.0, 30.0}) {
+    const Detected d = Detect(MakePartialObject(Bottle(), 4000, 5, half_angle));
+    const SymmetryHypothesis* axis = nullptr;
+    for (const SymmetryHypothesis& h : d.hypotheses) {
+      if (h.kind == SymmetryKind::kAxis) axis = &h;
+    }
+    ASSERT_NE(axis, nullptr);
+    EXPECT_TRUE(axis->accepted) << half_angle << ": " << axis->Describe();
+    EXPECT_GT(axis->direction.z(), std::cos(2 * kPi / 180)) << axis->Describe();
+    // The true axis is the z axis through the origin.
+    EXPECT_LT(Eigen::Vector2f(axis->point.x(), axis->point.y()).norm(), 0.004f) << axis->Describe();
+  }
+}
+
+TEST(Symmetry, ClaimsNoSymmetryOfAnAsymmetricBlock) {
+  const Detected d = Detect(MakePartialObject(LBlock(), 5000, 7));
+  ASSERT_FALSE(d.hypotheses.empty());
+  for (const SymmetryHypothesis& h : d.hypotheses) {
+    EXPECT_FALSE(h.accepted) << h.Describe();
+  }
+}
+
+TEST(Completion, CompletesAPartlySeenBottleWithinTheFreeSpace) {
+  const PartialObject scene = MakePartialObject(Bottle(), 4000, 11);
+  CompletionOptions options;
+  options.meshing.size_px = 96;
+  auto done = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
+  ASSERT_TRUE(done.ok()) << done.status();
+  const ExtraChannel* provenance = done->object.FindExtra(kProvenanceChannel);
+  ASSERT_NE(provenance, nullptr);
+  size_t completed = 0;
+  for (float v : provenance->values) completed += v == 1.0f;
+  EXPECT_EQ(completed, done->object.size() - done->raw.size());
+  EXPECT_GT(completed, done->raw.size() / 4);  // the back half and the underside
+  EXPECT_FALSE(done->prior.abstained);
+  // The completed surfels lie on the bottle: within 3 mm of the true surface (radius 5 cm).
+  const TriangleMesh truth = Bottle();
+  auto truth_caster = RayCaster::Create(truth);
+  ASSERT_TRUE(truth_caster.ok());
+  auto volume = VoxelizeByRayParity(truth, truth.Bounds(), 8);
+  ASSERT_TRUE(volume.ok());
+  size_t far = 0;
+  for (size_t g = done->raw.size(); g < done->object.size(); ++g) {
+    const Eigen::Vector3f p(&done->object.positions[3 * g]);
+    const float r = Eigen::Vector2f(p.x(), p.y()).norm();
+    (void)r;
+    // Distance to the mesh along the radial direction in both senses.
+    const Eigen::Vector3f radial = Eigen::Vector3f(p.x(), p.y(), 0).normalized();
+    const RayHit out = (*truth_caster)->Cast(p, radial);
+    const RayHit in = (*truth_caster)->Cast(p, -radial);
+    const float d = std::min(out.hit ? out.distance : 1.0f, in.hit ? in.distance : 1.0f);
+    far += d > 0.003f && std::abs(p.z()) > 0.003f;  // cap surfels sit on z = 0
+  }
+  EXPECT_LT(far, completed / 10);
+  EXPECT_TRUE(done->manifest["mesh"]["closed"].get<bool>());
+  EXPECT_EQ(done->manifest["format"], kObjectFormat);
+}
+
+TEST(Completion, ResultsDoNotDependOnThreadCount) {
+  const PartialObject scene = MakePartialObject(Bottle(), 2500, 13);
+  CompletionOptions options;
+  options.meshing.size_px = 64;
+  options.num_threads = 1;
+  auto one = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
+  options.num_threads = 2;
+  auto two = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
+  ASSERT_TRUE(one.ok() && two.ok());
+  EXPECT_EQ(EncodeGaussianPly(one->object), EncodeGaussianPly(two->object));
+  EXPECT_EQ(one->manifest.dump(), two->manifest.dump());
+}
+
+TEST(Completion, BadInstancesFailWithAMessage) {
+  const PartialObject scene = MakePartialObject(Bottle(), 2500, 17);
+  CompletionOptions options;
+  auto empty = CompleteObject(scene.cameras, scene.cloud, scene.labels, 9, options);
+  EXPECT_EQ(empty.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(empty.status().message().find("empty instance"), std::string::npos);
+  std::vector<uint32_t> few = scene.labels;
+  int kept = 0;
+  for (uint32_t& l : few) {
+    if (l == 1 && ++kept > 10) l = 0;
+  }
+  auto degenerate = CompleteObject(scene.cameras, scene.cloud, few, 1, options);
+  EXPECT_EQ(degenerate.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(degenerate.status().message().find("degenerate"), std::string::npos);
+  // An object no real view sees: every camera turned away.
+  std::vector<PinholeCamera> away = scene.cameras;
+  for (PinholeCamera& c : away) {
+    c = OrbitCamera({0, 0, 5}, {0, 0, 1}, 1.0, 0, 10, 64, 48, 40);
+    c.camera_from_world.rotation = -c.camera_from_world.rotation;
+    c.camera_from_world.rotation.row(0) *= -1;  // keep it a rotation, looking away
+  }
+  auto unseen = CompleteObject(away, scene.cloud, scene.labels, 1, options);
+  EXPECT_EQ(unseen.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(unseen.status().message().find("no real view"), std::string::npos);
+  options.prior = "magic";
+  EXPECT_EQ(CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  std::vector<uint32_t> short_labels(3, 1);
+  EXPECT_EQ(CompleteObject(scene.cameras, scene.cloud, short_labels, 1, CompletionOptions{})
+                .status()
+                .code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
+TEST(MeshVolume, RayParityMatchesTheAnalyticVolume) {
+  ShapeSpec spec;
+  spec.kind = ShapeKind::kSphere;
+  spec.size = {0.5f, 0, 0};
+  const TriangleMesh sphere = MakeShapeMesh(spec, 64);
+  Eigen::AlignedBox3f box = sphere.Bounds();
+  box.extend(box.min() - Eigen::Vector3f::Constant(0.05f));
+  box.extend(box.max() + Eigen::Vector3f::Constant(0.05f));
+  auto voxels = VoxelizeByRayParity(sphere, box, 48);
+  ASSERT_TRUE(voxels.ok());
+  size_t inside = 0;
+  for (uint8_t v : *voxels) inside += v;
+  const double voxel_volume = box.sizes().prod() / (48.0 * 48 * 48);
+  EXPECT_NEAR(inside * voxel_volume, 4.0 / 3.0 * kPi * 0.125, 0.03 * 4.0 / 3.0 * kPi * 0.125);
 }
 
 }  // namespace

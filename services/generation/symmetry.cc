@@ -175,6 +175,7 @@ std::vector<SymmetryHypothesis> DetectSymmetries(const std::vector<Eigen::Vector
     coarse_points.push_back(points[i]);
     coarse_normals.push_back(normals[i]);
   }
+  const PointIndex3 coarse_index(coarse_points);
   SymmetryOptions coarse = options;
   coarse.axis_steps = 6;
   constexpr int kReach = 6;
@@ -187,7 +188,7 @@ std::vector<SymmetryHypothesis> DetectSymmetries(const std::vector<Eigen::Vector
     h.direction = frame.up;
     h.point = fitted + 0.01f * frame.radius * (dx * basis.col(0) + dy * basis.col(1));
     h.copies = coarse.axis_steps - 1;
-    ScoreWithIndex(coarse_points, coarse_normals, index, frame, free_space, coarse, &h);
+    ScoreWithIndex(coarse_points, coarse_normals, coarse_index, frame, free_space, coarse, &h);
   });
   size_t best_axis = shifted.size() / 2;  // the fit itself
   for (size_t k = 0; k < shifted.size(); ++k) {
