@@ -34,12 +34,23 @@ check "render by index" "$BIN" render --scene "$WORK/s" --view 5 --out "$WORK/v5
 check "eval ground truth" "$BIN" eval --scene "$WORK/s" --result "$WORK/s/gt" --json
 check "eval gt scores 1" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"miou\":1.0'"
 check_fails "eval without result" "no such file" "$BIN" eval --scene "$WORK/s" --result "$WORK/nothing"
-check "run (decompose + train + segment)" "$BIN" run --scene "$WORK/s" --out "$WORK/run" --iterations 60 --samples 512 --pixel-pool 1024 --json
+check "run (decompose + train + segment + complete)" "$BIN" run --scene "$WORK/s" --out "$WORK/run" --iterations 60 --samples 512 --pixel-pool 1024 --json
+check "run completed objects" test -s "$(ls "$WORK"/run/objects/*/manifest.json | head -n 1)"
 check "run wrote instances" test -s "$WORK/run/segmentation/instances.json"
 check "run wrote labelled scene" test -s "$WORK/run/segmentation/scene_labelled.ply"
 check "eval trained features" "$BIN" eval --scene "$WORK/s" --result "$WORK/run/segmentation" --json
 check "eval used features" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"mode\":\"features\"'"
 check "render labels" "$BIN" render --scene "$WORK/s" --view 2 --mode labels --result "$WORK/run/segmentation" --out "$WORK/labels.png"
+# In-situ completion on a scene whose unseen surfels are dropped, scored against the truth.
+check "synth with unseen surfels dropped" "$BIN" synth --out "$WORK/u" --preset tiny --seed 5 --unseen drop --mask-noise none
+check "fewer surfels than the full scene" test "$(python3 -c "import json; print(json.load(open('$WORK/u/scene.json'))['gt']['unseen_surfels'])")" = dropped
+check "complete the ground-truth objects" "$BIN" complete --scene "$WORK/u" --result "$WORK/u/gt" --out "$WORK/u/objects" --mesh-size 64 --json
+check "completion json lists objects" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"objects\":\[{'"
+check "eval --completion" "$BIN" eval --scene "$WORK/u" --completion "$WORK/u/objects" --json
+check "eval --completion reports three versions" bash -c "tail -n 1 '$WORK/out.txt' | python3 -c \"import json,sys; d=json.load(sys.stdin); assert d['matched'] > 0 and set(d['mean']) == {'raw','closed','completed'}\""
+check_fails "complete with an unknown prior" "diffusion" "$BIN" complete --scene "$WORK/u" --result "$WORK/u/gt" --out "$WORK/u/x" --prior diffusion
+check_fails "complete an absent object" "no object could be completed" "$BIN" complete --scene "$WORK/u" --result "$WORK/u/gt" --out "$WORK/u/y" --object 999
+check_fails "eval needs exactly one of --result and --completion" "exactly one" "$BIN" eval --scene "$WORK/u" --result "$WORK/u/gt" --completion "$WORK/u/objects"
 check "segment again" "$BIN" segment --scene "$WORK/s" --features "$WORK/run/segmentation" --out "$WORK/seg2" --threshold 0.8
 check "train on the decomposition" "$BIN" train --scene "$WORK/s" --decomposition "$WORK/run/decomposition" --out "$WORK/tr" --iterations 30 --samples 256 --pixel-pool 512 --supervision 3d
 check_fails "bad supervision" "supervision" "$BIN" train --scene "$WORK/s" --decomposition "$WORK/run/decomposition" --out "$WORK/tr" --supervision bogus
