@@ -5,7 +5,9 @@
 # (`instascene run`, 500 training steps), then `instascene eval --completion`. Prints one row per
 # object (shape class, raw / closed / completed) and means with standard deviations over objects
 # and per shape class. Nothing was tuned on seeds >= 20.
-# Usage: scripts/results_completion.sh [BUILD_DIR] [WORK_DIR] [SEEDS]
+# ASYMMETRIC=0.5 draws that share of the objects from shapes without symmetry (mug, L-block,
+# irregular block) to check the prior abstains or at least does no harm there.
+# Usage: [ASYMMETRIC=F] scripts/results_completion.sh [BUILD_DIR] [WORK_DIR] [SEEDS]
 set -euo pipefail
 BUILD_DIR=${1:-build}
 WORK=${2:-$(mktemp -d)}
@@ -16,7 +18,7 @@ rows="$WORK/completion_rows.jsonl"
 : > "$rows"
 for seed in $SEEDS; do
   d="$WORK/scene_$seed"
-  "$BIN" synth --out "$d" --preset small --seed "$seed" --unseen drop --mask-noise none >/dev/null 2>&1
+  "$BIN" synth --out "$d" --preset small --seed "$seed" --unseen drop --mask-noise none --asymmetric "${ASYMMETRIC:-0}" >/dev/null 2>&1
   t0=$(date +%s.%N)
   "$BIN" run --scene "$d" --out "$d/run" --iterations 500 >/dev/null 2>&1
   t1=$(date +%s.%N)

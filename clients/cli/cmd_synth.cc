@@ -23,7 +23,7 @@ void AddSynthCommand(CLI::App& app, Action* action) {
   struct Args {
     std::string out, preset = "small", mask_noise = "medium", unseen = "keep";
     std::vector<std::string> from_splats;
-    double object_height = 0.5;
+    double object_height = 0.5, asymmetric = 0.0;
     int64_t seed = -1, objects = -1, views = -1, width = -1, height = -1, gaussians = -1;
     int threads = 0;
     bool json = false;
@@ -50,6 +50,9 @@ void AddSynthCommand(CLI::App& app, Action* action) {
       ->delimiter(',');
   cmd->add_option("--object-height", args->object_height,
                   "With --from-splats: height each capture is scaled to");
+  cmd->add_option("--asymmetric", args->asymmetric,
+                  "Share of objects drawn from shapes without symmetry (mug with a handle, "
+                  "L-block, irregular block); default 0");
   cmd->add_option("--unseen", args->unseen,
                   "Surfels no view sees: keep (default: every surface is covered) or drop (what "
                   "a model trained on the images would hold; for completion experiments)")
@@ -65,6 +68,7 @@ void AddSynthCommand(CLI::App& app, Action* action) {
       if (args->width >= 0) options.width = static_cast<int>(args->width);
       if (args->height >= 0) options.height = static_cast<int>(args->height);
       if (args->gaussians >= 0) options.gaussians = static_cast<size_t>(args->gaussians);
+      options.asymmetric_share = static_cast<float>(args->asymmetric);
       Stopwatch watch;
       ClutterScene scene;
       if (args->from_splats.empty()) {

@@ -88,6 +88,18 @@ ShapeSpec RandomShape(Rng& rng) {
   return s;
 }
 
+ShapeSpec AsymmetricShape(Rng& rng) {
+  ShapeSpec s;
+  s.kind = static_cast<ShapeKind>(rng.Int(static_cast<int>(ShapeKind::kMug),
+                                          static_cast<int>(ShapeKind::kIrregular)));
+  if (s.kind == ShapeKind::kMug) {
+    s.size = {rng.Uniform(0.035f, 0.06f), 0, rng.Uniform(0.08f, 0.12f)};
+  } else {
+    s.size = {rng.Uniform(0.1f, 0.2f), rng.Uniform(0.08f, 0.14f), rng.Uniform(0.06f, 0.16f)};
+  }
+  return s;
+}
+
 Appearance RandomAppearance(Rng& rng, int sh_degree) {
   Appearance a;
   a.color_a = RandomColor(rng);
@@ -169,6 +181,8 @@ absl::Status ClutterOptions::Validate() const {
   if (!(stuff_fraction >= 0.05f && stuff_fraction <= 0.9f))
     return absl::InvalidArgumentError("stuff_fraction must be in 0.05..0.9");
   if (sh_degree < 0 || sh_degree > 1) return absl::InvalidArgumentError("sh_degree must be 0 or 1");
+  if (!(asymmetric_share >= 0.0f && asymmetric_share <= 1.0f))
+    return absl::InvalidArgumentError("asymmetric_share must be in 0..1");
   return absl::OkStatus();
 }
 
@@ -220,6 +234,9 @@ absl::StatusOr<ClutterScene> GenerateClutterScene(const ClutterOptions& options)
     obj.id = k + 1;
     const bool is_dup = k < dup;
     obj.shape = is_dup ? dup_shape : RandomShape(rng);
+    if (!is_dup && options.asymmetric_share > 0 && rng.Uniform(0, 1) < options.asymmetric_share) {
+      obj.shape = AsymmetricShape(rng);
+    }
     obj.appearance = is_dup ? dup_look : RandomAppearance(rng, options.sh_degree);
     obj.duplicate_group = is_dup ? 0 : -1;
     // Some neighbours share a colour (but keep their own pattern).

@@ -31,6 +31,9 @@ struct ClutterOptions {
   int duplicates = 3;           // identical objects side by side (0 or 1 = none)
   int sh_degree = 1;            // 0 or 1
   float fov_x_deg = 60.0f;      // horizontal field of view of every camera
+  // Share of the (non-duplicate) objects drawn from the asymmetric shapes (mug, L-block, irregular
+  // block); 0 keeps the original shape distribution (and every earlier scene) unchanged.
+  float asymmetric_share = 0.0f;
 
   absl::Status Validate() const;
 };

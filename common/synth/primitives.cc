@@ -76,6 +76,12 @@ std::string ShapeKindName(ShapeKind kind) {
       return "cup";
     case ShapeKind::kBowl:
       return "bowl";
+    case ShapeKind::kMug:
+      return "mug";
+    case ShapeKind::kLBlock:
+      return "l-block";
+    case ShapeKind::kIrregular:
+      return "irregular";
   }
   return "?";
 }
@@ -83,9 +89,13 @@ std::string ShapeKindName(ShapeKind kind) {
 float ShapeSpec::FootprintRadius() const {
   switch (kind) {
     case ShapeKind::kBox:
-      return 0.5f * std::hypot(size.x(), size.y());
+    case ShapeKind::kLBlock:
+    case ShapeKind::kIrregular:
+      return 0.5f * std::hypot(1.3f * size.x(), 1.3f * size.y());
     case ShapeKind::kTorus:
       return size.x() + size.y();
+    case ShapeKind::kMug:
+      return size.x() + 0.45f * size.z();
     default:
       return size.x();
   }
@@ -94,7 +104,10 @@ float ShapeSpec::FootprintRadius() const {
 float ShapeSpec::Height() const {
   switch (kind) {
     case ShapeKind::kBox:
+    case ShapeKind::kLBlock:
       return size.z();
+    case ShapeKind::kIrregular:
+      return 1.35f * size.z();
     case ShapeKind::kSphere:
       return 2.0f * size.x();
     case ShapeKind::kTorus:
@@ -211,6 +224,46 @@ TriangleMesh MakeShapeMesh(const ShapeSpec& spec, int segments) {
       }
       profile.back().x() = 0.0f;
       return MakeLathe(profile, segments, false);
+    }
+    case ShapeKind::kMug: {
+      // The cup, and a handle: a torus standing in the x-z plane touching the wall at +x.
+      TriangleMesh mesh = MakeShapeMesh({ShapeKind::kCup, spec.size}, segments);
+      const float tube = 0.09f * h, major = 0.28f * h;
+      TriangleMesh handle =
+          MakeShapeMesh({ShapeKind::kTorus, Eigen::Vector3f(major, tube, 0)}, segments / 2);
+      Rigid3d stand;  // torus axis z -> y, centred beside the wall at mid height
+      stand.rotation = Eigen::AngleAxisd(0.5 * kPi, Eigen::Vector3d::UnitX()).toRotationMatrix();
+      stand.translation = Eigen::Vector3d(r + major - tube, 0, 0.5 * h - tube);
+      handle.Transform(stand);
+      mesh.Append(handle);
+      return mesh;
+    }
+    case ShapeKind::kLBlock: {
+      // A tall bar along x and a lower arm along y at one end: the two boxes share a face.
+      const Eigen::Vector3f bar(spec.size.x(), 0.4f * spec.size.y(), spec.size.z());
+      const Eigen::Vector3f arm(0.35f * spec.size.x(), 0.6f * spec.size.y(), 0.55f * spec.size.z());
+      TriangleMesh mesh = MakeBox(bar);
+      Rigid3d shift_bar, shift_arm;
+      shift_bar.translation = Eigen::Vector3d(0, -0.3 * spec.size.y(), 0);
+      mesh.Transform(shift_bar);
+      TriangleMesh side = MakeBox(arm);
+      shift_arm.translation =
+          Eigen::Vector3d(0.5 * (spec.size.x() - arm.x()), 0.2 * spec.size.y(), 0);
+      side.Transform(shift_arm);
+      mesh.Append(side);
+      return mesh;
+    }
+    case ShapeKind::kIrregular: {
+      // A box sheared along x with height, its top slanted along x and twisted along y.
+      TriangleMesh mesh = MakeBox(spec.size);
+      const Eigen::Vector3f s = spec.size;
+      for (Eigen::Vector3f& v : mesh.vertices) {
+        const float tx = v.x() / s.x(), tz = v.z() / s.z();  // tx in [-0.5, 0.5], tz in [0, 1]
+        v.z() *= 1.0f + 0.7f * (tx + 0.5f) * 0.5f;            // top rises towards +x
+        v.x() += 0.25f * s.x() * tz;                          // shear
+        v.y() += 0.3f * s.y() * tz * (tx + 0.5f);             // twist
+      }
+      return mesh;
     }
   }
   return {};

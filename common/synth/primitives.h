@@ -15,14 +15,21 @@
 
 namespace instascene {
 
-enum class ShapeKind { kBox, kSphere, kCylinder, kCone, kTorus, kBottle, kCup, kBowl };
+// The first eight are symmetric (boxes: two mirror planes; the rest: solids of revolution). The
+// last three have no symmetry a completion prior could exploit: kMug (a cup with a handle on one
+// side), kLBlock (two boxes of different heights in an L), kIrregular (a box sheared, slanted and
+// twisted).
+enum class ShapeKind {
+  kBox, kSphere, kCylinder, kCone, kTorus, kBottle, kCup, kBowl, kMug, kLBlock, kIrregular
+};
 
 std::string ShapeKindName(ShapeKind kind);
 
 struct ShapeSpec {
   ShapeKind kind = ShapeKind::kBox;
-  // kBox: full extents (x, y, z). Revolution shapes: (radius, unused, height); kTorus: (major
-  // radius, tube radius, unused); kSphere: (radius, unused, unused). Metres.
+  // kBox, kLBlock, kIrregular: full extents (x, y, z). Revolution shapes and kMug: (radius,
+  // unused, height); kTorus: (major radius, tube radius, unused); kSphere: (radius, unused,
+  // unused). Metres.
   Eigen::Vector3f size = Eigen::Vector3f::Ones();
 
   float FootprintRadius() const;  // radius of the bounding circle in the xy plane

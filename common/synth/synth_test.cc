@@ -52,6 +52,38 @@ TEST(Primitives, ClosedMeshesHaveTheAnalyticVolume) {
   }
 }
 
+TEST(Primitives, AsymmetricShapesAreClosedPartsWithTheirVolumes) {
+  // The L-block's two boxes share a face: volumes add up.
+  const TriangleMesh l = MakeShapeMesh({ShapeKind::kLBlock, {0.2f, 0.1f, 0.1f}});
+  EXPECT_NEAR(SignedVolume(l), 0.2 * 0.04 * 0.1 + 0.07 * 0.06 * 0.055, 1e-6);
+  // The mug: the cup plus a handle torus beside it.
+  const TriangleMesh cup = MakeShapeMesh({ShapeKind::kCup, {0.05f, 0, 0.1f}}, 96);
+  const TriangleMesh mug = MakeShapeMesh({ShapeKind::kMug, {0.05f, 0, 0.1f}}, 96);
+  EXPECT_GT(SignedVolume(mug), SignedVolume(cup));
+  EXPECT_GT(mug.Bounds().max().x(), cup.Bounds().max().x() + 0.03f);  // the handle sticks out
+  // The irregular block keeps its base and is closed with a positive volume.
+  const TriangleMesh rock = MakeShapeMesh({ShapeKind::kIrregular, {0.15f, 0.1f, 0.1f}});
+  EXPECT_GT(SignedVolume(rock), 0.15 * 0.1 * 0.1);
+  EXPECT_NEAR(rock.Bounds().min().z(), 0.0f, 1e-6f);
+  for (ShapeKind k : {ShapeKind::kMug, ShapeKind::kLBlock, ShapeKind::kIrregular}) {
+    EXPECT_NE(ShapeKindName(k), "?");
+  }
+}
+
+TEST(ClutterScene, AsymmetricShareDrawsAsymmetricShapes) {
+  auto options = ClutterPreset("tiny");
+  ASSERT_TRUE(options.ok());
+  options->asymmetric_share = 1.0f;
+  auto scene = GenerateClutterScene(*options);
+  ASSERT_TRUE(scene.ok());
+  for (const SynthObject& o : scene->objects) {
+    if (o.duplicate_group >= 0) continue;
+    EXPECT_GE(static_cast<int>(o.shape.kind), static_cast<int>(ShapeKind::kMug)) << o.name;
+  }
+  options->asymmetric_share = 1.5f;
+  EXPECT_FALSE(GenerateClutterScene(*options).ok());
+}
+
 TEST(ClutterScene, DeterministicWithGroundTruthIds) {
   absl::StatusOr<ClutterOptions> options = ClutterPreset("tiny");
   ASSERT_TRUE(options.ok());

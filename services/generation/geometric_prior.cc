@@ -131,6 +131,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     added.push_back(c);
   };
   nlohmann::json tried = nlohmann::json::array();
+  int skipped_sources = 0;
   int accepted = 0;
   std::map<std::string, int> added_by;
   for (const SymmetryHypothesis& h : hypotheses) {
@@ -138,9 +139,23 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     if (!h.accepted) continue;
     ++accepted;
     const size_t before = added.size();
+    // A part the hypothesis does not hold for (a mug's handle under the body's axis) has images
+    // in seen-empty space: such a surfel lends no images at all.
+    std::vector<uint8_t> asymmetric(instance.size(), 0);
+    int asymmetric_count = 0;
+    for (uint32_t g = 0; g < instance.size(); ++g) {
+      int contradicted = 0;
+      for (int k = 0; k < h.copies; ++k) contradicted += input.free_space->IsFree(h.MapPoint(points[g], k));
+      if (contradicted > std::max(0, h.copies / 4)) {
+        asymmetric[g] = 1;
+        ++asymmetric_count;
+      }
+    }
+    skipped_sources += asymmetric_count;
     for (int k = 0; k < h.copies; ++k) {
       const Eigen::Matrix3f linear = h.Linear(k);
       for (uint32_t g = 0; g < instance.size(); ++g) {
+        if (asymmetric[g]) continue;
         const Eigen::Matrix3f r = SurfelRotation(instance, g);
         Candidate c;
         c.position = h.MapPoint(points[g], k);
@@ -198,6 +213,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
       absl::StrCat(accepted, " symmetry hypothesis(es) accepted; ", added.size(), " surfels added");
   out.report["added"] = added.size();
   out.report["added_by"] = added_by;
+  out.report["asymmetric_sources"] = skipped_sources;
   out.report["rejected"] = {{"observed_free", rejected_free},
                             {"already_covered", rejected_covered},
                             {"below_support", rejected_below}};
