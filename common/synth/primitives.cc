@@ -89,8 +89,9 @@ std::string ShapeKindName(ShapeKind kind) {
 float ShapeSpec::FootprintRadius() const {
   switch (kind) {
     case ShapeKind::kBox:
+      return 0.5f * std::hypot(size.x(), size.y());
     case ShapeKind::kLBlock:
-    case ShapeKind::kIrregular:
+    case ShapeKind::kIrregular:  // sheared and twisted: up to 1.3x the box
       return 0.5f * std::hypot(1.3f * size.x(), 1.3f * size.y());
     case ShapeKind::kTorus:
       return size.x() + size.y();
