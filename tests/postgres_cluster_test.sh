@@ -42,7 +42,7 @@ TRAIN_B=$LAST_PID
 PARAMS='{"train":{"iterations":1500,"samples":256,"pixel_pool":512}}'
 for s in 1 2 3 4; do
   check "synth scene $s" "$BIN" synth --out "$WORK/s$s" --preset tiny --seed "$s"
-  check "submit scene $s through replica A" "$BIN" submit --scene "$WORK/s$s" --server "$A" --store "$STORE" --params "$PARAMS" --json
+  check "submit scene $s through replica A" "$BIN" submit --scene "$WORK/s$s" --server "$A" --store "$STORE" --params "$PARAMS" --stages decompose,train,segment --json
 done
 check "replica B sees the same queue" test "$(json_get <("$BIN" jobs --server "$B" --json) "len(d['jobs'])")" = "12"
 # Wait until replica B's worker runs a training job, then kill the replica and the worker.

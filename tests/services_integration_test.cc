@@ -309,6 +309,8 @@ TEST_F(ServicesTest, WorkersRunThePipelineAndTrainingAnswersClicks) {
   WatchScene();
   const v1::Job job = GetJob(segment);
   ASSERT_EQ(job.state(), v1::JOB_STATE_SUCCEEDED) << job.error();
+  EXPECT_TRUE(workers_[0]->AwaitSucceeded(1, std::chrono::seconds(30)));
+  EXPECT_TRUE(workers_[1]->AwaitSucceeded(2, std::chrono::seconds(30)));
   EXPECT_EQ(workers_[0]->succeeded(), 1);
   EXPECT_EQ(workers_[1]->succeeded(), 2);
 

@@ -34,6 +34,15 @@ struct PinholeCamera {
     return {fx * x_in_camera.x() / x_in_camera.z() + cx,
             fy * x_in_camera.y() / x_in_camera.z() + cy};
   }
+  // True when a world point lies in front of the camera and projects inside the image; its
+  // camera coordinates go to *x_in_camera when given.
+  bool SeesPoint(const Eigen::Vector3d& x_in_world, Eigen::Vector3d* x_in_camera = nullptr) const {
+    const Eigen::Vector3d x = camera_from_world * x_in_world;
+    if (x_in_camera != nullptr) *x_in_camera = x;
+    if (x.z() <= 0) return false;
+    const Eigen::Vector2d px = ProjectFromCamera(x);
+    return px.x() >= 0 && px.y() >= 0 && px.x() < width && px.y() < height;
+  }
   // Unit ray direction in world coordinates through the centre of pixel (col, row).
   Eigen::Vector3d PixelRayInWorld(int col, int row) const;
 

@@ -54,10 +54,7 @@ Eigen::Vector3f Vec3(const nlohmann::json& j) {
 bool SeenBySomeView(const Eigen::Vector3f& p, const std::vector<PinholeCamera>& cameras,
                     const RayCaster& scene, float tolerance) {
   for (const PinholeCamera& c : cameras) {
-    const Eigen::Vector3d in_camera = c.camera_from_world * p.cast<double>();
-    if (in_camera.z() <= 0) continue;
-    const Eigen::Vector2d px = c.ProjectFromCamera(in_camera);
-    if (px.x() < 0 || px.y() < 0 || px.x() >= c.width || px.y() >= c.height) continue;
+    if (!c.SeesPoint(p.cast<double>())) continue;
     const Eigen::Vector3f o = c.CenterInWorld().cast<float>();
     const float line = (p - o).norm();
     if (!scene.Cast(o, (p - o) / line, 0.0f, line - tolerance).hit) return true;
@@ -72,10 +69,8 @@ bool SeenBySomeView(const Eigen::Vector3f& p, const std::vector<PinholeCamera>& 
 bool InObservedFreeSpace(const Eigen::Vector3f& p, const std::vector<PinholeCamera>& cameras,
                          const RayCaster& scene, float tolerance) {
   for (const PinholeCamera& c : cameras) {
-    const Eigen::Vector3d in_camera = c.camera_from_world * p.cast<double>();
-    if (in_camera.z() <= 0) continue;
-    const Eigen::Vector2d px = c.ProjectFromCamera(in_camera);
-    if (px.x() < 0 || px.y() < 0 || px.x() >= c.width || px.y() >= c.height) continue;
+    Eigen::Vector3d in_camera;
+    if (!c.SeesPoint(p.cast<double>(), &in_camera)) continue;
     const Eigen::Vector3f o = c.CenterInWorld().cast<float>();
     const Eigen::Matrix3d to_world = c.camera_from_world.rotation.transpose();
     const double half_x = 0.5 * in_camera.z() / c.fx, half_y = 0.5 * in_camera.z() / c.fy;

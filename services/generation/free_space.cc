@@ -52,10 +52,7 @@ bool FreeSpaceGrid::IsFree(const Eigen::Vector3f& p) const { return FreeViews(p)
 bool FreeSpaceGrid::SeenThrough(const Eigen::Vector3f& p, float tolerance) const {
   if (cameras_ == nullptr || surfaces_ == nullptr) return false;
   for (const PinholeCamera& c : *cameras_) {
-    const Eigen::Vector3d in_camera = c.camera_from_world * p.cast<double>();
-    if (in_camera.z() <= 0) continue;
-    const Eigen::Vector2d px = c.ProjectFromCamera(in_camera);
-    if (px.x() < 0 || px.y() < 0 || px.x() >= c.width || px.y() >= c.height) continue;
+    if (!c.SeesPoint(p.cast<double>())) continue;
     const Eigen::Vector3f o = c.CenterInWorld().cast<float>();
     const float line = (p - o).norm();
     if (!surfaces_->Cast(o, (p - o) / line, 0.0f, line + tolerance).hit) return true;

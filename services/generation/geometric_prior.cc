@@ -145,7 +145,8 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     int asymmetric_count = 0;
     for (uint32_t g = 0; g < instance.size(); ++g) {
       int contradicted = 0;
-      for (int k = 0; k < h.copies; ++k) contradicted += input.free_space->IsFree(h.MapPoint(points[g], k));
+      for (int k = 0; k < h.copies; ++k)
+        contradicted += input.free_space->IsFree(h.MapPoint(points[g], k));
       if (contradicted > std::max(0, h.copies / 4)) {
         asymmetric[g] = 1;
         ++asymmetric_count;

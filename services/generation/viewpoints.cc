@@ -74,11 +74,7 @@ ViewVisibility OcclusionScorer::Score(const PinholeCamera& camera) const {
         int self = 0, clear = 0;
         for (size_t i = range.begin(); i != range.end(); ++i) {
           const Eigen::Vector3f& p = points_[i];
-          const Eigen::Vector3d in_camera = camera.camera_from_world * p.cast<double>();
-          if (in_camera.z() <= 0) continue;
-          const Eigen::Vector2d px = camera.ProjectFromCamera(in_camera);
-          if (px.x() < 0 || px.y() < 0 || px.x() >= camera.width || px.y() >= camera.height)
-            continue;
+          if (!camera.SeesPoint(p.cast<double>())) continue;
           const Eigen::Vector3f offset = p - origin;
           const float line = offset.norm();
           const Eigen::Vector3f dir = offset / line;

@@ -296,7 +296,11 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
     request.set_items(items);
     v1::CompleteJobResponse response;
     reply = scheduler_->CompleteJob(&context, request, &response);
-    if (reply.ok()) ++succeeded_;
+    if (reply.ok()) {
+      std::lock_guard<std::mutex> lock(mutex_);
+      ++succeeded_;
+      counted_.notify_all();
+    }
     spdlog::info("worker {}: job {} succeeded in {:.1f} s -> {}", options_.worker_id, job.id(),
                  watch.ElapsedSeconds(), output.ToString());
   } else {
@@ -328,6 +332,11 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
     current_cancel_ = nullptr;
   }
   wake_.notify_all();
+}
+
+bool StageWorker::AwaitSucceeded(int64_t count, std::chrono::milliseconds timeout) const {
+  std::unique_lock<std::mutex> lock(mutex_);
+  return counted_.wait_for(lock, timeout, [&] { return succeeded_ >= count; });
 }
 
 void FillWorkerStatus(const worker::StageWorker* worker, const std::vector<std::string>& kinds,

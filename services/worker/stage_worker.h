@@ -53,6 +53,9 @@ class StageWorker {
   const std::string& worker_id() const { return options_.worker_id; }
   std::string current_job() const;
   int64_t succeeded() const { return succeeded_; }
+  // Waits (at most `timeout`) until at least `count` jobs succeeded: the scheduler records a
+  // success before the worker counts it, so a caller that saw the job succeed awaits the count.
+  bool AwaitSucceeded(int64_t count, std::chrono::milliseconds timeout) const;
   int64_t failed() const { return failed_; }
   bool draining() const { return draining_; }
 
@@ -78,6 +81,7 @@ class StageWorker {
   bool handed_back_ = false;              // the running job was cancelled by Drain
   std::atomic<bool> draining_{false};
   std::atomic<int64_t> succeeded_{0}, failed_{0};
+  mutable std::condition_variable counted_;  // notified (under mutex_) when succeeded_ grows
 };
 
 // The WorkerStatus every stage service reports (worker may be null: a service without a worker).
