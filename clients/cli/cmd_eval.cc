@@ -3,6 +3,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "absl/strings/str_format.h"
 #include "clients/cli/cli.h"
 #include "common/core/status.h"
 #include "common/core/timer.h"
@@ -24,13 +25,16 @@ absl::Status EvaluateCompletionCommand(const std::string& scene, const std::stri
     std::printf(
         "%-14s %-8s chamfer%% raw %.2f closed %.2f completed %.2f | F1@2%% %.3f %.3f "
         "%.3f | vIoU %.3f %.3f %.3f | hidden recall %.3f %.3f %.3f | PSNR unknown "
-        "%.2f -> %.2f | violations %d%s\n",
+        "%s | violations %d%s\n",
         e.gt_name.c_str(), e.shape.c_str(), 100 * e.raw.chamfer, 100 * e.closed.chamfer,
         100 * e.completed.chamfer, e.raw.f1.size() > 1 ? e.raw.f1[1] : 0,
         e.closed.f1.size() > 1 ? e.closed.f1[1] : 0,
         e.completed.f1.size() > 1 ? e.completed.f1[1] : 0, e.raw.volume_iou, e.closed.volume_iou,
         e.completed.volume_iou, e.raw.hidden_recall, e.closed.hidden_recall,
-        e.completed.hidden_recall, e.raw.psnr_unknown, e.completed.psnr_unknown,
+        e.completed.hidden_recall,
+        e.unknown_views == 0
+            ? "n/a (no unknown view)"
+            : absl::StrFormat("%.2f -> %.2f", e.raw.psnr_unknown, e.completed.psnr_unknown).c_str(),
         e.completed.free_space_violations, e.abstained ? " (abstained)" : "");
   }
   const nlohmann::json j = generation::CompletionEvalJson(evals, options);
