@@ -12,9 +12,12 @@
 #include "common/raster/depth_sort.h"
 #include "common/raster/projection.h"
 #include "common/raster/rasterizer.h"
+#include "common/raster/surfel_backward.h"
 #include "common/splat/gaussian_ply.h"
 #include "common/splat/sh.h"
 #include "common/synth/cluttered_scene.h"
+#include "common/synth/primitives.h"
+#include "common/synth/surfels.h"
 
 namespace instascene {
 namespace {
@@ -120,6 +123,57 @@ void BM_SortTileKeys(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * static_cast<int64_t>(n));
 }
 BENCHMARK(BM_SortTileKeys)->ArgsProduct({{64, 200, 400, 600, 5000}, {0, 1}});
+
+// The refinement kernel (surfel_backward.h) on one object of `count` surfels (a bottle, SH 1) seen
+// from a ring camera at 256x256: the forward the refinement renders, its backward, and the
+// production rasterizer's forward on the same view for comparison.
+struct RingObject {
+  GaussianCloud cloud;
+  PinholeCamera camera;
+};
+const RingObject& Object(size_t count) {
+  static std::map<size_t, RingObject> cache;
+  auto it = cache.find(count);
+  if (it == cache.end()) {
+    RingObject o;
+    o.cloud.num_scales = 2;
+    o.cloud.sh_degree = 1;
+    std::mt19937_64 rng(3);
+    Appearance appearance;
+    appearance.specular = 0.05f;
+    AppendSurfels(MakeShapeMesh({ShapeKind::kBottle, {0.05f, 0, 0.25f}}), count, appearance,
+                  SurfelSampling{}, rng, &o.cloud);
+    o.camera = OrbitCamera({0, 0, 0.12}, {0, 0, 1}, 0.45, 30, 30, 256, 256, 49.1);
+    it = cache.emplace(count, std::move(o)).first;
+  }
+  return it->second;
+}
+void BM_SurfelForwardDifferentiable(benchmark::State& state) {
+  const RingObject& o = Object(state.range(0));
+  for (auto _ : state) {
+    auto image = RenderSurfelsDifferentiable(o.cloud, o.camera, {});
+    benchmark::DoNotOptimize(image);
+  }
+}
+BENCHMARK(BM_SurfelForwardDifferentiable)->Arg(20000)->Unit(benchmark::kMillisecond)->UseRealTime();
+void BM_SurfelBackward(benchmark::State& state) {
+  const RingObject& o = Object(state.range(0));
+  const std::vector<float> d_color(3 * 256 * 256, 0.1f), d_alpha(256 * 256, 0.1f);
+  for (auto _ : state) {
+    auto grads = SurfelBackward(o.cloud, o.camera, {}, d_color, d_alpha);
+    benchmark::DoNotOptimize(grads);
+  }
+}
+BENCHMARK(BM_SurfelBackward)->Arg(20000)->Unit(benchmark::kMillisecond)->UseRealTime();
+void BM_RasterizerForwardRing(benchmark::State& state) {
+  const RingObject& o = Object(state.range(0));
+  RenderOptions options;
+  for (auto _ : state) {
+    auto image = Render(o.cloud, o.camera, options);
+    benchmark::DoNotOptimize(image);
+  }
+}
+BENCHMARK(BM_RasterizerForwardRing)->Arg(20000)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_EvalShDegree3(benchmark::State& state) {
   float coeffs[48];

@@ -1,5 +1,6 @@
 #include "common/raster/surfel_backward.h"
 
+#include <tbb/parallel_for.h>
 #include <unsupported/Eigen/AutoDiff>
 
 #include <algorithm>
@@ -185,7 +186,12 @@ struct Prepared {
   std::vector<Colour> colours;
   std::vector<Eigen::Vector4i> boxes;  // x0, x1, y0, y1: pixels where alpha >= 1/255 is possible
   bool cutoffs = true;
+  // Per 16x16 tile, the surfels whose box touches it, front to back (a subsequence of `order`).
+  int tiles_x = 0;
+  std::vector<std::vector<uint32_t>> tiles;
 };
+
+constexpr int kTile = 16;
 
 Prepared Prepare(const GaussianCloud& cloud, const PinholeCamera& camera,
                  const SurfelRenderOptions& options) {
@@ -217,6 +223,17 @@ Prepared Prepare(const GaussianCloud& cloud, const PinholeCamera& camera,
   }
   std::stable_sort(p.order.begin(), p.order.end(),
                    [&](uint32_t a, uint32_t b) { return p.splats[a].depth < p.splats[b].depth; });
+  p.tiles_x = (camera.width + kTile - 1) / kTile;
+  const int tiles_y = (camera.height + kTile - 1) / kTile;
+  p.tiles.resize(static_cast<size_t>(p.tiles_x) * tiles_y);
+  for (uint32_t g : p.order) {
+    const Eigen::Vector4i& b = p.boxes[g];
+    for (int ty = b[2] / kTile; ty <= (b[3] - 1) / kTile; ++ty) {
+      for (int tx = b[0] / kTile; tx <= (b[1] - 1) / kTile; ++tx) {
+        p.tiles[static_cast<size_t>(ty) * p.tiles_x + tx].push_back(g);
+      }
+    }
+  }
   return p;
 }
 
@@ -229,7 +246,7 @@ struct Contributor {
 double BlendPixel(const Prepared& p, int x, int y, std::vector<Contributor>* list) {
   list->clear();
   double T = 1.0;
-  for (uint32_t g : p.order) {
+  for (uint32_t g : p.tiles[static_cast<size_t>(y / kTile) * p.tiles_x + x / kTile]) {
     const Eigen::Vector4i& box = p.boxes[g];
     if (x < box[0] || x >= box[1] || y < box[2] || y >= box[3]) continue;
     const double raw = RawAlpha(p.splats[g], x, y, p.cam.near_plane);
@@ -255,8 +272,9 @@ absl::StatusOr<SurfelImage> RenderSurfelsDifferentiable(const GaussianCloud& clo
   image.height = camera.height;
   image.color.assign(static_cast<size_t>(3) * camera.width * camera.height, 0.0f);
   image.alpha.assign(static_cast<size_t>(camera.width) * camera.height, 0.0f);
-  std::vector<Contributor> list;
-  for (int y = 0; y < camera.height; ++y) {
+  // Rows in parallel: every pixel is written by exactly one task.
+  tbb::parallel_for(0, camera.height, [&](int y) {
+    std::vector<Contributor> list;
     for (int x = 0; x < camera.width; ++x) {
       const double T = BlendPixel(p, x, y, &list);
       Eigen::Vector3d c = Eigen::Vector3d::Zero();
@@ -267,7 +285,7 @@ absl::StatusOr<SurfelImage> RenderSurfelsDifferentiable(const GaussianCloud& clo
       }
       image.alpha[i] = static_cast<float>(1.0 - T);
     }
-  }
+  });
   return image;
 }
 
@@ -306,34 +324,63 @@ absl::StatusOr<SurfelGradients> SurfelBackward(const GaussianCloud& cloud,
   }
   const Prepared p = Prepare(cloud, camera, options);
   const size_t n = cloud.size();
-  std::vector<Deriv> d_geometry(n, Deriv::Zero());  // dL / d (p, log s, q, logit) via alpha
-  std::vector<Eigen::Vector3d> d_colour(n, Eigen::Vector3d::Zero());  // dL / d rgb
-  std::vector<Contributor> list;
-  for (int y = 0; y < camera.height; ++y) {
-    for (int x = 0; x < camera.width; ++x) {
-      const double T_final = BlendPixel(p, x, y, &list);
-      const size_t i = static_cast<size_t>(y) * camera.width + x;
-      const Eigen::Vector3d dc(dloss_dcolor[3 * i], dloss_dcolor[3 * i + 1],
-                               dloss_dcolor[3 * i + 2]);
-      const double da = dloss_dalpha.empty() ? 0.0 : dloss_dalpha[i];
-      // Back to front: "after" = what lies behind contributor k (colour incl. background).
-      Eigen::Vector3d after =
-          T_final *
-          Eigen::Vector3d(options.background[0], options.background[1], options.background[2]);
-      double after_alpha_T = T_final;  // d(1 - T_final) / d alpha_k = T_final / (1 - alpha_k)
-      for (auto it = list.rbegin(); it != list.rend(); ++it) {
-        const Contributor& k = *it;
-        const Eigen::Vector3d& c = p.colours[k.g].rgb;
-        d_colour[k.g] += k.alpha * k.T * dc;
-        // C = sum c_j a_j T_j + T_N bg: dC/da_k = c_k T_k - after_k / (1 - a_k).
-        const double dL_dalpha =
-            dc.dot(c * k.T - after / (1.0 - k.alpha)) + da * (after_alpha_T / (1.0 - k.alpha));
-        after += k.alpha * k.T * c;
-        if (k.raw_alpha < kAlphaMaxD) {  // the 0.99 clamp passes no gradient
-          const Dual a = RawAlpha(Project(Seeded(cloud, k.g), p.cam), x, y, p.cam.near_plane);
-          d_geometry[k.g] += dL_dalpha * a.derivatives();
+  // One band of 16 rows per task, each with its own sparse accumulators; the bands are then summed
+  // in band order, so the result does not depend on the thread count.
+  const int bands = (camera.height + kTile - 1) / kTile;
+  struct Band {
+    std::vector<uint32_t> touched;
+    std::vector<Deriv> geometry;          // parallel to touched
+    std::vector<Eigen::Vector3d> colour;  // parallel to touched
+  };
+  std::vector<Band> band_grads(bands);
+  tbb::parallel_for(0, bands, [&](int band) {
+    Band& out = band_grads[band];
+    std::vector<int32_t> slot(n, -1);
+    auto at = [&](uint32_t g) {
+      if (slot[g] < 0) {
+        slot[g] = static_cast<int32_t>(out.touched.size());
+        out.touched.push_back(g);
+        out.geometry.push_back(Deriv::Zero());
+        out.colour.push_back(Eigen::Vector3d::Zero());
+      }
+      return slot[g];
+    };
+    std::vector<Contributor> list;
+    for (int y = band * kTile; y < std::min(camera.height, (band + 1) * kTile); ++y) {
+      for (int x = 0; x < camera.width; ++x) {
+        const double T_final = BlendPixel(p, x, y, &list);
+        const size_t i = static_cast<size_t>(y) * camera.width + x;
+        const Eigen::Vector3d dc(dloss_dcolor[3 * i], dloss_dcolor[3 * i + 1],
+                                 dloss_dcolor[3 * i + 2]);
+        const double da = dloss_dalpha.empty() ? 0.0 : dloss_dalpha[i];
+        // Back to front: "after" = what lies behind contributor k (colour incl. background).
+        Eigen::Vector3d after =
+            T_final *
+            Eigen::Vector3d(options.background[0], options.background[1], options.background[2]);
+        for (auto it = list.rbegin(); it != list.rend(); ++it) {
+          const Contributor& k = *it;
+          const Eigen::Vector3d& c = p.colours[k.g].rgb;
+          const int s = at(k.g);
+          out.colour[s] += k.alpha * k.T * dc;
+          // C = sum c_j a_j T_j + T_N bg: dC/da_k = c_k T_k - after_k / (1 - a_k);
+          // A = 1 - T_N: dA/da_k = T_N / (1 - a_k).
+          const double dL_dalpha =
+              dc.dot(c * k.T - after / (1.0 - k.alpha)) + da * (T_final / (1.0 - k.alpha));
+          after += k.alpha * k.T * c;
+          if (k.raw_alpha < kAlphaMaxD) {  // the 0.99 clamp passes no gradient
+            const Dual a = RawAlpha(Project(Seeded(cloud, k.g), p.cam), x, y, p.cam.near_plane);
+            out.geometry[s] += dL_dalpha * a.derivatives();
+          }
         }
       }
+    }
+  });
+  std::vector<Deriv> d_geometry(n, Deriv::Zero());                    // dL / d (p, log s, q, logit)
+  std::vector<Eigen::Vector3d> d_colour(n, Eigen::Vector3d::Zero());  // dL / d rgb
+  for (const Band& band : band_grads) {
+    for (size_t k = 0; k < band.touched.size(); ++k) {
+      d_geometry[band.touched[k]] += band.geometry[k];
+      d_colour[band.touched[k]] += band.colour[k];
     }
   }
   SurfelGradients out;

@@ -12,8 +12,10 @@
 // adjoint) and differentiates the per-pixel alpha with forward-mode automatic differentiation
 // (Eigen's AutoDiffScalar over the 10 geometric parameters of the surfel), so the maths is not
 // hand-derived twice. SH degree 0 and 1 (the colour's dependence on the position through the view
-// direction is included). Single-threaded and deterministic: a reference kernel, correct first;
-// tests compare it with finite differences for every parameter.
+// direction is included). Surfels are binned into 16x16 tiles by a conservative pixel box; rows
+// (forward) and 16-row bands (backward, each with its own accumulators summed in band order) run in
+// parallel, so results do not depend on the thread count. Tests compare it with finite
+// differences for every parameter.
 #pragma once
 
 #include <vector>

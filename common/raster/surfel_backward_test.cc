@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include "common/core/parallel.h"
 #include "common/raster/rasterizer.h"
 #include "common/splat/sh.h"
 
@@ -164,6 +165,20 @@ TEST(SurfelBackward, DescentLowersTheLoss) {
     previous = loss;
   }
   EXPECT_LT(previous, 0.5 * initial);
+}
+
+TEST(SurfelBackward, GradientsDoNotDependOnThreadCount) {
+  const GaussianCloud cloud = RandomSurfels(5, 40, 1);
+  PinholeCamera camera = Camera();
+  camera.height = 60;  // several 16-row bands
+  camera.cy = 30;
+  std::vector<float> wc(3 * camera.width * camera.height, 0.3f), wa;
+  auto one = RunWithThreads(1, [&] { return SurfelBackward(cloud, camera, {}, wc, wa); });
+  auto two = RunWithThreads(2, [&] { return SurfelBackward(cloud, camera, {}, wc, wa); });
+  ASSERT_TRUE(one.ok() && two.ok());
+  EXPECT_EQ(one->positions, two->positions);
+  EXPECT_EQ(one->rotations, two->rotations);
+  EXPECT_EQ(one->sh, two->sh);
 }
 
 TEST(SurfelBackward, RefusesWhatItCannotDifferentiate) {
