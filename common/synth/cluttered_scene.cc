@@ -90,8 +90,8 @@ ShapeSpec RandomShape(Rng& rng) {
 
 ShapeSpec AsymmetricShape(Rng& rng) {
   ShapeSpec s;
-  s.kind = static_cast<ShapeKind>(rng.Int(static_cast<int>(ShapeKind::kMug),
-                                          static_cast<int>(ShapeKind::kIrregular)));
+  s.kind = static_cast<ShapeKind>(
+      rng.Int(static_cast<int>(ShapeKind::kMug), static_cast<int>(ShapeKind::kIrregular)));
   if (s.kind == ShapeKind::kMug) {
     s.size = {rng.Uniform(0.035f, 0.06f), 0, rng.Uniform(0.08f, 0.12f)};
   } else {

@@ -260,9 +260,9 @@ TriangleMesh MakeShapeMesh(const ShapeSpec& spec, int segments) {
       const Eigen::Vector3f s = spec.size;
       for (Eigen::Vector3f& v : mesh.vertices) {
         const float tx = v.x() / s.x(), tz = v.z() / s.z();  // tx in [-0.5, 0.5], tz in [0, 1]
-        v.z() *= 1.0f + 0.7f * (tx + 0.5f) * 0.5f;            // top rises towards +x
-        v.x() += 0.25f * s.x() * tz;                          // shear
-        v.y() += 0.3f * s.y() * tz * (tx + 0.5f);             // twist
+        v.z() *= 1.0f + 0.7f * (tx + 0.5f) * 0.5f;           // top rises towards +x
+        v.x() += 0.25f * s.x() * tz;                         // shear
+        v.y() += 0.3f * s.y() * tz * (tx + 0.5f);            // twist
       }
       return mesh;
     }

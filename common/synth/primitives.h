@@ -20,7 +20,17 @@ namespace instascene {
 // side), kLBlock (two boxes of different heights in an L), kIrregular (a box sheared, slanted and
 // twisted).
 enum class ShapeKind {
-  kBox, kSphere, kCylinder, kCone, kTorus, kBottle, kCup, kBowl, kMug, kLBlock, kIrregular
+  kBox,
+  kSphere,
+  kCylinder,
+  kCone,
+  kTorus,
+  kBottle,
+  kCup,
+  kBowl,
+  kMug,
+  kLBlock,
+  kIrregular
 };
 
 std::string ShapeKindName(ShapeKind kind);
