@@ -57,8 +57,7 @@ nlohmann::json OrientedBox(const GaussianCloud& cloud, const ObjectFrame& frame)
   return {{"min", Vec(box.min())}, {"max", Vec(box.max())}, {"extent", Vec(box.sizes())}};
 }
 
-nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& options,
-                        const std::vector<PinholeCamera>& cameras) {
+nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& options) {
   nlohmann::json ring = nlohmann::json::array();
   int known = 0;
   for (size_t k = 0; k < o.ring.size(); ++k) {
@@ -115,7 +114,6 @@ nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& optio
         {"reason", "the 2DGS backward pass (GENERATION.md step 5) is not built yet"}}},
       {"seed", options.seed},
   };
-  (void)cameras;
   return m;
 }
 
@@ -191,7 +189,7 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
   report("meshing", 5, 6);
   ASSIGN_OR_RETURN(out.mesh,
                    MeshObject(out.object, out.frame, options.meshing, options.num_threads));
-  out.manifest = Manifest(out, options, cameras);
+  out.manifest = Manifest(out, options);
   report("done", 6, 6);
   return out;
 }

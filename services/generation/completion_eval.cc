@@ -184,15 +184,18 @@ ObjectFrame FrameFromManifest(const nlohmann::json& m) {
   return f;
 }
 
+// The GT objects, and every GT surface (stuff and objects) as one mesh with its caster.
 absl::StatusOr<std::vector<GroundTruthObject>> ReadGroundTruth(const Scene& scene,
                                                                const CompletionEvalOptions& o,
+                                                               TriangleMesh* everything,
                                                                std::unique_ptr<RayCaster>* caster) {
+  if (!fs::exists(scene.Path("gt/meshes/stuff.ply"))) {
+    return absl::FailedPreconditionError(absl::StrCat(
+        scene.directory, ": gt/meshes/stuff.ply missing (regenerate the scene with synth)"));
+  }
   ASSIGN_OR_RETURN(nlohmann::json objects, ReadJson(scene.Path("gt/objects.json")));
   std::vector<GroundTruthObject> out;
-  TriangleMesh everything;
-  if (fs::exists(scene.Path("gt/meshes/stuff.ply"))) {
-    ASSIGN_OR_RETURN(everything, ReadMeshPly(scene.Path("gt/meshes/stuff.ply")));
-  }
+  ASSIGN_OR_RETURN(*everything, ReadMeshPly(scene.Path("gt/meshes/stuff.ply")));
   for (const nlohmann::json& j : objects) {
     if (!j.contains("mesh") || j["mesh"].is_null()) {
       return absl::FailedPreconditionError(
@@ -207,15 +210,11 @@ absl::StatusOr<std::vector<GroundTruthObject>> ReadGroundTruth(const Scene& scen
     ASSIGN_OR_RETURN(gt.mesh, ReadMeshPly(scene.Path(j.at("mesh").get<std::string>())));
     gt.diagonal = gt.mesh.Bounds().diagonal().norm();
     gt.samples = SampleSurface(gt.mesh, o.samples, o.seed * 7919 + gt.id);
-    everything.Append(gt.mesh);
+    everything->Append(gt.mesh);
     out.push_back(std::move(gt));
   }
-  if (!fs::exists(scene.Path("gt/meshes/stuff.ply"))) {
-    return absl::FailedPreconditionError(absl::StrCat(
-        scene.directory, ": gt/meshes/stuff.ply missing (regenerate the scene with synth)"));
-  }
-  everything.colors.clear();
-  ASSIGN_OR_RETURN(*caster, RayCaster::Create(everything));
+  everything->colors.clear();
+  ASSIGN_OR_RETURN(*caster, RayCaster::Create(*everything));
   std::vector<PinholeCamera> cameras;
   for (const SceneView& v : scene.views) cameras.push_back(v.camera);
   for (GroundTruthObject& gt : out) {
@@ -230,19 +229,19 @@ absl::StatusOr<std::vector<GroundTruthObject>> ReadGroundTruth(const Scene& scen
 
 }  // namespace
 
-absl::StatusOr<std::vector<ObjectCompletionEval>> EvaluateCompletion(
-    const std::string& scene_dir, const std::string& objects_dir, const CompletionEvalOptions& o) {
+namespace {
+
+absl::StatusOr<std::vector<ObjectCompletionEval>> Evaluate(const std::string& scene_dir,
+                                                           const std::string& objects_dir,
+                                                           const CompletionEvalOptions& o) {
   ASSIGN_OR_RETURN(Scene scene, ReadScene(scene_dir));
   std::vector<PinholeCamera> cameras;
   for (const SceneView& v : scene.views) cameras.push_back(v.camera);
   std::unique_ptr<RayCaster> caster;
-  ASSIGN_OR_RETURN(std::vector<GroundTruthObject> truth, ReadGroundTruth(scene, o, &caster));
-  // Dense samples of every GT surface (objects and stuff), for "is p on some surface".
   TriangleMesh all_meshes;
-  if (fs::exists(scene.Path("gt/meshes/stuff.ply"))) {
-    ASSIGN_OR_RETURN(all_meshes, ReadMeshPly(scene.Path("gt/meshes/stuff.ply")));
-  }
-  for (const GroundTruthObject& gt : truth) all_meshes.Append(gt.mesh);
+  ASSIGN_OR_RETURN(std::vector<GroundTruthObject> truth,
+                   ReadGroundTruth(scene, o, &all_meshes, &caster));
+  // Dense samples of every GT surface (objects and stuff), for "is p on some surface".
   const PointIndex3 surfaces(SampleSurface(all_meshes, 400000, o.seed + 3));
   std::vector<std::unique_ptr<PointIndex3>> truth_index;
   for (const GroundTruthObject& gt : truth) {
@@ -377,6 +376,20 @@ absl::StatusOr<std::vector<ObjectCompletionEval>> EvaluateCompletion(
     results.push_back(std::move(e));
   }
   return results;
+}
+
+}  // namespace
+
+absl::StatusOr<std::vector<ObjectCompletionEval>> EvaluateCompletion(
+    const std::string& scene_dir, const std::string& objects_dir, const CompletionEvalOptions& o) {
+  // Manifests and ground-truth files are user input: a missing or mistyped key is an error
+  // naming the folders, never an exception out of the command.
+  try {
+    return Evaluate(scene_dir, objects_dir, o);
+  } catch (const nlohmann::json::exception& e) {
+    return absl::DataLossError(
+        absl::StrCat(objects_dir, " or ", scene_dir, ": malformed JSON field: ", e.what()));
+  }
 }
 
 nlohmann::json CompletionEvalJson(const std::vector<ObjectCompletionEval>& objects,

@@ -1,7 +1,6 @@
 #include "services/generation/stage.h"
 
 #include <filesystem>
-#include <fstream>
 
 #include <nlohmann/json.hpp>
 
