@@ -21,7 +21,7 @@ PACKAGES=(
   libcli11-dev
   libgtest-dev libgmock-dev
   libbenchmark-dev
-  libssl-dev
+  libssl-dev libcurl4-openssl-dev
   libnanoflann-dev
   libcpp-httplib-dev
   libpqxx-dev postgresql-15

@@ -232,6 +232,13 @@ absl::Status FilesystemBlobStore::FinishUpload(const Digest& digest) {
   std::lock_guard<std::mutex> lock(upload_mutex_);
   if (Contains(digest)) return absl::OkStatus();
   const std::string part = PartPath(digest);
+  std::error_code size_ec;
+  const auto part_size = fs::file_size(part, size_ec);
+  const int64_t committed = size_ec ? 0 : static_cast<int64_t>(part_size);
+  if (committed != digest.size_bytes)  // keep it: the client may resume
+    return absl::FailedPreconditionError(absl::StrCat("blob ", digest.ToString(),
+                                                      ": upload incomplete, ", committed, " of ",
+                                                      digest.size_bytes, " bytes committed"));
   ASSIGN_OR_RETURN(Digest actual, DigestFile(part));
   if (actual != digest) {
     std::error_code ec;

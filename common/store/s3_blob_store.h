@@ -1,0 +1,97 @@
+// common/store/s3_blob_store.h: the content-addressed store on an S3-compatible object store
+// (AWS S3, MinIO, Ceph RGW), for scale-out: every process that opens the same bucket and prefix
+// sees the same blobs, so workers and schedulers need no store service between them.
+//
+// Layout under PREFIX: `cas/<hash>` (visible blobs), `uploads/<hash>-<size>` (resumable uploads:
+// an S3 multipart upload, or the assembled object awaiting verification).
+// - Put: the bytes are hashed here first; the PUT carries their SHA-256 in x-amz-content-sha256,
+//   which S3 checks against the body, so a corrupted transfer is refused by the server; a PUT is
+//   atomic (the object appears whole or not at all).
+// - Append/FinishUpload (large blobs): appended bytes are buffered per upload up to `part_bytes`
+//   and sent as multipart parts (S3's minimum part size is 5 MiB); `CommittedSize` counts the parts
+//   S3 holds plus this process's buffer, so a client that restarts resumes at the last part S3
+//   holds (ListMultipartUploads + ListParts; no local state needed). FinishUpload completes the
+//   upload under `uploads/`, reads it back and hashes it, and only then copies it to `cas/`
+//   (multipart copy above `copy_part_bytes`); a mismatch deletes it and nothing becomes visible.
+// - FindMissing is one HEAD per digest (never a bucket listing); Stats lists `cas/`.
+// Abandoned multipart uploads are not visible and cost storage only: configure the bucket's
+// lifecycle rule AbortIncompleteMultipartUpload (docs/DEPLOY.md).
+#pragma once
+
+#include <list>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <string>
+
+#include "common/store/blob_store.h"
+#include "common/store/s3_client.h"
+
+namespace instascene::store {
+
+struct S3StoreOptions {
+  int64_t part_bytes = int64_t{8} << 20;          // multipart part size (S3 minimum: 5 MiB)
+  int64_t copy_part_bytes = int64_t{1} << 30;     // above this, copy to cas/ by multipart copy
+  int64_t verify_chunk_bytes = int64_t{8} << 20;  // read-back chunk when verifying an upload
+  int max_buffered_uploads = 16;  // uploads holding an unsent buffer; the oldest is dropped
+
+  absl::Status Validate() const;
+};
+
+class S3BlobStore final : public BlobStore {
+ public:
+  // Checks that the bucket is reachable with these credentials.
+  static absl::StatusOr<std::unique_ptr<S3BlobStore>> Open(
+      const S3Location& location, const S3Credentials& credentials, const StoreOptions& options,
+      const S3StoreOptions& s3_options = {}, const S3ClientOptions& client_options = {});
+
+  const StoreOptions& options() const override { return options_; }
+  absl::StatusOr<std::vector<Digest>> FindMissing(const std::vector<Digest>& digests) override;
+  absl::Status Put(const Digest& digest, absl::string_view bytes) override;
+  absl::StatusOr<std::string> Read(const Digest& digest, int64_t offset = 0,
+                                   int64_t limit = 0) override;
+  absl::StatusOr<int64_t> CommittedSize(const Digest& digest) override;
+  absl::StatusOr<int64_t> Append(const Digest& digest, int64_t offset,
+                                 absl::string_view data) override;
+  absl::Status FinishUpload(const Digest& digest) override;
+  absl::StatusOr<StoreStats> Stats() override;
+
+  std::string BlobKey(const Digest& digest) const;
+  std::string UploadKey(const Digest& digest) const;
+  S3Client& client() { return *client_; }
+
+ private:
+  // One resumable upload: the multipart upload S3 holds and the bytes not yet sent as a part.
+  struct Upload {
+    std::mutex mutex;
+    bool loaded = false;     // state read from S3
+    bool assembled = false;  // the object under uploads/ is complete (awaits verification)
+    std::string upload_id;   // "" = no multipart upload yet
+    std::vector<S3Client::Part> parts;  // full parts S3 holds, numbered 1..n
+    std::string buffer;                 // bytes after the parts
+    int64_t durable() const;
+  };
+
+  S3BlobStore(std::unique_ptr<S3Client> client, StoreOptions options, S3StoreOptions s3_options)
+      : client_(std::move(client)), options_(options), s3_options_(s3_options) {}
+  absl::Status CheckWritable(const Digest& digest) const;
+  absl::StatusOr<bool> Contains(const Digest& digest);
+  std::shared_ptr<Upload> GetUpload(const Digest& digest);
+  void Forget(const Digest& digest);
+  void NoteBuffered(const Digest& digest);  // LRU of uploads holding a buffer
+  absl::Status Load(const Digest& digest, Upload& upload);
+  absl::Status SendFullParts(const Digest& digest, Upload& upload);
+  absl::Status Assemble(const Digest& digest, Upload& upload);
+  // Hashes the assembled upload; publishes it to cas/ or deletes it.
+  absl::Status VerifyAndPublish(const Digest& digest);
+  absl::Status CopyToBlob(const std::string& from, const Digest& digest);
+
+  std::unique_ptr<S3Client> client_;
+  const StoreOptions options_;
+  const S3StoreOptions s3_options_;
+  std::mutex uploads_mutex_;
+  std::map<std::string, std::shared_ptr<Upload>> uploads_;  // by UploadKey
+  std::list<std::string> buffered_;                         // most recent last
+};
+
+}  // namespace instascene::store

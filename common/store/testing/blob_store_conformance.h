@@ -1,0 +1,41 @@
+// common/store/testing/blob_store_conformance.h: the behaviour every BlobStore backend must have
+// (filesystem, remote over gRPC, S3), as one parameterised GoogleTest suite. A backend's test
+// instantiates it with a factory of `BlobStoreBackend`s:
+//   INSTANTIATE_TEST_SUITE_P(Filesystem, BlobStoreConformanceTest,
+//                            ::testing::Values(BlobStoreBackendFactory(...)));
+// and links the `instascene_blob_store_conformance` object library.
+#pragma once
+
+#include <gtest/gtest.h>
+
+#include <functional>
+#include <memory>
+
+#include "absl/status/statusor.h"
+#include "common/store/blob_store.h"
+
+namespace instascene::store::testing {
+
+// Fresh, empty storage for one test.
+class BlobStoreBackend {
+ public:
+  virtual ~BlobStoreBackend() = default;
+  // A store over this backend's storage. A second call models a restarted process: the test
+  // destroys the previous store first, and the new one sees what the old one made durable.
+  virtual absl::StatusOr<std::unique_ptr<BlobStore>> Open(const StoreOptions& options) = 0;
+  // After a restart, an interrupted upload resumes at most this many bytes before the point the
+  // client had reached (0: exactly there; S3: what was buffered below a part is resent).
+  virtual int64_t resume_loss_bytes() const { return 0; }
+};
+
+using BlobStoreBackendFactory = std::function<std::unique_ptr<BlobStoreBackend>()>;
+
+class BlobStoreConformanceTest : public ::testing::TestWithParam<BlobStoreBackendFactory> {
+ protected:
+  void SetUp() override { backend_ = GetParam()(); }
+  std::unique_ptr<BlobStore> Open(const StoreOptions& options = {});
+
+  std::unique_ptr<BlobStoreBackend> backend_;
+};
+
+}  // namespace instascene::store::testing
