@@ -9,7 +9,9 @@
 #include "common/core/testing/temp_dir.h"
 #include "common/rpc/server.h"
 #include "common/rpc/status.h"
+#include "common/core/status.h"
 #include "common/store/manifest.h"
+#include "common/store/testing/blob_store_conformance.h"
 #include "services/store/remote_blob_store.h"
 #include "services/store/store_service.h"
 
@@ -18,6 +20,39 @@ namespace {
 namespace fs = std::filesystem;
 using instascene::testing::CountFiles;
 using instascene::testing::RandomBytes;
+
+// The conformance suite through the service: a filesystem store behind the ContentStore service
+// on loopback, driven by RemoteBlobStore. Reopening restarts both the service and the client.
+class RemoteBackend : public store::testing::BlobStoreBackend {
+ public:
+  absl::StatusOr<std::unique_ptr<store::BlobStore>> Open(
+      const store::StoreOptions& options) override {
+    server_.reset();
+    service_.reset();
+    local_.reset();
+    ASSIGN_OR_RETURN(local_, store::FilesystemBlobStore::Open(temp_.str(), options));
+    service_ = std::make_unique<StoreService>(local_.get());
+    rpc::ServerOptions server_options;
+    server_options.listen = "127.0.0.1:0";
+    server_options.max_message_bytes = static_cast<int>(options.max_batch_bytes + (1 << 20));
+    ASSIGN_OR_RETURN(server_, rpc::Server::Start(server_options, {service_.get()},
+                                                 {"instascene.v1.ContentStore"}));
+    ASSIGN_OR_RETURN(std::unique_ptr<RemoteBlobStore> remote,
+                     RemoteBlobStore::Connect(rpc::Connect(server_->address())));
+    return std::unique_ptr<store::BlobStore>(std::move(remote));
+  }
+
+ private:
+  instascene::testing::ScopedTempDir temp_{"remote_conformance"};
+  std::unique_ptr<store::FilesystemBlobStore> local_;
+  std::unique_ptr<StoreService> service_;
+  std::unique_ptr<rpc::Server> server_;
+};
+
+using store::testing::BlobStoreConformanceTest;
+INSTANTIATE_TEST_SUITE_P(Remote, BlobStoreConformanceTest,
+                         ::testing::Values(store::testing::BlobStoreBackendFactory(
+                             [] { return std::make_unique<RemoteBackend>(); })));
 
 class StoreServiceTest : public ::testing::Test {
  protected:
