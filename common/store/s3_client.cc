@@ -226,10 +226,14 @@ absl::StatusOr<S3Location> S3Location::Parse(absl::string_view uri) {
       loc.region = value;
     } else if (key == "addressing") {
       addressing = value;
+    } else if (key == "query_slash") {
+      if (value != "literal" && value != "encoded")
+        return absl::InvalidArgumentError("s3 URI: query_slash must be literal or encoded");
+      loc.query_slash_literal = value == "literal";
     } else {
-      return absl::InvalidArgumentError(absl::StrCat("s3 URI: unknown parameter '",
-                                                     key.substr(0, 40),
-                                                     "' (known: endpoint, region, addressing)"));
+      return absl::InvalidArgumentError(
+          absl::StrCat("s3 URI: unknown parameter '", key.substr(0, 40),
+                       "' (known: endpoint, region, addressing, query_slash)"));
     }
   }
   if (loc.region.empty() || loc.region.size() > 64 ||
@@ -258,7 +262,8 @@ absl::StatusOr<S3Location> S3Location::Parse(absl::string_view uri) {
 
 std::string S3Location::ToString() const {
   return absl::StrCat("s3://", bucket, "/", prefix, "?endpoint=", endpoint, "&region=", region,
-                      "&addressing=", path_style ? "path" : "virtual");
+                      "&addressing=", path_style ? "path" : "virtual",
+                      query_slash_literal ? "&query_slash=literal" : "");
 }
 
 std::string S3Location::Url(absl::string_view key) const {
@@ -364,13 +369,14 @@ absl::StatusOr<S3Response> S3Client::SendOnce(const S3Request& r) {
   std::string url = location_.Url(r.key);
   std::vector<std::pair<std::string, std::string>> query = r.query;
   std::sort(query.begin(), query.end());  // SigV4's canonical query string is sorted
-  // '/' stays literal: curl 7.88 encodes the query itself when it signs, so a pre-encoded %2F
-  // would be signed as %252F (checked against botocore's signer in s3_store_test). Values here
-  // are keys, prefixes, markers and upload ids; none needs more than this.
+  // curl signs the query string exactly as sent, so it is sent in canonical form (s3_store_test
+  // checks curl's signature against SignS3RequestV4 on a captured request).
   std::vector<std::string> params;
   for (const auto& [k, v] : query)
-    params.push_back(absl::StrCat(AwsUriEncode(k, false), "=", AwsUriEncode(v, true)));
-  if (!params.empty()) absl::StrAppend(&url, "?", absl::StrJoin(params, "&"));
+    params.push_back(
+        absl::StrCat(AwsUriEncode(k, false), "=", AwsUriEncode(v, location_.query_slash_literal)));
+  const std::string canonical_query = absl::StrJoin(params, "&");
+  if (!params.empty()) absl::StrAppend(&url, "?", canonical_query);
   const std::string sigv4 = absl::StrCat("aws:amz:", location_.region, ":s3");
   std::vector<std::string> lines = r.headers;
   lines.push_back(absl::StrCat("x-amz-content-sha256: ", ComputeDigest(r.body).hash));
@@ -398,13 +404,10 @@ absl::StatusOr<S3Response> S3Client::SendOnce(const S3Request& r) {
     const size_t host_start = url.find("://") + 3;
     const size_t path_start = url.find('/', host_start);
     signed_headers["host"] = url.substr(host_start, path_start - host_start);
-    std::vector<std::string> canonical_params;
-    for (const auto& [k, v] : query)
-      canonical_params.push_back(absl::StrCat(AwsUriEncode(k, false), "=", AwsUriEncode(v, false)));
     const std::string path = url.substr(path_start, url.find('?') - path_start);
-    lines.push_back(absl::StrCat(
-        "Authorization: ", SignS3RequestV4(r.method, path, absl::StrJoin(canonical_params, "&"),
-                                           signed_headers, location_.region, credentials_)));
+    lines.push_back(absl::StrCat("Authorization: ",
+                                 SignS3RequestV4(r.method, path, canonical_query, signed_headers,
+                                                 location_.region, credentials_)));
   }
   Slist headers, resolve;
   for (const std::string& h : lines) Append(headers, h);

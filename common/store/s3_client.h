@@ -36,6 +36,10 @@ struct S3Location {
   std::string prefix;  // "" or "a/b/" (always ends with '/')
   std::string region = "us-east-1";
   bool path_style = true;  // endpoint/bucket/key; false: bucket.host/key (virtual-hosted)
+  // '/' in query values (list prefixes) is sent and signed as %2F, as SigV4 specifies (AWS, MinIO,
+  // Ceph RGW). `query_slash=literal` sends it unencoded, for servers that canonicalise it so
+  // (moto, whose signature check rejects even AWS's own SDK on %2F).
+  bool query_slash_literal = false;
 
   // Defaults: endpoint https://s3.REGION.amazonaws.com with virtual-hosted addressing; any other
   // endpoint (MinIO, Ceph RGW, a test server) path-style unless `addressing=virtual`.

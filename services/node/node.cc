@@ -11,6 +11,7 @@
 #include "common/core/file_io.h"
 #include "common/core/status.h"
 #include "common/rpc/server.h"
+#include "common/store/blob_store_uri.h"
 #include "services/scheduler/postgres_queue_store.h"
 #include "services/scheduler/scheduler_service.h"
 #include "services/scheduler/sqlite_queue_store.h"
@@ -21,8 +22,13 @@ namespace instascene::node {
 namespace fs = std::filesystem;
 
 absl::Status NodeOptions::Validate() const {
-  if (!run_store && store_address.empty())
-    return absl::InvalidArgumentError("no store: run one here or give --store ADDR");
+  if (!run_store && store.empty())
+    return absl::InvalidArgumentError(
+        "no store: run one here or give --store HOST:PORT (the store service) or s3://...");
+  if (run_store && !store.empty() && !store::IsBlobStoreUri(store))
+    return absl::InvalidArgumentError(absl::StrCat(
+        "--store '", store.substr(0, 80),
+        "': the store service keeps its blobs in file:DIR or s3://BUCKET/PREFIX?endpoint=..."));
   if (!run_scheduler && scheduler_address.empty() && !workers.empty())
     return absl::InvalidArgumentError(
         "workers need a scheduler: run one here or give --scheduler ADDR");
@@ -75,19 +81,17 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
   if (ec) return absl::UnavailableError(absl::StrCat(options.data_dir, ": ", ec.message()));
 
   // The store: local (served here) or remote.
-  std::unique_ptr<store::FilesystemBlobStore> local_store;
-  std::unique_ptr<store::BlobStore> remote_store;
-  store::BlobStore* blob_store = nullptr;
-  if (options.run_store) {
-    ASSIGN_OR_RETURN(local_store,
-                     store::FilesystemBlobStore::Open(
-                         (fs::path(options.data_dir) / "store").string(), options.store_options));
-    blob_store = local_store.get();
+  std::unique_ptr<store::BlobStore> owned_store;
+  if (options.run_store || store::IsBlobStoreUri(options.store)) {
+    const std::string uri = options.store.empty()
+                                ? "file:" + (fs::path(options.data_dir) / "store").string()
+                                : options.store;
+    ASSIGN_OR_RETURN(owned_store, store::OpenBlobStoreUri(uri, options.store_options));
   } else {
-    ASSIGN_OR_RETURN(remote_store,
-                     store_service::RemoteBlobStore::Connect(rpc::Connect(options.store_address)));
-    blob_store = remote_store.get();
+    ASSIGN_OR_RETURN(owned_store,
+                     store_service::RemoteBlobStore::Connect(rpc::Connect(options.store)));
   }
+  store::BlobStore* blob_store = owned_store.get();
 
   std::vector<grpc::Service*> services;
   std::vector<std::string> names;

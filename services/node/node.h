@@ -31,7 +31,11 @@ struct NodeOptions {
   bool run_store = true;
   bool run_scheduler = true;
   std::vector<std::string> workers;  // stage services to run here, by name (see StageService)
-  std::string store_address;         // where the store is when !run_store
+  // The store. With run_store: where its blobs live, "file:DIR" (default: DATA/store) or
+  // "s3://BUCKET/PREFIX?endpoint=...&region=..." (common/store/blob_store_uri.h). Without: the
+  // store service's HOST:PORT, or a storage URI to use directly (every process that opens the
+  // same bucket and prefix shares the store; no store service needed between them).
+  std::string store;
   // The job queue's storage: "" or "sqlite:PATH" (embedded default: DATA/jobs.db), or a PostgreSQL
   // URI "postgres://HOST[:PORT]/DB?..." (scale-out; several schedulers may share it). Passwords
   // come from PGPASSWORD or ~/.pgpass, never from this flag.

@@ -17,7 +17,18 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
   app.add_option("--listen", o->listen, "host:port to serve on (port 0 = any free port)")
       ->capture_default_str();
   if (needs_store_address)
-    app.add_option("--store", o->store_address, "Address of the store service")->required();
+    app.add_option("--store", o->store,
+                   "The store: HOST:PORT of the store service, or storage to use directly "
+                   "(s3://BUCKET/PREFIX?endpoint=URL&region=R&addressing=path|virtual, "
+                   "credentials from AWS_ACCESS_KEY_ID/AWS_SECRET_ACCESS_KEY or "
+                   "~/.aws/credentials; or file:DIR)")
+        ->required();
+  else
+    app.add_option("--store", o->store,
+                   "Where the store keeps its blobs: file:DIR (default DATA/store) or "
+                   "s3://BUCKET/PREFIX?endpoint=URL&region=R&addressing=path|virtual "
+                   "(credentials from AWS_ACCESS_KEY_ID/AWS_SECRET_ACCESS_KEY or "
+                   "~/.aws/credentials, never from flags)");
   if (needs_scheduler_address)
     app.add_option("--scheduler", o->scheduler_address, "Address of the scheduler service")
         ->required();

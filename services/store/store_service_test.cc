@@ -5,11 +5,11 @@
 #include <fstream>
 #include <random>
 
+#include "common/core/status.h"
 #include "common/core/testing/files.h"
 #include "common/core/testing/temp_dir.h"
 #include "common/rpc/server.h"
 #include "common/rpc/status.h"
-#include "common/core/status.h"
 #include "common/store/manifest.h"
 #include "common/store/testing/blob_store_conformance.h"
 #include "services/store/remote_blob_store.h"
@@ -51,8 +51,9 @@ class RemoteBackend : public store::testing::BlobStoreBackend {
 
 using store::testing::BlobStoreConformanceTest;
 INSTANTIATE_TEST_SUITE_P(Remote, BlobStoreConformanceTest,
-                         ::testing::Values(store::testing::BlobStoreBackendFactory(
-                             [] { return std::make_unique<RemoteBackend>(); })));
+                         ::testing::Values(store::testing::BlobStoreBackendFactory([] {
+                           return std::make_unique<RemoteBackend>();
+                         })));
 
 class StoreServiceTest : public ::testing::Test {
  protected:

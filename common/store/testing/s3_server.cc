@@ -65,6 +65,7 @@ S3Location S3Server::Location(const std::string& prefix) const {
   loc.bucket = bucket_;
   loc.prefix = prefix.empty() ? "" : (prefix.back() == '/' ? prefix : prefix + "/");
   loc.path_style = true;
+  loc.query_slash_literal = true;  // moto's canonical form (s3_client.h)
   return loc;
 }
 

@@ -24,7 +24,7 @@ class S3Server {
   const std::string& endpoint() const { return endpoint_; }  // http://127.0.0.1:PORT
   const std::string& bucket() const { return bucket_; }
   const S3Credentials& credentials() const { return credentials_; }
-  // A location in the bucket under `prefix`, path-style.
+  // A location in the bucket under `prefix`, path-style, '/' literal in query values (moto).
   S3Location Location(const std::string& prefix) const;
 
  private:

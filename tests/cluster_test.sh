@@ -1,0 +1,64 @@
+#!/usr/bin/env bash
+# A scale-out cluster on loopback: a real PostgreSQL and an S3-compatible server (moto, SigV4
+# checked) started here; the store service on S3 (for the CLI's uploads and downloads), two
+# scheduler replicas sharing the PostgreSQL queue, and three workers as separate processes with
+# separate scratch folders (decomposition and training on replica A, a second training worker on
+# replica B); schedulers and workers reach the blobs in S3 directly. Ten scenes are submitted;
+# replica B and its worker are SIGKILLed while that worker runs a job. Every job must end succeeded
+# exactly once: no job lost, none recorded twice, every result in the store (S3, nothing on local
+# disk). Prints "N passed, N failed"; exits 1 on any failure.
+set -uo pipefail
+BIN=$1      # the instascene command
+BINDIR=$2   # folder with instascene-store, -scheduler, -decomposition, -training
+source "$(dirname "$0")/test_lib.sh"
+source "$(dirname "$0")/cluster_lib.sh"
+start_postgres
+start_s3 instascene-cluster
+
+start store "$WORK/ready-store" "$BINDIR/instascene-store" --data "$WORK/store" --store "$STORE_URI" --listen 127.0.0.1:0 --ready-file "$WORK/ready-store"
+STORE=$(cat "$WORK/ready-store")
+for r in a b; do
+  start "sched-$r" "$WORK/ready-$r" "$BINDIR/instascene-scheduler" --data "$WORK/sched-$r" --queue "$QUEUE" \
+    --store "$STORE_URI" --listen 127.0.0.1:0 --ready-file "$WORK/ready-$r" --lease-seconds 2
+done
+A=$(cat "$WORK/ready-a")
+B=$(cat "$WORK/ready-b")
+SCHED_B=$LAST_PID  # the last started: replica b
+start dec "$WORK/ready-dec" "$BINDIR/instascene-decomposition" --data "$WORK/w-dec" --store "$STORE_URI" --scheduler "$A" --lease-seconds 2 --ready-file "$WORK/ready-dec"
+start train-a "$WORK/ready-ta" "$BINDIR/instascene-training" --data "$WORK/w-ta" --store "$STORE_URI" --scheduler "$A" --lease-seconds 2 --ready-file "$WORK/ready-ta"
+start train-b "$WORK/ready-tb" "$BINDIR/instascene-training" --data "$WORK/w-tb" --store "$STORE_URI" --scheduler "$B" --lease-seconds 2 --ready-file "$WORK/ready-tb"
+TRAIN_B=$LAST_PID
+
+PARAMS='{"train":{"iterations":1500,"samples":256,"pixel_pool":512}}'
+for s in $(seq 10); do
+  check "synth scene $s" "$BIN" synth --out "$WORK/s$s" --preset tiny --seed "$s"
+  check "submit scene $s through replica A" "$BIN" submit --scene "$WORK/s$s" --server "$A" --store "$STORE" --params "$PARAMS" --stages decompose,train,segment --json
+done
+check "replica B sees the same queue" test "$(json_get <("$BIN" jobs --server "$B" --json) "len(d['jobs'])")" = "30"
+# Wait until replica B's worker runs a training job, then kill the replica and the worker.
+busy=""
+for _ in $(seq 600); do
+  busy=$("$BIN" jobs --server "$A" --json --limit 100 2>/dev/null | tail -n 1 | python3 -c "
+import json, sys
+d = json.load(sys.stdin)
+print(next((j['id'] for j in d['jobs'] if j['state'] == 'running' and j['worker'].endswith('-$TRAIN_B-train+segment')), ''))")
+  [ -n "$busy" ] && break
+  sleep 0.1
+done
+check "replica B's worker took a job" test -n "$busy"
+kill -9 "$SCHED_B" "$TRAIN_B" 2>/dev/null
+for s in $(seq 10); do check "scene $s finishes on replica A" "$BIN" watch --scene "s$s" --server "$A"; done
+"$BIN" jobs --server "$A" --json --limit 100 2>/dev/null | tail -n 1 > "$WORK/final.json"
+check "thirty jobs, all succeeded" test "$(json_get "$WORK/final.json" "sorted(set(j['state'] for j in d['jobs'])) == ['succeeded'] and len(d['jobs'])")" = "30"
+check "the killed worker's job ran again (2 attempts), every other once" test \
+  "$(json_get "$WORK/final.json" "sorted((j['id'] == '$busy', j['attempts']) for j in d['jobs'])[-1]")" = "(True, 2)"
+check "no other job ran twice" test "$(json_get "$WORK/final.json" "sum(j['attempts'] for j in d['jobs'])")" = "31"
+check "every result is in the store" "$BIN" fetch --scene s1 --out "$WORK/f1" --server "$A" --store "$STORE"
+for s in $(seq 2 10); do check "fetch scene $s" "$BIN" fetch --scene "s$s" --out "$WORK/f$s" --server "$A" --store "$STORE"; done
+
+check "the blobs are in S3" test "$(s3_count cas/)" -gt 30
+check "no upload left staged in S3" test "$(s3_count uploads/)" = 0
+check "nothing was stored on local disk" test ! -e "$WORK/store/store"
+
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]
