@@ -36,6 +36,11 @@ for p in "${PACKAGES[@]}"; do
   fi
 done
 
+# The S3 tests run moto's server from the machine image's Python (PyPI is not reachable here).
+if ! python3 -c "import moto.server, boto3" 2>/dev/null; then
+  echo "install-deps: warning: python3 lacks moto/boto3: the S3 store tests will fail (docs/DEPLOY.md)"
+fi
+
 if [ "${#missing[@]}" -eq 0 ]; then
   echo "install-deps: all ${#PACKAGES[@]} packages present"
   exit 0
