@@ -20,12 +20,24 @@ start_postgres() {
     -o "-c listen_addresses='' -c unix_socket_directories='$WORK/pg' -c fsync=off -p 5433" start >/dev/null ||
     { echo "FAIL: pg_ctl start"; cat "$WORK/pg/server.log"; exit 1; }
   trap 'stop_cluster_engines; cleanup' EXIT
+  # If this shell is killed outright (ctest's timeout sends SIGKILL: no trap runs), a reaper kills
+  # the servers, stops PostgreSQL and removes WORK: it waits on a FIFO whose only writer is this shell (servers are
+  # started without it, test_lib.sh `start`), so it wakes exactly when the shell is gone.
+  mkfifo "$WORK/alive"
+  (
+    trap '' INT TERM
+    read -r _ <"$WORK/alive"
+    pkill -9 -f -- "$WORK/" 2>/dev/null  # the servers started with --data under WORK
+    $PG_AS "$PGBIN/pg_ctl" -D "$WORK/pg/data" -m immediate -w stop >/dev/null 2>&1
+    rm -rf "$WORK"
+  ) 8>&- 9>&- &
+  exec 9>"$WORK/alive"
   QUEUE="postgresql:///postgres?host=$WORK/pg&port=5433&user=postgres"
 }
 
 start_s3() {
   mkfifo "$WORK/s3.in" "$WORK/s3.out"
-  python3 "$CLUSTER_SRC/common/store/testing/s3_test_server.py" "$1" <"$WORK/s3.in" >"$WORK/s3.out" 2>"$WORK/s3.log" &
+  python3 "$CLUSTER_SRC/common/store/testing/s3_test_server.py" "$1" <"$WORK/s3.in" >"$WORK/s3.out" 2>"$WORK/s3.log" 9>&- &
   PIDS+=("$!")
   exec 8>"$WORK/s3.in"  # the server's standard input: it stops when this closes
   local ready
@@ -48,7 +60,7 @@ print(n)"
 }
 
 stop_cluster_engines() {
-  exec 8>&- 2>/dev/null
+  exec 8>&- 9>&- 2>/dev/null
   [ -n "${PGBIN:-}" ] && $PG_AS "$PGBIN/pg_ctl" -D "$WORK/pg/data" -m immediate -w stop >/dev/null 2>&1
   return 0
 }

@@ -29,7 +29,7 @@ start train-a "$WORK/ready-ta" "$BINDIR/instascene-training" --data "$WORK/w-ta"
 start train-b "$WORK/ready-tb" "$BINDIR/instascene-training" --data "$WORK/w-tb" --store "$STORE_URI" --scheduler "$B" --lease-seconds 2 --ready-file "$WORK/ready-tb"
 TRAIN_B=$LAST_PID
 
-PARAMS='{"train":{"iterations":1500,"samples":256,"pixel_pool":512}}'
+PARAMS='{"train":{"iterations":600,"samples":256,"pixel_pool":512}}'
 for s in $(seq 10); do
   check "synth scene $s" "$BIN" synth --out "$WORK/s$s" --preset tiny --seed "$s"
   check "submit scene $s through replica A" "$BIN" submit --scene "$WORK/s$s" --server "$A" --store "$STORE" --params "$PARAMS" --stages decompose,train,segment --json

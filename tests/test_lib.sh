@@ -25,7 +25,7 @@ check_fails() {  # check_fails NAME PATTERN COMMAND...: must fail with PATTERN o
 start() {
   local name=$1 ready=$2; shift 2
   rm -f "$ready"
-  "$@" >"$WORK/$name.log" 2>&1 &
+  "$@" >"$WORK/$name.log" 2>&1 8>&- 9>&- &  # not the cluster engines' lifeline FIFOs (cluster_lib.sh)
   LAST_PID=$!
   PIDS+=("$LAST_PID")
   for _ in $(seq 200); do [ -s "$ready" ] && return 0; sleep 0.05; done

@@ -56,9 +56,9 @@ class S3Backend : public store::testing::BlobStoreBackend {
 };
 
 INSTANTIATE_TEST_SUITE_P(S3, BlobStoreConformanceTest,
-                         ::testing::Values(store::testing::BlobStoreBackendFactory([] {
-                           return std::make_unique<S3Backend>();
-                         })));
+                         ::testing::Values(store::testing::BlobStoreBackendFactory{
+                             "s3", [] { return std::make_unique<S3Backend>(); }}),
+                         store::testing::BackendName);
 
 std::unique_ptr<S3BlobStore> OpenS3(const std::string& prefix, S3StoreOptions s3 = SmallParts(),
                                     S3ClientOptions client = {}) {

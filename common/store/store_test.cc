@@ -62,9 +62,9 @@ class FilesystemBackend : public store::testing::BlobStoreBackend {
 };
 
 INSTANTIATE_TEST_SUITE_P(Filesystem, BlobStoreConformanceTest,
-                         ::testing::Values(store::testing::BlobStoreBackendFactory([] {
-                           return std::make_unique<FilesystemBackend>();
-                         })));
+                         ::testing::Values(store::testing::BlobStoreBackendFactory{
+                             "filesystem", [] { return std::make_unique<FilesystemBackend>(); }}),
+                         store::testing::BackendName);
 
 TEST(BlobStoreTest, RejectedWritesLeaveNoFiles) {
   const instascene::testing::ScopedTempDir temp("store_reject");

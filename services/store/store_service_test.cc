@@ -51,9 +51,9 @@ class RemoteBackend : public store::testing::BlobStoreBackend {
 
 using store::testing::BlobStoreConformanceTest;
 INSTANTIATE_TEST_SUITE_P(Remote, BlobStoreConformanceTest,
-                         ::testing::Values(store::testing::BlobStoreBackendFactory([] {
-                           return std::make_unique<RemoteBackend>();
-                         })));
+                         ::testing::Values(store::testing::BlobStoreBackendFactory{
+                             "remote", [] { return std::make_unique<RemoteBackend>(); }}),
+                         store::testing::BackendName);
 
 class StoreServiceTest : public ::testing::Test {
  protected:

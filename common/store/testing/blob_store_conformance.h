@@ -2,7 +2,8 @@
 // (filesystem, remote over gRPC, S3), as one parameterised GoogleTest suite. A backend's test
 // instantiates it with a factory of `BlobStoreBackend`s:
 //   INSTANTIATE_TEST_SUITE_P(Filesystem, BlobStoreConformanceTest,
-//                            ::testing::Values(BlobStoreBackendFactory(...)));
+//                            ::testing::Values(BlobStoreBackendFactory{"filesystem", ...}),
+//                            BackendName);
 // and links the `instascene_blob_store_conformance` object library.
 #pragma once
 
@@ -10,6 +11,7 @@
 
 #include <functional>
 #include <memory>
+#include <string>
 
 #include "absl/status/statusor.h"
 #include "common/store/blob_store.h"
@@ -28,11 +30,20 @@ class BlobStoreBackend {
   virtual int64_t resume_loss_bytes() const { return 0; }
 };
 
-using BlobStoreBackendFactory = std::function<std::unique_ptr<BlobStoreBackend>()>;
+// Makes a backend over fresh storage for each test (named for test names and output).
+struct BlobStoreBackendFactory {
+  std::string name;
+  std::function<std::unique_ptr<BlobStoreBackend>()> make;
+  friend void PrintTo(const BlobStoreBackendFactory& f, std::ostream* os) { *os << f.name; }
+};
+
+inline std::string BackendName(const ::testing::TestParamInfo<BlobStoreBackendFactory>& info) {
+  return info.param.name;
+}
 
 class BlobStoreConformanceTest : public ::testing::TestWithParam<BlobStoreBackendFactory> {
  protected:
-  void SetUp() override { backend_ = GetParam()(); }
+  void SetUp() override { backend_ = GetParam().make(); }
   std::unique_ptr<BlobStore> Open(const StoreOptions& options = {});
 
   std::unique_ptr<BlobStoreBackend> backend_;
