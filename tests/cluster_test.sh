@@ -29,24 +29,27 @@ start train-a "$WORK/ready-ta" "$BINDIR/instascene-training" --data "$WORK/w-ta"
 start train-b "$WORK/ready-tb" "$BINDIR/instascene-training" --data "$WORK/w-tb" --store "$STORE_URI" --scheduler "$B" --lease-seconds 2 --ready-file "$WORK/ready-tb"
 TRAIN_B=$LAST_PID
 
+# As soon as replica B's worker starts a training job (its log says so: an event, not a poll of the
+# queue), ask replica B for the queue, then kill the replica and the worker while the job runs.
+(
+  busy=$(grep -m1 -o "job j[0-9a-f]* (train of" < <(exec timeout 300 tail -n +1 -f "$WORK/train-b.log" 2>/dev/null) | cut -d' ' -f2)
+  "$BIN" jobs --server "$B" --json --limit 100 2>/dev/null | tail -n 1 >"$WORK/b-jobs.json"
+  kill -9 "$SCHED_B" "$TRAIN_B" 2>/dev/null
+  pkill -f -- "tail -n +1 -f $WORK/train-b.log"
+  echo "$busy" >"$WORK/busy"
+) 8>&- 9>&- &
+KILLER=$!
+
 PARAMS='{"train":{"iterations":600,"samples":256,"pixel_pool":512}}'
 for s in $(seq 10); do
   check "synth scene $s" "$BIN" synth --out "$WORK/s$s" --preset tiny --seed "$s"
   check "submit scene $s through replica A" "$BIN" submit --scene "$WORK/s$s" --server "$A" --store "$STORE" --params "$PARAMS" --stages decompose,train,segment --json
 done
-check "replica B sees the same queue" test "$(json_get <("$BIN" jobs --server "$B" --json) "len(d['jobs'])")" = "30"
-# Wait until replica B's worker runs a training job, then kill the replica and the worker.
-busy=""
-for _ in $(seq 600); do
-  busy=$("$BIN" jobs --server "$A" --json --limit 100 2>/dev/null | tail -n 1 | python3 -c "
-import json, sys
-d = json.load(sys.stdin)
-print(next((j['id'] for j in d['jobs'] if j['state'] == 'running' and j['worker'].endswith('-$TRAIN_B-train+segment')), ''))")
-  [ -n "$busy" ] && break
-  sleep 0.1
-done
+wait "$KILLER"
+busy=$(cat "$WORK/busy")
 check "replica B's worker took a job" test -n "$busy"
-kill -9 "$SCHED_B" "$TRAIN_B" 2>/dev/null
+check "replica B saw the shared queue, its job running" test \
+  "$(json_get "$WORK/b-jobs.json" "len(d['jobs']) >= 3 and [j['state'] for j in d['jobs'] if j['id'] == '$busy'] == ['running']")" = "True"
 for s in $(seq 10); do check "scene $s finishes on replica A" "$BIN" watch --scene "s$s" --server "$A"; done
 "$BIN" jobs --server "$A" --json --limit 100 2>/dev/null | tail -n 1 > "$WORK/final.json"
 check "thirty jobs, all succeeded" test "$(json_get "$WORK/final.json" "sorted(set(j['state'] for j in d['jobs'])) == ['succeeded'] and len(d['jobs'])")" = "30"
