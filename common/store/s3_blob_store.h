@@ -4,9 +4,10 @@
 //
 // Layout under PREFIX: `cas/<hash>` (visible blobs), `uploads/<hash>-<size>` (resumable uploads:
 // an S3 multipart upload, or the assembled object awaiting verification).
-// - Put: the bytes are hashed here first; the PUT carries their SHA-256 in x-amz-content-sha256,
-//   which S3 checks against the body, so a corrupted transfer is refused by the server; a PUT is
-//   atomic (the object appears whole or not at all).
+// - Put: the bytes are hashed here first; the PUT carries their SHA-256 (x-amz-content-sha256) and
+//   MD5 (Content-MD5), which S3 servers check against the body, so a corrupted transfer is refused
+//   by the server; a PUT is atomic (the object appears whole or not at all). A single verified PUT
+//   rather than temporary key + read-back: half the requests and bytes for the many small blobs.
 // - Append/FinishUpload (large blobs): appended bytes are buffered per upload up to `part_bytes`
 //   and sent as multipart parts (S3's minimum part size is 5 MiB); `CommittedSize` counts the parts
 //   S3 holds plus this process's buffer, so a client that restarts resumes at the last part S3

@@ -139,6 +139,17 @@ std::string Hex(absl::string_view bytes) {
   return out;
 }
 
+// Content-MD5 of a body (base64): every S3 implementation checks it before storing, also those
+// that do not check x-amz-content-sha256 against the body.
+std::string ContentMd5(absl::string_view body) {
+  unsigned char md5[EVP_MAX_MD_SIZE];
+  unsigned int len = 0;
+  EVP_Digest(body.data(), body.size(), md5, &len, EVP_md5(), nullptr);
+  unsigned char b64[64];
+  const int n = EVP_EncodeBlock(b64, md5, static_cast<int>(len));
+  return std::string(reinterpret_cast<char*>(b64), static_cast<size_t>(n));
+}
+
 // Whether curl 7.88 would sign these headers in the wrong order (a name that prefixes another).
 bool CurlMisordersHeaders(const std::vector<std::string>& headers) {
   std::vector<std::string> names;
@@ -533,6 +544,7 @@ absl::Status S3Client::PutObject(const std::string& key, absl::string_view bytes
   r.method = "PUT";
   r.key = key;
   r.body = bytes;
+  r.headers = {absl::StrCat("Content-MD5: ", ContentMd5(bytes))};
   return Call(r).status();
 }
 
@@ -584,6 +596,7 @@ absl::StatusOr<std::string> S3Client::UploadPart(const std::string& key,
   r.key = key;
   r.query = {{"partNumber", absl::StrCat(number)}, {"uploadId", upload_id}};
   r.body = bytes;
+  r.headers = {absl::StrCat("Content-MD5: ", ContentMd5(bytes))};
   ASSIGN_OR_RETURN(S3Response response, Call(r));
   const std::string etag = response.headers["etag"];
   if (etag.empty()) return absl::DataLossError("S3 UploadPart: no ETag");

@@ -9,8 +9,9 @@
 // the shared credentials file (AWS_SHARED_CREDENTIALS_FILE or
 // ~/.aws/credentials, profile AWS_PROFILE or "default"); never from flags, never logged.
 //
-// Every request carries `x-amz-content-sha256` (the payload's SHA-256, which S3 checks against the
-// body) and is retried on transport errors and HTTP 500/502/503/504 with exponential backoff.
+// Every request carries `x-amz-content-sha256` (the payload's SHA-256, which AWS checks against the
+// body), uploads also `Content-MD5` (which every S3 implementation checks before storing), and each
+// is retried on transport errors and HTTP 500/502/503/504 with exponential backoff.
 // Errors map to absl codes (404 NotFound, 403 PermissionDenied, 416 OutOfRange, 5xx Unavailable,
 // other 4xx InvalidArgument/FailedPrecondition) with the S3 error code and message. Thread-safe
 // (a pool of curl handles keeps connections alive).

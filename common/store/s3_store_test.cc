@@ -127,7 +127,8 @@ TEST(S3SignatureTest, CurlSignsWhatSigV4Specifies) {
   std::mutex mutex;
   const auto record = [&](const httplib::Request& req, httplib::Response& res) {
     std::lock_guard<std::mutex> lock(mutex);
-    const std::string query = req.target.substr(req.target.find('?') + 1);
+    const size_t q = req.target.find('?');
+    const std::string query = q == std::string::npos ? "" : req.target.substr(q + 1);
     seen.push_back({req.method + " " + req.path + "?" + query, req.headers});
     res.set_content("<ListBucketResult><IsTruncated>false</IsTruncated></ListBucketResult>",
                     "application/xml");
@@ -137,6 +138,7 @@ TEST(S3SignatureTest, CurlSignsWhatSigV4Specifies) {
     record(req, res);
     res.set_content("<CopyPartResult><ETag>\"e\"</ETag></CopyPartResult>", "application/xml");
   });
+  capture.set_keep_alive_max_count(1);  // no idle keep-alive connection to wait for at stop()
   const int port = capture.bind_to_any_port("127.0.0.1");
   std::thread serving([&] { capture.listen_after_bind(); });
   // (bind_to_any_port already listens: requests wait in the backlog until the loop runs.)
@@ -147,9 +149,10 @@ TEST(S3SignatureTest, CurlSignsWhatSigV4Specifies) {
   S3Client client(loc, c);
   EXPECT_TRUE(client.ListObjects("scenes/site1/cas/").ok());
   EXPECT_TRUE(client.UploadPartCopy("dst", "up.1", 2, "src/a", 0, 9).ok());
+  EXPECT_TRUE(client.PutObject("k", "abc").ok());
   capture.stop();
   serving.join();
-  ASSERT_EQ(seen.size(), 2u);
+  ASSERT_EQ(seen.size(), 3u);
   for (const auto& [line, headers] : seen) {
     const std::string target = line.substr(line.find(' ') + 1);
     const std::string path = target.substr(0, target.find('?'));
@@ -168,6 +171,9 @@ TEST(S3SignatureTest, CurlSignsWhatSigV4Specifies) {
         << line;
   }
   EXPECT_EQ(seen[0].first, "GET /spec-bucket?list-type=2&prefix=scenes%2Fsite1%2Fcas%2F");
+  // Uploads carry Content-MD5 (RFC 1864; MD5("abc") = 900150983cd24fb0d6963f7d28e17f72), checked by
+  // S3 servers before storing (not by moto).
+  EXPECT_EQ(seen[2].second.find("Content-MD5")->second, "kAFQmDzST7DWlj99KOF/cg==");
   EXPECT_NE(seen[1]
                 .second.find("Authorization")
                 ->second.find("x-amz-copy-source;x-amz-copy-source-range"),
