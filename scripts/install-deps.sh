@@ -24,6 +24,7 @@ PACKAGES=(
   libssl-dev libcurl4-openssl-dev
   libnanoflann-dev
   libcpp-httplib-dev
+  libqhull-dev liburdfdom-tools libmujoco-dev
   libpqxx-dev postgresql-15
   yamllint nodejs
   zlib1g-dev libpng-dev

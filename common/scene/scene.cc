@@ -1,5 +1,7 @@
 #include "common/scene/scene.h"
 
+#include <cmath>
+
 #include <charconv>
 #include <filesystem>
 #include <set>
@@ -105,6 +107,13 @@ absl::StatusOr<Scene> ParseSceneJson(absl::string_view text, absl::string_view s
   }
   if (!IsSafeRelativePath(scene.gaussians))
     return fail(absl::StrCat("unsafe path '", scene.gaussians, "'"));
+  if (root.contains("meters_per_unit")) {
+    const json& m = root["meters_per_unit"];
+    if (!m.is_number() || !(m.get<double>() > 0) || !std::isfinite(m.get<double>()) ||
+        m.get<double>() > 1e6)
+      return fail("\"meters_per_unit\" must be a positive number (metres per scene unit)");
+    scene.meters_per_unit = m.get<double>();
+  }
   if (!root.contains("views") || !root["views"].is_array())
     return fail("\"views\" must be an array");
   std::set<std::string> names;
@@ -116,7 +125,8 @@ absl::StatusOr<Scene> ParseSceneJson(absl::string_view text, absl::string_view s
     scene.views.push_back(*std::move(view));
   }
   for (auto it = root.begin(); it != root.end(); ++it) {
-    if (it.key() != "format" && it.key() != "gaussians" && it.key() != "views")
+    if (it.key() != "format" && it.key() != "gaussians" && it.key() != "views" &&
+        it.key() != "meters_per_unit")
       scene.metadata[it.key()] = it.value();
   }
   return scene;
@@ -126,6 +136,7 @@ std::string SceneToJson(const Scene& scene) {
   json root = scene.metadata;
   root["format"] = kSceneFormat;
   root["gaussians"] = scene.gaussians;
+  if (scene.meters_per_unit) root["meters_per_unit"] = *scene.meters_per_unit;
   json views = json::array();
   for (const SceneView& v : scene.views) {
     const PinholeCamera& c = v.camera;

@@ -9,6 +9,7 @@
 // top-level keys (e.g. "gt") are kept in `metadata` and written back. Value types; thread-safe.
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -34,6 +35,9 @@ struct Scene {
   std::string directory;                    // where scene.json lives
   std::string gaussians = "gaussians.ply";  // relative path of the splat model
   std::vector<SceneView> views;
+  // Metric scale: metres per scene unit (scene.json `meters_per_unit`, optional; importers take
+  // --meters-per-unit, synthetic scenes set it). Absent: sizes stay in scene units, never guessed.
+  std::optional<double> meters_per_unit;
   nlohmann::json metadata = nlohmann::json::object();  // other top-level keys, kept verbatim
 
   std::string Path(const std::string& relative) const;  // directory / relative

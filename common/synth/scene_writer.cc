@@ -99,6 +99,7 @@ absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& dir
   if (!scene.stuff_mesh.triangles.empty()) {
     RETURN_IF_ERROR(WriteMeshPly(out.Path("gt/meshes/stuff.ply"), scene.stuff_mesh));
   }
+  out.meters_per_unit = 1.0;  // the synthetic world is in metres (cluttered_scene.h)
   out.metadata["gt"] = {
       {"format", "instascene.gt/1"},
       {"objects", "gt/objects.json"},
