@@ -172,9 +172,10 @@ void AddClientCommands(CLI::App& app, Action* action) {
   s->add_option("--params", submit->params,
                 R"(Stage parameters as JSON, e.g. '{"train":{"iterations":500}}')");
   s->add_option("--iterations", submit->iterations, "Shortcut for train.iterations");
-  s->add_option("--stages", submit->stages,
-                "Only these stages, comma-separated (their inputs included), e.g. "
-                "decompose,train,segment; default: every stage")
+  s->add_option(
+       "--stages", submit->stages,
+       "Only these stages, comma-separated (their inputs included), e.g. "
+       "decompose,train,segment; default: every stage but export (add it: ...,complete,export)")
       ->delimiter(',');
   s->add_option("--priority", submit->priority, "Higher runs first (interactive requests)");
   s->add_flag("--wait", submit->wait, "Watch the jobs until they finish");

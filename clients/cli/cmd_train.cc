@@ -169,7 +169,8 @@ void AddTrainCommands(CLI::App& app, Action* action) {
       ->required();
   r->add_option("--stages", run->stages,
                 "Run only these stages (comma-separated, each with its inputs: e.g. "
-                "decompose,train,segment skips completion); default: all")
+                "decompose,train,segment skips completion; add export for robot-ready objects); "
+                "default: every stage but export")
       ->delimiter(',');
   auto registry = std::make_shared<pipeline::StageRegistry>();
   if (absl::Status s = stages::RegisterStages(registry.get()); !s.ok())

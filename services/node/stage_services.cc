@@ -28,7 +28,7 @@ StageService TrainingStageService() {
 StageService GenerationStageService() {
   return {"generation",
           "instascene.v1.Generation",
-          {"complete"},
+          {"complete", "export"},  // export: until the objects service hosts it (issue 15)
           [](const worker::StageWorker* worker, store::BlobStore*, const std::string&) {
             return std::make_unique<generation::GenerationService>(worker);
           }};

@@ -1,5 +1,6 @@
 #include "services/objects/export.h"
 
+#include <algorithm>
 #include <filesystem>
 #include <random>
 
@@ -95,6 +96,18 @@ absl::StatusOr<json> ExportObject(const std::string& object_dir, const MetricSca
   const Eigen::Vector3d t = world_from_object.translation();
   for (Eigen::Vector3f& v : mesh.vertices)
     v = (s * (r.transpose() * (v.cast<double>() - t))).cast<float>();
+  // Faces with two corners at one position (marching cubes makes a few) have no area; Draco drops
+  // them, so every artefact drops them and all agree on the triangle count.
+  const size_t input_triangles = mesh.triangles.size();
+  mesh.triangles.erase(std::remove_if(mesh.triangles.begin(), mesh.triangles.end(),
+                                      [&](const std::array<uint32_t, 3>& f) {
+                                        const auto& v = mesh.vertices;
+                                        return v[f[0]] == v[f[1]] || v[f[1]] == v[f[2]] ||
+                                               v[f[0]] == v[f[2]];
+                                      }),
+                       mesh.triangles.end());
+  if (mesh.triangles.empty())
+    return absl::DataLossError(absl::StrCat(object_dir, "/mesh.ply: only degenerate triangles"));
   Eigen::AlignedBox3f box;
   for (const Eigen::Vector3f& v : mesh.vertices) box.extend(v);
 
@@ -123,10 +136,33 @@ absl::StatusOr<json> ExportObject(const std::string& object_dir, const MetricSca
   RETURN_IF_ERROR(write("mesh.stl", EncodeBinaryStl(mesh, name)));
 
   // Collision: the hull and the convex parts; mass and inertia from the parts.
-  ASSIGN_OR_RETURN(TriangleMesh hull, ConvexHull(mesh.vertices));
+  // A flat or degenerate mesh has no hull: its bounding box, thickened, stands in; a mesh the
+  // decomposition cannot voxelise gets its hull as the single part. The manifest says which.
+  std::string collision_method = "convex decomposition";
+  absl::StatusOr<TriangleMesh> hull_or = ConvexHull(mesh.vertices);
+  if (!hull_or.ok()) {
+    const float pad = std::max(1e-4f, 1e-3f * box.sizes().maxCoeff());
+    std::vector<Eigen::Vector3f> corners;
+    for (int c = 0; c < 8; ++c)
+      corners.emplace_back(c & 1 ? box.max().x() + pad : box.min().x() - pad,
+                           c & 2 ? box.max().y() + pad : box.min().y() - pad,
+                           c & 4 ? box.max().z() + pad : box.min().z() - pad);
+    hull_or = ConvexHull(corners);
+    collision_method = "bounding box (the mesh spans no volume)";
+  }
+  if (!hull_or.ok()) return hull_or.status();
+  const TriangleMesh hull = *std::move(hull_or);
   RETURN_IF_ERROR(write("collision/hull.stl", EncodeBinaryStl(hull, name + " hull")));
-  ASSIGN_OR_RETURN(std::vector<TriangleMesh> parts,
-                   ConvexDecomposition(mesh, options.decomposition));
+  std::vector<TriangleMesh> parts = {hull};
+  if (collision_method == "convex decomposition") {
+    absl::StatusOr<std::vector<TriangleMesh>> decomposed =
+        ConvexDecomposition(mesh, options.decomposition);
+    if (decomposed.ok())
+      parts = *std::move(decomposed);
+    else
+      collision_method =
+          absl::StrCat("convex hull (decomposition failed: ", decomposed.status().message(), ")");
+  }
   RigidObjectModel model;
   model.name = name;
   model.visual_mesh = "mesh.stl";
@@ -203,8 +239,12 @@ absl::StatusOr<json> ExportObject(const std::string& object_dir, const MetricSca
       {"mesh",
        {{"vertices", mesh.vertices.size()},
         {"triangles", mesh.triangles.size()},
+        {"degenerate_triangles_dropped", input_triangles - mesh.triangles.size()},
         {"volume", mesh_mass.volume}}},
-      {"collision", {{"hull", "collision/hull.stl"}, {"parts", model.collision_meshes}}},
+      {"collision",
+       {{"hull", "collision/hull.stl"},
+        {"parts", model.collision_meshes},
+        {"method", collision_method}}},
       {"inertial",
        {{"density_kg_m3", options.density},
         {"mass", model.mass.mass},

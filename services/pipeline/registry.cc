@@ -73,6 +73,13 @@ std::vector<std::string> StageRegistry::Kinds() const {
   return kinds;
 }
 
+std::vector<std::string> StageRegistry::DefaultStages() const {
+  std::vector<std::string> kinds;
+  for (const std::string& kind : Kinds())
+    if (Find(kind)->spec.in_default_pipeline) kinds.push_back(kind);
+  return kinds;
+}
+
 std::vector<std::string> StageRegistry::RunnableKinds() const {
   std::vector<std::string> kinds;
   for (const StageDefinition& s : stages_)

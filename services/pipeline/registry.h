@@ -21,8 +21,9 @@ class StageRegistry {
   std::vector<std::string> Kinds() const;          // registration order
   std::vector<std::string> RunnableKinds() const;  // those with a run function
 
-  // The default pipeline: every registered stage, in registration order.
-  std::vector<std::string> DefaultStages() const { return Kinds(); }
+  // The default pipeline: every registered stage marked `in_default_pipeline`, in registration
+  // order (`export` is asked for explicitly: as a join it fails when any object's completion did).
+  std::vector<std::string> DefaultStages() const;
 
   // Plans a pipeline: `stages` (empty = the default) in dependency order, each with every input
   // it declares, parameters canonicalised by the stage's codec; `parameters` is

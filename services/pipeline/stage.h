@@ -57,7 +57,8 @@ struct StageSpec {
   std::string directory;  // output folder name in `instascene run` (default: the kind)
   std::string description;
   std::vector<PlannedInput> inputs;
-  bool fans_out = false;  // its output holds items; per-item stages may take it kEach
+  bool fans_out = false;            // its output holds items; per-item stages may take it kEach
+  bool in_default_pipeline = true;  // run when no stage list is given
   std::vector<ParamSpec> parameters;
   std::function<absl::StatusOr<nlohmann::json>(const nlohmann::json&)> canonicalize;
 };

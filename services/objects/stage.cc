@@ -1,0 +1,67 @@
+#include "services/objects/stage.h"
+
+#include <filesystem>
+
+#include <nlohmann/json.hpp>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "common/core/file_io.h"
+#include "common/core/status.h"
+#include "common/scene/scene.h"
+#include "services/objects/export.h"
+
+namespace instascene::objects {
+namespace {
+namespace fs = std::filesystem;
+
+absl::StatusOr<pipeline::StageResult> RunExport(const pipeline::StageContext& c) {
+  ASSIGN_OR_RETURN(ExportStageOptions o, ExportCodec().Decode(c.parameters));
+  ExportOptions options;
+  options.density = o.density;
+  options.surface_points = o.surface_points;
+  options.decomposition.max_parts = o.collision_parts;
+  options.decomposition.resolution = o.collision_resolution;
+  options.seed = o.seed;
+  ASSIGN_OR_RETURN(Scene scene, ReadScene(c.scene_dir));
+  MetricScale scale{scene.meters_per_unit, "scene.json meters_per_unit"};
+  std::vector<std::string> objects;  // complete/<i> inputs, in item order
+  for (int64_t i = 0;; ++i) {
+    auto it = c.inputs.find(absl::StrCat("complete/", i));
+    if (it == c.inputs.end()) break;
+    objects.push_back(it->second);
+  }
+  nlohmann::json catalogue = nlohmann::json::array();
+  for (size_t i = 0; i < objects.size(); ++i) {
+    RETURN_IF_ERROR(CheckCancelled(c.cancel, "export"));
+    c.Report("export", static_cast<int>(i), static_cast<int>(objects.size()));
+    ASSIGN_OR_RETURN(std::string text,
+                     ReadFileBounded((fs::path(objects[i]) / "manifest.json").string(), 64 << 20));
+    const nlohmann::json in = nlohmann::json::parse(text, nullptr, false);
+    if (!in.is_object() || !in.contains("id") || !in["id"].is_number_unsigned())
+      return absl::DataLossError(absl::StrCat("complete/", i, "/manifest.json: no object id"));
+    const std::string id = std::to_string(in["id"].get<uint32_t>());
+    ASSIGN_OR_RETURN(nlohmann::json m,
+                     ExportObject(objects[i], scale, options, (fs::path(c.out_dir) / id).string()));
+    catalogue.push_back({{"id", m["id"]},
+                         {"dir", id},
+                         {"units", m["units"]},
+                         {"world_from_object", m["world_from_object"]},
+                         {"extent", m["bounding_box"]["extent"]},
+                         {"completion", m["completion"]},
+                         {"completed_share", m["completed_share"]},
+                         {"collision_parts", m["collision"]["parts"].size()},
+                         {"mass", m["inertial"]["mass"]}});
+  }
+  c.Report("export", static_cast<int>(objects.size()), static_cast<int>(objects.size()));
+  RETURN_IF_ERROR(WriteFileAtomically(
+      (fs::path(c.out_dir) / "objects.json").string(),
+      nlohmann::json({{"format", "instascene.objects/1"}, {"objects", catalogue}}).dump(1)));
+  return pipeline::StageResult{};
+}
+
+}  // namespace
+
+pipeline::StageDefinition ExportStage() { return {ExportSpec(), RunExport}; }
+
+}  // namespace instascene::objects
