@@ -22,7 +22,11 @@ StageRegistry Stages() {
 
 TEST(Registry, CodecsValidateAndCanonicalize) {
   const StageRegistry r = Stages();
-  EXPECT_EQ(r.Kinds(), (std::vector<std::string>{"decompose", "train", "segment", "complete"}));
+  EXPECT_EQ(r.Kinds(),
+            (std::vector<std::string>{"decompose", "train", "segment", "complete", "export"}));
+  // export is asked for explicitly (a join that fails when any completion did).
+  EXPECT_EQ(r.DefaultStages(),
+            (std::vector<std::string>{"decompose", "train", "segment", "complete"}));
   // Defaults are filled in: {} and the explicit defaults are the same job.
   auto a = r.Canonicalize("train", nlohmann::json::object());
   auto b = r.Canonicalize("train", {{"iterations", 1500}, {"supervision", "full"}});
