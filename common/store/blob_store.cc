@@ -20,6 +20,28 @@ absl::Status StoreOptions::Validate() const {
   return absl::OkStatus();
 }
 
+absl::Status CheckWritable(const Digest& digest, const StoreOptions& options) {
+  RETURN_IF_ERROR(ValidateDigest(digest));
+  if (digest.size_bytes > options.max_blob_bytes)
+    return absl::ResourceExhaustedError(absl::StrCat("blob ", digest.ToString(),
+                                                     " is larger than the store's limit of ",
+                                                     options.max_blob_bytes, " bytes"));
+  return absl::OkStatus();
+}
+
+absl::Status VerifyBlobBytes(const Digest& digest, absl::string_view bytes) {
+  if (static_cast<int64_t>(bytes.size()) != digest.size_bytes)
+    return absl::InvalidArgumentError(absl::StrCat("blob ", digest.ToString(), ": got ",
+                                                   bytes.size(), " bytes, digest says ",
+                                                   digest.size_bytes));
+  const Digest actual = ComputeDigest(bytes);
+  if (actual.hash != digest.hash)
+    return absl::InvalidArgumentError(absl::StrCat("digest mismatch: claimed ", digest.hash,
+                                                   ", bytes hash to ", actual.hash,
+                                                   "; nothing stored"));
+  return absl::OkStatus();
+}
+
 absl::Status BlobStore::PutFile(const Digest& digest, const std::string& path,
                                 const TransferProgress& progress) {
   RETURN_IF_ERROR(ValidateDigest(digest));
@@ -108,15 +130,6 @@ std::string FilesystemBlobStore::PartPath(const Digest& digest) const {
       .string();
 }
 
-absl::Status FilesystemBlobStore::CheckWritable(const Digest& digest) const {
-  RETURN_IF_ERROR(ValidateDigest(digest));
-  if (digest.size_bytes > options_.max_blob_bytes)
-    return absl::ResourceExhaustedError(absl::StrCat("blob ", digest.ToString(),
-                                                     " is larger than the store's limit of ",
-                                                     options_.max_blob_bytes, " bytes"));
-  return absl::OkStatus();
-}
-
 bool FilesystemBlobStore::Contains(const Digest& digest) const {
   std::error_code ec;
   const auto size = fs::file_size(BlobPath(digest), ec);
@@ -145,16 +158,8 @@ absl::Status FilesystemBlobStore::Publish(const std::string& from, const Digest&
 }
 
 absl::Status FilesystemBlobStore::Put(const Digest& digest, absl::string_view bytes) {
-  RETURN_IF_ERROR(CheckWritable(digest));
-  if (static_cast<int64_t>(bytes.size()) != digest.size_bytes)
-    return absl::InvalidArgumentError(absl::StrCat("blob ", digest.ToString(), ": got ",
-                                                   bytes.size(), " bytes, digest says ",
-                                                   digest.size_bytes));
-  const Digest actual = ComputeDigest(bytes);
-  if (actual.hash != digest.hash)
-    return absl::InvalidArgumentError(absl::StrCat("digest mismatch: claimed ", digest.hash,
-                                                   ", bytes hash to ", actual.hash,
-                                                   "; nothing stored"));
+  RETURN_IF_ERROR(CheckWritable(digest, options_));
+  RETURN_IF_ERROR(VerifyBlobBytes(digest, bytes));
   if (Contains(digest)) return absl::OkStatus();
   std::string temp;
   {
@@ -205,7 +210,7 @@ absl::StatusOr<int64_t> FilesystemBlobStore::CommittedSize(const Digest& digest)
 
 absl::StatusOr<int64_t> FilesystemBlobStore::Append(const Digest& digest, int64_t offset,
                                                     absl::string_view data) {
-  RETURN_IF_ERROR(CheckWritable(digest));
+  RETURN_IF_ERROR(CheckWritable(digest, options_));
   std::lock_guard<std::mutex> lock(upload_mutex_);
   if (Contains(digest)) return digest.size_bytes;
   const std::string part = PartPath(digest);
@@ -228,7 +233,7 @@ absl::StatusOr<int64_t> FilesystemBlobStore::Append(const Digest& digest, int64_
 }
 
 absl::Status FilesystemBlobStore::FinishUpload(const Digest& digest) {
-  RETURN_IF_ERROR(CheckWritable(digest));
+  RETURN_IF_ERROR(CheckWritable(digest, options_));
   std::lock_guard<std::mutex> lock(upload_mutex_);
   if (Contains(digest)) return absl::OkStatus();
   const std::string part = PartPath(digest);

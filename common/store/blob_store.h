@@ -35,6 +35,12 @@ struct StoreStats {
 // Progress of a transfer: bytes done, bytes total.
 using TransferProgress = std::function<void(int64_t done, int64_t total)>;
 
+// Checks every backend makes before a write: a well-formed digest within the size limit
+// (InvalidArgument / ResourceExhausted), and bytes that match it (InvalidArgument, "nothing
+// stored").
+absl::Status CheckWritable(const Digest& digest, const StoreOptions& options);
+absl::Status VerifyBlobBytes(const Digest& digest, absl::string_view bytes);
+
 class BlobStore {
  public:
   virtual ~BlobStore() = default;
@@ -88,7 +94,6 @@ class FilesystemBlobStore final : public BlobStore {
   FilesystemBlobStore(std::string root, StoreOptions options, FileLock lock)
       : root_(std::move(root)), options_(options), lock_(std::move(lock)) {}
   std::string PartPath(const Digest& digest) const;
-  absl::Status CheckWritable(const Digest& digest) const;
   bool Contains(const Digest& digest) const;
   // Moves a verified file into cas/ (fsync + rename + directory fsync).
   absl::Status Publish(const std::string& from, const Digest& digest);

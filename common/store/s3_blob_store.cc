@@ -49,15 +49,6 @@ std::string S3BlobStore::UploadKey(const Digest& digest) const {
   return absl::StrCat(client_->location().prefix, "uploads/", digest.hash, "-", digest.size_bytes);
 }
 
-absl::Status S3BlobStore::CheckWritable(const Digest& digest) const {
-  RETURN_IF_ERROR(ValidateDigest(digest));
-  if (digest.size_bytes > options_.max_blob_bytes)
-    return absl::ResourceExhaustedError(absl::StrCat("blob ", digest.ToString(),
-                                                     " is larger than the store's limit of ",
-                                                     options_.max_blob_bytes, " bytes"));
-  return absl::OkStatus();
-}
-
 absl::StatusOr<bool> S3BlobStore::Contains(const Digest& digest) {
   ASSIGN_OR_RETURN(std::optional<int64_t> size, client_->HeadObject(BlobKey(digest)));
   return size.has_value() && *size == digest.size_bytes;
@@ -74,16 +65,8 @@ absl::StatusOr<std::vector<Digest>> S3BlobStore::FindMissing(const std::vector<D
 }
 
 absl::Status S3BlobStore::Put(const Digest& digest, absl::string_view bytes) {
-  RETURN_IF_ERROR(CheckWritable(digest));
-  if (static_cast<int64_t>(bytes.size()) != digest.size_bytes)
-    return absl::InvalidArgumentError(absl::StrCat("blob ", digest.ToString(), ": got ",
-                                                   bytes.size(), " bytes, digest says ",
-                                                   digest.size_bytes));
-  const Digest actual = ComputeDigest(bytes);
-  if (actual.hash != digest.hash)
-    return absl::InvalidArgumentError(absl::StrCat("digest mismatch: claimed ", digest.hash,
-                                                   ", bytes hash to ", actual.hash,
-                                                   "; nothing stored"));
+  RETURN_IF_ERROR(CheckWritable(digest, options_));
+  RETURN_IF_ERROR(VerifyBlobBytes(digest, bytes));
   ASSIGN_OR_RETURN(bool present, Contains(digest));
   if (present) return absl::OkStatus();
   if (digest.size_bytes <= kMaxSinglePut) return client_->PutObject(BlobKey(digest), bytes);
@@ -228,7 +211,7 @@ absl::StatusOr<int64_t> S3BlobStore::CommittedSize(const Digest& digest) {
 
 absl::StatusOr<int64_t> S3BlobStore::Append(const Digest& digest, int64_t offset,
                                             absl::string_view data) {
-  RETURN_IF_ERROR(CheckWritable(digest));
+  RETURN_IF_ERROR(CheckWritable(digest, options_));
   ASSIGN_OR_RETURN(bool present, Contains(digest));
   if (present) return digest.size_bytes;
   std::shared_ptr<Upload> upload = GetUpload(digest);
@@ -327,7 +310,7 @@ absl::Status S3BlobStore::VerifyAndPublish(const Digest& digest) {
 }
 
 absl::Status S3BlobStore::FinishUpload(const Digest& digest) {
-  RETURN_IF_ERROR(CheckWritable(digest));
+  RETURN_IF_ERROR(CheckWritable(digest, options_));
   ASSIGN_OR_RETURN(bool present, Contains(digest));
   if (present) {
     Forget(digest);

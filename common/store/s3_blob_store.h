@@ -75,7 +75,6 @@ class S3BlobStore final : public BlobStore {
 
   S3BlobStore(std::unique_ptr<S3Client> client, StoreOptions options, S3StoreOptions s3_options)
       : client_(std::move(client)), options_(options), s3_options_(s3_options) {}
-  absl::Status CheckWritable(const Digest& digest) const;
   absl::StatusOr<bool> Contains(const Digest& digest);
   std::shared_ptr<Upload> GetUpload(const Digest& digest);
   void Forget(const Digest& digest);
