@@ -81,6 +81,10 @@ if [ -d "$SHARED/data/fox_instant_ngp" ]; then
   check_fails "fox needs undistortion flag" "distortion" "$BIN" import --transforms "$SHARED/data/fox_instant_ngp/transforms_images_2.json" --ply "$WORK/s/gaussians.ply" --out "$WORK/fox"
   check "import fox" "$BIN" import --transforms "$SHARED/data/fox_instant_ngp/transforms_images_2.json" --ply "$WORK/s/gaussians.ply" --out "$WORK/fox" --assume-undistorted
   check "fox has 50 views" bash -c "'$BIN' info --scene '$WORK/fox' --json | tail -n 1 | grep -q '\"views\":50'"
+  check "fox is unscaled" test "$(python3 -c "import json; print('meters_per_unit' in json.load(open('$WORK/fox/scene.json')))")" = False
+  check "import with a metric scale" "$BIN" import --transforms "$SHARED/data/fox_instant_ngp/transforms_images_2.json" --ply "$WORK/s/gaussians.ply" --out "$WORK/fox_m" --assume-undistorted --meters-per-unit 0.25
+  check "the scale is in scene.json" test "$(python3 -c "import json; print(json.load(open('$WORK/fox_m/scene.json'))['meters_per_unit'])")" = 0.25
+  check_fails "a non-positive scale is refused" "meters-per-unit" "$BIN" import --transforms "$SHARED/data/fox_instant_ngp/transforms_images_2.json" --ply "$WORK/s/gaussians.ply" --out "$WORK/fox_bad" --assume-undistorted --meters-per-unit -1
   check_fails "eval needs ground truth" "no ground truth" "$BIN" eval --scene "$WORK/fox" --result "$WORK/s/gt"
 fi
 

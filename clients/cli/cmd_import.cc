@@ -16,6 +16,7 @@ void AddImportCommand(CLI::App& app, Action* action) {
   struct Args {
     std::string colmap, transforms, ply, images, masks, out;
     bool assume_undistorted = false;
+    double meters_per_unit = 0;  // 0 = unknown (not written)
   };
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand(
@@ -31,6 +32,10 @@ void AddImportCommand(CLI::App& app, Action* action) {
       "Image folder (default: <model>/../../images for COLMAP, the JSON's folder otherwise)");
   cmd->add_option("--masks", args->masks, "Folder of per-view label maps named <image stem>.png");
   cmd->add_option("--out", args->out, "Output scene directory")->required();
+  cmd->add_option("--meters-per-unit", args->meters_per_unit,
+                  "Metric scale of the reconstruction (metres per scene unit), written to "
+                  "scene.json; omit when unknown: objects are then reported unscaled")
+      ->check(CLI::PositiveNumber);
   cmd->add_flag("--assume-undistorted", args->assume_undistorted,
                 "Accept distorted camera models, ignoring distortion (images already undistorted)");
   cmd->callback([args, action] {
@@ -56,6 +61,7 @@ void AddImportCommand(CLI::App& app, Action* action) {
                        ReadGaussianPly(args->ply));  // validates before copying
       Scene scene;
       scene.directory = args->out;
+      if (args->meters_per_unit > 0) scene.meters_per_unit = args->meters_per_unit;
       std::error_code ec;
       fs::create_directories(fs::path(args->out) / "images", ec);
       if (ec)

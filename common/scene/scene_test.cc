@@ -50,6 +50,13 @@ TEST(SceneJson, RoundTripKeepsViewsAndMetadata) {
                 .norm(),
             1e-12);
   EXPECT_EQ(back->metadata["gt"]["instances"], "gt/instances.json");
+  EXPECT_FALSE(back->meters_per_unit.has_value());  // absent: unscaled, never guessed
+  scene.meters_per_unit = 0.04;
+  ASSERT_TRUE(WriteScene(scene).ok());
+  back = ReadScene(scene.directory);
+  ASSERT_TRUE(back.ok());
+  EXPECT_EQ(back->meters_per_unit, 0.04);
+  EXPECT_FALSE(back->metadata.contains("meters_per_unit"));
   EXPECT_EQ(*ResolveView(*back, "b"), 1);
   EXPECT_EQ(*ResolveView(*back, "0"), 0);
   EXPECT_EQ(ResolveView(*back, "7").status().code(), absl::StatusCode::kNotFound);
@@ -77,6 +84,10 @@ TEST(SceneJson, RejectsMalformedManifests) {
   std::string escape = view;
   escape.insert(1, R"("image":"/etc/passwd",)");
   ExpectBadScene(R"({"format":"instascene.scene/1","views":[)" + escape + "]}", "unsafe path");
+  for (const char* scale : {"0", "-1", "\"1\"", "null", "2e6"})
+    ExpectBadScene(std::string(R"({"format":"instascene.scene/1","meters_per_unit":)") + scale +
+                       R"(,"views":[]})",
+                   "meters_per_unit");
   // Sizes are read as given, never wrapped or truncated.
   for (const char* width : {"4294967392", "0", "-3", "16385", "\"12\"", "12.5"}) {
     std::string sized = view;
