@@ -2,8 +2,9 @@
 # Robot-ready objects end to end, checked by tools nobody here wrote: a tiny synthetic scene (metric:
 # meters_per_unit 1) through decompose, train, segment, complete and export; every visual.glb passes
 # the Khronos glTF validator (npm gltf-validator, installed from the committed lockfile into the build
-# folder), every object.urdf passes urdfdom's check_urdf, the catalogue lists every object in metres.
-# (MuJoCo loads and drops an exported object in services/objects/objects_test.)
+# folder), every object.urdf passes urdfdom's check_urdf, every object.xml loads in MuJoCo and,
+# dropped onto a floor, comes to rest within a simulated second (objects_drop_check), and the
+# catalogue lists every object in metres.
 # Usage: export_test.sh INSTASCENE SOURCE_DIR BUILD_DIR
 set -uo pipefail
 BIN=$1
@@ -29,6 +30,8 @@ import json, sys
 d = json.load(open('$WORK/run/export/objects.json'))
 sys.exit(0 if len(d['objects']) == $n and all(o['units'] == 'metres' for o in d['objects']) else 1)"
 check "every visual.glb passes the Khronos glTF validator" node "$V/validate_glb.mjs" "$WORK"/run/export/*/visual.glb
+check "every object.xml loads in MuJoCo and comes to rest on a floor within a simulated second" \
+  "$BUILD/services/objects/objects_drop_check" "$WORK"/run/export/*/object.xml
 for urdf in "$WORK"/run/export/*/object.urdf; do
   check "check_urdf $(basename "$(dirname "$urdf")")" check_urdf "$urdf"
 done

@@ -2,7 +2,6 @@
 // integration, Qhull hulls, the convex decomposition of a cup, Draco glTF, and the exported files
 // read by tools nobody here wrote: urdfdom's check_urdf and MuJoCo (a drop onto a plane).
 #include <gtest/gtest.h>
-#include <mujoco/mujoco.h>
 
 #include <cmath>
 #include <cstdlib>
@@ -21,6 +20,7 @@
 #include "services/objects/export.h"
 #include "services/objects/gltf_writer.h"
 #include "services/objects/mass_properties.h"
+#include "services/objects/testing/mujoco_drop.h"
 
 namespace instascene::objects {
 namespace {
@@ -255,34 +255,15 @@ TEST(ExportTest, ArtefactsAreMetricPosedAndReadByCheckUrdfAndMuJoCo) {
   EXPECT_EQ(std::system(check.c_str()), 0)
       << *ReadFileBounded(temp.str() + "/check_urdf.txt", 1 << 20);
 
-  // MuJoCo loads the MJCF inside a scene with a floor; dropped from 10 cm it comes to rest upright
-  // on its bottom within a simulated second, without exploding or tunnelling.
-  const std::string scene = out + "/drop_scene.xml";
-  std::ofstream(scene) << "<mujoco>\n  <include file=\"object.xml\"/>\n  <worldbody>\n"
-                          "    <geom name=\"floor\" type=\"plane\" size=\"2 2 0.1\"/>\n"
-                          "  </worldbody>\n</mujoco>\n";
-  char error[1000] = "";
-  mjModel* model = mj_loadXML(scene.c_str(), nullptr, error, sizeof(error));
-  ASSERT_NE(model, nullptr) << error;
-  mjData* data = mj_makeData(model);
-  data->qpos[2] = 0.2;  // the object frame's origin is the cup's centre: bottom at 0.1 m
-  double lowest = 1e9;
-  while (data->time < 1.0) {
-    mj_step(model, data);
-    lowest = std::min(lowest, data->qpos[2] - 0.1);
-  }
-  double speed = 0, spin = 0;
-  for (int i = 0; i < 3; ++i) {
-    speed += data->qvel[i] * data->qvel[i];
-    spin += data->qvel[3 + i] * data->qvel[3 + i];
-  }
-  EXPECT_TRUE(std::isfinite(data->qpos[2]));
-  EXPECT_LT(std::sqrt(speed), 0.02) << "still moving after 1 s";
-  EXPECT_LT(std::sqrt(spin), 0.2);
-  EXPECT_GT(lowest, -0.01) << "tunnelled into the floor";
-  EXPECT_NEAR(data->qpos[2], 0.1, 0.01) << "not resting on its bottom";
-  mj_deleteData(data);
-  mj_deleteModel(model);
+  // MuJoCo loads the MJCF inside a scene with a floor; dropped from 5 cm the cup rests upright on
+  // its bottom within a simulated second, without exploding or tunnelling.
+  auto drop = testing::DropOntoFloor(out + "/object.xml");
+  ASSERT_TRUE(drop.ok()) << drop.status();
+  EXPECT_TRUE(drop->finite);
+  EXPECT_LT(drop->final_speed, 0.02) << "still moving after 1 s";
+  EXPECT_LT(drop->final_spin, 0.2);
+  EXPECT_GT(drop->lowest, -0.01) << "tunnelled into the floor";
+  EXPECT_NEAR(drop->rest_height, 0.0, 0.005) << "not resting on the floor";
 }
 
 TEST(ExportTest, UnscaledScenesSaySoAndBadInputsAreNamed) {
