@@ -32,6 +32,15 @@ sys.exit(0 if len(d['objects']) == $n and all(o['units'] == 'metres' for o in d[
 check "every visual.glb passes the Khronos glTF validator" node "$V/validate_glb.mjs" "$WORK"/run/export/*/visual.glb
 check "every object.xml loads in MuJoCo and comes to rest on a floor within a simulated second" \
   "$BUILD/services/objects/objects_drop_check" "$WORK"/run/export/*/object.xml
+# Placement and metric scale against the ground truth: each exported mesh, placed by its
+# world_from_object, lies on a ground-truth object (mean Chamfer under 2 cm; a wrong pose or scale
+# is off by decimetres). The extents are reported, not asserted: they are not within 5 % yet
+# (docs/OBJECTS.md, "Measured").
+check "eval --export" "$BIN" eval --scene "$WORK/scene" --export "$WORK/run/export" --json
+check "every exported object lies on a ground-truth object" python3 -c "
+import json, sys
+d = json.loads(open('$WORK/out.txt').read().strip().splitlines()[-1])
+sys.exit(0 if d['count'] == $n and d['mean']['chamfer_m'] < 0.02 else 1)"
 for urdf in "$WORK"/run/export/*/object.urdf; do
   check "check_urdf $(basename "$(dirname "$urdf")")" check_urdf "$urdf"
 done

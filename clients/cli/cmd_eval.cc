@@ -10,6 +10,7 @@
 #include "common/eval/click_eval.h"
 #include "common/scene/image_io.h"
 #include "services/generation/completion_eval.h"
+#include "services/objects/export_eval.h"
 
 namespace instascene::cli {
 namespace {
@@ -57,7 +58,7 @@ absl::Status EvaluateCompletionCommand(const std::string& scene, const std::stri
 
 void AddEvalCommand(CLI::App& app, Action* action) {
   struct Args {
-    std::string scene, result, completion;
+    std::string scene, result, completion, export_dir;
     ClickEvalOptions options;
     bool labels_only = false, json = false;
   };
@@ -72,6 +73,9 @@ void AddEvalCommand(CLI::App& app, Action* action) {
   cmd->add_option("--completion", args->completion,
                   "Instead: score completed objects (a folder of per-object folders, e.g. "
                   "<run>/objects) for the raw crop, the closed crop and the completed object");
+  cmd->add_option("--export", args->export_dir,
+                  "Instead: score exported objects (the export stage's folder) in metres: extents "
+                  "against the ground-truth object's, and the placed mesh's Chamfer distance");
   cmd->add_option("--threshold", args->options.feature_threshold,
                   "Cosine threshold of feature masks (default 0.9)");
   cmd->add_option("--min-visible", args->options.min_visible_pixels,
@@ -82,8 +86,20 @@ void AddEvalCommand(CLI::App& app, Action* action) {
   cmd->callback([args, action] {
     *action = [args]() -> absl::Status {
       Stopwatch watch;
-      if (args->result.empty() == args->completion.empty()) {
-        return absl::InvalidArgumentError("give exactly one of --result and --completion");
+      if ((!args->result.empty()) + (!args->completion.empty()) + (!args->export_dir.empty()) != 1)
+        return absl::InvalidArgumentError(
+            "give exactly one of --result, --completion and --export");
+      if (!args->export_dir.empty()) {
+        ASSIGN_OR_RETURN(std::vector<objects::ExportObjectEval> evals,
+                         objects::EvaluateExport(args->scene, args->export_dir));
+        std::printf("%-6s %-16s %-26s %-26s %8s %10s\n", "object", "ground truth", "extent (m)",
+                    "gt extent (m)", "error", "chamfer m");
+        for (const objects::ExportObjectEval& e : evals)
+          std::printf("%-6u %-16s %7.3f %7.3f %7.3f    %7.3f %7.3f %7.3f    %7.1f%% %10.4f\n", e.id,
+                      e.gt_name.c_str(), e.extent.x(), e.extent.y(), e.extent.z(), e.gt_extent.x(),
+                      e.gt_extent.y(), e.gt_extent.z(), 100 * e.extent_error, e.chamfer);
+        if (args->json) std::printf("%s\n", objects::ExportEvalJson(evals).dump().c_str());
+        return absl::OkStatus();
       }
       if (!args->completion.empty()) {
         return EvaluateCompletionCommand(args->scene, args->completion, args->options.num_threads,

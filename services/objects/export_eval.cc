@@ -1,0 +1,124 @@
+#include "services/objects/export_eval.h"
+
+#include <filesystem>
+
+#include <Eigen/Geometry>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/file_io.h"
+#include "common/core/status.h"
+#include "common/eval/geometry_metrics.h"
+#include "common/mesh/mesh_ply.h"
+#include "common/scene/scene.h"
+
+namespace instascene::objects {
+namespace {
+namespace fs = std::filesystem;
+using nlohmann::json;
+
+absl::StatusOr<json> ReadJson(const std::string& path) {
+  ASSIGN_OR_RETURN(std::string text, ReadFileBounded(path, 64 << 20));
+  json j = json::parse(text, nullptr, false);
+  if (j.is_discarded()) return absl::DataLossError(absl::StrCat(path, ": not JSON"));
+  return j;
+}
+
+struct GtObject {
+  uint32_t id = 0;
+  std::string name;
+  std::vector<Eigen::Vector3f> samples;   // metres, world
+  std::vector<Eigen::Vector3f> vertices;  // metres, world
+};
+
+}  // namespace
+
+absl::StatusOr<std::vector<ExportObjectEval>> EvaluateExport(const std::string& scene_dir,
+                                                             const std::string& export_dir) {
+  ASSIGN_OR_RETURN(Scene scene, ReadScene(scene_dir));
+  if (!scene.meters_per_unit)
+    return absl::FailedPreconditionError(absl::StrCat(scene_dir, ": no meters_per_unit"));
+  const double mpu = *scene.meters_per_unit;
+  ASSIGN_OR_RETURN(json gt_list, ReadJson(scene.Path("gt/objects.json")));
+  if (!gt_list.is_array())
+    return absl::FailedPreconditionError(absl::StrCat(scene_dir, ": no ground truth objects"));
+  std::vector<GtObject> gts;
+  for (const json& o : gt_list) {
+    if (!o.contains("mesh") || !o["mesh"].is_string()) continue;
+    ASSIGN_OR_RETURN(TriangleMesh mesh, ReadMeshPly(scene.Path(o["mesh"].get<std::string>())));
+    GtObject g;
+    g.id = o.value("id", 0u);
+    g.name = o.value("name", "");
+    for (Eigen::Vector3f& v : mesh.vertices) v *= static_cast<float>(mpu);
+    g.samples = SampleSurface(mesh, 4000, g.id);
+    g.vertices = mesh.vertices;
+    gts.push_back(std::move(g));
+  }
+  ASSIGN_OR_RETURN(json catalogue, ReadJson((fs::path(export_dir) / "objects.json").string()));
+  std::vector<ExportObjectEval> out;
+  for (const json& entry : catalogue.value("objects", json::array())) {
+    const std::string dir = (fs::path(export_dir) / entry.value("dir", "")).string();
+    ASSIGN_OR_RETURN(json m, ReadJson(dir + "/manifest.json"));
+    ASSIGN_OR_RETURN(TriangleMesh mesh, ReadMeshPly(dir + "/mesh.ply"));
+    const json& pose = m["world_from_object"];
+    const json& q = pose["quaternion_xyzw"];
+    const Eigen::Quaterniond rotation(q[3].get<double>(), q[0].get<double>(), q[1].get<double>(),
+                                      q[2].get<double>());
+    const Eigen::Matrix3d r = rotation.normalized().toRotationMatrix();
+    const Eigen::Vector3d t(pose["translation"][0].get<double>(),
+                            pose["translation"][1].get<double>(),
+                            pose["translation"][2].get<double>());
+    TriangleMesh placed = mesh;
+    for (Eigen::Vector3f& v : placed.vertices) v = (r * v.cast<double>() + t).cast<float>();
+    const std::vector<Eigen::Vector3f> samples = SampleSurface(placed, 4000, 7);
+    ExportObjectEval e;
+    e.id = m.value("id", 0u);
+    e.chamfer = std::numeric_limits<double>::infinity();
+    const GtObject* best = nullptr;
+    for (const GtObject& g : gts) {
+      const double c = ComparePointClouds(samples, g.samples, 0.01).chamfer;
+      if (c < e.chamfer) {
+        e.chamfer = c;
+        best = &g;
+      }
+    }
+    if (best == nullptr) continue;
+    e.gt_id = best->id;
+    e.gt_name = best->name;
+    Eigen::AlignedBox3d gt_box, box;
+    for (const Eigen::Vector3f& v : best->vertices)
+      gt_box.extend(r.transpose() * (v.cast<double>() - t));
+    for (const Eigen::Vector3f& v : mesh.vertices) box.extend(v.cast<double>());
+    e.extent = box.sizes();
+    e.gt_extent = gt_box.sizes();
+    for (int a = 0; a < 3; ++a)
+      e.extent_error = std::max(
+          e.extent_error, std::abs(e.extent[a] - e.gt_extent[a]) / std::max(e.gt_extent[a], 1e-6));
+    out.push_back(e);
+  }
+  return out;
+}
+
+json ExportEvalJson(const std::vector<ExportObjectEval>& evals) {
+  json objects = json::array();
+  double chamfer = 0, extent = 0;
+  int within = 0;
+  for (const ExportObjectEval& e : evals) {
+    objects.push_back({{"id", e.id},
+                       {"gt_id", e.gt_id},
+                       {"gt_name", e.gt_name},
+                       {"extent_m", {e.extent.x(), e.extent.y(), e.extent.z()}},
+                       {"gt_extent_m", {e.gt_extent.x(), e.gt_extent.y(), e.gt_extent.z()}},
+                       {"extent_error", e.extent_error},
+                       {"chamfer_m", e.chamfer}});
+    chamfer += e.chamfer;
+    extent += e.extent_error;
+    within += e.extent_error <= 0.05;
+  }
+  const double n = std::max<size_t>(evals.size(), 1);
+  return {{"objects", objects},
+          {"mean", {{"extent_error", extent / n}, {"chamfer_m", chamfer / n}}},
+          {"extents_within_5_percent", within},
+          {"count", evals.size()}};
+}
+
+}  // namespace instascene::objects
