@@ -1,6 +1,8 @@
 #include "common/store/s3_blob_store.h"
 
 #include <algorithm>
+#include <atomic>
+#include <thread>
 
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
@@ -11,6 +13,7 @@ namespace {
 constexpr int64_t kMiB = int64_t{1} << 20;
 constexpr int64_t kMaxSinglePut = int64_t{5} << 30;  // S3's limit of one PUT (and of a part)
 constexpr size_t kMaxTrackedUploads = 4096;
+constexpr size_t kFindMissingConcurrency = 16;
 
 }  // namespace
 
@@ -55,11 +58,30 @@ absl::StatusOr<bool> S3BlobStore::Contains(const Digest& digest) {
 }
 
 absl::StatusOr<std::vector<Digest>> S3BlobStore::FindMissing(const std::vector<Digest>& digests) {
+  for (const Digest& d : digests) RETURN_IF_ERROR(ValidateDigest(d));
+  // One HEAD per digest, kFindMissingConcurrency in flight (network-bound: a scene upload asks for
+  // hundreds); the answer keeps the request's order.
+  std::vector<char> present(digests.size(), 0);
+  std::vector<absl::Status> errors(digests.size());
+  std::atomic<size_t> next{0};
+  auto work = [&] {
+    for (size_t i; (i = next.fetch_add(1)) < digests.size();) {
+      absl::StatusOr<bool> found = Contains(digests[i]);
+      if (found.ok())
+        present[i] = *found;
+      else
+        errors[i] = found.status();
+    }
+  };
+  const size_t threads = std::min(kFindMissingConcurrency, digests.size());
+  std::vector<std::thread> pool;
+  for (size_t t = 1; t < threads; ++t) pool.emplace_back(work);
+  work();
+  for (std::thread& t : pool) t.join();
   std::vector<Digest> missing;
-  for (const Digest& d : digests) {
-    RETURN_IF_ERROR(ValidateDigest(d));
-    ASSIGN_OR_RETURN(bool present, Contains(d));
-    if (!present) missing.push_back(d);
+  for (size_t i = 0; i < digests.size(); ++i) {
+    RETURN_IF_ERROR(errors[i]);
+    if (!present[i]) missing.push_back(digests[i]);
   }
   return missing;
 }

@@ -14,7 +14,7 @@
 //   holds (ListMultipartUploads + ListParts; no local state needed). FinishUpload completes the
 //   upload under `uploads/`, reads it back and hashes it, and only then copies it to `cas/`
 //   (multipart copy above `copy_part_bytes`); a mismatch deletes it and nothing becomes visible.
-// - FindMissing is one HEAD per digest (never a bucket listing); Stats lists `cas/`.
+// - FindMissing is one HEAD per digest (never a bucket listing), 16 in flight; Stats lists `cas/`.
 // Abandoned multipart uploads are not visible and cost storage only: configure the bucket's
 // lifecycle rule AbortIncompleteMultipartUpload (docs/DEPLOY.md).
 #pragma once

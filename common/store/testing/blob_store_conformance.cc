@@ -50,6 +50,23 @@ TEST_P(BlobStoreConformanceTest, PutReadFindMissingStats) {
   EXPECT_EQ(stats->total_bytes, 1000);
 }
 
+TEST_P(BlobStoreConformanceTest, FindMissingOfManyKeepsTheRequestOrder) {
+  auto store = Open();
+  ASSERT_NE(store, nullptr);
+  std::vector<Digest> all, expected;
+  for (int i = 0; i < 100; ++i) {
+    const std::string b = RandomBytes(64, 1000 + static_cast<uint64_t>(i));
+    all.push_back(ComputeDigest(b));
+    if (i % 3 == 0)
+      ASSERT_TRUE(store->Put(all.back(), b).ok());
+    else
+      expected.push_back(all.back());
+  }
+  const auto missing = store->FindMissing(all);
+  ASSERT_TRUE(missing.ok()) << missing.status();
+  EXPECT_EQ(*missing, expected);
+}
+
 TEST_P(BlobStoreConformanceTest, RejectsWrongDigestOversizedAndMalformedLeavingNothing) {
   StoreOptions options;
   options.max_blob_bytes = 100;
