@@ -9,6 +9,7 @@ SRC=$1
 BUILD=$2
 WORK=$(mktemp -d)
 trap 'rm -rf "$WORK"' EXIT
+source "$(dirname "$0")/npm_tools.sh"
 command -v kubectl >/dev/null || { echo "FAIL: kubectl missing"; exit 1; }
 command -v yamllint >/dev/null || { echo "FAIL: yamllint missing (scripts/install-deps.sh installs it)"; exit 1; }
 rendered=()
@@ -20,12 +21,7 @@ done
 yamllint -d '{extends: default, rules: {line-length: {max: 120}, document-start: disable, truthy: {check-keys: false}}}' \
   "$SRC/deploy"
 V="$BUILD/deploy-validate"
-mkdir -p "$V"
-if ! cmp -s "$SRC/tests/deploy/package-lock.json" "$V/package-lock.json" || [ ! -d "$V/node_modules" ]; then
-  cp "$SRC/tests/deploy/package.json" "$SRC/tests/deploy/package-lock.json" "$V/"
-  (cd "$V" && npm ci --no-audit --no-fund --loglevel=error >/dev/null 2>&1) ||
-    { echo "FAIL: npm ci of the schema packages"; exit 1; }
-fi
+npm_ci_tools "$SRC/tests/deploy" "$V" || { echo "FAIL: npm ci of the schema packages"; exit 1; }
 cp "$SRC/tests/deploy/validate.mjs" "$SRC/tests/deploy/consistency.mjs" "$V/"
 node "$V/validate.mjs" "${rendered[@]}" | tail -n 1 > "$WORK/schema.txt"
 node "$V/consistency.mjs" "$BUILD/bin" "$SRC/docker/Dockerfile" "${rendered[@]}" | tail -n 1 > "$WORK/consistency.txt"

@@ -11,14 +11,10 @@ BIN=$1
 SRC=$2
 BUILD=$3
 source "$(dirname "$0")/test_lib.sh"
+source "$(dirname "$0")/npm_tools.sh"
 command -v check_urdf >/dev/null || { echo "FAIL: check_urdf missing (scripts/install-deps.sh installs liburdfdom-tools)"; exit 1; }
 V="$BUILD/export-validate"
-mkdir -p "$V"
-if ! cmp -s "$SRC/tests/objects/package-lock.json" "$V/package-lock.json" || [ ! -d "$V/node_modules" ]; then
-  cp "$SRC/tests/objects/package.json" "$SRC/tests/objects/package-lock.json" "$V/"
-  (cd "$V" && npm ci --no-audit --no-fund --loglevel=error >/dev/null 2>&1) ||
-    { echo "FAIL: npm ci of gltf-validator"; exit 1; }
-fi
+npm_ci_tools "$SRC/tests/objects" "$V" || { echo "FAIL: npm ci of gltf-validator"; exit 1; }
 cp "$SRC/tests/objects/validate_glb.mjs" "$V/"
 
 check "synth" "$BIN" synth --out "$WORK/scene" --preset tiny --seed 1

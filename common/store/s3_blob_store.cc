@@ -234,12 +234,14 @@ absl::StatusOr<int64_t> S3BlobStore::CommittedSize(const Digest& digest) {
 absl::StatusOr<int64_t> S3BlobStore::Append(const Digest& digest, int64_t offset,
                                             absl::string_view data) {
   RETURN_IF_ERROR(CheckWritable(digest, options_));
-  ASSIGN_OR_RETURN(bool present, Contains(digest));
-  if (present) return digest.size_bytes;
   std::shared_ptr<Upload> upload = GetUpload(digest);
   {
     std::lock_guard<std::mutex> lock(upload->mutex);
-    RETURN_IF_ERROR(Load(digest, *upload));
+    if (!upload->loaded) {  // the first append of this process: not on every chunk
+      ASSIGN_OR_RETURN(bool present, Contains(digest));
+      if (present) return digest.size_bytes;
+      RETURN_IF_ERROR(Load(digest, *upload));
+    }
     if (upload->assembled) return digest.size_bytes;
     const int64_t durable = upload->durable();
     const int64_t committed = durable + static_cast<int64_t>(upload->buffer.size());
