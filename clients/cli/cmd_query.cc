@@ -10,7 +10,7 @@
 #include "common/core/status.h"
 #include "common/core/timer.h"
 #include "common/scene/image_io.h"
-#include "services/training/query.h"
+#include "services/objects/query_index.h"
 
 namespace instascene::cli {
 
@@ -43,8 +43,8 @@ void AddQueryCommand(CLI::App& app, Action* action) {
       ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
       ASSIGN_OR_RETURN(SegmentationResult result, ReadResult(args->result, cloud.size()));
       Stopwatch build;
-      ASSIGN_OR_RETURN(std::unique_ptr<training::QueryIndex> index,
-                       training::QueryIndex::Build(scene, cloud, result));
+      ASSIGN_OR_RETURN(std::unique_ptr<objects::QueryIndex> index,
+                       objects::QueryIndex::Build(scene, cloud, result));
       const double build_ms = build.ElapsedMs();
       const std::string& spec = !args->pixel.empty()   ? args->pixel
                                 : !args->point.empty() ? args->point
@@ -58,7 +58,7 @@ void AddQueryCommand(CLI::App& app, Action* action) {
         values.push_back(v);
       }
       Stopwatch click;
-      training::QueryAnswer answer;
+      objects::QueryAnswer answer;
       if (!args->pixel.empty()) {
         if (values.size() != 2) return absl::InvalidArgumentError("--pixel must be X,Y");
         ASSIGN_OR_RETURN(int view, ResolveView(scene, args->view));

@@ -18,7 +18,7 @@ int main(int argc, char** argv) {
   o.workers = {"generation"};
   return instascene::node::NodeMain(
       argc, argv,
-      "instascene-generation: leases complete jobs (one per object) and export jobs "
+      "instascene-generation: leases complete jobs (one per object) "
       "(needs --store and --scheduler)",
       o, true, true, stages, {instascene::node::GenerationStageService()});
 }

@@ -2,6 +2,7 @@
 
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 
 #include <spdlog/spdlog.h>
 
@@ -117,6 +118,16 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
     names.push_back("instascene.v1.Scheduler");
   }
   const std::string work_dir = (fs::path(options.data_dir) / "work").string();
+  // The scheduler's channel, known once the server runs (services built before ask it lazily).
+  struct SchedulerChannel {
+    std::mutex mutex;
+    std::shared_ptr<grpc::Channel> channel;
+  };
+  auto scheduler_channel = std::make_shared<SchedulerChannel>();
+  auto get_scheduler = [scheduler_channel]() {
+    std::lock_guard<std::mutex> lock(scheduler_channel->mutex);
+    return scheduler_channel->channel;
+  };
   std::vector<std::unique_ptr<worker::StageWorker>> workers;
   std::vector<std::unique_ptr<grpc::Service>> stage_services;
   for (const StageService* hosted_service : hosted) {
@@ -129,8 +140,12 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
     w.heartbeat_interval_ms = std::min(1000, options.lease_seconds * 1000 / 4);  // live progress
     RETURN_IF_ERROR(w.Validate(stages));
     workers.push_back(std::make_unique<worker::StageWorker>(w, blob_store, &stages));
-    stage_services.push_back(hosted_service->make(
-        workers.back().get(), blob_store, (fs::path(work_dir) / hosted_service->name).string()));
+    StageServiceContext context;
+    context.worker = workers.back().get();
+    context.store = blob_store;
+    context.work_dir = (fs::path(work_dir) / hosted_service->name).string();
+    context.scheduler = get_scheduler;
+    stage_services.push_back(hosted_service->make(context));
     services.push_back(stage_services.back().get());
     names.push_back(hosted_service->grpc_name);
   }
@@ -142,10 +157,14 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
   ASSIGN_OR_RETURN(std::unique_ptr<rpc::Server> server,
                    rpc::Server::Start(server_options, services, names));
   if (!workers.empty()) {
-    std::shared_ptr<grpc::Channel> scheduler_channel =
-        options.run_scheduler ? server->InProcessChannel()
-                              : rpc::Connect(options.scheduler_address);
-    for (auto& w : workers) w->Start(scheduler_channel);
+    std::shared_ptr<grpc::Channel> channel = options.run_scheduler
+                                                 ? server->InProcessChannel()
+                                                 : rpc::Connect(options.scheduler_address);
+    {
+      std::lock_guard<std::mutex> lock(scheduler_channel->mutex);
+      scheduler_channel->channel = channel;
+    }
+    for (auto& w : workers) w->Start(channel);
   }
   spdlog::info("instascene node serving on {} (data {}): {}", server->address(), options.data_dir,
                absl::StrJoin(names, ", "));

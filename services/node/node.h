@@ -52,15 +52,23 @@ struct NodeOptions {
   absl::Status Validate() const;
 };
 
+// What a stage service's adapter is built with.
+struct StageServiceContext {
+  const worker::StageWorker* worker = nullptr;  // null when the service leases no stage
+  store::BlobStore* store = nullptr;
+  std::string work_dir;  // the service's own scratch folder
+  // The scheduler's channel once the node serves (in-process, or --scheduler's address); null
+  // before. Services that ask the scheduler (the Objects service resolving scene names) call it
+  // per request.
+  std::function<std::shared_ptr<grpc::Channel>()> scheduler;
+};
+
 // A stage service a node can host: a worker leasing `kinds` and the gRPC adapter around it.
 struct StageService {
   std::string name;       // as --workers names it: "decomposition", "training", ...
   std::string grpc_name;  // full gRPC service name (health, reflection)
   std::vector<std::string> kinds;
-  // Builds the adapter; `work_dir` is the service's own scratch folder.
-  std::function<std::unique_ptr<grpc::Service>(
-      const worker::StageWorker* worker, store::BlobStore* store, const std::string& work_dir)>
-      make;
+  std::function<std::unique_ptr<grpc::Service>(const StageServiceContext& context)> make;
 };
 
 // Runs until SIGTERM or SIGINT, then drains. `stages` must hold every stage the scheduler accepts

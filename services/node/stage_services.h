@@ -1,6 +1,7 @@
 // services/node/stage_services.h: the stage services this project ships, for the binaries that
-// host them: decomposition (decompose jobs), training (train and segment jobs, click and point
-// queries) and generation (complete jobs, one per object). Links the stage libraries; the scheduler
+// host them: decomposition (decompose jobs), training (train and segment jobs),
+// generation (complete jobs, one per object) and objects (export jobs and the Objects
+// service: objects by id, point, click or ray). Links the stage libraries; the scheduler
 // binary does not link this.
 #pragma once
 
@@ -13,6 +14,7 @@ namespace instascene::node {
 StageService DecompositionStageService();
 StageService TrainingStageService();
 StageService GenerationStageService();
+StageService ObjectsStageService();  // export jobs + the Objects service (lookups)
 std::vector<StageService> AllStageServices();
 
 }  // namespace instascene::node

@@ -1,4 +1,4 @@
-// services/training/query.h: click queries against a segmentation result.
+// services/objects/query_index.h: click queries against a segmentation result.
 //
 // The index renders every view's instance label map once (per pixel, the label with the largest
 // summed blending weight) and keeps per-instance Gaussian lists and per-view pixel counts, so a
@@ -19,7 +19,7 @@
 #include "common/geometry/point_index.h"
 #include "common/scene/scene.h"
 
-namespace instascene::training {
+namespace instascene::objects {
 
 struct QueryAnswer {
   uint32_t instance = 0;                      // 0 = background / nothing
@@ -46,6 +46,10 @@ class QueryIndex {
   // The instance's mask in a view (W*H, 1 = selected).
   std::vector<uint8_t> Mask(uint32_t instance, int view) const;
   const std::vector<uint32_t>& Gaussians(uint32_t instance) const;
+  // Every instance with at least one Gaussian, ascending.
+  std::vector<uint32_t> Instances() const;
+  // Approximate memory held: label maps, labels, members, the k-d tree.
+  size_t ByteSize() const;
 
  private:
   QueryAnswer Answer(uint32_t instance) const;
@@ -58,4 +62,4 @@ class QueryIndex {
   std::unique_ptr<PointIndex3> points_;
 };
 
-}  // namespace instascene::training
+}  // namespace instascene::objects

@@ -1,11 +1,11 @@
-#include "services/training/query.h"
+#include "services/objects/query_index.h"
 
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
 #include "common/raster/label_render.h"
 #include "common/scene/image_io.h"
 
-namespace instascene::training {
+namespace instascene::objects {
 
 absl::StatusOr<std::unique_ptr<QueryIndex>> QueryIndex::Build(const Scene& scene,
                                                               const GaussianCloud& cloud,
@@ -97,4 +97,17 @@ const std::vector<uint32_t>& QueryIndex::Gaussians(uint32_t instance) const {
   return it == members_.end() ? kEmpty : it->second;
 }
 
-}  // namespace instascene::training
+std::vector<uint32_t> QueryIndex::Instances() const {
+  std::vector<uint32_t> ids;
+  for (const auto& [id, members] : members_) ids.push_back(id);
+  return ids;
+}
+
+size_t QueryIndex::ByteSize() const {
+  size_t bytes = sizeof(uint32_t) * 2 * labels_.size();                 // labels + members
+  bytes += (sizeof(Eigen::Vector3f) + 2 * sizeof(uint32_t)) * labels_.size();  // k-d tree
+  for (const std::vector<uint32_t>& map : label_maps_) bytes += sizeof(uint32_t) * map.size();
+  return bytes;
+}
+
+}  // namespace instascene::objects

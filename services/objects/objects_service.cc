@@ -1,0 +1,179 @@
+#include "services/objects/objects_service.h"
+
+#include <exception>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/core/timer.h"
+#include "common/rpc/status.h"
+
+namespace instascene::objects {
+
+absl::StatusOr<SceneOutputs> OutputsOf(const v1::Scene& scene) {
+  SceneOutputs out;
+  out.scene = scene.name();
+  const v1::StageOutput* segment = nullptr;
+  for (const v1::StageOutput& o : scene.outputs()) {
+    if (o.kind() == "segment" && o.item() < 0) segment = &o;
+  }
+  if (segment == nullptr)
+    return absl::FailedPreconditionError(absl::StrCat(
+        "scene '", scene.name(),
+        "' has no segmentation yet (its segment job has not succeeded): no objects to find"));
+  out.segment = rpc::FromProto(segment->output_manifest());
+  out.scene_manifest = rpc::FromProto(segment->scene_manifest());
+  for (const v1::StageOutput& o : scene.outputs()) {
+    if (rpc::FromProto(o.scene_manifest()) != out.scene_manifest) continue;
+    if (o.kind() == "export" && o.item() < 0) out.exported = rpc::FromProto(o.output_manifest());
+    if (o.kind() == "complete" && o.item() >= 0)
+      out.complete[o.item()] = rpc::FromProto(o.output_manifest());
+  }
+  return out;
+}
+
+ObjectsService::ObjectsService(store::BlobStore* store, SceneLookup lookup, std::string work_dir,
+                               ObjectsServiceOptions options)
+    : store_(store),
+      lookup_(std::move(lookup)),
+      work_dir_(std::move(work_dir)),
+      options_(options) {}
+
+namespace {
+
+absl::Status CheckSceneName(const std::string& scene) {
+  if (scene.empty()) return absl::InvalidArgumentError("scene: a scene name is required");
+  if (scene.size() > 256)
+    return absl::InvalidArgumentError(
+        absl::StrCat("scene: a name of ", scene.size(), " bytes (at most 256)"));
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+ObjectsService::Loaded ObjectsService::Index(const std::string& scene, bool* fresh) {
+  *fresh = false;
+  RETURN_IF_ERROR(CheckSceneName(scene));
+  ASSIGN_OR_RETURN(v1::Scene described, lookup_(scene));
+  ASSIGN_OR_RETURN(SceneOutputs outputs, OutputsOf(described));
+  const std::string key = outputs.Key();
+  std::promise<Loaded> promise;
+  std::shared_future<Loaded> future;
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (auto it = lru_.begin(); it != lru_.end(); ++it) {
+      if (it->key == key) {
+        lru_.splice(lru_.begin(), lru_, it);
+        future = lru_.front().future;
+        break;
+      }
+    }
+    if (future.valid()) {
+      ++hits_;
+    } else {
+      ++loads_;
+      future = promise.get_future().share();
+      lru_.push_front(Entry{key, future, 0});
+      *fresh = true;
+    }
+  }
+  if (!*fresh) return future.get();
+  // Load outside the lock; an exception (e.g. allocation failure) fails this load only.
+  Loaded loaded = absl::InternalError("index load did not finish");
+  try {
+    absl::StatusOr<std::unique_ptr<SceneObjects>> built =
+        SceneObjects::Load(*store_, outputs, work_dir_);
+    if (built.ok()) {
+      loaded = std::shared_ptr<const SceneObjects>(std::move(*built));
+    } else {
+      loaded = absl::Status(built.status().code(),
+                            absl::StrCat("scene '", scene, "': ", built.status().message()));
+    }
+  } catch (const std::exception& e) {
+    loaded = absl::ResourceExhaustedError(
+        absl::StrCat("scene '", scene, "': loading its objects failed: ", e.what()));
+  }
+  promise.set_value(loaded);
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (auto it = lru_.begin(); it != lru_.end(); ++it) {
+    if (it->key != key) continue;
+    if (loaded.ok()) {
+      it->bytes = (*loaded)->ByteSize();
+    } else {
+      lru_.erase(it);  // a failed load is retried by the next query
+    }
+    break;
+  }
+  Evict();
+  return loaded;
+}
+
+void ObjectsService::Evict() {
+  int64_t total = 0;
+  for (const Entry& e : lru_) total += static_cast<int64_t>(e.bytes);
+  // Keep the newest entry whatever its size; drop loaded entries from the old end.
+  if (lru_.empty()) return;
+  for (auto it = std::prev(lru_.end()); total > options_.cache_bytes && it != lru_.begin();) {
+    auto newer = std::prev(it);
+    if (it->bytes > 0) {  // not still loading
+      total -= static_cast<int64_t>(it->bytes);
+      lru_.erase(it);
+    }
+    it = newer;
+  }
+}
+
+ObjectsService::CacheStats ObjectsService::cache_stats() const {
+  std::lock_guard<std::mutex> lock(mutex_);
+  CacheStats s;
+  s.entries = static_cast<int64_t>(lru_.size());
+  for (const Entry& e : lru_) s.bytes += static_cast<int64_t>(e.bytes);
+  s.loads = loads_;
+  s.hits = hits_;
+  return s;
+}
+
+grpc::Status ObjectsService::GetObject(grpc::ServerContext*, const v1::GetObjectRequest* request,
+                                       v1::Object* response) {
+  auto answer = [&]() -> absl::Status {
+    bool fresh = false;
+    ASSIGN_OR_RETURN(std::shared_ptr<const SceneObjects> index, Index(request->scene(), &fresh));
+    Stopwatch watch;
+    ASSIGN_OR_RETURN(uint32_t id, index->Resolve(request->selector()));
+    ASSIGN_OR_RETURN(*response, index->Describe(id));
+    response->set_query_microseconds(watch.ElapsedSeconds() * 1e6);
+    response->set_index_loaded(!fresh);
+    return absl::OkStatus();
+  };
+  return rpc::ToGrpcStatus(answer());
+}
+
+grpc::Status ObjectsService::ListObjects(grpc::ServerContext*,
+                                         const v1::ListObjectsRequest* request,
+                                         v1::ListObjectsResponse* response) {
+  auto answer = [&]() -> absl::Status {
+    const int limit = request->limit() == 0 ? 100 : request->limit();
+    if (limit < 0 || limit > options_.max_page)
+      return absl::InvalidArgumentError(
+          absl::StrCat("limit ", request->limit(), ": must be in [0, ", options_.max_page, "]"));
+    uint32_t after = 0;
+    if (!request->page_token().empty() && !absl::SimpleAtoi(request->page_token(), &after))
+      return absl::InvalidArgumentError(
+          absl::StrCat("page_token '", request->page_token().substr(0, 40),
+                       "' is not one this service gave (next_page_token)"));
+    bool fresh = false;
+    ASSIGN_OR_RETURN(std::shared_ptr<const SceneObjects> index, Index(request->scene(), &fresh));
+    for (uint32_t id : index->Ids()) {
+      if (id <= after) continue;
+      if (response->objects_size() == limit) {
+        response->set_next_page_token(std::to_string(response->objects().rbegin()->id()));
+        break;
+      }
+      ASSIGN_OR_RETURN(*response->add_objects(), index->Describe(id));
+    }
+    return absl::OkStatus();
+  };
+  return rpc::ToGrpcStatus(answer());
+}
+
+}  // namespace instascene::objects

@@ -1,0 +1,72 @@
+// services/objects/scene_objects.h: the loaded index of one scene's objects, what the Objects
+// service answers from. Built from stored results only:
+//   - the scene (scene.json and its splat; images and masks are not read),
+//   - its `segment` output (per-Gaussian instance labels): click, point and ray lookups through a
+//     QueryIndex (every view's label map rendered once; a k-d tree over the Gaussians),
+//   - its `export` output when there is one (objects.json and each object's manifest.json: pose,
+//     metric size, artefact digests), else its `complete` outputs (the completed objects), else
+//     the segmentation's per-instance summary (a raw crop, no artefacts but the instance's splat).
+// Immutable once loaded: queries are const and safe from many threads.
+#pragma once
+
+#include <cstdint>
+#include <map>
+#include <memory>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "absl/status/statusor.h"
+#include "common/store/blob_store.h"
+#include "common/store/manifest.h"
+#include "instascene/v1/objects.pb.h"
+#include "services/objects/query_index.h"
+
+namespace instascene::objects {
+
+// The stored results one index is built from (the scheduler's latest outputs of a scene).
+struct SceneOutputs {
+  std::string scene;               // name
+  store::Digest scene_manifest;    // the submission the segment output was computed from
+  store::Digest segment;           // `segment` output (required)
+  std::optional<store::Digest> exported;  // `export` output
+  std::map<int64_t, store::Digest> complete;  // item -> `complete` output
+  // Identifies the index: equal keys give equal answers.
+  std::string Key() const;
+};
+
+class SceneObjects {
+ public:
+  // `work_dir` receives the scene's splat and the labels (content-addressed folders; reused).
+  static absl::StatusOr<std::unique_ptr<SceneObjects>> Load(store::BlobStore& store,
+                                                            const SceneOutputs& outputs,
+                                                            const std::string& work_dir);
+
+  // The object a selector names: NOT_FOUND (with what was asked) when nothing is there,
+  // INVALID_ARGUMENT / OUT_OF_RANGE for a malformed selector.
+  absl::StatusOr<uint32_t> Resolve(const v1::ObjectSelector& selector) const;
+  // The answer for an object id (NOT_FOUND if the scene has no such object).
+  absl::StatusOr<v1::Object> Describe(uint32_t id) const;
+  // Every object id, ascending.
+  std::vector<uint32_t> Ids() const;
+  // Approximate memory held (label maps, Gaussians, k-d tree, manifests): the cache's unit.
+  size_t ByteSize() const { return bytes_; }
+
+ private:
+  SceneObjects() = default;
+  absl::Status LoadExport(store::BlobStore& store, const store::Digest& digest);
+  absl::Status LoadCompleted(store::BlobStore& store, const std::map<int64_t, store::Digest>& items);
+  void AddSegmentOnly(const store::Manifest& segment);
+
+  SceneOutputs outputs_;
+  Scene scene_;
+  GaussianCloud cloud_;
+  std::unique_ptr<QueryIndex> index_;
+  float default_radius_ = 0;  // 2 % of the scene's robust diagonal
+  float max_radius_ = 0;      // the diagonal
+  std::optional<double> meters_per_unit_;
+  std::map<uint32_t, v1::Object> objects_;  // id -> answer (query fields unset)
+  size_t bytes_ = 0;
+};
+
+}  // namespace instascene::objects
