@@ -1,7 +1,7 @@
 // The services wired together in one process over gRPC (loopback / in-process channels): bad
 // requests are refused with the right status and leave no trace; workers run a pipeline; the DAG
-// fans out one job per instance and fans in a join (test stages registered here); the training
-// service answers click queries like the offline query index.
+// fans out one job per instance and fans in a join (test stages registered here); the Objects
+// service answers clicks on the pipeline's result like the offline query index.
 #include <gtest/gtest.h>
 
 #include <atomic>
@@ -17,14 +17,14 @@
 #include "common/store/manifest.h"
 #include "common/synth/scene_writer.h"
 #include "grpc/health/v1/health.grpc.pb.h"
-#include "instascene/v1/training.grpc.pb.h"
+#include "instascene/v1/objects.grpc.pb.h"
 #include "services/scheduler/scheduler_service.h"
 #include "services/scheduler/sqlite_queue_store.h"
 #include "services/stages/all_stages.h"
 #include "services/store/remote_blob_store.h"
 #include "services/store/store_service.h"
-#include "services/training/query.h"
-#include "services/training/training_service.h"
+#include "services/objects/objects_service.h"
+#include "services/objects/query_index.h"
 #include "services/worker/stage_worker.h"
 
 namespace instascene {
@@ -93,11 +93,20 @@ class ServicesTest : public ::testing::Test {
     store_service_ = std::make_unique<store_service::StoreService>(store_.get());
     scheduler_service_ = std::make_unique<scheduler::SchedulerService>(
         queue_.get(), store_.get(), &stages_, scheduler::SchedulerServiceOptions{});
-    training_service_ =
-        std::make_unique<training::TrainingService>(store_.get(), root_ + "/query", nullptr);
+    objects_service_ = std::make_unique<objects::ObjectsService>(
+        store_.get(),
+        [this](const std::string& scene) -> absl::StatusOr<v1::Scene> {
+          v1::GetSceneRequest request;
+          request.set_scene(scene);
+          v1::Scene answer;
+          grpc::ClientContext context;
+          RETURN_IF_ERROR(rpc::FromGrpcStatus(scheduler_->GetScene(&context, request, &answer)));
+          return answer;
+        },
+        root_ + "/objects");
     auto server = rpc::Server::Start(
-        {"127.0.0.1:0"}, {store_service_.get(), scheduler_service_.get(), training_service_.get()},
-        {"instascene.v1.ContentStore", "instascene.v1.Scheduler", "instascene.v1.Training"});
+        {"127.0.0.1:0"}, {store_service_.get(), scheduler_service_.get(), objects_service_.get()},
+        {"instascene.v1.ContentStore", "instascene.v1.Scheduler", "instascene.v1.Objects"});
     ASSERT_TRUE(server.ok()) << server.status();
     server_ = std::move(*server);
     channel_ = rpc::Connect(server_->address());
@@ -173,7 +182,7 @@ class ServicesTest : public ::testing::Test {
   std::unique_ptr<scheduler::JobQueue> queue_;
   std::unique_ptr<store_service::StoreService> store_service_;
   std::unique_ptr<scheduler::SchedulerService> scheduler_service_;
-  std::unique_ptr<training::TrainingService> training_service_;
+  std::unique_ptr<objects::ObjectsService> objects_service_;
   std::unique_ptr<rpc::Server> server_;
   std::shared_ptr<grpc::Channel> channel_;
   std::unique_ptr<store_service::RemoteBlobStore> remote_;
@@ -299,7 +308,7 @@ TEST_F(ServicesTest, BadRequestsAreRejectedAndLeaveNoTrace) {
   EXPECT_EQ(CountFiles(root_ + "/store/tmp"), 0u);
 }
 
-TEST_F(ServicesTest, WorkersRunThePipelineAndTrainingAnswersClicks) {
+TEST_F(ServicesTest, WorkersRunThePipelineAndTheObjectsServiceAnswersClicks) {
   StartWorker({"decompose"});
   StartWorker({"train", "segment"});
   v1::SubmitPipelineResponse response;
@@ -323,36 +332,40 @@ TEST_F(ServicesTest, WorkersRunThePipelineAndTrainingAnswersClicks) {
   auto cloud = ReadSceneGaussians(*scene);
   auto result = ReadResult(result_dir, cloud->size());
   ASSERT_TRUE(result.ok()) << result.status();
-  auto index = training::QueryIndex::Build(*scene, *cloud, *result);
+  auto index = objects::QueryIndex::Build(*scene, *cloud, *result);
   ASSERT_TRUE(index.ok());
-  auto stub = v1::Training::NewStub(channel_);
+  auto stub = v1::Objects::NewStub(channel_);
   int hits = 0;
   for (int y = 4; y < scene->views[2].camera.height; y += 9) {
     for (int x = 4; x < scene->views[2].camera.width; x += 9) {
-      v1::QueryRequest q;
-      rpc::ToProto(scene_manifest_, q.mutable_scene_manifest());
-      *q.mutable_result_manifest() = job.output_manifest();
-      q.set_view(scene->views[2].name);
-      q.set_x(x);
-      q.set_y(y);
-      v1::QueryResponse answer;
+      v1::GetObjectRequest q;
+      q.set_scene("tiny");
+      q.mutable_selector()->mutable_click()->set_view(scene->views[2].name);
+      q.mutable_selector()->mutable_click()->set_x(x);
+      q.mutable_selector()->mutable_click()->set_y(y);
+      v1::Object answer;
       grpc::ClientContext context;
-      ASSERT_TRUE(stub->Query(&context, q, &answer).ok());
+      const grpc::Status status = stub->GetObject(&context, q, &answer);
       const auto expected = (*index)->Click(2, x, y);
-      EXPECT_EQ(answer.instance(), expected->instance) << x << "," << y;
-      hits += answer.instance() != 0;
+      if (expected->instance == 0) {
+        EXPECT_EQ(status.error_code(), grpc::StatusCode::NOT_FOUND) << x << "," << y;
+        continue;
+      }
+      ASSERT_TRUE(status.ok()) << status.error_message();
+      EXPECT_EQ(answer.id(), expected->instance) << x << "," << y;
+      EXPECT_EQ(answer.source(), "segment");  // no export in this pipeline
+      ++hits;
     }
   }
   EXPECT_GT(hits, 0);
   // A click outside the image is out of range.
-  v1::QueryRequest bad;
-  rpc::ToProto(scene_manifest_, bad.mutable_scene_manifest());
-  *bad.mutable_result_manifest() = job.output_manifest();
-  bad.set_view(scene->views[2].name);
-  bad.set_x(100000);
-  v1::QueryResponse ignored;
+  v1::GetObjectRequest bad;
+  bad.set_scene("tiny");
+  bad.mutable_selector()->mutable_click()->set_view(scene->views[2].name);
+  bad.mutable_selector()->mutable_click()->set_x(100000);
+  v1::Object ignored;
   grpc::ClientContext context;
-  EXPECT_EQ(stub->Query(&context, bad, &ignored).error_code(), grpc::StatusCode::OUT_OF_RANGE);
+  EXPECT_EQ(stub->GetObject(&context, bad, &ignored).error_code(), grpc::StatusCode::OUT_OF_RANGE);
 }
 
 TEST_F(ServicesTest, TheDagFansOutPerInstanceAndFansInOnce) {
