@@ -27,6 +27,7 @@ void AddQueryCommand(CLI::App& app, Action* action);
 void AddCompleteCommand(CLI::App& app, Action* action);
 void AddServeCommand(CLI::App& app, Action* action);
 void AddClientCommands(CLI::App& app, Action* action);  // submit, watch, jobs, fetch, cancel
+void AddObjectCommands(CLI::App& app, Action* action);  // object, objects
 
 // Prints one JSON object as the last stdout line (the --json contract).
 void PrintJsonLine(const std::string& json);

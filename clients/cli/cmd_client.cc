@@ -14,41 +14,22 @@
 #include "clients/cli/cli.h"
 #include "clients/cli/progress.h"
 #include "common/core/status.h"
-#include "common/rpc/server.h"
 #include "common/rpc/status.h"
-#include "common/store/manifest.h"
-#include "instascene/v1/scheduler.grpc.pb.h"
+#include "instascene/client/services.h"
 #include "services/scheduler/job_proto.h"
-#include "services/store/remote_blob_store.h"
 
 namespace instascene::cli {
 namespace {
 
 constexpr char kDefaultServer[] = "127.0.0.1:50051";
 
-struct Connection {
-  std::shared_ptr<grpc::Channel> channel;
-  std::unique_ptr<v1::Scheduler::Stub> scheduler;
-};
-
-Connection ConnectTo(const std::string& address) {
-  Connection c;
-  c.channel = rpc::Connect(address);
-  c.scheduler = v1::Scheduler::NewStub(c.channel);
-  return c;
-}
-
-void SetDeadline(grpc::ClientContext* context, int seconds = 30) {
-  context->set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(seconds));
-}
-
-absl::Status Call(const grpc::Status& status, const std::string& server) {
-  if (status.error_code() == grpc::StatusCode::UNAVAILABLE ||
-      status.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED)
-    return absl::UnavailableError(absl::StrCat("server ", server,
-                                               " unreachable: ", status.error_message(),
-                                               " (is `instascene serve` running?)"));
-  return rpc::FromGrpcStatus(status);
+// Every command connects through the C++ client library (deadlines, retries while UNAVAILABLE).
+absl::StatusOr<std::unique_ptr<client::Client>> ConnectTo(const std::string& server,
+                                                          const std::string& store = "") {
+  client::ClientOptions options;
+  options.server = server;
+  options.store = store;
+  return client::Client::Connect(options);
 }
 
 nlohmann::json JobJson(const v1::Job& j) {
@@ -119,14 +100,15 @@ bool IsFinalState(v1::JobState s) {
 
 // Streams job snapshots until every watched job is final. Prints a line per state change and per
 // progress step of 10 %; returns the final snapshots.
-absl::StatusOr<std::map<std::string, v1::Job>> Watch(Connection& c, const std::string& server,
+absl::StatusOr<std::map<std::string, v1::Job>> Watch(client::Client& c,
                                                      const std::vector<std::string>& ids,
                                                      const std::string& scene) {
   v1::WatchJobsRequest request;
   for (const std::string& id : ids) request.add_job_ids(id);
   request.set_scene(scene);
   grpc::ClientContext context;
-  std::unique_ptr<grpc::ClientReader<v1::Job>> reader(c.scheduler->WatchJobs(&context, request));
+  std::unique_ptr<grpc::ClientReader<v1::Job>> reader(
+      client::SchedulerStub(c).WatchJobs(&context, request));
   std::map<std::string, v1::Job> last;
   std::map<std::string, std::string> printed;
   v1::Job job;
@@ -145,7 +127,8 @@ absl::StatusOr<std::map<std::string, v1::Job>> Watch(Connection& c, const std::s
     }
     last[job.id()] = job;
   }
-  RETURN_IF_ERROR(Call(reader->Finish(), server));
+  const grpc::Status finished = reader->Finish();
+  RETURN_IF_ERROR(client::Call(c, "scheduler", [&](grpc::ClientContext*) { return finished; }));
   return last;
 }
 
@@ -190,60 +173,44 @@ void AddClientCommands(CLI::App& app, Action* action) {
           return absl::InvalidArgumentError("--params is not a JSON object");
       }
       if (a.iterations > 0) params["train"]["iterations"] = a.iterations;
-      ASSIGN_OR_RETURN(store::Manifest manifest, store::SceneManifestFromDirectory(a.scene));
-      Connection c = ConnectTo(a.server);
-      absl::StatusOr<std::unique_ptr<store_service::RemoteBlobStore>> connected =
-          store_service::RemoteBlobStore::Connect(
-              a.store.empty() ? c.channel : rpc::Connect(a.store), 5000);
-      if (!connected.ok())
-        return absl::UnavailableError(absl::StrCat("store ", a.store.empty() ? a.server : a.store,
-                                                   " unreachable: ", connected.status().message(),
-                                                   " (is `instascene serve` running?)"));
-      std::unique_ptr<store_service::RemoteBlobStore> blobs = std::move(*connected);
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(a.server, a.store));
+      client::SubmitRequest request;
+      request.scene_dir = a.scene;
+      request.name = a.name;
+      request.parameters_json = params.dump();
+      request.stages = a.stages;
+      request.priority = a.priority;
       ProgressBar bar("upload");
       int64_t last_mb = -1;
-      ASSIGN_OR_RETURN(
-          store::UploadReport upload,
-          store::UploadManifest(*blobs, manifest, a.scene, [&](int64_t done, int64_t total) {
-            if (done / (1 << 20) == last_mb && done != total) return;
-            last_mb = done / (1 << 20);
-            bar.Update(static_cast<int>(done >> 10), static_cast<int>(total >> 10));
-          }));
+      ASSIGN_OR_RETURN(client::SubmitResult submitted,
+                       c->Submit(request, [&](int64_t done, int64_t total) {
+                         if (done / (1 << 20) == last_mb && done != total) return;
+                         last_mb = done / (1 << 20);
+                         bar.Update(static_cast<int>(done >> 10), static_cast<int>(total >> 10));
+                       }));
       std::fprintf(stderr, "upload: %lld files (%.1f MB) sent, %lld already in the store\n",
-                   static_cast<long long>(upload.files_sent), upload.bytes_sent / 1e6,
-                   static_cast<long long>(upload.files_skipped));
-      v1::SubmitPipelineRequest request;
-      rpc::ToProto(upload.manifest, request.mutable_scene_manifest());
-      const std::string name =
-          a.name.empty() ? std::filesystem::path(a.scene).lexically_normal().filename().string()
-                         : a.name;
-      request.set_scene(name);
-      request.set_parameters_json(params.dump());
-      request.set_priority(a.priority);
-      for (const std::string& stage : a.stages) request.add_stages(stage);
-      v1::SubmitPipelineResponse response;
-      grpc::ClientContext context;
-      SetDeadline(&context);
-      RETURN_IF_ERROR(Call(c.scheduler->SubmitPipeline(&context, request, &response), a.server));
+                   static_cast<long long>(submitted.files_sent), submitted.bytes_sent / 1e6,
+                   static_cast<long long>(submitted.files_skipped));
       nlohmann::json jobs = nlohmann::json::array();
-      for (int i = 0; i < response.jobs_size(); ++i) {
-        const v1::Job& j = response.jobs(i);
-        std::fprintf(stderr, "job %s %-9s %s%s\n", j.id().c_str(), j.kind().c_str(),
-                     scheduler::StateName(j.state()).c_str(),
-                     response.created(i) ? "" : " (existing job)");
-        nlohmann::json jj = JobJson(j);
-        jj["created"] = response.created(i);
-        jobs.push_back(jj);
+      std::vector<std::string> ids;
+      for (const client::SubmittedJob& j : submitted.jobs) {
+        std::fprintf(stderr, "job %s %-9s %s%s\n", j.id.c_str(), j.kind.c_str(), j.state.c_str(),
+                     j.created ? "" : " (existing job)");
+        jobs.push_back({{"id", j.id},
+                        {"kind", j.kind},
+                        {"item", j.item},
+                        {"scene", submitted.scene},
+                        {"state", j.state},
+                        {"created", j.created}});
+        ids.push_back(j.id);
       }
-      nlohmann::json summary = {{"scene", name},
-                                {"scene_manifest", upload.manifest.ToString()},
-                                {"uploaded_files", upload.files_sent},
-                                {"uploaded_bytes", upload.bytes_sent},
+      nlohmann::json summary = {{"scene", submitted.scene},
+                                {"scene_manifest", submitted.scene_manifest},
+                                {"uploaded_files", submitted.files_sent},
+                                {"uploaded_bytes", submitted.bytes_sent},
                                 {"jobs", jobs}};
       if (a.wait) {
-        std::vector<std::string> ids;
-        for (const v1::Job& j : response.jobs()) ids.push_back(j.id());
-        ASSIGN_OR_RETURN(auto final_jobs, Watch(c, a.server, ids, ""));
+        ASSIGN_OR_RETURN(auto final_jobs, Watch(*c, ids, ""));
         summary["jobs"] = nlohmann::json::array();
         for (const std::string& id : ids) summary["jobs"].push_back(JobJson(final_jobs[id]));
       }
@@ -271,8 +238,8 @@ void AddClientCommands(CLI::App& app, Action* action) {
     *action = [watch]() -> absl::Status {
       if (watch->ids.empty() && watch->scene.empty())
         return absl::InvalidArgumentError("give job ids or --scene");
-      Connection c = ConnectTo(watch->server);
-      ASSIGN_OR_RETURN(auto jobs, Watch(c, watch->server, watch->ids, watch->scene));
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(watch->server));
+      ASSIGN_OR_RETURN(auto jobs, Watch(*c, watch->ids, watch->scene));
       nlohmann::json out = nlohmann::json::array();
       std::string bad;
       for (const auto& [id, j] : jobs) {
@@ -306,7 +273,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
   l->add_flag("--json", list->json, "Print {\"jobs\", \"stats\"} as the last stdout line");
   l->callback([list, action] {
     *action = [list]() -> absl::Status {
-      Connection c = ConnectTo(list->server);
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(list->server));
       v1::ListJobsRequest request;
       request.set_scene(list->scene);
       request.set_limit(list->limit);
@@ -318,15 +285,13 @@ void AddClientCommands(CLI::App& app, Action* action) {
         }
       }
       v1::ListJobsResponse response;
-      grpc::ClientContext context;
-      SetDeadline(&context);
-      RETURN_IF_ERROR(Call(c.scheduler->ListJobs(&context, request, &response), list->server));
+      RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
+        return client::SchedulerStub(*c).ListJobs(context, request, &response);
+      }));
       v1::QueueStats stats;
-      grpc::ClientContext stats_context;
-      SetDeadline(&stats_context);
-      RETURN_IF_ERROR(
-          Call(c.scheduler->GetQueueStats(&stats_context, v1::GetQueueStatsRequest(), &stats),
-               list->server));
+      RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
+        return client::SchedulerStub(*c).GetQueueStats(context, v1::GetQueueStatsRequest(), &stats);
+      }));
       std::printf("%-17s %-22s %-16s %-9s %-3s %s\n", "JOB", "KIND", "SCENE", "STATE", "TRY",
                   "PROGRESS / ERROR");
       nlohmann::json jobs = nlohmann::json::array();
@@ -395,19 +360,15 @@ void AddClientCommands(CLI::App& app, Action* action) {
     *action = [fetch]() -> absl::Status {
       if (fetch->id.empty() == fetch->scene.empty())
         return absl::InvalidArgumentError("give a job id or --scene NAME (one of them)");
-      Connection c = ConnectTo(fetch->server);
-      // (job id or stage output, target directory)
-      std::vector<std::pair<v1::StageOutput, std::string>> outputs;
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(fetch->server, fetch->store));
+      // (stage output, target directory)
+      std::vector<std::pair<client::StageOutput, std::string>> outputs;
       if (!fetch->scene.empty()) {
-        v1::GetSceneRequest request;
-        request.set_scene(fetch->scene);
-        v1::Scene scene;
-        grpc::ClientContext context;
-        SetDeadline(&context);
-        RETURN_IF_ERROR(Call(c.scheduler->GetScene(&context, request, &scene), fetch->server));
-        for (const v1::StageOutput& o : scene.outputs()) {
-          std::filesystem::path dir = std::filesystem::path(fetch->out) / o.kind();
-          if (o.item() >= 0) dir /= std::to_string(o.item());
+        ASSIGN_OR_RETURN(std::vector<client::StageOutput> stage_outputs,
+                         c->SceneOutputs(fetch->scene));
+        for (const client::StageOutput& o : stage_outputs) {
+          std::filesystem::path dir = std::filesystem::path(fetch->out) / o.kind;
+          if (o.item >= 0) dir /= std::to_string(o.item);
           outputs.emplace_back(o, dir.string());
         }
         if (outputs.empty())
@@ -417,35 +378,28 @@ void AddClientCommands(CLI::App& app, Action* action) {
         v1::GetJobRequest request;
         request.set_job_id(fetch->id);
         v1::Job job;
-        grpc::ClientContext context;
-        SetDeadline(&context);
-        RETURN_IF_ERROR(Call(c.scheduler->GetJob(&context, request, &job), fetch->server));
+        RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
+          return client::SchedulerStub(*c).GetJob(context, request, &job);
+        }));
         if (job.state() != v1::JOB_STATE_SUCCEEDED)
           return absl::FailedPreconditionError(
               absl::StrCat("job ", fetch->id, " is ", scheduler::StateName(job.state()),
                            ", not succeeded; nothing to fetch yet"));
-        v1::StageOutput o;
-        o.set_kind(job.kind());
-        o.set_item(job.item());
-        o.set_job_id(job.id());
-        *o.mutable_output_manifest() = job.output_manifest();
-        outputs.emplace_back(o, fetch->out);
+        outputs.emplace_back(client::StageOutput{job.kind(), job.item(), job.id(),
+                                                 job.output_manifest().hash(),
+                                                 job.output_manifest().size_bytes()},
+                             fetch->out);
       }
-      ASSIGN_OR_RETURN(std::unique_ptr<store_service::RemoteBlobStore> blobs,
-                       store_service::RemoteBlobStore::Connect(
-                           fetch->store.empty() ? c.channel : rpc::Connect(fetch->store), 5000));
       nlohmann::json fetched = nlohmann::json::array();
       int64_t files = 0, bytes = 0;
       for (const auto& [o, dir] : outputs) {
-        const store::Digest digest = rpc::FromProto(o.output_manifest());
-        ASSIGN_OR_RETURN(store::Manifest manifest, store::ReadManifest(*blobs, digest));
-        RETURN_IF_ERROR(store::MaterializeManifest(*blobs, manifest, dir));
-        files += static_cast<int64_t>(manifest.files.size());
-        bytes += manifest.TotalBytes();
-        fetched.push_back({{"kind", o.kind()},
-                           {"item", o.item()},
-                           {"job", o.job_id()},
-                           {"files", manifest.files.size()},
+        ASSIGN_OR_RETURN(client::Transfer t, c->FetchOutput(o, dir));
+        files += t.files;
+        bytes += t.bytes;
+        fetched.push_back({{"kind", o.kind},
+                           {"item", o.item},
+                           {"job", o.job_id},
+                           {"files", t.files},
                            {"out", dir}});
       }
       std::fprintf(stderr, "fetch: %lld files (%.1f MB) of %zu outputs into %s\n",
@@ -478,16 +432,15 @@ void AddClientCommands(CLI::App& app, Action* action) {
     *action = [cancel]() -> absl::Status {
       if (cancel->id.empty() == cancel->scene.empty())
         return absl::InvalidArgumentError("give a job id or --scene NAME (one of them)");
-      Connection c = ConnectTo(cancel->server);
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(cancel->server));
       std::vector<v1::Job> jobs;
-      grpc::ClientContext context;
-      SetDeadline(&context);
       if (!cancel->scene.empty()) {
         v1::CancelSceneRequest request;
         request.set_scene(cancel->scene);
         v1::CancelSceneResponse response;
-        RETURN_IF_ERROR(
-            Call(c.scheduler->CancelScene(&context, request, &response), cancel->server));
+        RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
+          return client::SchedulerStub(*c).CancelScene(context, request, &response);
+        }));
         jobs.assign(response.jobs().begin(), response.jobs().end());
         std::fprintf(stderr, "scene %s: %zu unfinished jobs cancelled or asked to stop\n",
                      cancel->scene.c_str(), jobs.size());
@@ -495,7 +448,9 @@ void AddClientCommands(CLI::App& app, Action* action) {
         v1::CancelJobRequest request;
         request.set_job_id(cancel->id);
         v1::Job job;
-        RETURN_IF_ERROR(Call(c.scheduler->CancelJob(&context, request, &job), cancel->server));
+        RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
+          return client::SchedulerStub(*c).CancelJob(context, request, &job);
+        }));
         jobs.push_back(job);
       }
       for (const v1::Job& job : jobs) {

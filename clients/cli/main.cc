@@ -34,6 +34,7 @@ int Run(int argc, char** argv) {
   AddBenchCommand(app, &action);
   AddServeCommand(app, &action);
   AddClientCommands(app, &action);
+  AddObjectCommands(app, &action);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

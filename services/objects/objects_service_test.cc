@@ -141,6 +141,16 @@ TEST_F(ObjectsServiceTest, EverySelectorFindsTheGroundTruthObject) {
     point.set_max_distance(0.005);
     ASSERT_TRUE(Get(*service, "s1", point, &o).ok());
     EXPECT_EQ(o.id(), static_cast<uint32_t>(so.id));
+    // Just under its lowest Gaussian, in the table: the table's Gaussians are nearer, yet the
+    // nearest *object* is this one.
+    size_t lowest = so.first_gaussian;
+    for (size_t g = so.first_gaussian; g < so.first_gaussian + so.num_gaussians; ++g)
+      if (truth.cloud.positions[3 * g + 2] < truth.cloud.positions[3 * lowest + 2]) lowest = g;
+    point.mutable_point()->set_x(truth.cloud.positions[3 * lowest]);
+    point.mutable_point()->set_y(truth.cloud.positions[3 * lowest + 1]);
+    point.mutable_point()->set_z(truth.cloud.positions[3 * lowest + 2] - 0.004);
+    ASSERT_TRUE(Get(*service, "s1", point, &o).ok());
+    EXPECT_EQ(o.id(), static_cast<uint32_t>(so.id));
   }
   // By a ray: from the camera through object pixels of the view (a ray is thinner than a pixel's
   // footprint and the masks are drawn from the meshes, so boundary pixels of this small image may

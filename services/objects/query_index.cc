@@ -30,8 +30,14 @@ absl::StatusOr<std::unique_ptr<QueryIndex>> QueryIndex::Build(const Scene& scene
     for (const auto& [l, c] : counts) index->visible_[l].emplace_back(static_cast<int>(v), c);
     index->label_maps_.push_back(std::move(map));
   }
-  std::vector<Eigen::Vector3f> positions(cloud.size());
-  for (size_t g = 0; g < cloud.size(); ++g) positions[g] = Eigen::Vector3f(&cloud.positions[3 * g]);
+  // Point queries look for the nearest object: only labelled Gaussians are indexed (a table
+  // Gaussian nearer than the object must not hide it).
+  std::vector<Eigen::Vector3f> positions;
+  for (size_t g = 0; g < cloud.size(); ++g) {
+    if (result.labels[g] == 0) continue;
+    positions.emplace_back(&cloud.positions[3 * g]);
+    index->point_labels_.push_back(result.labels[g]);
+  }
   index->points_ = std::make_unique<PointIndex3>(std::move(positions));
   return index;
 }
@@ -62,7 +68,7 @@ absl::StatusOr<QueryAnswer> QueryIndex::Point(const Eigen::Vector3f& point,
   if (!point.allFinite()) return absl::InvalidArgumentError("query point is not finite");
   if (points_->size() == 0) return Answer(0);
   const auto [g, dist2] = points_->Nearest(point);
-  return Answer(dist2 <= max_distance * max_distance ? labels_[g] : 0);
+  return Answer(dist2 <= max_distance * max_distance ? point_labels_[g] : 0);
 }
 
 absl::StatusOr<QueryAnswer> QueryIndex::Ray(const Eigen::Vector3f& origin,
@@ -105,7 +111,7 @@ std::vector<uint32_t> QueryIndex::Instances() const {
 
 size_t QueryIndex::ByteSize() const {
   size_t bytes = sizeof(uint32_t) * 2 * labels_.size();                 // labels + members
-  bytes += (sizeof(Eigen::Vector3f) + 2 * sizeof(uint32_t)) * labels_.size();  // k-d tree
+  bytes += (sizeof(Eigen::Vector3f) + 3 * sizeof(uint32_t)) * point_labels_.size();  // k-d tree
   for (const std::vector<uint32_t>& map : label_maps_) bytes += sizeof(uint32_t) * map.size();
   return bytes;
 }

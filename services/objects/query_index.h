@@ -2,7 +2,8 @@
 //
 // The index renders every view's instance label map once (per pixel, the label with the largest
 // summed blending weight) and keeps per-instance Gaussian lists and per-view pixel counts, so a
-// click (view, pixel) is a lookup, and a 3D point query is a k-d tree nearest-neighbour search.
+// click (view, pixel) is a lookup, and a 3D point query is a k-d tree nearest-neighbour search over
+// the labelled Gaussians.
 // The scene and cloud passed to Build must outlive the index. Build is not thread-safe; queries are
 // const and safe from many threads.
 #pragma once
@@ -36,7 +37,7 @@ class QueryIndex {
 
   // The instance under pixel (x, y) of view `view`.
   absl::StatusOr<QueryAnswer> Click(int view, int x, int y) const;
-  // The instance of the Gaussian nearest to a 3D point, if one lies within max_distance.
+  // The instance nearest to a 3D point (its nearest labelled Gaussian), if within max_distance.
   absl::StatusOr<QueryAnswer> Point(const Eigen::Vector3f& point_in_world,
                                     float max_distance) const;
   // The instance a ray meets: the label with the largest summed blending weight along the ray
@@ -59,7 +60,8 @@ class QueryIndex {
   std::map<uint32_t, std::vector<uint32_t>> members_;                // instance -> Gaussians
   std::map<uint32_t, std::vector<std::pair<int, size_t>>> visible_;  // instance -> (view, pixels)
   std::vector<uint32_t> labels_;
-  std::unique_ptr<PointIndex3> points_;
+  std::unique_ptr<PointIndex3> points_;  // labelled Gaussians only
+  std::vector<uint32_t> point_labels_;   // their labels
 };
 
 }  // namespace instascene::objects

@@ -1,0 +1,174 @@
+// `instascene object` and `instascene objects`: what a robot asks a running server for. One
+// object by id, 3D point, click or ray (its pose, metric size and artefacts, downloaded and
+// verified with --out), or the list of a scene's objects. Both go through the C++ client library.
+#include <cstdio>
+
+#include <nlohmann/json.hpp>
+
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_format.h"
+#include "absl/strings/str_split.h"
+#include "clients/cli/cli.h"
+#include "common/core/status.h"
+#include "instascene/client/client.h"
+
+namespace instascene::cli {
+namespace {
+
+absl::StatusOr<std::vector<double>> Numbers(const std::string& spec, size_t count,
+                                            const std::string& flag, const std::string& form) {
+  std::vector<double> values;
+  for (absl::string_view p : absl::StrSplit(spec, ',')) {
+    double v = 0;
+    if (!absl::SimpleAtod(p, &v))
+      return absl::InvalidArgumentError(absl::StrCat(flag, ": not a number: '", p, "'"));
+    values.push_back(v);
+  }
+  if (values.size() != count)
+    return absl::InvalidArgumentError(absl::StrCat(flag, " must be ", form));
+  return values;
+}
+
+nlohmann::json ObjectJson(const client::ObjectInfo& o) {
+  const client::Pose& p = o.world_from_object;
+  nlohmann::json artefacts = nlohmann::json::array();
+  for (const client::Artefact& a : o.artefacts)
+    artefacts.push_back({{"path", a.path},
+                         {"sha256", a.sha256},
+                         {"bytes", a.bytes},
+                         {"media_type", a.media_type}});
+  return {{"scene", o.scene},
+          {"id", o.id},
+          {"source", o.source},
+          {"units", o.units},
+          {"meters_per_unit", o.meters_per_unit},
+          {"world_from_object",
+           {{"translation", {p.translation.x, p.translation.y, p.translation.z}},
+            {"quaternion_xyzw", {p.qx, p.qy, p.qz, p.qw}}}},
+          {"extent", {o.extent.x, o.extent.y, o.extent.z}},
+          {"completion", o.completion},
+          {"completed_share", o.completed_share},
+          {"gaussians", o.gaussians},
+          {"artefacts", artefacts},
+          {"query_us", o.query_microseconds},
+          {"index_loaded", o.index_loaded}};
+}
+
+void PrintObject(const client::ObjectInfo& o) {
+  const client::Pose& p = o.world_from_object;
+  std::printf("object %u of scene %s: %s (%s)\n", o.id, o.scene.c_str(), o.completion.c_str(),
+              o.source.c_str());
+  std::printf("  pose  t = (%.4f, %.4f, %.4f)  q_xyzw = (%.4f, %.4f, %.4f, %.4f)  [%s]\n",
+              p.translation.x, p.translation.y, p.translation.z, p.qx, p.qy, p.qz, p.qw,
+              o.units.c_str());
+  std::printf("  size  %.4f x %.4f x %.4f  [%s]\n", o.extent.x, o.extent.y, o.extent.z,
+              o.units.c_str());
+  for (const client::Artefact& a : o.artefacts)
+    std::printf("  %-24s %10lld bytes  %s\n", a.path.c_str(), static_cast<long long>(a.bytes),
+                a.media_type.c_str());
+}
+
+}  // namespace
+
+void AddObjectCommands(CLI::App& app, Action* action) {
+  struct Args {
+    std::string server = "127.0.0.1:50051", store, scene, view, pixel, point, ray, out;
+    int64_t id = -1;
+    double max_distance = 0;
+    bool json = false;
+  };
+  auto args = std::make_shared<Args>();
+  CLI::App* cmd = app.add_subcommand(
+      "object",
+      "One object of a scene on a server, by --id, --point, --view + --pixel or --ray: its pose, "
+      "size in metres (metric scenes) and artefacts; --out downloads them (digests verified)");
+  cmd->add_option("--scene", args->scene, "Scene name")->required();
+  cmd->add_option("--id", args->id, "Object (instance) id");
+  cmd->add_option("--point", args->point, "Or the object nearest a 3D point X,Y,Z (world)");
+  cmd->add_option("--max-distance", args->max_distance,
+                  "--point: search radius in scene units (0 = 2 % of the scene's diagonal)");
+  cmd->add_option("--view", args->view, "With --pixel: the view clicked (name or index)");
+  cmd->add_option("--pixel", args->pixel, "Or the object drawn at pixel X,Y of --view");
+  cmd->add_option("--ray", args->ray, "Or the object a ray OX,OY,OZ,DX,DY,DZ meets (world)");
+  cmd->add_option("--out", args->out, "Download its artefacts into this directory");
+  cmd->add_option("--server", args->server, "Server address (scheduler + objects)")
+      ->capture_default_str();
+  cmd->add_option("--store", args->store, "Store address (default: --server)");
+  cmd->add_flag("--json", args->json, "Print the object as one JSON line");
+  cmd->callback([args, action] {
+    *action = [args]() -> absl::Status {
+      const int given = (args->id >= 0) + !args->point.empty() + !args->pixel.empty() +
+                        !args->ray.empty();
+      if (given != 1)
+        return absl::InvalidArgumentError(
+            "give exactly one of --id, --point, --view with --pixel, or --ray");
+      if (args->pixel.empty() != args->view.empty())
+        return absl::InvalidArgumentError("--pixel and --view go together");
+      client::ObjectSelector selector;
+      if (args->id >= 0) {
+        if (args->id > 0xffffffffLL)
+          return absl::InvalidArgumentError("--id must be below 2^32");
+        selector = client::ObjectSelector::Id(static_cast<uint32_t>(args->id));
+      } else if (!args->point.empty()) {
+        ASSIGN_OR_RETURN(auto v, Numbers(args->point, 3, "--point", "X,Y,Z"));
+        selector = client::ObjectSelector::Point({v[0], v[1], v[2]}, args->max_distance);
+      } else if (!args->pixel.empty()) {
+        ASSIGN_OR_RETURN(auto v, Numbers(args->pixel, 2, "--pixel", "X,Y"));
+        selector = client::ObjectSelector::Click(args->view, static_cast<int>(v[0]),
+                                                 static_cast<int>(v[1]));
+      } else {
+        ASSIGN_OR_RETURN(auto v, Numbers(args->ray, 6, "--ray", "OX,OY,OZ,DX,DY,DZ"));
+        selector = client::ObjectSelector::Ray({v[0], v[1], v[2]}, {v[3], v[4], v[5]});
+      }
+      client::ClientOptions options;
+      options.server = args->server;
+      options.store = args->store;
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, client::Client::Connect(options));
+      ASSIGN_OR_RETURN(client::ObjectInfo object, c->GetObject(args->scene, selector));
+      PrintObject(object);
+      nlohmann::json out = ObjectJson(object);
+      if (!args->out.empty()) {
+        ASSIGN_OR_RETURN(client::Transfer t, c->DownloadObject(object, args->out));
+        std::printf("downloaded %lld files (%.2f MB, digests verified) into %s\n",
+                    static_cast<long long>(t.files), t.bytes / 1e6, args->out.c_str());
+        out["downloaded"] = {{"files", t.files}, {"bytes", t.bytes}, {"out", args->out}};
+      }
+      if (args->json) PrintJsonLine(out.dump());
+      return absl::OkStatus();
+    };
+  });
+
+  struct ListArgs {
+    std::string server = "127.0.0.1:50051", scene;
+    bool json = false;
+  };
+  auto list = std::make_shared<ListArgs>();
+  CLI::App* ls = app.add_subcommand(
+      "objects", "The objects of a scene on a server: id, source, size, completion, artefacts");
+  ls->add_option("--scene", list->scene, "Scene name")->required();
+  ls->add_option("--server", list->server, "Server address")->capture_default_str();
+  ls->add_flag("--json", list->json, "Print {\"objects\": [...]} as the last stdout line");
+  ls->callback([list, action] {
+    *action = [list]() -> absl::Status {
+      client::ClientOptions options;
+      options.server = list->server;
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, client::Client::Connect(options));
+      ASSIGN_OR_RETURN(std::vector<client::ObjectInfo> objects, c->ListObjects(list->scene));
+      std::printf("%-5s %-9s %-26s %-30s %s\n", "ID", "SOURCE", "SIZE", "COMPLETION", "ARTEFACTS");
+      nlohmann::json all = nlohmann::json::array();
+      for (const client::ObjectInfo& o : objects) {
+        const std::string size =
+            absl::StrFormat("%.3f x %.3f x %.3f %s", o.extent.x, o.extent.y, o.extent.z,
+                            o.units == "metres" ? "m" : "u");
+        std::printf("%-5u %-9s %-26s %-30s %zu\n", o.id, o.source.c_str(), size.c_str(),
+                    o.completion.substr(0, 30).c_str(), o.artefacts.size());
+        all.push_back(ObjectJson(o));
+      }
+      if (list->json) PrintJsonLine(nlohmann::json({{"objects", all}}).dump());
+      return absl::OkStatus();
+    };
+  });
+}
+
+}  // namespace instascene::cli
