@@ -10,25 +10,29 @@ namespace instascene::objects {
 absl::StatusOr<std::unique_ptr<QueryIndex>> QueryIndex::Build(const Scene& scene,
                                                               const GaussianCloud& cloud,
                                                               const SegmentationResult& result,
-                                                              int num_threads) {
+                                                              int num_threads, bool eager) {
   if (result.labels.size() != cloud.size())
     return absl::InvalidArgumentError("result and scene disagree on the Gaussian count");
   auto index = std::unique_ptr<QueryIndex>(new QueryIndex());
   index->scene_ = &scene;
   index->cloud_ = &cloud;
   index->labels_ = result.labels;
+  index->num_threads_ = num_threads;
+  index->eager_ = eager;
   for (uint32_t g = 0; g < result.labels.size(); ++g) {
     if (result.labels[g] != 0) index->members_[result.labels[g]].push_back(g);
   }
-  for (size_t v = 0; v < scene.views.size(); ++v) {
-    ASSIGN_OR_RETURN(std::vector<uint32_t> map, RenderLabelMap(cloud, scene.views[v].camera,
-                                                               result.labels, 0.5f, num_threads));
-    std::map<uint32_t, size_t> counts;
-    for (uint32_t l : map) {
-      if (l != 0) ++counts[l];
+  for (size_t v = 0; v < scene.views.size(); ++v)
+    index->views_.push_back(std::make_unique<LazyView>());
+  if (eager) {
+    for (size_t v = 0; v < scene.views.size(); ++v) {
+      ASSIGN_OR_RETURN(const std::vector<uint32_t>* map, index->LabelMap(static_cast<int>(v)));
+      std::map<uint32_t, size_t> counts;
+      for (uint32_t l : *map) {
+        if (l != 0) ++counts[l];
+      }
+      for (const auto& [l, c] : counts) index->visible_[l].emplace_back(static_cast<int>(v), c);
     }
-    for (const auto& [l, c] : counts) index->visible_[l].emplace_back(static_cast<int>(v), c);
-    index->label_maps_.push_back(std::move(map));
   }
   // Point queries look for the nearest object: only labelled Gaussians are indexed (a table
   // Gaussian nearer than the object must not hide it).
@@ -42,6 +46,21 @@ absl::StatusOr<std::unique_ptr<QueryIndex>> QueryIndex::Build(const Scene& scene
   return index;
 }
 
+absl::StatusOr<const std::vector<uint32_t>*> QueryIndex::LabelMap(int view) const {
+  LazyView& v = *views_[view];
+  std::call_once(v.once, [&] {
+    absl::StatusOr<std::vector<uint32_t>> map =
+        RenderLabelMap(*cloud_, scene_->views[view].camera, labels_, 0.5f, num_threads_);
+    if (map.ok()) {
+      v.map = std::move(*map);
+    } else {
+      v.status = map.status();
+    }
+  });
+  if (!v.status.ok()) return v.status;
+  return &v.map;
+}
+
 QueryAnswer QueryIndex::Answer(uint32_t instance) const {
   QueryAnswer answer;
   answer.instance = instance;
@@ -53,14 +72,15 @@ QueryAnswer QueryIndex::Answer(uint32_t instance) const {
 }
 
 absl::StatusOr<QueryAnswer> QueryIndex::Click(int view, int x, int y) const {
-  if (view < 0 || view >= static_cast<int>(label_maps_.size()))
+  if (view < 0 || view >= static_cast<int>(views_.size()))
     return absl::OutOfRangeError(absl::StrCat("no view ", view));
   const PinholeCamera& camera = scene_->views[view].camera;
   if (x < 0 || y < 0 || x >= camera.width || y >= camera.height) {
     return absl::OutOfRangeError(absl::StrCat("pixel (", x, ", ", y, ") outside the ", camera.width,
                                               "x", camera.height, " image"));
   }
-  return Answer(label_maps_[view][static_cast<size_t>(y) * camera.width + x]);
+  ASSIGN_OR_RETURN(const std::vector<uint32_t>* map, LabelMap(view));
+  return Answer((*map)[static_cast<size_t>(y) * camera.width + x]);
 }
 
 absl::StatusOr<QueryAnswer> QueryIndex::Point(const Eigen::Vector3f& point,
@@ -91,9 +111,12 @@ absl::StatusOr<QueryAnswer> QueryIndex::Ray(const Eigen::Vector3f& origin,
 }
 
 std::vector<uint8_t> QueryIndex::Mask(uint32_t instance, int view) const {
-  std::vector<uint8_t> mask(label_maps_[view].size(), 0);
+  const PinholeCamera& camera = scene_->views[view].camera;
+  std::vector<uint8_t> mask(static_cast<size_t>(camera.width) * camera.height, 0);
+  absl::StatusOr<const std::vector<uint32_t>*> map = LabelMap(view);
+  if (!map.ok()) return mask;
   if (instance == 0) return mask;
-  for (size_t p = 0; p < mask.size(); ++p) mask[p] = label_maps_[view][p] == instance;
+  for (size_t p = 0; p < mask.size(); ++p) mask[p] = (**map)[p] == instance;
   return mask;
 }
 
@@ -112,7 +135,8 @@ std::vector<uint32_t> QueryIndex::Instances() const {
 size_t QueryIndex::ByteSize() const {
   size_t bytes = sizeof(uint32_t) * 2 * labels_.size();                 // labels + members
   bytes += (sizeof(Eigen::Vector3f) + 3 * sizeof(uint32_t)) * point_labels_.size();  // k-d tree
-  for (const std::vector<uint32_t>& map : label_maps_) bytes += sizeof(uint32_t) * map.size();
+  for (const SceneView& v : scene_->views)  // every label map, rendered or not yet
+    bytes += sizeof(uint32_t) * static_cast<size_t>(v.camera.width) * v.camera.height;
   return bytes;
 }
 

@@ -1,9 +1,9 @@
 // services/objects/query_index.h: click queries against a segmentation result.
 //
-// The index renders every view's instance label map once (per pixel, the label with the largest
-// summed blending weight) and keeps per-instance Gaussian lists and per-view pixel counts, so a
-// click (view, pixel) is a lookup, and a 3D point query is a k-d tree nearest-neighbour search over
-// the labelled Gaussians.
+// The index renders each view's instance label map once (per pixel, the label with the largest
+// summed blending weight; all at build, or each on the first click in its view) and keeps
+// per-instance Gaussian lists, so a click (view, pixel) is a lookup, and a 3D point query is a k-d
+// tree nearest-neighbour search over the labelled Gaussians.
 // The scene and cloud passed to Build must outlive the index. Build is not thread-safe; queries are
 // const and safe from many threads.
 #pragma once
@@ -11,6 +11,7 @@
 #include <cstdint>
 #include <map>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 #include <Eigen/Core>
@@ -30,10 +31,14 @@ struct QueryAnswer {
 
 class QueryIndex {
  public:
+  // eager: render every view's label map now (and know each instance's visible views, in
+  // QueryAnswer::views); otherwise each map is rendered on the first click in its view (a
+  // service's cold start then costs no rendering; answers carry no views).
   static absl::StatusOr<std::unique_ptr<QueryIndex>> Build(const Scene& scene,
                                                            const GaussianCloud& cloud,
                                                            const SegmentationResult& result,
-                                                           int num_threads = 0);
+                                                           int num_threads = 0,
+                                                           bool eager = true);
 
   // The instance under pixel (x, y) of view `view`.
   absl::StatusOr<QueryAnswer> Click(int view, int x, int y) const;
@@ -54,9 +59,18 @@ class QueryIndex {
 
  private:
   QueryAnswer Answer(uint32_t instance) const;
+  // A view's label map, rendered once on first use (thread-safe).
+  absl::StatusOr<const std::vector<uint32_t>*> LabelMap(int view) const;
+  struct LazyView {
+    std::once_flag once;
+    std::vector<uint32_t> map;  // W*H
+    absl::Status status;
+  };
   const Scene* scene_ = nullptr;
   const GaussianCloud* cloud_ = nullptr;
-  std::vector<std::vector<uint32_t>> label_maps_;                    // per view, W*H
+  std::vector<std::unique_ptr<LazyView>> views_;
+  int num_threads_ = 0;
+  bool eager_ = true;
   std::map<uint32_t, std::vector<uint32_t>> members_;                // instance -> Gaussians
   std::map<uint32_t, std::vector<std::pair<int, size_t>>> visible_;  // instance -> (view, pixels)
   std::vector<uint32_t> labels_;

@@ -130,7 +130,7 @@ absl::StatusOr<std::unique_ptr<SceneObjects>> SceneObjects::Load(store::BlobStor
   SegmentationResult result;
   ASSIGN_OR_RETURN(result.labels, ReadGaussianInstanceIds(
                                       (fs::path(result_dir) / labels_file).string(), s.cloud_.size()));
-  ASSIGN_OR_RETURN(s.index_, QueryIndex::Build(s.scene_, s.cloud_, result));
+  ASSIGN_OR_RETURN(s.index_, QueryIndex::Build(s.scene_, s.cloud_, result, 0, /*eager=*/false));
   const float diagonal = RobustBounds(s.cloud_).diagonal().norm();
   s.default_radius_ = 0.02f * diagonal;
   s.max_radius_ = diagonal;
@@ -150,7 +150,18 @@ absl::StatusOr<std::unique_ptr<SceneObjects>> SceneObjects::Load(store::BlobStor
   for (const ExtraChannel& e : c.extras) bytes += sizeof(float) * e.values.size();
   for (const auto& [id, o] : s.objects_) bytes += o.SpaceUsedLong();
   s.bytes_ = bytes;
+  s.warm_up_ = std::thread([&s] {
+    for (int v = 0; v < s.Views() && !s.stop_; ++v) {
+      (void)s.index_->Click(v, 0, 0);  // renders the view's label map (errors resurface on clicks)
+      ++s.views_ready_;
+    }
+  });
   return loaded;
+}
+
+SceneObjects::~SceneObjects() {
+  stop_ = true;
+  if (warm_up_.joinable()) warm_up_.join();  // at most one view's rendering
 }
 
 absl::Status SceneObjects::LoadExport(store::BlobStore& store, const store::Digest& digest) {

@@ -9,11 +9,13 @@
 // Immutable once loaded: queries are const and safe from many threads.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <map>
 #include <memory>
 #include <optional>
 #include <string>
+#include <thread>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -51,6 +53,13 @@ class SceneObjects {
   std::vector<uint32_t> Ids() const;
   // Approximate memory held (label maps, Gaussians, k-d tree, manifests): the cache's unit.
   size_t ByteSize() const { return bytes_; }
+  // Views whose label map is rendered (Load renders none: a cold start answers points and ids at
+  // once, and a background thread then renders every view in order; a click in a view not yet
+  // rendered renders it first).
+  int ViewsReady() const { return views_ready_.load(); }
+  int Views() const { return static_cast<int>(scene_.views.size()); }
+
+  ~SceneObjects();
 
  private:
   SceneObjects() = default;
@@ -67,6 +76,9 @@ class SceneObjects {
   std::optional<double> meters_per_unit_;
   std::map<uint32_t, v1::Object> objects_;  // id -> answer (query fields unset)
   size_t bytes_ = 0;
+  std::atomic<bool> stop_{false};
+  std::atomic<int> views_ready_{0};
+  std::thread warm_up_;  // renders every view's label map after Load
 };
 
 }  // namespace instascene::objects
