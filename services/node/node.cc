@@ -37,6 +37,8 @@ absl::Status NodeOptions::Validate() const {
     return absl::InvalidArgumentError("nothing to run");
   if (lease_seconds < 2) return absl::InvalidArgumentError("--lease-seconds must be >= 2");
   if (drain_seconds < 0) return absl::InvalidArgumentError("--drain-seconds must be >= 0");
+  if (index_cache_bytes < 0)
+    return absl::InvalidArgumentError("--index-cache-bytes must be >= 0");
   if (!(retention_hours >= 0 && retention_hours <= 24 * 3650))
     return absl::InvalidArgumentError("--retention-hours must be in [0, 87600]");
   return store_options.Validate();
@@ -145,6 +147,7 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
     context.store = blob_store;
     context.work_dir = (fs::path(work_dir) / hosted_service->name).string();
     context.scheduler = get_scheduler;
+    context.index_cache_bytes = options.index_cache_bytes;
     stage_services.push_back(hosted_service->make(context));
     services.push_back(stage_services.back().get());
     names.push_back(hosted_service->grpc_name);

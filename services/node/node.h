@@ -46,6 +46,7 @@ struct NodeOptions {
   int drain_seconds = 30;                   // SIGTERM: how long running jobs may take to finish
   int num_threads = 0;                      // per job; 0 = all cores
   int64_t cache_bytes = int64_t{20} << 30;  // per worker: input cache budget (0 = unlimited)
+  int64_t index_cache_bytes = int64_t{4} << 30;  // Objects service: loaded scene indexes
   std::string ready_file;  // written with the bound address once serving ("" = none)
   store::StoreOptions store_options;
 
@@ -61,6 +62,7 @@ struct StageServiceContext {
   // before. Services that ask the scheduler (the Objects service resolving scene names) call it
   // per request.
   std::function<std::shared_ptr<grpc::Channel>()> scheduler;
+  int64_t index_cache_bytes = 0;  // NodeOptions::index_cache_bytes
 };
 
 // A stage service a node can host: a worker leasing `kinds` and the gRPC adapter around it.

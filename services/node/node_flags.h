@@ -51,6 +51,10 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
          "--cache-bytes", o->cache_bytes,
          "Per worker: budget of the input cache under DATA/work, LRU-evicted (0 = unlimited)")
       ->capture_default_str();
+  app.add_option("--index-cache-bytes", o->index_cache_bytes,
+                 "Objects service: memory budget of the loaded scene indexes (LRU; the newest is "
+                 "always kept)")
+      ->capture_default_str();
   app.add_option("--ready-file", o->ready_file,
                  "Write the bound address here once serving (removed at exit)");
   app.add_option("--max-blob-bytes", o->store_options.max_blob_bytes,

@@ -49,8 +49,10 @@ StageService ObjectsStageService() {
               if (!status.ok()) return rpc::FromGrpcStatus(status);
               return answer;
             };
+            objects::ObjectsServiceOptions options;
+            options.cache_bytes = c.index_cache_bytes;
             return std::make_unique<objects::ObjectsService>(c.store, std::move(lookup),
-                                                             c.work_dir);
+                                                             c.work_dir, options);
           }};
 }
 
