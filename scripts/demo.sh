@@ -4,10 +4,13 @@
 # 2. generates a synthetic cluttered scene with ground truth and noisy 2D masks;
 # 3. starts the embedded server (`instascene serve`: store + scheduler + workers), submits that
 #    scene and a composite of the real captures, watches their pipelines (decompose -> train ->
-#    segment -> complete, one completion job per object), resubmits to show nothing is recomputed;
+#    segment -> complete, one completion job per object; -> export for the synthetic scene),
+#    resubmits to show nothing is recomputed;
 # 4. fetches the per-instance results and the completed objects, scores both against the ground
 #    truth (click mIoU; Chamfer / volume IoU / hidden-surface recall of raw crop, closed crop and
-#    completed object), writes raw-vs-completed images from an unknown view, stops the server;
+#    completed object), writes raw-vs-completed images from an unknown view;
+# 5. fetches one object the way a robot would (by a 3D point, through the C++ client library's
+#    example program): its pose, size in metres and artefacts; stops the server;
 # then prints what it wrote and how long it took.
 set -euo pipefail
 BUILD_DIR=${1:-build}
@@ -59,15 +62,19 @@ ADDR=$(cat "$OUT/server.addr")
 echo "server: $ADDR (log: $OUT/server.log, data: $OUT/server/)"
 scenes=(synthetic)
 [ -d "$OUT/composite" ] && scenes+=(composite)
-for scene in "${scenes[@]}"; do
-  echo "-- submit $scene"
-  "$BIN" submit --scene "$OUT/$scene" --server "$ADDR" --json > "$OUT/$scene.submit.json"
-done
+# The synthetic scene (metric: meters_per_unit 1) also gets the robot-ready export of every object.
+echo "-- submit synthetic (decompose -> train -> segment -> complete -> export)"
+"$BIN" submit --scene "$OUT/synthetic" --server "$ADDR" --stages decompose,train,segment,complete,export \
+  --json > "$OUT/synthetic.submit.json"
+if [ -d "$OUT/composite" ]; then
+  echo "-- submit composite"
+  "$BIN" submit --scene "$OUT/composite" --server "$ADDR" --json > "$OUT/composite.submit.json"
+fi
 echo "-- watch (both scenes share the workers; the scheduler alternates between them)"
 for scene in "${scenes[@]}"; do "$BIN" watch --scene "$scene" --server "$ADDR"; done
 "$BIN" jobs --server "$ADDR" --scene synthetic
 echo "-- resubmitting the same capture uploads and computes nothing:"
-"$BIN" submit --scene "$OUT/synthetic" --server "$ADDR" 2>&1 | sed 's/^/  /'
+"$BIN" submit --scene "$OUT/synthetic" --server "$ADDR" --stages decompose,train,segment,complete,export 2>&1 | sed 's/^/  /'
 
 echo "== 4. Results, fetched from the store by scene name (every stage's latest output) =="
 for scene in "${scenes[@]}"; do
@@ -94,6 +101,19 @@ done
 "$BIN" eval --scene "$OUT/synthetic" --completion "$OUT/synthetic/stages/complete" | sed 's/^/  /'
 echo "-- per-instance splats (open in any 3DGS viewer):"
 ls "$OUT/synthetic/result/instances" | head -n 20 | sed 's/^/  /'
+
+echo "== 5. A robot asks for the object at a 3D point (Objects service through the C++ client) =="
+"$BIN" objects --scene synthetic --server "$ADDR" | sed 's/^/  /'
+# The point: the top centre of a ground-truth object with a closed top (what a robot's depth camera
+# would see), in the scene's frame.
+POINT=$(python3 -c "
+import json
+objs = json.load(open('$OUT/synthetic/gt/objects.json'))
+o = next(o for o in objs if o['shape'] in ('box', 'bottle', 'sphere', 'cylinder'))
+print('%.4f %.4f %.4f' % ((o['bounds_min'][0] + o['bounds_max'][0]) / 2, (o['bounds_min'][1] + o['bounds_max'][1]) / 2, o['bounds_max'][2]))")
+echo "-- clients/cpp/examples/object_at_point $ADDR synthetic $POINT $OUT/robot"
+# shellcheck disable=SC2086
+"$BUILD_DIR/clients/cpp/object_at_point" "$ADDR" synthetic $POINT "$OUT/robot" | sed 's/^/  /'
 kill -TERM $SERVER_PID
 wait $SERVER_PID || true
 trap - EXIT
@@ -109,6 +129,8 @@ echo "  demo-out/synthetic/instances_*.png     rendered instance maps"
 echo "  demo-out/synthetic/completion_*.png    each object: raw crop | completed, seen from an unknown view"
 echo "  demo-out/synthetic/stages/complete/    each completed object: object.ply (provenance), mesh.ply, manifest.json"
 [ -d "$OUT/composite" ] && echo "  demo-out/composite/                    the real captures composed into one scene, and its result/"
+echo "  demo-out/synthetic/stages/export/      each object robot-ready: visual.glb (Draco), object.urdf, object.xml (MJCF), collision/, points.ply, manifest.json"
+echo "  demo-out/robot/                        the object a robot fetched by a 3D point (artefacts, digests verified)"
 echo "  demo-out/server/                       the server's data: store/ (content-addressed blobs), jobs.db (SQLite queue)"
 echo "  ($(find "$OUT" -name '*.png' | wc -l) PNG and $(find "$OUT" -name '*.ply' | wc -l) PLY files in all)"
 elapsed_ms=$(( (end_ns - start_ns) / 1000000 ))
