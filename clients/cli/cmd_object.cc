@@ -92,7 +92,8 @@ void AddObjectCommands(CLI::App& app, Action* action) {
   cmd->add_option("--pixel", args->pixel, "Or the object drawn at pixel X,Y of --view");
   cmd->add_option("--ray", args->ray, "Or the object a ray OX,OY,OZ,DX,DY,DZ meets (world)");
   cmd->add_option("--out", args->out, "Download its artefacts into this directory");
-  cmd->add_option("--server", args->server, "Server address (scheduler + objects)")
+  cmd->add_option("--server", args->server,
+                  "The Objects service's address (`instascene serve`, or instascene-objects)")
       ->capture_default_str();
   cmd->add_option("--store", args->store, "Store address (default: --server)");
   cmd->add_flag("--json", args->json, "Print the object as one JSON line");
@@ -147,7 +148,9 @@ void AddObjectCommands(CLI::App& app, Action* action) {
   CLI::App* ls = app.add_subcommand(
       "objects", "The objects of a scene on a server: id, source, size, completion, artefacts");
   ls->add_option("--scene", list->scene, "Scene name")->required();
-  ls->add_option("--server", list->server, "Server address")->capture_default_str();
+  ls->add_option("--server", list->server,
+                 "The Objects service's address (`instascene serve`, or instascene-objects)")
+      ->capture_default_str();
   ls->add_flag("--json", list->json, "Print {\"objects\": [...]} as the last stdout line");
   ls->callback([list, action] {
     *action = [list]() -> absl::Status {

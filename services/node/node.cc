@@ -110,6 +110,9 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
     scheduler::QueueOptions queue_options;
     queue_options.lease_ms = int64_t{options.lease_seconds} * 1000;
     queue_options.max_lease_ms = std::max(queue_options.max_lease_ms, queue_options.lease_ms);
+    for (const std::string& kind : stages.Kinds()) {
+      if (stages.Find(kind)->spec.partial_join) queue_options.partial_join_kinds.insert(kind);
+    }
     ASSIGN_OR_RETURN(queue, OpenQueue(options, queue_options));
     scheduler::SchedulerServiceOptions scheduler_options;
     scheduler_options.rescue_interval_ms = std::min(1000, options.lease_seconds * 250);

@@ -25,12 +25,8 @@ absl::StatusOr<pipeline::StageResult> RunExport(const pipeline::StageContext& c)
   options.seed = o.seed;
   ASSIGN_OR_RETURN(Scene scene, ReadScene(c.scene_dir));
   MetricScale scale{scene.meters_per_unit, "scene.json meters_per_unit"};
-  std::vector<std::string> objects;  // complete/<i> inputs, in item order
-  for (int64_t i = 0;; ++i) {
-    auto it = c.inputs.find(absl::StrCat("complete/", i));
-    if (it == c.inputs.end()) break;
-    objects.push_back(it->second);
-  }
+  // The completed objects, in item order; items whose completion failed are absent (partial join).
+  const std::vector<std::string> objects = c.AllInputs("complete");
   nlohmann::json catalogue = nlohmann::json::array();
   for (size_t i = 0; i < objects.size(); ++i) {
     RETURN_IF_ERROR(CheckCancelled(c.cancel, "export"));

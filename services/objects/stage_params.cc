@@ -26,9 +26,10 @@ pipeline::StageSpec ExportSpec() {
       "Every completed object as robot-ready artefacts (glTF/Draco, STL, URDF, MJCF, collision "
       "parts, surface samples) in metres, and the scene's object catalogue",
       {{"complete", pipeline::InputMode::kAll}}, /*fans_out=*/false, ExportCodec());
-  // Asked for explicitly (--stages ...,export): a join fails when any object's completion failed
-  // (e.g. a degenerate instance), and the default pipeline must not.
-  spec.in_default_pipeline = false;
+  // Part of the default pipeline: a partial join, so an object whose completion failed (e.g. a
+  // degenerate instance) is left out of the export (the Objects service answers it as a raw crop)
+  // instead of failing the scene's export.
+  spec.partial_join = true;
   return spec;
 }
 

@@ -39,6 +39,7 @@ absl::StatusOr<LocalRunResult> RunPipelineLocally(const StageRegistry& registry,
         for (int64_t i = 0; i < item_count.at(in.stage); ++i) {
           const std::string name = absl::StrCat(in.stage, "/", i);
           if (auto failed = result.failures.find(name); failed != result.failures.end()) {
+            if (def->spec.partial_join) continue;  // runs over the items that succeeded
             return absl::FailedPreconditionError(
                 absl::StrCat(stage.kind, ": input ", name, " failed: ", failed->second.message()));
           }
@@ -70,6 +71,8 @@ absl::StatusOr<LocalRunResult> RunPipelineLocally(const StageRegistry& registry,
     }
     if (!each.empty()) item_count[stage.kind] = runs;
     if (!failures.empty()) {
+      std::error_code ec;
+      fs::create_directories(dir, ec);  // every item may have failed before writing anything
       RETURN_IF_ERROR(
           WriteFileAtomically((fs::path(dir) / "failures.json").string(), failures.dump(1)));
     }

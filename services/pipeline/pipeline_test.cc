@@ -24,9 +24,9 @@ TEST(Registry, CodecsValidateAndCanonicalize) {
   const StageRegistry r = Stages();
   EXPECT_EQ(r.Kinds(),
             (std::vector<std::string>{"decompose", "train", "segment", "complete", "export"}));
-  // export is asked for explicitly (a join that fails when any completion did).
+  // export is a partial join (it runs over the completions that succeeded): in the default.
   EXPECT_EQ(r.DefaultStages(),
-            (std::vector<std::string>{"decompose", "train", "segment", "complete"}));
+            (std::vector<std::string>{"decompose", "train", "segment", "complete", "export"}));
   // Defaults are filled in: {} and the explicit defaults are the same job.
   auto a = r.Canonicalize("train", nlohmann::json::object());
   auto b = r.Canonicalize("train", {{"iterations", 1500}, {"supervision", "full"}});
@@ -69,7 +69,8 @@ TEST(Registry, PlansPipelinesAndRefusesBadOnes) {
   const StageRegistry r = Stages();
   auto plan = r.Plan({}, {{"train", {{"iterations", 50}}}});
   ASSERT_TRUE(plan.ok()) << plan.status();
-  ASSERT_EQ(plan->size(), 4u);
+  ASSERT_EQ(plan->size(), 5u);
+  EXPECT_EQ((*plan)[4].inputs[0].mode, InputMode::kAll);
   EXPECT_EQ((*plan)[1].parameters["iterations"], 50);
   EXPECT_EQ((*plan)[2].inputs.size(), 1u);
   EXPECT_EQ((*plan)[2].inputs[0].stage, "train");
@@ -128,6 +129,55 @@ TEST(Registry, AStageThatThrowsFailsItsJobNotTheProcess) {
   EXPECT_NE(broken.status().message().find("index out of range"), std::string::npos);
 }
 
+TEST(LocalRunner, APartialJoinRunsOverTheItemsThatSucceeded) {
+  const testing::ScopedTempDir temp("pipeline_partial");
+  StageRegistry r;
+  auto spec = [](const std::string& kind, std::vector<PlannedInput> inputs) {
+    StageSpec s;
+    s.kind = kind;
+    s.inputs = std::move(inputs);
+    s.canonicalize = [](const nlohmann::json& p) -> absl::StatusOr<nlohmann::json> { return p; };
+    return s;
+  };
+  StageSpec source = spec("source", {});
+  source.fans_out = true;
+  ASSERT_TRUE(r.Add({source, [](const StageContext&) -> absl::StatusOr<StageResult> {
+                       return StageResult{3};
+                     }})
+                  .ok());
+  ASSERT_TRUE(r.Add({spec("each", {{"source", InputMode::kEach}}),
+                     [](const StageContext& c) -> absl::StatusOr<StageResult> {
+                       if (c.item == 1) return absl::InvalidArgumentError("degenerate item");
+                       return StageResult{};
+                     }})
+                  .ok());
+  std::vector<std::string> seen;
+  StageSpec partial = spec("partial", {{"each", InputMode::kAll}});
+  partial.partial_join = true;
+  ASSERT_TRUE(r.Add({partial, [&](const StageContext& c) -> absl::StatusOr<StageResult> {
+                       for (const auto& [name, dir] : c.inputs) seen.push_back(name);
+                       return StageResult{};
+                     }})
+                  .ok());
+  ASSERT_TRUE(r.Add({spec("strict", {{"each", InputMode::kAll}}),
+                     [](const StageContext&) -> absl::StatusOr<StageResult> {
+                       return StageResult{};
+                     }})
+                  .ok());
+  LocalRunOptions options;
+  options.out_dir = temp.str();
+  auto plan = r.Plan({"source", "each", "partial"}, nlohmann::json::object());
+  ASSERT_TRUE(plan.ok()) << plan.status();
+  auto run = RunPipelineLocally(r, *plan, options);
+  ASSERT_TRUE(run.ok()) << run.status();
+  EXPECT_EQ(seen, (std::vector<std::string>{"each/0", "each/2"}));
+  EXPECT_EQ(run->failures.count("each/1"), 1u);
+  auto strict = r.Plan({"source", "each", "strict"}, nlohmann::json::object());
+  ASSERT_TRUE(strict.ok());
+  EXPECT_EQ(RunPipelineLocally(r, *strict, options).status().code(),
+            absl::StatusCode::kFailedPrecondition);
+}
+
 TEST(LocalRunner, ThreeStagesGiveTheTauRuleLabelsAndCancelStops) {
   const testing::ScopedTempDir temp("pipeline_stages");
   const std::string root = temp.str();
@@ -136,7 +186,7 @@ TEST(LocalRunner, ThreeStagesGiveTheTauRuleLabelsAndCancelStops) {
   ASSERT_TRUE(generated.ok());
   ASSERT_TRUE(WriteClutterScene(*generated, scene_dir).ok());
   const StageRegistry r = Stages();
-  auto plan = r.Plan({}, {{"train", {{"iterations", 60}}}});
+  auto plan = r.Plan({"decompose", "train", "segment"}, {{"train", {{"iterations", 60}}}});
   ASSERT_TRUE(plan.ok());
   std::vector<std::string> phases;
   LocalRunOptions options;

@@ -59,6 +59,9 @@ struct StageSpec {
   std::vector<PlannedInput> inputs;
   bool fans_out = false;            // its output holds items; per-item stages may take it kEach
   bool in_default_pipeline = true;  // run when no stage list is given
+  // A join (kAll input) that runs over the items that succeeded: a failed or cancelled item is
+  // left out (absent from StageContext::inputs) instead of failing the join.
+  bool partial_join = false;
   std::vector<ParamSpec> parameters;
   std::function<absl::StatusOr<nlohmann::json>(const nlohmann::json&)> canonicalize;
 };

@@ -108,10 +108,13 @@ absl::StatusOr<SubmitResult> JobQueue::SubmitOne(QueueTx& tx, const SubmitReques
             [](const JobDependency& a, const JobDependency& b) { return a.name < b.name; });
   std::vector<std::pair<std::string, std::string>> keys;
   int pending = 0;
+  const bool partial = options_.partial_join_kinds.count(kind) > 0;
   for (const JobDependency& d : dependencies) {
     ASSIGN_OR_RETURN(Job dep, Load(tx, d.job_id));
     keys.emplace_back(d.name, dep.key);
-    pending += dep.state != JobState::kSucceeded;
+    const bool left_out = partial && d.name.find('/') != std::string::npos &&
+                          (dep.state == JobState::kFailed || dep.state == JobState::kCancelled);
+    pending += dep.state != JobState::kSucceeded && !left_out;
   }
   const std::string key = JobKey(request.scene_manifest, kind, parameters, keys, item);
   const std::string id = JobIdFromKey(key);
@@ -295,6 +298,9 @@ absl::StatusOr<std::optional<Lease>> JobQueue::LeaseNext(const std::vector<std::
     Lease l{job, job.lease_token, {}};
     for (const JobDependency& d : job.dependencies) {
       ASSIGN_OR_RETURN(Job dep, Load(tx, d.job_id));
+      if (dep.state != JobState::kSucceeded && MayLeaveOut(job, d.name) &&
+          (dep.state == JobState::kFailed || dep.state == JobState::kCancelled))
+        continue;  // a partial join runs without its failed items
       if (dep.state != JobState::kSucceeded)
         return absl::InternalError(absl::StrCat("job ", job.id, " was ready but its input ", d.name,
                                                 " (", d.job_id, ") is ", JobStateName(dep.state)));
@@ -352,12 +358,22 @@ absl::Status JobQueue::Complete(const std::string& id, const std::string& token,
   });
 }
 
+bool JobQueue::MayLeaveOut(const Job& job, const std::string& name) const {
+  return options_.partial_join_kinds.count(job.kind) > 0 && name.find('/') != std::string::npos;
+}
+
 absl::Status JobQueue::CancelDependents(QueueTx& tx, const std::string& id,
                                         const std::string& why) {
   ASSIGN_OR_RETURN(std::vector<std::string> dependents, tx.Dependents(id));
   for (const std::string& d : dependents) {
     ASSIGN_OR_RETURN(Job job, Load(tx, d));
-    if (job.state == JobState::kQueued) {
+    bool left_out = false;
+    for (const JobDependency& dep : job.dependencies)
+      left_out |= dep.job_id == id && MayLeaveOut(job, dep.name);
+    if (left_out && job.state == JobState::kQueued) {
+      if (job.pending > 0) --job.pending;  // runs over the items that succeeded
+      RETURN_IF_ERROR(tx.Update(job));
+    } else if (job.state == JobState::kQueued) {
       RETURN_IF_ERROR(EndCancelled(tx, &job, why));
     } else if (IsHeld(job.state) && !job.cancel_requested) {
       job.cancel_requested = true;  // cannot happen (held jobs wait for success); kept safe

@@ -19,6 +19,7 @@
 #include <mutex>
 #include <optional>
 #include <random>
+#include <set>
 #include <string>
 #include <vector>
 
@@ -37,6 +38,10 @@ struct QueueOptions {
   double backoff_jitter = 0.25;    // delay *= 1 - jitter * U[0,1) (spreads retry storms)
   int64_t max_items = 10000;       // most items one fan-out job may report
   uint64_t seed = 1;               // jitter and lease-token random seed
+  // Join stages that run over the items that succeeded (StageSpec::partial_join): a failed or
+  // cancelled per-item input is left out instead of cancelling the join. Set from the registry;
+  // every scheduler of one queue must agree.
+  std::set<std::string> partial_join_kinds;
 
   absl::Status Validate() const;
 };
@@ -125,7 +130,11 @@ class JobQueue {
                       std::vector<SubmitResult>* results);
   absl::Status RetryOrFail(QueueTx& tx, Job* job, const std::string& error, bool retryable);
   absl::Status EndCancelled(QueueTx& tx, Job* job, const std::string& why);
+  // A job ended failed or cancelled: its dependents are cancelled, except partial joins, which
+  // only stop waiting for it when it is one of their per-item inputs.
   absl::Status CancelDependents(QueueTx& tx, const std::string& id, const std::string& why);
+  // Whether `job` may run without its input `name` (a per-item input of a partial join).
+  bool MayLeaveOut(const Job& job, const std::string& name) const;
   int64_t BackoffMs(int attempts);
   std::string NewToken(int attempt);
 

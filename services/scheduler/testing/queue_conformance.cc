@@ -546,4 +546,54 @@ TEST_P(JobQueueConformanceTest, FailureAndCancellationCascadeThroughTheDag) {
   EXPECT_EQ(queue_->CancelScene("nope").status().code(), absl::StatusCode::kNotFound);
 }
 
+TEST_P(JobQueueConformanceTest, APartialJoinRunsOverTheItemsThatSucceeded) {
+  options_.partial_join_kinds = {"join"};
+  queue_.reset();  // one process owns the queue: close before reopening
+  queue_ = Open();
+  SubmitStages("s", FanOutPipeline());
+  Drain(*queue_, {"decompose", "train", "segment"}, 4);
+  // Item 0 succeeds, item 1 fails permanently, item 2 is cancelled, item 3 succeeds.
+  std::map<int64_t, Lease> leases;
+  for (int i = 0; i < 4; ++i) {
+    auto lease = MustLease({"item"});
+    ASSERT_TRUE(lease.has_value());
+    leases[lease->job.item] = *lease;
+  }
+  ASSERT_TRUE(queue_->Complete(leases[0].job.id, leases[0].token, Out("0")).ok());
+  ASSERT_TRUE(
+      queue_->Fail(leases[1].job.id, leases[1].token, FailureKind::kPermanent, "degenerate").ok());
+  ASSERT_TRUE(queue_->Cancel(leases[2].job.id).ok());  // running: asked to stop
+  ASSERT_TRUE(
+      queue_->Fail(leases[2].job.id, leases[2].token, FailureKind::kCancelled, "stopped").ok());
+  EXPECT_FALSE(MustLease({"join"}).has_value());  // still waits for item 3
+  ASSERT_TRUE(queue_->Complete(leases[3].job.id, leases[3].token, Out("3")).ok());
+  auto join = MustLease({"join"});
+  ASSERT_TRUE(join.has_value());
+  EXPECT_EQ(join->inputs, (std::vector<std::pair<std::string, store::Digest>>{
+                              {"item/0", Out("0")}, {"item/3", Out("3")}}));
+  ASSERT_TRUE(queue_->Complete(join->job.id, join->token, Out("joined")).ok());
+  EXPECT_EQ(queue_->Get(join->job.id)->state, JobState::kSucceeded);
+
+  // Without the option, the same failure cancels the join (the default for joins).
+  options_.partial_join_kinds.clear();
+  queue_.reset();
+  queue_ = Open();
+  SubmitStages("t", FanOutPipeline());
+  Drain(*queue_, {"decompose", "train", "segment"}, 2);
+  auto a = MustLease({"item"});
+  ASSERT_TRUE(a.has_value());
+  ASSERT_TRUE(queue_->Fail(a->job.id, a->token, FailureKind::kPermanent, "degenerate").ok());
+  JobFilter filter;
+  filter.scene = "t";
+  auto jobs = queue_->List(filter);
+  ASSERT_TRUE(jobs.ok());
+  int joins = 0;
+  for (const Job& j : *jobs) {
+    if (j.kind != "join") continue;
+    EXPECT_EQ(j.state, JobState::kCancelled);
+    ++joins;
+  }
+  EXPECT_EQ(joins, 1);
+}
+
 }  // namespace instascene::scheduler::testing
