@@ -206,7 +206,7 @@ TEST_F(ServicesTest, HealthReportsEveryService) {
   EXPECT_EQ(check(""), kServing);
   EXPECT_EQ(check("instascene.v1.Scheduler"), kServing);
   EXPECT_EQ(check("instascene.v1.ContentStore"), kServing);
-  EXPECT_EQ(check("instascene.v1.Training"), kServing);
+  EXPECT_EQ(check("instascene.v1.Objects"), kServing);
   EXPECT_EQ(check("instascene.v1.Nope"), -static_cast<int>(grpc::StatusCode::NOT_FOUND));
 }
 
