@@ -307,7 +307,10 @@ absl::StatusOr<std::vector<ObjectCompletionEval>> Evaluate(const std::string& sc
     for (uint8_t s : gt.seen) hidden += !s;
     e.hidden_share = static_cast<double>(hidden) / std::max<size_t>(1, gt.seen.size());
     MeshingOptions meshing;
-    if (m.contains("meshing")) meshing.size_px = m["meshing"].value("size_px", meshing.size_px);
+    if (m.contains("meshing")) {
+      meshing.size_px = m["meshing"].value("size_px", meshing.size_px);
+      meshing.min_alpha = m["meshing"].value("min_alpha", meshing.min_alpha);
+    }
     ASSIGN_OR_RETURN(TriangleMesh closed_mesh, MeshObject(raw, frame, meshing, o.num_threads));
     const std::vector<Eigen::Vector3f> closed_points =
         SampleSurface(closed_mesh, o.samples, o.seed + 1);

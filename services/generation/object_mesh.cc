@@ -52,6 +52,9 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& object, const Objec
   for (const PinholeCamera& camera : MeshingCameras(frame, options)) {
     ASSIGN_OR_RETURN(ViewImages render,
                      RenderObjectView(object, camera, frame, num_threads, options.scale_modifier));
+    for (size_t i = 0; i < render.depth.size(); ++i) {
+      if (render.alpha[i] <= options.min_alpha) render.depth[i] = 0.0f;  // not fused
+    }
     views.push_back({camera, std::move(render.depth), std::move(render.rgb)});
   }
   DepthFusionOptions fusion;

@@ -44,6 +44,7 @@ CompletionOptions ToCompletionOptions(const CompleteStageOptions& o) {
   options.top_training_views = o.top_training_views;
   options.free_space.resolution = o.free_space_resolution;
   options.meshing.size_px = o.mesh_size;
+  options.meshing.min_alpha = static_cast<float>(o.mesh_min_alpha);
   options.min_gaussians = static_cast<size_t>(o.min_gaussians);
   options.seed = o.seed;
   return options;

@@ -18,6 +18,9 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
         .Real("min_agreement", &O::min_agreement, 0.5, 1.0,
               "Symmetry hypotheses need this share of decided points to agree")
         .Int("mesh_size", &O::mesh_size, 32, 1024, "Meshing view size, px")
+        .Real("mesh_min_alpha", &O::mesh_min_alpha, 0.5, 0.99,
+              "Meshing: pixels fused into the TSDF need this much alpha (higher: less silhouette "
+              "inflation by the surfels' footprint)")
         .Int("min_gaussians", &O::min_gaussians, 1, 1000000,
              "Instances with fewer Gaussians fail as degenerate")
         .Int<uint64_t>("prior_seed", &O::seed, 0, int64_t{1} << 53,

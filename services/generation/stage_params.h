@@ -19,6 +19,7 @@ struct CompleteStageOptions {
   int free_space_resolution = 64;  // voxels per axis
   double min_agreement = 0.85;     // symmetry acceptance
   int mesh_size = 160;             // meshing view size, px
+  double mesh_min_alpha = 0.9;     // meshing: alpha a fused pixel needs
   int min_gaussians = 50;          // fewer: a degenerate object (fails permanently)
   uint64_t seed = 1;
 };
