@@ -18,13 +18,13 @@
 #include "common/synth/scene_writer.h"
 #include "grpc/health/v1/health.grpc.pb.h"
 #include "instascene/v1/objects.grpc.pb.h"
+#include "services/objects/objects_service.h"
+#include "services/objects/query_index.h"
 #include "services/scheduler/scheduler_service.h"
 #include "services/scheduler/sqlite_queue_store.h"
 #include "services/stages/all_stages.h"
 #include "services/store/remote_blob_store.h"
 #include "services/store/store_service.h"
-#include "services/objects/objects_service.h"
-#include "services/objects/query_index.h"
 #include "services/worker/stage_worker.h"
 
 namespace instascene {

@@ -385,10 +385,10 @@ void AddClientCommands(CLI::App& app, Action* action) {
           return absl::FailedPreconditionError(
               absl::StrCat("job ", fetch->id, " is ", scheduler::StateName(job.state()),
                            ", not succeeded; nothing to fetch yet"));
-        outputs.emplace_back(client::StageOutput{job.kind(), job.item(), job.id(),
-                                                 job.output_manifest().hash(),
-                                                 job.output_manifest().size_bytes()},
-                             fetch->out);
+        outputs.emplace_back(
+            client::StageOutput{job.kind(), job.item(), job.id(), job.output_manifest().hash(),
+                                job.output_manifest().size_bytes()},
+            fetch->out);
       }
       nlohmann::json fetched = nlohmann::json::array();
       int64_t files = 0, bytes = 0;

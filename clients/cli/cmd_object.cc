@@ -34,10 +34,8 @@ nlohmann::json ObjectJson(const client::ObjectInfo& o) {
   const client::Pose& p = o.world_from_object;
   nlohmann::json artefacts = nlohmann::json::array();
   for (const client::Artefact& a : o.artefacts)
-    artefacts.push_back({{"path", a.path},
-                         {"sha256", a.sha256},
-                         {"bytes", a.bytes},
-                         {"media_type", a.media_type}});
+    artefacts.push_back(
+        {{"path", a.path}, {"sha256", a.sha256}, {"bytes", a.bytes}, {"media_type", a.media_type}});
   return {{"scene", o.scene},
           {"id", o.id},
           {"source", o.source},
@@ -99,8 +97,8 @@ void AddObjectCommands(CLI::App& app, Action* action) {
   cmd->add_flag("--json", args->json, "Print the object as one JSON line");
   cmd->callback([args, action] {
     *action = [args]() -> absl::Status {
-      const int given = (args->id >= 0) + !args->point.empty() + !args->pixel.empty() +
-                        !args->ray.empty();
+      const int given =
+          (args->id >= 0) + !args->point.empty() + !args->pixel.empty() + !args->ray.empty();
       if (given != 1)
         return absl::InvalidArgumentError(
             "give exactly one of --id, --point, --view with --pixel, or --ray");
@@ -108,8 +106,7 @@ void AddObjectCommands(CLI::App& app, Action* action) {
         return absl::InvalidArgumentError("--pixel and --view go together");
       client::ObjectSelector selector;
       if (args->id >= 0) {
-        if (args->id > 0xffffffffLL)
-          return absl::InvalidArgumentError("--id must be below 2^32");
+        if (args->id > 0xffffffffLL) return absl::InvalidArgumentError("--id must be below 2^32");
         selector = client::ObjectSelector::Id(static_cast<uint32_t>(args->id));
       } else if (!args->point.empty()) {
         ASSIGN_OR_RETURN(auto v, Numbers(args->point, 3, "--point", "X,Y,Z"));
@@ -161,9 +158,8 @@ void AddObjectCommands(CLI::App& app, Action* action) {
       std::printf("%-5s %-9s %-26s %-30s %s\n", "ID", "SOURCE", "SIZE", "COMPLETION", "ARTEFACTS");
       nlohmann::json all = nlohmann::json::array();
       for (const client::ObjectInfo& o : objects) {
-        const std::string size =
-            absl::StrFormat("%.3f x %.3f x %.3f %s", o.extent.x, o.extent.y, o.extent.z,
-                            o.units == "metres" ? "m" : "u");
+        const std::string size = absl::StrFormat("%.3f x %.3f x %.3f %s", o.extent.x, o.extent.y,
+                                                 o.extent.z, o.units == "metres" ? "m" : "u");
         std::printf("%-5u %-9s %-26s %-30s %zu\n", o.id, o.source.c_str(), size.c_str(),
                     o.completion.substr(0, 30).c_str(), o.artefacts.size());
         all.push_back(ObjectJson(o));

@@ -16,9 +16,9 @@ int main(int argc, char** argv) {
   o.run_store = o.run_scheduler = false;
   o.listen = "127.0.0.1:0";
   o.workers = {"generation"};
-  return instascene::node::NodeMain(
-      argc, argv,
-      "instascene-generation: leases complete jobs (one per object) "
-      "(needs --store and --scheduler)",
-      o, true, true, stages, {instascene::node::GenerationStageService()});
+  return instascene::node::NodeMain(argc, argv,
+                                    "instascene-generation: leases complete jobs (one per object) "
+                                    "(needs --store and --scheduler)",
+                                    o, true, true, stages,
+                                    {instascene::node::GenerationStageService()});
 }

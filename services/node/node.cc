@@ -37,8 +37,7 @@ absl::Status NodeOptions::Validate() const {
     return absl::InvalidArgumentError("nothing to run");
   if (lease_seconds < 2) return absl::InvalidArgumentError("--lease-seconds must be >= 2");
   if (drain_seconds < 0) return absl::InvalidArgumentError("--drain-seconds must be >= 0");
-  if (index_cache_bytes < 0)
-    return absl::InvalidArgumentError("--index-cache-bytes must be >= 0");
+  if (index_cache_bytes < 0) return absl::InvalidArgumentError("--index-cache-bytes must be >= 0");
   if (!(retention_hours >= 0 && retention_hours <= 24 * 3650))
     return absl::InvalidArgumentError("--retention-hours must be in [0, 87600]");
   return store_options.Validate();

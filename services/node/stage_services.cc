@@ -11,22 +11,23 @@
 namespace instascene::node {
 
 StageService DecompositionStageService() {
-  return {"decomposition", "instascene.v1.Decomposition", {"decompose"},
+  return {"decomposition",
+          "instascene.v1.Decomposition",
+          {"decompose"},
           [](const StageServiceContext& c) {
             return std::make_unique<decomposition::DecompositionService>(c.worker);
           }};
 }
 
 StageService TrainingStageService() {
-  return {"training", "instascene.v1.Training", {"train", "segment"},
-          [](const StageServiceContext& c) {
-            return std::make_unique<training::TrainingService>(c.worker);
-          }};
+  return {
+      "training", "instascene.v1.Training", {"train", "segment"}, [](const StageServiceContext& c) {
+        return std::make_unique<training::TrainingService>(c.worker);
+      }};
 }
 
 StageService GenerationStageService() {
-  return {"generation", "instascene.v1.Generation", {"complete"},
-          [](const StageServiceContext& c) {
+  return {"generation", "instascene.v1.Generation", {"complete"}, [](const StageServiceContext& c) {
             return std::make_unique<generation::GenerationService>(c.worker);
           }};
 }
@@ -51,8 +52,8 @@ StageService ObjectsStageService() {
             };
             objects::ObjectsServiceOptions options;
             options.cache_bytes = c.index_cache_bytes;
-            return std::make_unique<objects::ObjectsService>(c.store, std::move(lookup),
-                                                             c.work_dir, options);
+            return std::make_unique<objects::ObjectsService>(c.store, std::move(lookup), c.work_dir,
+                                                             options);
           }};
 }
 

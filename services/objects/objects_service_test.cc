@@ -45,7 +45,8 @@ class ObjectsServiceTest : public ::testing::Test {
     ASSERT_TRUE(WriteResult(result_dir, *gt, scene->cloud).ok());
     absl::StatusOr<store::Manifest> segment = store::ManifestFromDirectory(result_dir, "segment");
     ASSERT_TRUE(segment.ok());
-    absl::StatusOr<store::UploadReport> seg_up = store::UploadManifest(*store_, *segment, result_dir);
+    absl::StatusOr<store::UploadReport> seg_up =
+        store::UploadManifest(*store_, *segment, result_dir);
     ASSERT_TRUE(seg_up.ok());
     v1::Scene described;
     described.set_name("s" + std::to_string(seed));
@@ -65,8 +66,7 @@ class ObjectsServiceTest : public ::testing::Test {
         [this](const std::string& name) -> absl::StatusOr<v1::Scene> {
           ++lookups_;
           auto it = scenes_.find(name);
-          if (it == scenes_.end())
-            return absl::NotFoundError("scene '" + name + "' not found");
+          if (it == scenes_.end()) return absl::NotFoundError("scene '" + name + "' not found");
           return it->second;
         },
         temp_.Sub("work"), options);
@@ -133,7 +133,8 @@ TEST_F(ObjectsServiceTest, EverySelectorFindsTheGroundTruthObject) {
     ASSERT_EQ(o.artefacts_size(), 0);  // ground truth carries no per-instance splats
 
     // By a point on it (one of its Gaussians), and by a ray from a camera through that point.
-    const Eigen::Vector3f at(&truth.cloud.positions[3 * (so.first_gaussian + so.num_gaussians / 2)]);
+    const Eigen::Vector3f at(
+        &truth.cloud.positions[3 * (so.first_gaussian + so.num_gaussians / 2)]);
     v1::ObjectSelector point;
     point.mutable_point()->set_x(at.x());
     point.mutable_point()->set_y(at.y());

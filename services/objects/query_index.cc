@@ -133,7 +133,7 @@ std::vector<uint32_t> QueryIndex::Instances() const {
 }
 
 size_t QueryIndex::ByteSize() const {
-  size_t bytes = sizeof(uint32_t) * 2 * labels_.size();                 // labels + members
+  size_t bytes = sizeof(uint32_t) * 2 * labels_.size();  // labels + members
   bytes += (sizeof(Eigen::Vector3f) + 3 * sizeof(uint32_t)) * point_labels_.size();  // k-d tree
   for (const SceneView& v : scene_->views)  // every label map, rendered or not yet
     bytes += sizeof(uint32_t) * static_cast<size_t>(v.camera.width) * v.camera.height;

@@ -37,8 +37,7 @@ class QueryIndex {
   static absl::StatusOr<std::unique_ptr<QueryIndex>> Build(const Scene& scene,
                                                            const GaussianCloud& cloud,
                                                            const SegmentationResult& result,
-                                                           int num_threads = 0,
-                                                           bool eager = true);
+                                                           int num_threads = 0, bool eager = true);
 
   // The instance under pixel (x, y) of view `view`.
   absl::StatusOr<QueryAnswer> Click(int view, int x, int y) const;

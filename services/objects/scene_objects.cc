@@ -40,8 +40,7 @@ absl::Status MaterializeFiles(store::BlobStore& store, const store::Manifest& ma
   subset.kind = manifest.kind;
   for (const std::string& f : files) {
     auto it = manifest.files.find(f);
-    if (it == manifest.files.end())
-      return absl::DataLossError(absl::StrCat(what, " has no ", f));
+    if (it == manifest.files.end()) return absl::DataLossError(absl::StrCat(what, " has no ", f));
     subset.files.emplace(f, it->second);
   }
   return store::MaterializeManifest(store, subset, directory);
@@ -67,8 +66,7 @@ void SetVector(const Eigen::Vector3d& v, v1::Vector3* out) {
 }
 
 absl::StatusOr<Eigen::Vector3d> JsonVector(const json& j, const std::string& what) {
-  if (!j.is_array() || j.size() != 3 || !j[0].is_number() || !j[1].is_number() ||
-      !j[2].is_number())
+  if (!j.is_array() || j.size() != 3 || !j[0].is_number() || !j[1].is_number() || !j[2].is_number())
     return absl::DataLossError(absl::StrCat(what, ": expected [x, y, z]"));
   return Eigen::Vector3d(j[0].get<double>(), j[1].get<double>(), j[2].get<double>());
 }
@@ -128,8 +126,9 @@ absl::StatusOr<std::unique_ptr<SceneObjects>> SceneObjects::Load(store::BlobStor
   RETURN_IF_ERROR(
       MaterializeFiles(store, segment, {labels_file}, result_dir, "the segment output"));
   SegmentationResult result;
-  ASSIGN_OR_RETURN(result.labels, ReadGaussianInstanceIds(
-                                      (fs::path(result_dir) / labels_file).string(), s.cloud_.size()));
+  ASSIGN_OR_RETURN(
+      result.labels,
+      ReadGaussianInstanceIds((fs::path(result_dir) / labels_file).string(), s.cloud_.size()));
   ASSIGN_OR_RETURN(s.index_, QueryIndex::Build(s.scene_, s.cloud_, result, 0, /*eager=*/false));
   const float diagonal = RobustBounds(s.cloud_).diagonal().norm();
   s.default_radius_ = 0.02f * diagonal;
@@ -246,8 +245,7 @@ absl::Status SceneObjects::LoadCompleted(store::BlobStore& store,
     SetVector(s * extent, o.mutable_extent());
     const bool abstained = m.value("abstained", true);
     o.set_completion(abstained ? "abstained (closed crop)" : "completed");
-    o.set_completed_share(
-        m.value("gaussians", json::object()).value("completed_share", 0.0));
+    o.set_completed_share(m.value("gaussians", json::object()).value("completed_share", 0.0));
     o.set_gaussians(static_cast<int64_t>(index_->Gaussians(id).size()));
     o.set_manifest_json(m.dump());
     AddArtefacts(completed, "", &o);
@@ -294,8 +292,8 @@ absl::StatusOr<uint32_t> SceneObjects::Resolve(const v1::ObjectSelector& selecto
   switch (selector.selector_case()) {
     case v1::ObjectSelector::kId: {
       if (objects_.count(selector.id()) == 0)
-        return absl::NotFoundError(absl::StrCat("scene '", scene, "' has no object ",
-                                                selector.id(), " (", objects_.size(),
+        return absl::NotFoundError(absl::StrCat("scene '", scene, "' has no object ", selector.id(),
+                                                " (", objects_.size(),
                                                 " objects; ListObjects names them)"));
       return selector.id();
     }
@@ -312,9 +310,9 @@ absl::StatusOr<uint32_t> SceneObjects::Resolve(const v1::ObjectSelector& selecto
       ASSIGN_OR_RETURN(QueryAnswer a,
                        index_->Point(point.cast<float>(), static_cast<float>(radius)));
       if (a.instance == 0 || objects_.count(a.instance) == 0)
-        return absl::NotFoundError(absl::StrFormat(
-            "scene '%s': no object within %g scene units of (%g, %g, %g)", scene, radius,
-            point.x(), point.y(), point.z()));
+        return absl::NotFoundError(
+            absl::StrFormat("scene '%s': no object within %g scene units of (%g, %g, %g)", scene,
+                            radius, point.x(), point.y(), point.z()));
       return a.instance;
     }
     case v1::ObjectSelector::kClick: {
@@ -322,9 +320,9 @@ absl::StatusOr<uint32_t> SceneObjects::Resolve(const v1::ObjectSelector& selecto
       ASSIGN_OR_RETURN(int view, ResolveView(scene_, c.view()));
       ASSIGN_OR_RETURN(QueryAnswer a, index_->Click(view, c.x(), c.y()));
       if (a.instance == 0 || objects_.count(a.instance) == 0)
-        return absl::NotFoundError(absl::StrFormat(
-            "scene '%s': pixel (%d, %d) of view %s shows the background, no object", scene, c.x(),
-            c.y(), scene_.views[view].name));
+        return absl::NotFoundError(
+            absl::StrFormat("scene '%s': pixel (%d, %d) of view %s shows the background, no object",
+                            scene, c.x(), c.y(), scene_.views[view].name));
       return a.instance;
     }
     case v1::ObjectSelector::kRay: {
@@ -348,8 +346,7 @@ absl::StatusOr<uint32_t> SceneObjects::Resolve(const v1::ObjectSelector& selecto
 absl::StatusOr<v1::Object> SceneObjects::Describe(uint32_t id) const {
   auto it = objects_.find(id);
   if (it == objects_.end())
-    return absl::NotFoundError(
-        absl::StrCat("scene '", outputs_.scene, "' has no object ", id));
+    return absl::NotFoundError(absl::StrCat("scene '", outputs_.scene, "' has no object ", id));
   return it->second;
 }
 

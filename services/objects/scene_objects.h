@@ -28,10 +28,10 @@ namespace instascene::objects {
 
 // The stored results one index is built from (the scheduler's latest outputs of a scene).
 struct SceneOutputs {
-  std::string scene;               // name
-  store::Digest scene_manifest;    // the submission the segment output was computed from
-  store::Digest segment;           // `segment` output (required)
-  std::optional<store::Digest> exported;  // `export` output
+  std::string scene;                          // name
+  store::Digest scene_manifest;               // the submission the segment output was computed from
+  store::Digest segment;                      // `segment` output (required)
+  std::optional<store::Digest> exported;      // `export` output
   std::map<int64_t, store::Digest> complete;  // item -> `complete` output
   // Identifies the index: equal keys give equal answers.
   std::string Key() const;
@@ -64,7 +64,8 @@ class SceneObjects {
  private:
   SceneObjects() = default;
   absl::Status LoadExport(store::BlobStore& store, const store::Digest& digest);
-  absl::Status LoadCompleted(store::BlobStore& store, const std::map<int64_t, store::Digest>& items);
+  absl::Status LoadCompleted(store::BlobStore& store,
+                             const std::map<int64_t, store::Digest>& items);
   void AddSegmentOnly(const store::Manifest& segment);
 
   SceneOutputs outputs_;

@@ -141,10 +141,10 @@ TEST(LocalRunner, APartialJoinRunsOverTheItemsThatSucceeded) {
   };
   StageSpec source = spec("source", {});
   source.fans_out = true;
-  ASSERT_TRUE(r.Add({source, [](const StageContext&) -> absl::StatusOr<StageResult> {
-                       return StageResult{3};
-                     }})
-                  .ok());
+  ASSERT_TRUE(
+      r.Add({source,
+             [](const StageContext&) -> absl::StatusOr<StageResult> { return StageResult{3}; }})
+          .ok());
   ASSERT_TRUE(r.Add({spec("each", {{"source", InputMode::kEach}}),
                      [](const StageContext& c) -> absl::StatusOr<StageResult> {
                        if (c.item == 1) return absl::InvalidArgumentError("degenerate item");
@@ -154,16 +154,16 @@ TEST(LocalRunner, APartialJoinRunsOverTheItemsThatSucceeded) {
   std::vector<std::string> seen;
   StageSpec partial = spec("partial", {{"each", InputMode::kAll}});
   partial.partial_join = true;
-  ASSERT_TRUE(r.Add({partial, [&](const StageContext& c) -> absl::StatusOr<StageResult> {
+  ASSERT_TRUE(r.Add({partial,
+                     [&](const StageContext& c) -> absl::StatusOr<StageResult> {
                        for (const auto& [name, dir] : c.inputs) seen.push_back(name);
                        return StageResult{};
                      }})
                   .ok());
-  ASSERT_TRUE(r.Add({spec("strict", {{"each", InputMode::kAll}}),
-                     [](const StageContext&) -> absl::StatusOr<StageResult> {
-                       return StageResult{};
-                     }})
-                  .ok());
+  ASSERT_TRUE(
+      r.Add({spec("strict", {{"each", InputMode::kAll}}),
+             [](const StageContext&) -> absl::StatusOr<StageResult> { return StageResult{}; }})
+          .ok());
   LocalRunOptions options;
   options.out_dir = temp.str();
   auto plan = r.Plan({"source", "each", "partial"}, nlohmann::json::object());

@@ -23,8 +23,7 @@ int main(int argc, char** argv) {
     std::fprintf(stderr, "connect: %s\n", client.status().ToString().c_str());
     return 1;
   }
-  const instascene::client::Vec3 point{std::atof(argv[3]), std::atof(argv[4]),
-                                       std::atof(argv[5])};
+  const instascene::client::Vec3 point{std::atof(argv[3]), std::atof(argv[4]), std::atof(argv[5])};
   auto object = (*client)->GetObject(argv[2], ObjectSelector::Point(point));
   if (!object.ok()) {  // NOT_FOUND: nothing near that point
     std::fprintf(stderr, "lookup: %s\n", object.status().ToString().c_str());

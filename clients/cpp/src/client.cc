@@ -50,8 +50,8 @@ struct Client::Impl {
       last = connected.status();
       if (!absl::IsUnavailable(last) && !absl::IsDeadlineExceeded(last)) break;
     }
-    return absl::UnavailableError(absl::StrCat("store ", Address("store"),
-                                               " unreachable: ", last.message()));
+    return absl::UnavailableError(
+        absl::StrCat("store ", Address("store"), " unreachable: ", last.message()));
   }
 };
 
@@ -233,8 +233,9 @@ absl::StatusOr<Transfer> Client::DownloadObject(const ObjectInfo& object, const 
     const fs::path target = fs::path(dir) / a.path;
     std::error_code ec;
     fs::create_directories(target.parent_path(), ec);
-    if (ec) return absl::UnavailableError(absl::StrCat(target.parent_path().string(), ": ",
-                                                       ec.message()));
+    if (ec)
+      return absl::UnavailableError(
+          absl::StrCat(target.parent_path().string(), ": ", ec.message()));
     RETURN_IF_ERROR(blobs->GetFile(digest, target.string()));
     t.files += 1;
     t.bytes += a.bytes;
@@ -272,8 +273,8 @@ absl::StatusOr<SubmitResult> Client::Submit(const SubmitRequest& r,
   result.files_skipped = upload.files_skipped;
   for (int i = 0; i < response.jobs_size(); ++i) {
     const v1::Job& j = response.jobs(i);
-    result.jobs.push_back({j.id(), j.kind(), "", j.item(), i < response.created_size() &&
-                                                                response.created(i)});
+    result.jobs.push_back(
+        {j.id(), j.kind(), "", j.item(), i < response.created_size() && response.created(i)});
     result.jobs.back().state = StateName(j.state());
   }
   return result;

@@ -24,9 +24,9 @@
 namespace instascene::client {
 
 struct ClientOptions {
-  std::string server = "127.0.0.1:50051";  // scheduler and Objects service (`instascene serve`)
-  std::string store;    // the content store's address ("" = server)
-  std::string objects;  // the Objects service's address ("" = server)
+  std::string server = "127.0.0.1:50051";     // scheduler and Objects service (`instascene serve`)
+  std::string store;                          // the content store's address ("" = server)
+  std::string objects;                        // the Objects service's address ("" = server)
   std::chrono::milliseconds deadline{30000};  // per call (per attempt)
   int max_attempts = 4;                       // attempts while UNAVAILABLE (>= 1)
   std::chrono::milliseconds initial_backoff{200};  // doubled after each failed attempt
@@ -43,8 +43,8 @@ struct Pose {
 };
 
 struct Artefact {
-  std::string path;        // relative: "visual.glb", "collision/hull.stl", "object.urdf", ...
-  std::string sha256;      // lower-case hex digest of its bytes
+  std::string path;    // relative: "visual.glb", "collision/hull.stl", "object.urdf", ...
+  std::string sha256;  // lower-case hex digest of its bytes
   int64_t bytes = 0;
   std::string media_type;  // "model/gltf-binary", "model/stl", "application/xml", ...
 };
@@ -58,14 +58,14 @@ struct ObjectInfo {
   std::string units;           // "metres" or "scene units (unscaled)"
   double meters_per_unit = 0;  // 0 when the scene has no metric scale
   Pose world_from_object;
-  Vec3 extent;                 // bounding-box size in the object frame, in `units`
-  std::string completion;      // "completed", "abstained (closed crop)", "raw crop ..."
+  Vec3 extent;             // bounding-box size in the object frame, in `units`
+  std::string completion;  // "completed", "abstained (closed crop)", "raw crop ..."
   double completed_share = 0;
   int64_t gaussians = 0;
-  std::string manifest_json;   // the per-object manifest (instascene.export/1), when exported
+  std::string manifest_json;  // the per-object manifest (instascene.export/1), when exported
   std::vector<Artefact> artefacts;
   double query_microseconds = 0;
-  bool index_loaded = false;   // false when this query loaded the scene's index first
+  bool index_loaded = false;  // false when this query loaded the scene's index first
 };
 
 // Which object: by id, the object nearest a 3D point (world, scene units; within max_distance,
@@ -105,8 +105,8 @@ struct Transfer {
 using ProgressCallback = std::function<void(int64_t done, int64_t total)>;
 
 struct SubmitRequest {
-  std::string scene_dir;            // a scene folder (scene.json, splat, images, masks)
-  std::string name;                 // scene name ("" = the folder's name)
+  std::string scene_dir;  // a scene folder (scene.json, splat, images, masks)
+  std::string name;       // scene name ("" = the folder's name)
   std::string parameters_json = "{}";
   std::vector<std::string> stages;  // empty = the default pipeline
   int priority = 0;
