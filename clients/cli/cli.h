@@ -7,8 +7,10 @@
 
 #include <functional>
 #include <string>
+#include <vector>
 
 #include "absl/status/status.h"
+#include "absl/status/statusor.h"
 
 namespace instascene::cli {
 
@@ -31,5 +33,10 @@ void AddObjectCommands(CLI::App& app, Action* action);  // object, objects
 
 // Prints one JSON object as the last stdout line (the --json contract).
 void PrintJsonLine(const std::string& json);
+
+// Parses a comma-separated list of exactly `count` numbers given as `flag` (errors say "FLAG must
+// be FORM", e.g. "--point must be X,Y,Z").
+absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& spec, size_t count,
+                                                 const std::string& flag, const std::string& form);
 
 }  // namespace instascene::cli

@@ -5,30 +5,14 @@
 
 #include <nlohmann/json.hpp>
 
-#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
-#include "absl/strings/str_split.h"
 #include "clients/cli/cli.h"
 #include "common/core/status.h"
 #include "instascene/client/client.h"
 
 namespace instascene::cli {
 namespace {
-
-absl::StatusOr<std::vector<double>> Numbers(const std::string& spec, size_t count,
-                                            const std::string& flag, const std::string& form) {
-  std::vector<double> values;
-  for (absl::string_view p : absl::StrSplit(spec, ',')) {
-    double v = 0;
-    if (!absl::SimpleAtod(p, &v))
-      return absl::InvalidArgumentError(absl::StrCat(flag, ": not a number: '", p, "'"));
-    values.push_back(v);
-  }
-  if (values.size() != count)
-    return absl::InvalidArgumentError(absl::StrCat(flag, " must be ", form));
-  return values;
-}
 
 nlohmann::json ObjectJson(const client::ObjectInfo& o) {
   const client::Pose& p = o.world_from_object;
@@ -109,14 +93,14 @@ void AddObjectCommands(CLI::App& app, Action* action) {
         if (args->id > 0xffffffffLL) return absl::InvalidArgumentError("--id must be below 2^32");
         selector = client::ObjectSelector::Id(static_cast<uint32_t>(args->id));
       } else if (!args->point.empty()) {
-        ASSIGN_OR_RETURN(auto v, Numbers(args->point, 3, "--point", "X,Y,Z"));
+        ASSIGN_OR_RETURN(auto v, ParseNumbers(args->point, 3, "--point", "X,Y,Z"));
         selector = client::ObjectSelector::Point({v[0], v[1], v[2]}, args->max_distance);
       } else if (!args->pixel.empty()) {
-        ASSIGN_OR_RETURN(auto v, Numbers(args->pixel, 2, "--pixel", "X,Y"));
+        ASSIGN_OR_RETURN(auto v, ParseNumbers(args->pixel, 2, "--pixel", "X,Y"));
         selector = client::ObjectSelector::Click(args->view, static_cast<int>(v[0]),
                                                  static_cast<int>(v[1]));
       } else {
-        ASSIGN_OR_RETURN(auto v, Numbers(args->ray, 6, "--ray", "OX,OY,OZ,DX,DY,DZ"));
+        ASSIGN_OR_RETURN(auto v, ParseNumbers(args->ray, 6, "--ray", "OX,OY,OZ,DX,DY,DZ"));
         selector = client::ObjectSelector::Ray({v[0], v[1], v[2]}, {v[3], v[4], v[5]});
       }
       client::ClientOptions options;

@@ -46,32 +46,23 @@ void AddQueryCommand(CLI::App& app, Action* action) {
       ASSIGN_OR_RETURN(std::unique_ptr<objects::QueryIndex> index,
                        objects::QueryIndex::Build(scene, cloud, result));
       const double build_ms = build.ElapsedMs();
-      const std::string& spec = !args->pixel.empty()   ? args->pixel
-                                : !args->point.empty() ? args->point
-                                                       : args->ray;
-      std::vector<std::string> parts = absl::StrSplit(spec, ',');
-      std::vector<double> values;
-      for (const std::string& p : parts) {
-        double v = 0;
-        if (!absl::SimpleAtod(p, &v))
-          return absl::InvalidArgumentError(absl::StrCat("not a number: '", p, "'"));
-        values.push_back(v);
-      }
       Stopwatch click;
       objects::QueryAnswer answer;
       if (!args->pixel.empty()) {
-        if (values.size() != 2) return absl::InvalidArgumentError("--pixel must be X,Y");
+        ASSIGN_OR_RETURN(std::vector<double> values,
+                         ParseNumbers(args->pixel, 2, "--pixel", "X,Y"));
         ASSIGN_OR_RETURN(int view, ResolveView(scene, args->view));
         ASSIGN_OR_RETURN(
             answer, index->Click(view, static_cast<int>(values[0]), static_cast<int>(values[1])));
       } else if (!args->ray.empty()) {
-        if (values.size() != 6)
-          return absl::InvalidArgumentError("--ray must be OX,OY,OZ,DX,DY,DZ");
+        ASSIGN_OR_RETURN(std::vector<double> values,
+                         ParseNumbers(args->ray, 6, "--ray", "OX,OY,OZ,DX,DY,DZ"));
         ASSIGN_OR_RETURN(
             answer, index->Ray(Eigen::Vector3d(values[0], values[1], values[2]).cast<float>(),
                                Eigen::Vector3d(values[3], values[4], values[5]).cast<float>()));
       } else {
-        if (values.size() != 3) return absl::InvalidArgumentError("--point must be X,Y,Z");
+        ASSIGN_OR_RETURN(std::vector<double> values,
+                         ParseNumbers(args->point, 3, "--point", "X,Y,Z"));
         ASSIGN_OR_RETURN(
             answer, index->Point(Eigen::Vector3d(values[0], values[1], values[2]).cast<float>(),
                                  args->max_distance));

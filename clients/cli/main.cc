@@ -1,6 +1,9 @@
 // instascene: offline pipeline commands, the embedded server and clients of the services.
 #include <cstdio>
 
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
 #include "clients/cli/cli.h"
 
 namespace instascene::cli {
@@ -9,6 +12,20 @@ void PrintJsonLine(const std::string& json) {
   std::fflush(stderr);
   std::printf("%s\n", json.c_str());
   std::fflush(stdout);
+}
+
+absl::StatusOr<std::vector<double>> ParseNumbers(const std::string& spec, size_t count,
+                                                 const std::string& flag, const std::string& form) {
+  std::vector<double> values;
+  for (absl::string_view p : absl::StrSplit(spec, ',')) {
+    double v = 0;
+    if (!absl::SimpleAtod(p, &v))
+      return absl::InvalidArgumentError(absl::StrCat(flag, ": not a number: '", p, "'"));
+    values.push_back(v);
+  }
+  if (values.size() != count)
+    return absl::InvalidArgumentError(absl::StrCat(flag, " must be ", form));
+  return values;
 }
 
 }  // namespace instascene::cli

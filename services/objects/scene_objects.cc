@@ -163,6 +163,18 @@ SceneObjects::~SceneObjects() {
   if (warm_up_.joinable()) warm_up_.join();  // at most one view's rendering
 }
 
+v1::Object SceneObjects::NewObject(uint32_t id, const std::string& source) const {
+  v1::Object o;
+  o.set_scene(outputs_.scene);
+  o.set_id(id);
+  o.set_source(source);
+  o.set_units(meters_per_unit_ ? "metres" : "scene units (unscaled)");
+  if (meters_per_unit_) o.set_meters_per_unit(*meters_per_unit_);
+  o.set_gaussians(static_cast<int64_t>(index_->Gaussians(id).size()));
+  rpc::ToProto(outputs_.segment, o.mutable_segment_manifest());
+  return o;
+}
+
 absl::Status SceneObjects::LoadExport(store::BlobStore& store, const store::Digest& digest) {
   ASSIGN_OR_RETURN(store::Manifest exported, store::ReadManifest(store, digest));
   ASSIGN_OR_RETURN(json catalogue,
@@ -177,12 +189,8 @@ absl::Status SceneObjects::LoadExport(store::BlobStore& store, const store::Dige
     const std::string prefix = entry["dir"].get<std::string>() + "/";
     const std::string what = absl::StrCat("export object ", id);
     ASSIGN_OR_RETURN(json m, ReadJsonBlob(store, exported, prefix + "manifest.json", what));
-    v1::Object o;
-    o.set_scene(outputs_.scene);
-    o.set_id(id);
-    o.set_source("export");
-    o.set_units(m.value("units", std::string("scene units (unscaled)")));
-    if (meters_per_unit_) o.set_meters_per_unit(*meters_per_unit_);
+    v1::Object o = NewObject(id, "export");
+    o.set_units(m.value("units", o.units()));
     const json& pose = m.value("world_from_object", json::object());
     ASSIGN_OR_RETURN(Eigen::Vector3d t,
                      JsonVector(pose.value("translation", json()), what + " translation"));
@@ -199,10 +207,8 @@ absl::Status SceneObjects::LoadExport(store::BlobStore& store, const store::Dige
     SetVector(extent, o.mutable_extent());
     o.set_completion(m.value("completion", std::string()));
     o.set_completed_share(m.value("completed_share", 0.0));
-    o.set_gaussians(static_cast<int64_t>(index_->Gaussians(id).size()));
     o.set_manifest_json(m.dump());
     AddArtefacts(exported, prefix, &o);
-    rpc::ToProto(outputs_.segment, o.mutable_segment_manifest());
     rpc::ToProto(digest, o.mutable_export_manifest());
     objects_[id] = std::move(o);
   }
@@ -231,12 +237,7 @@ absl::Status SceneObjects::LoadCompleted(store::BlobStore& store,
       t[i] = rows[i][3].get<double>();
     }
     const double s = meters_per_unit_.value_or(1.0);
-    v1::Object o;
-    o.set_scene(outputs_.scene);
-    o.set_id(id);
-    o.set_source("complete");
-    o.set_units(meters_per_unit_ ? "metres" : "scene units (unscaled)");
-    if (meters_per_unit_) o.set_meters_per_unit(*meters_per_unit_);
+    v1::Object o = NewObject(id, "complete");
     SetVector(s * t, o.mutable_world_from_object()->mutable_translation());
     SetRotation(Eigen::Quaterniond(r).normalized(), o.mutable_world_from_object());
     ASSIGN_OR_RETURN(
@@ -246,10 +247,8 @@ absl::Status SceneObjects::LoadCompleted(store::BlobStore& store,
     const bool abstained = m.value("abstained", true);
     o.set_completion(abstained ? "abstained (closed crop)" : "completed");
     o.set_completed_share(m.value("gaussians", json::object()).value("completed_share", 0.0));
-    o.set_gaussians(static_cast<int64_t>(index_->Gaussians(id).size()));
     o.set_manifest_json(m.dump());
     AddArtefacts(completed, "", &o);
-    rpc::ToProto(outputs_.segment, o.mutable_segment_manifest());
     objects_[id] = std::move(o);
   }
   return absl::OkStatus();
@@ -262,18 +261,12 @@ void SceneObjects::AddSegmentOnly(const store::Manifest& segment) {
     Eigen::AlignedBox3d box;
     const std::vector<uint32_t>& members = index_->Gaussians(id);
     for (uint32_t g : members) box.extend(Eigen::Vector3f(&cloud_.positions[3 * g]).cast<double>());
-    v1::Object o;
-    o.set_scene(outputs_.scene);
-    o.set_id(id);
-    o.set_source("segment");
-    o.set_units(meters_per_unit_ ? "metres" : "scene units (unscaled)");
-    if (meters_per_unit_) o.set_meters_per_unit(*meters_per_unit_);
+    v1::Object o = NewObject(id, "segment");
     // Axis-aligned: the box centre as origin, the world's axes.
     SetVector(s * box.center(), o.mutable_world_from_object()->mutable_translation());
     SetRotation(Eigen::Quaterniond::Identity(), o.mutable_world_from_object());
     SetVector(s * box.sizes(), o.mutable_extent());
     o.set_completion("raw crop (not completed)");
-    o.set_gaussians(static_cast<int64_t>(members.size()));
     const std::string splat = absl::StrCat("instances/", id, ".ply");
     auto it = segment.files.find(splat);
     if (it != segment.files.end()) {
@@ -282,7 +275,6 @@ void SceneObjects::AddSegmentOnly(const store::Manifest& segment) {
       rpc::ToProto(it->second, a->mutable_digest());
       a->set_media_type(MediaType(splat));
     }
-    rpc::ToProto(outputs_.segment, o.mutable_segment_manifest());
     objects_[id] = std::move(o);
   }
 }

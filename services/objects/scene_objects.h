@@ -67,6 +67,8 @@ class SceneObjects {
   absl::Status LoadCompleted(store::BlobStore& store,
                              const std::map<int64_t, store::Digest>& items);
   void AddSegmentOnly(const store::Manifest& segment);
+  // An answer's common fields: scene, id, source, units, observed Gaussians, segment digest.
+  v1::Object NewObject(uint32_t id, const std::string& source) const;
 
   SceneOutputs outputs_;
   Scene scene_;
