@@ -7,7 +7,7 @@ SANITIZE_DIR ?= build-sanitize
 JOBS         ?= $(shell nproc)
 CMAKE_FLAGS  ?=
 
-.PHONY: all deps configure build test test-sanitize bench demo format tidy clean
+.PHONY: all deps configure build test test-sanitize fuzz bench demo format tidy clean
 
 all: build
 
@@ -36,6 +36,10 @@ test-sanitize: deps
 	cmake --build $(SANITIZE_DIR) -j $(JOBS)
 	cd $(SANITIZE_DIR) && ASAN_OPTIONS=detect_leaks=1 LSAN_OPTIONS=suppressions=$(CURDIR)/tests/lsan.supp UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 ctest --output-on-failure -j $(JOBS) -L unit
 
+# libFuzzer harnesses under ASan/UBSan (clang), FUZZ_SECONDS each (default 60); not part of `make test`.
+fuzz: deps
+	scripts/fuzz.sh
+
 bench: build
 	scripts/bench.sh $(BUILD_DIR)
 
@@ -49,4 +53,4 @@ tidy: configure
 	git ls-files 'common/*.cc' 'clients/*.cc' 'services/*.cc' | grep -v _test.cc | grep -v _benchmark.cc | xargs clang-tidy -p $(BUILD_DIR) --quiet
 
 clean:
-	rm -rf $(BUILD_DIR) $(SANITIZE_DIR) demo-out
+	rm -rf $(BUILD_DIR) $(SANITIZE_DIR) build-fuzz demo-out

@@ -127,8 +127,7 @@ absl::StatusOr<std::map<std::string, v1::Job>> Watch(client::Client& c,
     }
     last[job.id()] = job;
   }
-  const grpc::Status finished = reader->Finish();
-  RETURN_IF_ERROR(client::Call(c, "scheduler", [&](grpc::ClientContext*) { return finished; }));
+  RETURN_IF_ERROR(client::StatusOf(c, "scheduler", reader->Finish()));
   return last;
 }
 

@@ -94,33 +94,38 @@ ObjectsService::Loaded ObjectsService::Index(const std::string& scene, bool* fre
         absl::StrCat("scene '", scene, "': loading its objects failed: ", e.what()));
   }
   promise.set_value(loaded);
-  std::lock_guard<std::mutex> lock(mutex_);
-  for (auto it = lru_.begin(); it != lru_.end(); ++it) {
-    if (it->key != key) continue;
-    if (loaded.ok()) {
-      it->bytes = (*loaded)->ByteSize();
-    } else {
-      lru_.erase(it);  // a failed load is retried by the next query
+  std::list<Entry> evicted;  // destroyed after the lock is released
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    for (auto it = lru_.begin(); it != lru_.end(); ++it) {
+      if (it->key != key) continue;
+      if (loaded.ok()) {
+        it->bytes = (*loaded)->ByteSize();
+      } else {
+        lru_.erase(it);  // a failed load is retried by the next query
+      }
+      break;
     }
-    break;
+    evicted = Evict();
   }
-  Evict();
   return loaded;
 }
 
-void ObjectsService::Evict() {
+std::list<ObjectsService::Entry> ObjectsService::Evict() {
+  std::list<Entry> evicted;
   int64_t total = 0;
   for (const Entry& e : lru_) total += static_cast<int64_t>(e.bytes);
   // Keep the newest entry whatever its size; drop loaded entries from the old end.
-  if (lru_.empty()) return;
+  if (lru_.empty()) return evicted;
   for (auto it = std::prev(lru_.end()); total > options_.cache_bytes && it != lru_.begin();) {
     auto newer = std::prev(it);
     if (it->bytes > 0) {  // not still loading
       total -= static_cast<int64_t>(it->bytes);
-      lru_.erase(it);
+      evicted.splice(evicted.end(), lru_, it);
     }
     it = newer;
   }
+  return evicted;
 }
 
 ObjectsService::CacheStats ObjectsService::cache_stats() const {

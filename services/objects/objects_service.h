@@ -56,7 +56,9 @@ class ObjectsService final : public v1::Objects::Service {
   };
   // The index of a scene's latest outputs; *fresh is true when this call loaded it.
   Loaded Index(const std::string& scene, bool* fresh);
-  void Evict();  // mutex_ held
+  // Drops loaded entries past the byte budget (mutex_ held); returns them so that the caller
+  // destroys them after unlocking (a SceneObjects joins its warm-up thread when destroyed).
+  std::list<Entry> Evict();
 
   store::BlobStore* store_;
   SceneLookup lookup_;

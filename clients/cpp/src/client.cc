@@ -185,6 +185,10 @@ absl::Status Call(Client& client, const std::string& service,
     status = call(&context);
     if (status.error_code() != grpc::StatusCode::UNAVAILABLE) break;
   }
+  return StatusOf(client, service, status);
+}
+
+absl::Status StatusOf(Client& client, const std::string& service, const grpc::Status& status) {
   if (status.error_code() == grpc::StatusCode::UNAVAILABLE ||
       status.error_code() == grpc::StatusCode::DEADLINE_EXCEEDED)
     return absl::UnavailableError(absl::StrCat(service, " ", client.impl().Address(service),

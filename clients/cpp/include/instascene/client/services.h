@@ -21,5 +21,8 @@ v1::Objects::Stub& ObjectsStub(Client& client);
 // while the service is UNAVAILABLE; `service` names it in errors ("scheduler", "store", ...).
 absl::Status Call(Client& client, const std::string& service,
                   const std::function<grpc::Status(grpc::ClientContext*)>& call);
+// The client's error for a finished call (streams: after Finish), without retrying: UNAVAILABLE and
+// DEADLINE_EXCEEDED become "SERVICE ADDRESS unreachable: ...", other statuses pass through.
+absl::Status StatusOf(Client& client, const std::string& service, const grpc::Status& status);
 
 }  // namespace instascene::client
