@@ -1,6 +1,9 @@
 #include "services/objects/objects_service.h"
 
 #include <exception>
+#include <new>
+
+#include <nlohmann/json.hpp>
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
@@ -89,8 +92,14 @@ ObjectsService::Loaded ObjectsService::Index(const std::string& scene, bool* fre
       loaded = absl::Status(built.status().code(),
                             absl::StrCat("scene '", scene, "': ", built.status().message()));
     }
-  } catch (const std::exception& e) {
+  } catch (const nlohmann::json::exception& e) {  // a stored manifest of the wrong shape
+    loaded = absl::DataLossError(
+        absl::StrCat("scene '", scene, "': a stored result is malformed: ", e.what()));
+  } catch (const std::bad_alloc&) {
     loaded = absl::ResourceExhaustedError(
+        absl::StrCat("scene '", scene, "': out of memory loading its objects"));
+  } catch (const std::exception& e) {
+    loaded = absl::InternalError(
         absl::StrCat("scene '", scene, "': loading its objects failed: ", e.what()));
   }
   promise.set_value(loaded);

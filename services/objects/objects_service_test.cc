@@ -5,6 +5,8 @@
 
 #include <gtest/gtest.h>
 
+#include <filesystem>
+#include <fstream>
 #include <thread>
 
 #include "common/core/testing/temp_dir.h"
@@ -226,6 +228,38 @@ TEST_F(ObjectsServiceTest, WhatIsNotThereIsNotFoundAndMalformedSelectorsAreRefus
   fresh.set_name("fresh");
   scenes_["fresh"] = fresh;
   EXPECT_EQ(Get(*service, "fresh", id, &o).error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+}
+
+TEST_F(ObjectsServiceTest, AMalformedStoredExportIsDataLossNotACrash) {
+  // An export output whose object manifest has a quaternion of strings (a forged or corrupt
+  // result).
+  const std::string dir = temp_.Sub("bad-export");
+  std::filesystem::create_directories(dir + "/1");
+  std::ofstream(dir + "/objects.json") << R"({"objects": [{"id": 1, "dir": "1"}]})";
+  std::ofstream(dir + "/1/manifest.json")
+      << R"({"world_from_object": {"translation": [0, 0, 0], "quaternion_xyzw": ["a", "b", "c", "d"]},
+            "bounding_box": {"extent": [1, 1, 1]}})";
+  absl::StatusOr<store::Manifest> exported = store::ManifestFromDirectory(dir, "export");
+  ASSERT_TRUE(exported.ok());
+  absl::StatusOr<store::UploadReport> up = store::UploadManifest(*store_, *exported, dir);
+  ASSERT_TRUE(up.ok());
+  v1::Scene broken = scenes_["s1"];
+  broken.set_name("broken");
+  v1::StageOutput* o = broken.add_outputs();
+  o->set_kind("export");
+  o->set_item(-1);
+  rpc::ToProto(up->manifest, o->mutable_output_manifest());
+  *o->mutable_scene_manifest() = broken.outputs(0).scene_manifest();
+  scenes_["broken"] = broken;
+  auto service = Service();
+  v1::ObjectSelector id;
+  id.set_id(1);
+  v1::Object answer;
+  const grpc::Status status = Get(*service, "broken", id, &answer);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::DATA_LOSS) << status.error_message();
+  EXPECT_NE(status.error_message().find("malformed"), std::string::npos);
+  EXPECT_EQ(service->cache_stats().entries, 0);        // not cached: the next query tries again
+  EXPECT_TRUE(Get(*service, "s1", id, &answer).ok());  // the service goes on
 }
 
 TEST_F(ObjectsServiceTest, ListObjectsPaginatesInIdOrder) {
