@@ -17,6 +17,8 @@ cmake -S . -B "$DIR" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMP
   -DINSTASCENE_FUZZ=ON -DINSTASCENE_WERROR=OFF -DINSTASCENE_BUILD_BENCHMARKS=OFF >/dev/null || exit 1
 cmake --build "$DIR" --target fuzzers || exit 1
 status=0
+corpus=""
+trap '[ -z "$corpus" ] || rm -rf "$corpus"' EXIT
 printf "%-16s %12s %10s %8s  %s\n" harness executions exec/s cov outcome
 for h in "${HARNESSES[@]}"; do
   corpus=$(mktemp -d)
