@@ -344,6 +344,14 @@ absl::StatusOr<PlyColumns> ReadPlyElement(absl::string_view data, const PlyHeade
           " bytes each) but only ", cursor.remaining(), " bytes follow"));
     }
     const bool wanted = element.name == element_name;
+    // An element without properties holds no data, whatever its count: nothing to read or skip
+    // (looping over a declared count of 2e13 would never end; found by ply_fuzz).
+    if (element.properties.empty()) {
+      if (!wanted) continue;
+      PlyColumns empty;
+      empty.count = element.count;
+      return empty;
+    }
     PlyColumns out;
     if (wanted) {
       out.count = element.count;

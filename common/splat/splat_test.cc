@@ -113,6 +113,24 @@ TEST(GaussianPly, ElementCountsMustBeWholeIntegers) {
   }
 }
 
+// Found by ply_fuzz (tests/fuzz): an element without properties but a count of 2.2e13 before the
+// wanted one made the reader loop over every declared instance of nothing.
+TEST(GaussianPly, AnElementWithoutPropertiesIsSkippedWhateverItsCount) {
+  for (const char* format : {"ascii", "binary_little_endian"}) {
+    const std::string data = absl::StrCat("ply\nformat ", format,
+                                          " 1.0\nelement chunk 22222222222222\nelement vertex "
+                                          "0\nproperty float x\nend_header\n");
+    absl::StatusOr<PlyHeader> header = ParsePlyHeader(data, "empty.ply");
+    ASSERT_TRUE(header.ok()) << header.status();
+    absl::StatusOr<PlyColumns> vertex = ReadPlyElement(data, *header, "vertex", "empty.ply");
+    ASSERT_TRUE(vertex.ok()) << vertex.status();
+    EXPECT_EQ(vertex->count, 0);
+    absl::StatusOr<PlyColumns> chunk = ReadPlyElement(data, *header, "chunk", "empty.ply");
+    ASSERT_TRUE(chunk.ok());
+    EXPECT_TRUE(chunk->columns.empty());
+  }
+}
+
 TEST(GaussianPly, ReadsAsciiWithAnyPropertyOrderAndSkipsOtherElements) {
   std::string data = TinyHeader("ascii", 2) +
                      "2 0.5 0.25\n"
