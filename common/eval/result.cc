@@ -94,7 +94,7 @@ absl::StatusOr<SegmentationResult> ReadResult(const std::string& directory,
   nlohmann::json j = nlohmann::json::parse(text, nullptr, false);
   if (j.is_discarded() || !j.is_object())
     return absl::InvalidArgumentError(absl::StrCat(json_path, ": not a JSON object"));
-  if (j.value("format", std::string()) != kResultFormat) {
+  if (!j.contains("format") || !j["format"].is_string() || j["format"] != kResultFormat) {
     return absl::InvalidArgumentError(
         absl::StrCat(json_path, ": \"format\" must be \"", kResultFormat, "\""));
   }

@@ -97,7 +97,9 @@ absl::StatusOr<Scene> ParseSceneJson(absl::string_view text, absl::string_view s
   json root = json::parse(text.begin(), text.end(), nullptr, /*allow_exceptions=*/false);
   if (root.is_discarded()) return fail("not valid JSON");
   if (!root.is_object()) return fail("top level must be an object");
-  if (root.value("format", std::string()) != kSceneFormat) {
+  // (a "format" of another type must not throw: found by scene_json_fuzz)
+  if (!root.contains("format") || !root["format"].is_string() ||
+      root["format"].get<std::string>() != kSceneFormat) {
     return fail(absl::StrCat("\"format\" must be \"", kSceneFormat, "\""));
   }
   Scene scene;

@@ -73,6 +73,8 @@ TEST(SceneJson, RejectsMalformedManifests) {
       R"({"name":"v","width":4,"height":4,"fx":2,"fy":2,"cx":2,"cy":2,"camera_from_world":[[1,0,0,0],[0,1,0,0],[0,0,1,0]]})";
   ExpectBadScene("{", "not valid JSON");
   ExpectBadScene(R"({"format":"other","views":[]})", "format");
+  // A "format" of another type is refused, not thrown (found by scene_json_fuzz).
+  ExpectBadScene(R"({"format":1.0,"views":[]})", "format");
   ExpectBadScene(R"({"format":"instascene.scene/1","views":[)" + view + "," + view + "]}",
                  "duplicate view");
   ExpectBadScene(R"({"format":"instascene.scene/1","gaussians":"../x.ply","views":[]})",

@@ -14,10 +14,12 @@ namespace {
 // log(1e-6) written by 2DGS exports in the unused third scale slot (ALGORITHM.md 2.8).
 constexpr float kSurfelThirdLogScale = -13.815510557964274f;
 
-// Returns the numeric suffix of `name` after `prefix`, or -1.
+// Returns the numeric suffix of `name` after `prefix` (canonical decimal: "rot_00" is not rot_0),
+// or -1.
 int IndexedSuffix(absl::string_view name, absl::string_view prefix) {
   if (!absl::StartsWith(name, prefix)) return -1;
   absl::string_view rest = name.substr(prefix.size());
+  if (rest.size() > 1 && rest[0] == '0') return -1;  // found by ply_fuzz
   int index = -1;
   auto r = std::from_chars(rest.data(), rest.data() + rest.size(), index);
   if (r.ec != std::errc() || r.ptr != rest.data() + rest.size() || rest.empty()) return -1;
@@ -97,11 +99,20 @@ absl::StatusOr<GaussianCloud> ParseGaussianPly(absl::string_view data, absl::str
   ASSIGN_OR_RETURN(pos[1], require("y"));
   ASSIGN_OR_RETURN(pos[2], require("z"));
   ASSIGN_OR_RETURN(int opacity, require("opacity"));
-  for (int i = 0; i < 3; ++i) dc[i] = cols.Find(absl::StrCat("f_dc_", i));
-  for (int i = 0; i < num_scales; ++i) scale[i] = cols.Find(absl::StrCat("scale_", i));
-  for (int i = 0; i < 4; ++i) rot[i] = cols.Find(absl::StrCat("rot_", i));
+  // Every index of each group must be there under its canonical name.
+  for (int i = 0; i < 3; ++i) {
+    ASSIGN_OR_RETURN(dc[i], require(absl::StrCat("f_dc_", i)));
+  }
+  for (int i = 0; i < num_scales; ++i) {
+    ASSIGN_OR_RETURN(scale[i], require(absl::StrCat("scale_", i)));
+  }
+  for (int i = 0; i < 4; ++i) {
+    ASSIGN_OR_RETURN(rot[i], require(absl::StrCat("rot_", i)));
+  }
   std::vector<int> rest(num_rest);
-  for (int i = 0; i < num_rest; ++i) rest[i] = cols.Find(absl::StrCat("f_rest_", i));
+  for (int i = 0; i < num_rest; ++i) {
+    ASSIGN_OR_RETURN(rest[i], require(absl::StrCat("f_rest_", i)));
+  }
 
   const size_t n = static_cast<size_t>(cols.count);
   // 2DGS exports with a constant log(1e-6) third scale are surfels.

@@ -194,6 +194,10 @@ TEST(GaussianPly, BadInputGivesPreciseErrors) {
   std::string missing = good;
   missing.replace(missing.find("property float opacity"), 22, "property float opacitX");
   ExpectError(missing, "'opacity'");
+  // "rot_00" is not rot_0: refused, never indexed as column -1 (found by ply_fuzz).
+  std::string leading_zero = good;
+  leading_zero.replace(leading_zero.find("property float rot_0"), 20, "property float rot_00");
+  ExpectError(leading_zero, "rot_");
   std::string bad_type = good;
   bad_type.replace(bad_type.find("property float x"), 16, "property flt   x");
   ExpectError(bad_type, "unknown property type");

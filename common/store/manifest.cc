@@ -56,7 +56,7 @@ absl::StatusOr<Manifest> ParseManifest(absl::string_view bytes, absl::string_vie
     return absl::InvalidArgumentError(absl::StrCat(source, ": malformed manifest: ", why));
   };
   if (j.is_discarded() || !j.is_object()) return bad("not a JSON object");
-  if (j.value("format", "") != kManifestFormat)
+  if (!j.contains("format") || !j["format"].is_string() || j["format"] != kManifestFormat)
     return bad(absl::StrCat("format is not \"", kManifestFormat, "\""));
   if (!j.contains("kind") || !j["kind"].is_string()) return bad("\"kind\" missing");
   if (!j.contains("files") || !j["files"].is_object()) return bad("\"files\" missing");

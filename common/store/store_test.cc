@@ -100,6 +100,7 @@ TEST(ManifestTest, RoundTripAndMalformed) {
   EXPECT_EQ(SerializeManifest(*back), bytes);
   for (const std::string& bad :
        {std::string("not json"), std::string("[]"), std::string("{\"format\":\"x\"}"),
+        std::string("{\"format\":1}"),  // a format of another type: refused, not thrown
         std::string(R"({"format":"instascene.manifest/1","kind":"scene","files":{"../x":"a/1"}})"),
         std::string(R"({"format":"instascene.manifest/1","kind":"scene","files":{"x":"zz/1"}})"),
         std::string(R"({"format":"instascene.manifest/1","kind":"scene","files":{"/etc/x":")") +
