@@ -18,7 +18,6 @@ absl::StatusOr<std::unique_ptr<QueryIndex>> QueryIndex::Build(const Scene& scene
   index->cloud_ = &cloud;
   index->labels_ = result.labels;
   index->num_threads_ = num_threads;
-  index->eager_ = eager;
   for (uint32_t g = 0; g < result.labels.size(); ++g) {
     if (result.labels[g] != 0) index->members_[result.labels[g]].push_back(g);
   }

@@ -69,7 +69,6 @@ class QueryIndex {
   const GaussianCloud* cloud_ = nullptr;
   std::vector<std::unique_ptr<LazyView>> views_;
   int num_threads_ = 0;
-  bool eager_ = true;
   std::map<uint32_t, std::vector<uint32_t>> members_;                // instance -> Gaussians
   std::map<uint32_t, std::vector<std::pair<int, size_t>>> visible_;  // instance -> (view, pixels)
   std::vector<uint32_t> labels_;

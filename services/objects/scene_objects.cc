@@ -152,7 +152,6 @@ absl::StatusOr<std::unique_ptr<SceneObjects>> SceneObjects::Load(store::BlobStor
   s.warm_up_ = std::thread([&s] {
     for (int v = 0; v < s.Views() && !s.stop_; ++v) {
       (void)s.index_->Click(v, 0, 0);  // renders the view's label map (errors resurface on clicks)
-      ++s.views_ready_;
     }
   });
   return loaded;

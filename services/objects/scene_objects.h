@@ -53,10 +53,8 @@ class SceneObjects {
   std::vector<uint32_t> Ids() const;
   // Approximate memory held (label maps, Gaussians, k-d tree, manifests): the cache's unit.
   size_t ByteSize() const { return bytes_; }
-  // Views whose label map is rendered (Load renders none: a cold start answers points and ids at
-  // once, and a background thread then renders every view in order; a click in a view not yet
-  // rendered renders it first).
-  int ViewsReady() const { return views_ready_.load(); }
+  // Load renders no label map: a cold start answers points and ids at once, and a background
+  // thread then renders every view in order; a click in a view not yet rendered renders it first.
   int Views() const { return static_cast<int>(scene_.views.size()); }
 
   ~SceneObjects();
@@ -80,7 +78,6 @@ class SceneObjects {
   std::map<uint32_t, v1::Object> objects_;  // id -> answer (query fields unset)
   size_t bytes_ = 0;
   std::atomic<bool> stop_{false};
-  std::atomic<int> views_ready_{0};
   std::thread warm_up_;  // renders every view's label map after Load
 };
 
