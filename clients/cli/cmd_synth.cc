@@ -23,7 +23,7 @@ void AddSynthCommand(CLI::App& app, Action* action) {
   struct Args {
     std::string out, preset = "small", mask_noise = "medium", unseen = "keep";
     std::vector<std::string> from_splats;
-    double object_height = 0.5, asymmetric = 0.0;
+    double object_height = 0.5, asymmetric = 0.0, gap = 0.03;
     int64_t seed = -1, objects = -1, views = -1, width = -1, height = -1, gaussians = -1;
     int threads = 0;
     bool json = false;
@@ -50,6 +50,11 @@ void AddSynthCommand(CLI::App& app, Action* action) {
       ->delimiter(',');
   cmd->add_option("--object-height", args->object_height,
                   "With --from-splats: height each capture is scaled to");
+  cmd->add_option("--gap", args->gap,
+                  "With --from-splats: gap between neighbouring footprint circles, in object "
+                  "heights (default 0.03; negative values push the captures into each other "
+                  "until they touch)")
+      ->check(CLI::Range(-1.0, 1.0));
   cmd->add_option("--asymmetric", args->asymmetric,
                   "Share of objects drawn from shapes without symmetry (mug with a handle, "
                   "L-block, irregular block); default 0");
@@ -87,6 +92,7 @@ void AddSynthCommand(CLI::App& app, Action* action) {
         composite.width = options.width;
         composite.height = options.height;
         composite.object_height = static_cast<float>(args->object_height);
+        composite.gap = static_cast<float>(args->gap);
         ASSIGN_OR_RETURN(scene, ComposeSplats(clouds, names, composite));
         options.objects = static_cast<int>(clouds.size());
       }

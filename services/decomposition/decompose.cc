@@ -43,15 +43,35 @@ absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const Gaussian
   ASSIGN_OR_RETURN(result.trackers, BuildTrackers(cloud, cameras, loader, options, track_progress));
   result.tracking_seconds = watch.ElapsedSeconds();
   watch.Restart();
-  result.judgement = JudgeTrackers(result.trackers, options);
+  const MaskJudgement judged = JudgeTrackers(result.trackers, options);
+  result.judgement = judged;
   UndoUndersegmented(result.trackers, &result.judgement);
-  if (progress) progress("clustering", 0, 1);
-  const std::vector<MaskNode> nodes =
+  if (progress) progress("clustering", 0, 1 + options.rejudge_passes);
+  std::vector<MaskNode> nodes =
       ClusterMasks(result.trackers, result.judgement, options, &result.schedule);
-  if (progress) progress("clustering", 1, 1);
+  result.instances = BuildInstances(result.trackers, nodes, cloud, options);
+  std::vector<uint8_t> flags = judged.undersegmented;
+  for (int pass = 0; pass < options.rejudge_passes; ++pass) {
+    RETURN_IF_ERROR(CheckCancelled(options.cancel, "decompose"));
+    if (RejudgeUndersegmented(result.trackers, result.instances, options, &flags) == 0) break;
+    result.judgement = judged;
+    result.judgement.undersegmented = flags;
+    UndoUndersegmented(result.trackers, &result.judgement);
+    nodes = ClusterMasks(result.trackers, result.judgement, options, &result.schedule);
+    result.instances = BuildInstances(result.trackers, nodes, cloud, options);
+    if (progress) progress("clustering", pass + 2, 1 + options.rejudge_passes);
+  }
+  if (progress) progress("clustering", 1 + options.rejudge_passes, 1 + options.rejudge_passes);
+  result.cluster_of.assign(result.trackers.trackers.size(), -1);
+  result.cluster_size.assign(result.trackers.trackers.size(), 0);
+  for (size_t k = 0; k < nodes.size(); ++k) {
+    for (uint32_t t : nodes[k].masks) {
+      result.cluster_of[t] = static_cast<int32_t>(k);
+      result.cluster_size[t] = static_cast<uint32_t>(nodes[k].masks.size());
+    }
+  }
   result.clustering_seconds = watch.ElapsedSeconds();
   watch.Restart();
-  result.instances = BuildInstances(result.trackers, nodes, cloud, options);
   result.undersegmented =
       RemedyUndersegmented(result.trackers, result.judgement, options, &result.instances);
   result.post_seconds = watch.ElapsedSeconds();
@@ -113,9 +133,36 @@ absl::Status WriteDecomposition(const std::string& directory, const Scene& scene
     under.push_back({{"view", scene.views[t.view].name}, {"mask", t.mask_id}});
     under_by_view[t.view].push_back(t.mask_id);
   }
+  // Every kept mask (tracker) and what became of it.
+  std::vector<int64_t> instance_of_tracker(set.trackers.size(), 0);
+  for (size_t k = 0; k < result.instances.size(); ++k) {
+    for (uint32_t t : result.instances[k].masks) instance_of_tracker[t] = static_cast<int64_t>(k + 1);
+  }
+  nlohmann::json masks = nlohmann::json::array();
+  for (size_t t = 0; t < set.trackers.size(); ++t) {
+    const Tracker& tracker = set.trackers[t];
+    std::string fate;
+    if (instance_of_tracker[t] > 0) {
+      fate = "instance";
+    } else if (result.judgement.undersegmented[t]) {
+      fate = "undersegmented";
+    } else if (t < result.cluster_size.size() && result.cluster_size[t] < 2) {
+      fate = "unclustered";  // its cluster holds only this mask
+    } else {
+      fate = "filtered";  // its cluster's sub-object kept < 2 masks, or was a contained duplicate
+    }
+    nlohmann::json entry = {{"view", scene.views[tracker.view].name},
+                            {"mask", tracker.mask_id},
+                            {"gaussians", tracker.gaussians.size()},
+                            {"fate", fate},
+                            {"instance", instance_of_tracker[t]}};
+    if (t < result.cluster_of.size()) entry["cluster"] = result.cluster_of[t];
+    masks.push_back(std::move(entry));
+  }
   nlohmann::json summary = {{"format", "instascene.decomposition/1"},
                             {"instances", instances},
                             {"undersegmented", under},
+                            {"masks", masks},
                             {"trackers", set.trackers.size()},
                             {"observer_schedule", result.schedule},
                             {"seconds",

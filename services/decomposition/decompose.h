@@ -31,6 +31,10 @@ struct DecompositionResult {
   std::vector<double> schedule;
   std::vector<Instance> instances;
   std::vector<uint32_t> undersegmented;  // tracker ids that stay under-segmented
+  // Per tracker: the mask cluster it ended in (-1: judged under-segmented, never a node) and that
+  // cluster's size in masks; written to decomposition.json so a user can see why a mask was lost.
+  std::vector<int32_t> cluster_of;
+  std::vector<uint32_t> cluster_size;
   double tracking_seconds = 0, clustering_seconds = 0, post_seconds = 0;
 
   // One label per Gaussian: instance index + 1 (0 = none; overlaps: the later instance wins).

@@ -81,6 +81,63 @@ TEST(MaskGraph, TouchingObjectsMergedInOneViewAreUndersegmentedAndStaySeparate) 
   EXPECT_EQ(nodes[1].masks, (std::vector<uint32_t>{1, 3}));
 }
 
+// One object, Gaussians 0..199, on a dense line (one DBSCAN cluster). Views 0-2 hold whole-object
+// masks; views 3 and 4 split it SAM-style into a part A = 0..109 and a sliver (110..139 in view 3,
+// 140..169 in view 4: no sliver is seen twice, so none becomes an instance), the rest unlabelled. The whole masks look
+// under-segmented (split in 2 of 5 visible frames); re-judgement sees that their instance-covered
+// Gaussians all lie in A's instance, restores them, and the object comes out whole.
+TEST(Rejudge, WholeObjectMaskSplitByPartMasksIsRestored) {
+  const TrackerSet set = MakeSet(5, 200,
+                                 {{0, 1, 0, 200},
+                                  {1, 1, 0, 200},
+                                  {2, 1, 0, 200},
+                                  {3, 1, 0, 110},
+                                  {3, 2, 110, 140},
+                                  {4, 1, 0, 110},
+                                  {4, 2, 140, 170}});
+  GaussianCloud cloud;
+  cloud.Resize(200);
+  for (int g = 0; g < 200; ++g) {
+    cloud.positions[3 * g] = 0.001f * g;
+    cloud.positions[3 * g + 1] = cloud.positions[3 * g + 2] = 0.0f;
+  }
+  DecompositionOptions options;
+  const MaskJudgement judged = JudgeTrackers(set, options);
+  for (int t = 0; t < 3; ++t) ASSERT_TRUE(judged.undersegmented[t]) << t;
+  MaskJudgement j = judged;
+  UndoUndersegmented(set, &j);
+  std::vector<Instance> instances = BuildInstances(set, ClusterMasks(set, j, options), cloud, options);
+  ASSERT_EQ(instances.size(), 1u);  // the part A only
+  EXPECT_EQ(instances[0].gaussians.size(), 110u);
+  std::vector<uint8_t> flags = judged.undersegmented;
+  EXPECT_EQ(RejudgeUndersegmented(set, instances, options, &flags), 3);
+  for (int t = 0; t < 3; ++t) EXPECT_FALSE(flags[t]) << t;
+  j = judged;
+  j.undersegmented = flags;
+  UndoUndersegmented(set, &j);
+  instances = BuildInstances(set, ClusterMasks(set, j, options), cloud, options);
+  ASSERT_EQ(instances.size(), 1u);
+  EXPECT_EQ(instances[0].gaussians.size(), 200u);
+}
+
+// A true merge stays flagged: a mask over A (0..99) and B (100..199) whose Gaussians lie half in
+// each instance; and a mask too little of which lies in any instance is not judged at all.
+TEST(Rejudge, MergedMaskAndMostlyUncoveredMaskStayUndersegmented) {
+  const TrackerSet set = MakeSet(1, 400, {{0, 1, 0, 200}, {0, 2, 200, 400}});
+  std::vector<Instance> instances(2);
+  for (uint32_t g = 0; g < 100; ++g) instances[0].gaussians.push_back(g);
+  for (uint32_t g = 100; g < 200; ++g) instances[1].gaussians.push_back(g);
+  for (uint32_t g = 200; g < 280; ++g) instances[0].gaussians.push_back(g);  // 40 % of mask 2
+  std::sort(instances[0].gaussians.begin(), instances[0].gaussians.end());
+  std::vector<uint8_t> flags = {1, 1};
+  DecompositionOptions options;  // remedy_ratio 0.8, rejudge_min_coverage 0.5
+  EXPECT_EQ(RejudgeUndersegmented(set, instances, options, &flags), 0);
+  EXPECT_EQ(flags, (std::vector<uint8_t>{1, 1}));
+  options.rejudge_min_coverage = 0.4;  // now mask 2 is covered enough, and wholly by instance 1
+  EXPECT_EQ(RejudgeUndersegmented(set, instances, options, &flags), 1);
+  EXPECT_EQ(flags, (std::vector<uint8_t>{1, 0}));
+}
+
 TEST(MaskGraph, ObserverScheduleFollowsNumpyPercentiles) {
   // Three trackers visible in {0,1,2}, {0,1}, {3}: the non-zero entries of V V^T (both triangles
   // and the diagonal) are 1, 2, 2, 2, 3 -> numpy percentiles 95, 90, ..., 5 by linear

@@ -15,7 +15,7 @@ enum class TrackerRule {
 struct DecompositionOptions {
   TrackerRule tracker_rule = TrackerRule::kWeight;
   float tracker_min_weight = 0.1f;  // w threshold of kWeight
-  int min_tracker_gaussians = 50;   // smaller trackers (masks) are ignored
+  int min_tracker_gaussians = 30;   // smaller trackers are ignored (release: 50; DECOMPOSITION.md)
   double mask_visible_threshold =
       0.7;  // a frame is skipped if more than this share of the tracker is label 0
   double contained_threshold = 0.8;  // top mask holds more than this share of the non-zero labels
@@ -28,6 +28,12 @@ struct DecompositionOptions {
   int dbscan_min_points = 4;              // Open3D convention: the point itself counts
   double overlap_ratio = 0.8;             // duplicate-object removal
   double remedy_ratio = 0.8;              // under-segmentation remedy
+  // Re-judgement (not in the released code; docs/DECOMPOSITION.md): after clustering, a mask
+  // judged under-segmented whose Gaussians lie mostly in one instance (>= remedy_ratio of those
+  // inside any instance, and those >= rejudge_min_coverage of the tracker) was split by other
+  // views' part masks, not a merge: it is restored and the clustering reruns, up to this many times.
+  int rejudge_passes = 3;
+  double rejudge_min_coverage = 0.5;
   int num_threads = 0;                    // 0 = all cores; results never depend on it
   const CancelFlag* cancel = nullptr;     // polled per view; not owned (common/core/cancel.h)
 

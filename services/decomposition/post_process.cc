@@ -260,6 +260,30 @@ std::vector<Instance> BuildInstances(const TrackerSet& set, const std::vector<Ma
   return kept;
 }
 
+int RejudgeUndersegmented(const TrackerSet& set, const std::vector<Instance>& instances,
+                          const DecompositionOptions& options, std::vector<uint8_t>* undersegmented) {
+  std::vector<uint32_t> instance_of(set.num_gaussians, 0);  // overlaps: the later instance
+  for (size_t k = 0; k < instances.size(); ++k) {
+    for (uint32_t g : instances[k].gaussians) instance_of[g] = static_cast<uint32_t>(k + 1);
+  }
+  int changed = 0;
+  std::vector<uint32_t> counts(instances.size() + 1, 0);
+  for (size_t t = 0; t < set.trackers.size(); ++t) {
+    if (!(*undersegmented)[t]) continue;
+    const std::vector<uint32_t>& gaussians = set.trackers[t].gaussians;
+    std::fill(counts.begin(), counts.end(), 0u);
+    for (uint32_t g : gaussians) ++counts[instance_of[g]];
+    const uint32_t covered = static_cast<uint32_t>(gaussians.size()) - counts[0];
+    const uint32_t best = *std::max_element(counts.begin() + 1, counts.end());
+    if (covered > 0 && covered >= options.rejudge_min_coverage * gaussians.size() &&
+        best >= options.remedy_ratio * covered) {
+      (*undersegmented)[t] = 0;
+      ++changed;
+    }
+  }
+  return changed;
+}
+
 std::vector<uint32_t> RemedyUndersegmented(const TrackerSet& set, const MaskJudgement& judgement,
                                            const DecompositionOptions& options,
                                            std::vector<Instance>* instances) {

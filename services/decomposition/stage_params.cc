@@ -6,12 +6,15 @@ absl::Status DecompositionOptions::Validate() const {
   auto in01 = [](double v) { return v >= 0.0 && v <= 1.0; };
   if (!in01(mask_visible_threshold) || !in01(contained_threshold) ||
       !in01(undersegment_threshold) || !in01(view_consensus_threshold) ||
-      !in01(point_filter_threshold) || !in01(overlap_ratio) || !in01(remedy_ratio)) {
+      !in01(point_filter_threshold) || !in01(overlap_ratio) || !in01(remedy_ratio) ||
+      !in01(rejudge_min_coverage)) {
     return absl::InvalidArgumentError("decomposition thresholds must lie in [0, 1]");
   }
   if (!(tracker_min_weight >= 0.0f && tracker_min_weight < 1.0f)) {
     return absl::InvalidArgumentError("tracker_min_weight must lie in [0, 1)");
   }
+  if (rejudge_passes < 0 || rejudge_passes > 8)
+    return absl::InvalidArgumentError("rejudge_passes must lie in [0, 8]");
   if (min_tracker_gaussians < 1)
     return absl::InvalidArgumentError("min_tracker_gaussians must be >= 1");
   if (!(dbscan_eps > 0.0) || dbscan_min_points < 1) {
@@ -48,6 +51,11 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
              "DBSCAN core size (the point itself counts)")
         .Real("overlap_ratio", &O::overlap_ratio, 0.0, 1.0, "Duplicate-object removal overlap")
         .Real("remedy_ratio", &O::remedy_ratio, 0.0, 1.0, "Under-segmentation remedy ratio")
+        .Int("rejudge_passes", &O::rejudge_passes, 0, 8,
+             "Re-judge under-segmented masks against the instances found and recluster, up to "
+             "this many times (0 = the released code)")
+        .Real("rejudge_min_coverage", &O::rejudge_min_coverage, 0.0, 1.0,
+              "Share of a mask's tracker that must lie in instances before it is re-judged")
         .Check([](const O& o) { return o.Validate(); });
     return c;
   }();

@@ -1,0 +1,88 @@
+#!/usr/bin/env bash
+# Decomposition robustness on scenes nobody tuned on (docs/RESULTS.md, "Robustness"): for each
+# scene, the full offline pipeline (`instascene run`) with the released code's decomposition
+# constants (min_tracker_gaussians 50, no re-judgement) and with today's defaults, scored by the
+# click protocol on labels (`eval --labels-only`). Scenes: the `small` preset at 320x240 (32 views)
+# and 640x480 (48 views) under both segmenter-noise families, and real-capture composites with the
+# two statues pressed together. Prints a markdown table and mean ± std per group and configuration.
+# Usage: scripts/results_robustness.sh [BUILD_DIR] [WORK_DIR] [SEEDS] [COMPOSITE_SEEDS] [HIRES_SEEDS]
+set -euo pipefail
+BUILD_DIR=${1:-build}
+WORK=${2:-$(mktemp -d)}
+SEEDS=${3:-"31 32 33 34"}
+COMPOSITE_SEEDS=${4:-"5 8 21"}
+HIRES_SEEDS=${5:-"41 42"}
+SPLATS=${SPLATS:-"$(cd "$(dirname "$0")/../.." && pwd)/shared/data/splats"}
+BIN="$BUILD_DIR/clients/cli/instascene"
+mkdir -p "$WORK"
+rows="$WORK/rows.jsonl"
+: > "$rows"
+declare -A CONFIG=(
+  [release]="--min-tracker-gaussians 50 --rejudge-passes 0"
+  [default]=""
+)
+run_scene() {  # run_scene GROUP LABEL DIR
+  for config in release default; do
+    local out="$3/run_$config" t0 t1
+    rm -rf "$out"
+    t0=$(date +%s.%N)
+    # shellcheck disable=SC2086
+    "$BIN" run --scene "$3" --out "$out" ${CONFIG[$config]} >/dev/null 2>&1
+    t1=$(date +%s.%N)
+    "$BIN" eval --scene "$3" --result "$out/segmentation" --json --labels-only 2>/dev/null |
+      tail -n 1 > "$out/eval.json"
+    python3 - "$1" "$2" "$config" "$out/eval.json" "$(python3 -c "print($t1-$t0)")" >> "$rows" <<'PY'
+import json, sys
+group, label, config, path, seconds = sys.argv[1:6]
+ev = json.load(open(path))
+low = [f"{o['name']} {o['miou']:.2f} ({o['views']} views)" for o in ev["objects"] if o["miou"] < 0.6]
+print(json.dumps({"group": group, "scene": label, "config": config, "miou": ev["miou"],
+                  "ari": ev["ari"], "precision": ev["precision_3d"], "recall": ev["recall_3d"],
+                  "seconds": float(seconds), "low": low}))
+PY
+  done
+}
+for noise in medium sam-medium; do
+  for seed in $SEEDS; do
+    d="$WORK/small320_${noise}_$seed"
+    "$BIN" synth --out "$d" --preset small --seed "$seed" --mask-noise "$noise" --width 320 \
+      --height 240 --views 32 >/dev/null 2>&1
+    run_scene "320x240, $noise" "small 320x240, $noise, seed $seed" "$d"
+  done
+  for seed in $HIRES_SEEDS; do
+    d="$WORK/small640_${noise}_$seed"
+    "$BIN" synth --out "$d" --preset small --seed "$seed" --mask-noise "$noise" --width 640 \
+      --height 480 --views 48 >/dev/null 2>&1
+    run_scene "640x480, $noise" "small 640x480, $noise, seed $seed" "$d"
+  done
+done
+for seed in $COMPOSITE_SEEDS; do
+  d="$WORK/touching_$seed"
+  "$BIN" synth --out "$d" --seed "$seed" --mask-noise medium --width 320 --height 240 --views 32 \
+    --gap -0.15 --from-splats \
+    "$SPLATS/statue_massa.ply,$SPLATS/statue_angel.ply,$SPLATS/playbot_lod4_3dgs_order.ply" \
+    >/dev/null 2>&1
+  run_scene "touching statues 320x240, medium" "touching statues, seed $seed" "$d"
+done
+python3 - "$rows" <<'PY'
+import json, statistics, sys
+rows = [json.loads(l) for l in open(sys.argv[1])]
+print("| scene | decomposition | click mIoU (labels) | ARI | 3D precision@0.5 | 3D recall@0.5 | run s | objects < 0.6 |")
+print("|---|---|---|---|---|---|---|---|")
+for r in rows:
+    print(f"| {r['scene']} | {r['config']} | {r['miou']:.3f} | {r['ari']:.3f} | {r['precision']:.2f} | "
+          f"{r['recall']:.2f} | {r['seconds']:.0f} | {', '.join(r['low']) or '-'} |")
+print()
+print("| group | decomposition | n | click mIoU (labels) | ARI | 3D precision@0.5 | 3D recall@0.5 |")
+print("|---|---|---|---|---|---|---|")
+groups = list(dict.fromkeys(r["group"] for r in rows))
+def ms(v):
+    return f"{statistics.mean(v):.3f} ± {statistics.stdev(v) if len(v) > 1 else 0:.3f}"
+for g in groups:
+    for config in ("release", "default"):
+        sel = [r for r in rows if r["group"] == g and r["config"] == config]
+        if sel:
+            print(f"| {g} | {config} | {len(sel)} | {ms([r['miou'] for r in sel])} | "
+                  f"{ms([r['ari'] for r in sel])} | {ms([r['precision'] for r in sel])} | "
+                  f"{ms([r['recall'] for r in sel])} |")
+PY
