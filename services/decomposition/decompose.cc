@@ -136,7 +136,8 @@ absl::Status WriteDecomposition(const std::string& directory, const Scene& scene
   // Every kept mask (tracker) and what became of it.
   std::vector<int64_t> instance_of_tracker(set.trackers.size(), 0);
   for (size_t k = 0; k < result.instances.size(); ++k) {
-    for (uint32_t t : result.instances[k].masks) instance_of_tracker[t] = static_cast<int64_t>(k + 1);
+    for (uint32_t t : result.instances[k].masks)
+      instance_of_tracker[t] = static_cast<int64_t>(k + 1);
   }
   nlohmann::json masks = nlohmann::json::array();
   for (size_t t = 0; t < set.trackers.size(); ++t) {

@@ -83,9 +83,10 @@ TEST(MaskGraph, TouchingObjectsMergedInOneViewAreUndersegmentedAndStaySeparate) 
 
 // One object, Gaussians 0..199, on a dense line (one DBSCAN cluster). Views 0-2 hold whole-object
 // masks; views 3 and 4 split it SAM-style into a part A = 0..109 and a sliver (110..139 in view 3,
-// 140..169 in view 4: no sliver is seen twice, so none becomes an instance), the rest unlabelled. The whole masks look
-// under-segmented (split in 2 of 5 visible frames); re-judgement sees that their instance-covered
-// Gaussians all lie in A's instance, restores them, and the object comes out whole.
+// 140..169 in view 4: no sliver is seen twice, so none becomes an instance), the rest unlabelled.
+// The whole masks look under-segmented (split in 2 of 5 visible frames); re-judgement sees that
+// their instance-covered Gaussians all lie in A's instance, restores them, and the object comes out
+// whole.
 TEST(Rejudge, WholeObjectMaskSplitByPartMasksIsRestored) {
   const TrackerSet set = MakeSet(5, 200,
                                  {{0, 1, 0, 200},
@@ -106,7 +107,8 @@ TEST(Rejudge, WholeObjectMaskSplitByPartMasksIsRestored) {
   for (int t = 0; t < 3; ++t) ASSERT_TRUE(judged.undersegmented[t]) << t;
   MaskJudgement j = judged;
   UndoUndersegmented(set, &j);
-  std::vector<Instance> instances = BuildInstances(set, ClusterMasks(set, j, options), cloud, options);
+  std::vector<Instance> instances =
+      BuildInstances(set, ClusterMasks(set, j, options), cloud, options);
   ASSERT_EQ(instances.size(), 1u);  // the part A only
   EXPECT_EQ(instances[0].gaussians.size(), 110u);
   std::vector<uint8_t> flags = judged.undersegmented;

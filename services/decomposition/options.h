@@ -31,11 +31,12 @@ struct DecompositionOptions {
   // Re-judgement (not in the released code; docs/DECOMPOSITION.md): after clustering, a mask
   // judged under-segmented whose Gaussians lie mostly in one instance (>= remedy_ratio of those
   // inside any instance, and those >= rejudge_min_coverage of the tracker) was split by other
-  // views' part masks, not a merge: it is restored and the clustering reruns, up to this many times.
+  // views' part masks, not a merge: it is restored and the clustering reruns, up to this many
+  // times.
   int rejudge_passes = 3;
   double rejudge_min_coverage = 0.5;
-  int num_threads = 0;                    // 0 = all cores; results never depend on it
-  const CancelFlag* cancel = nullptr;     // polled per view; not owned (common/core/cancel.h)
+  int num_threads = 0;                 // 0 = all cores; results never depend on it
+  const CancelFlag* cancel = nullptr;  // polled per view; not owned (common/core/cancel.h)
 
   absl::Status Validate() const;
 };

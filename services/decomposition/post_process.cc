@@ -261,7 +261,8 @@ std::vector<Instance> BuildInstances(const TrackerSet& set, const std::vector<Ma
 }
 
 int RejudgeUndersegmented(const TrackerSet& set, const std::vector<Instance>& instances,
-                          const DecompositionOptions& options, std::vector<uint8_t>* undersegmented) {
+                          const DecompositionOptions& options,
+                          std::vector<uint8_t>* undersegmented) {
   std::vector<uint32_t> instance_of(set.num_gaussians, 0);  // overlaps: the later instance
   for (size_t k = 0; k < instances.size(); ++k) {
     for (uint32_t g : instances[k].gaussians) instance_of[g] = static_cast<uint32_t>(k + 1);

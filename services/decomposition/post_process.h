@@ -36,7 +36,8 @@ std::vector<Instance> BuildInstances(const TrackerSet& trackers, const std::vect
 // Re-judgement: clears the under-segmented flag of every flagged tracker whose Gaussians lie
 // mostly in one instance (see DecompositionOptions::rejudge_passes); returns how many changed.
 int RejudgeUndersegmented(const TrackerSet& trackers, const std::vector<Instance>& instances,
-                          const DecompositionOptions& options, std::vector<uint8_t>* undersegmented);
+                          const DecompositionOptions& options,
+                          std::vector<uint8_t>* undersegmented);
 
 // 4.8: under-segmented masks whose tracker lies > remedy_ratio inside one instance join that
 // instance's 2D cluster; returns the masks that remain under-segmented.
