@@ -36,9 +36,10 @@ import json, sys
 group, label, config, path, seconds = sys.argv[1:6]
 ev = json.load(open(path))
 low = [f"{o['name']} {o['miou']:.2f} ({o['views']} views)" for o in ev["objects"] if o["miou"] < 0.6]
+objects = [{"name": o["name"], "miou": o["miou"], "views": o["views"]} for o in ev["objects"]]
 print(json.dumps({"group": group, "scene": label, "config": config, "miou": ev["miou"],
                   "ari": ev["ari"], "precision": ev["precision_3d"], "recall": ev["recall_3d"],
-                  "seconds": float(seconds), "low": low}))
+                  "seconds": float(seconds), "low": low, "objects": objects}))
 PY
   done
 }
@@ -73,9 +74,17 @@ for r in rows:
     print(f"| {r['scene']} | {r['config']} | {r['miou']:.3f} | {r['ari']:.3f} | {r['precision']:.2f} | "
           f"{r['recall']:.2f} | {r['seconds']:.0f} | {', '.join(r['low']) or '-'} |")
 print()
-print("| group | decomposition | n | click mIoU (labels) | ARI | 3D precision@0.5 | 3D recall@0.5 |")
-print("|---|---|---|---|---|---|---|")
+print("| group | decomposition | n | click mIoU (labels) | ARI | 3D precision@0.5 | 3D recall@0.5 | "
+      "thin/concave objects (torus, bowl, cup) | objects seen in ≥ 6 views below 0.6 |")
+print("|---|---|---|---|---|---|---|---|---|")
 groups = list(dict.fromkeys(r["group"] for r in rows))
+def thin(sel):
+    v = [o["miou"] for r in sel for o in r["objects"]
+         if o["name"].split("_")[0] in ("torus", "bowl", "cup")]
+    return f"{statistics.mean(v):.3f} (n = {len(v)})" if v else "-"
+def failed(sel):
+    bad = sum(1 for r in sel for o in r["objects"] if o["views"] >= 6 and o["miou"] < 0.6)
+    return f"{bad} of {sum(1 for r in sel for o in r['objects'] if o['views'] >= 6)}"
 def ms(v):
     return f"{statistics.mean(v):.3f} ± {statistics.stdev(v) if len(v) > 1 else 0:.3f}"
 for g in groups:
@@ -84,5 +93,5 @@ for g in groups:
         if sel:
             print(f"| {g} | {config} | {len(sel)} | {ms([r['miou'] for r in sel])} | "
                   f"{ms([r['ari'] for r in sel])} | {ms([r['precision'] for r in sel])} | "
-                  f"{ms([r['recall'] for r in sel])} |")
+                  f"{ms([r['recall'] for r in sel])} | {thin(sel)} | {failed(sel)} |")
 PY
