@@ -61,6 +61,7 @@ absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const Gaussian
     result.instances = BuildInstances(result.trackers, nodes, cloud, options);
     if (progress) progress("clustering", pass + 2, 1 + options.rejudge_passes);
   }
+  result.merged_instances = MergeUnseparatedInstances(result.trackers, options, &result.instances);
   if (progress) progress("clustering", 1 + options.rejudge_passes, 1 + options.rejudge_passes);
   result.cluster_of.assign(result.trackers.trackers.size(), -1);
   result.cluster_size.assign(result.trackers.trackers.size(), 0);
@@ -166,6 +167,7 @@ absl::Status WriteDecomposition(const std::string& directory, const Scene& scene
                             {"masks", masks},
                             {"trackers", set.trackers.size()},
                             {"observer_schedule", result.schedule},
+                            {"merged_instances", result.merged_instances},
                             {"seconds",
                              {{"tracking", result.tracking_seconds},
                               {"clustering", result.clustering_seconds},

@@ -35,6 +35,7 @@ struct DecompositionResult {
   // cluster's size in masks; written to decomposition.json so a user can see why a mask was lost.
   std::vector<int32_t> cluster_of;
   std::vector<uint32_t> cluster_size;
+  int merged_instances = 0;  // merges of unseparated instances
   double tracking_seconds = 0, clustering_seconds = 0, post_seconds = 0;
 
   // One label per Gaussian: instance index + 1 (0 = none; overlaps: the later instance wins).

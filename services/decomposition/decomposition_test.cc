@@ -140,6 +140,45 @@ TEST(Rejudge, MergedMaskAndMostlyUncoveredMaskStayUndersegmented) {
   EXPECT_EQ(flags, (std::vector<uint8_t>{1, 0}));
 }
 
+// A (0..99) and B (100..199) are the two sides of one object, C (200..299) its neighbour. Masks
+// hold A and B together in 3 frames and apart in 1 (a part split); B and C together in 2 frames
+// (merged masks) and apart in 2; A and C together in 1, apart in 3. Only A and B merge.
+TEST(MergeUnseparated, TwoSidesOfOneObjectMergeNeighboursDoNot) {
+  const TrackerSet set = MakeSet(4, 300,
+                                 {{0, 1, 0, 200},
+                                  {0, 2, 200, 300},
+                                  {1, 1, 0, 200},
+                                  {1, 2, 200, 300},
+                                  {2, 1, 0, 100},
+                                  {2, 2, 100, 300},
+                                  {3, 1, 0, 300}});
+  std::vector<Instance> instances(3);
+  for (uint32_t k = 0; k < 3; ++k) {
+    for (uint32_t g = 100 * k; g < 100 * (k + 1); ++g) instances[k].gaussians.push_back(g);
+    instances[k].masks.push_back(k);
+    instances[k].coverage.push_back(1.0f);
+  }
+  DecompositionOptions options;
+  options.merge_min_joins = 0;  // off
+  std::vector<Instance> unchanged = instances;
+  EXPECT_EQ(MergeUnseparatedInstances(set, options, &unchanged), 0);
+  EXPECT_EQ(unchanged.size(), 3u);
+  options.merge_min_joins = 2;
+  ASSERT_EQ(MergeUnseparatedInstances(set, options, &instances), 1);
+  ASSERT_EQ(instances.size(), 2u);
+  EXPECT_EQ(instances[0].gaussians.size(), 200u);
+  EXPECT_EQ(instances[0].gaussians.front(), 0u);
+  EXPECT_EQ(instances[0].gaussians.back(), 199u);
+  EXPECT_EQ(instances[0].masks, (std::vector<uint32_t>{0, 1}));
+  EXPECT_EQ(instances[1].gaussians.front(), 200u);
+  options.merge_max_separation = 0.2;  // A and B's 1 of 4 is now too many
+  std::vector<Instance> strict(3);
+  for (uint32_t k = 0; k < 3; ++k) {
+    for (uint32_t g = 100 * k; g < 100 * (k + 1); ++g) strict[k].gaussians.push_back(g);
+  }
+  EXPECT_EQ(MergeUnseparatedInstances(set, options, &strict), 0);
+}
+
 TEST(MaskGraph, ObserverScheduleFollowsNumpyPercentiles) {
   // Three trackers visible in {0,1,2}, {0,1}, {3}: the non-zero entries of V V^T (both triangles
   // and the diagonal) are 1, 2, 2, 2, 3 -> numpy percentiles 95, 90, ..., 5 by linear

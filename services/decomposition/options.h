@@ -35,6 +35,12 @@ struct DecompositionOptions {
   // times.
   int rejudge_passes = 3;
   double rejudge_min_coverage = 0.5;
+  // Merging of unseparated instances (not in the released code; docs/DECOMPOSITION.md): two
+  // instances that one mask holds together in >= merge_min_joins frames and that separate masks
+  // hold apart in at most merge_max_separation of the frames where both are contained are one
+  // object seen from two sides. 0 joins = off.
+  int merge_min_joins = 2;
+  double merge_max_separation = 0.25;
   int num_threads = 0;                 // 0 = all cores; results never depend on it
   const CancelFlag* cancel = nullptr;  // polled per view; not owned (common/core/cancel.h)
 

@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 #include <unordered_map>
 
 #include "common/core/parallel.h"
@@ -283,6 +284,93 @@ int RejudgeUndersegmented(const TrackerSet& set, const std::vector<Instance>& in
     }
   }
   return changed;
+}
+
+int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions& options,
+                              std::vector<Instance>* instances) {
+  const size_t n = instances->size();
+  if (options.merge_min_joins <= 0 || n < 2) return 0;
+  std::vector<uint32_t> instance_of(set.num_gaussians, 0);  // overlaps: the later instance
+  for (size_t k = 0; k < n; ++k) {
+    for (uint32_t g : (*instances)[k].gaussians) instance_of[g] = static_cast<uint32_t>(k + 1);
+  }
+  // Per pair a < b (key a * n + b): frames holding them together, frames holding them apart.
+  std::unordered_map<uint64_t, std::pair<uint32_t, uint32_t>> evidence;
+  std::vector<uint32_t> counts, total(n + 1), best(n + 1);
+  std::vector<int64_t> holder(n + 1);  // per instance: the tracker holding it in this frame
+  for (int v = 0; v < set.num_views; ++v) {
+    const std::vector<uint32_t>& frame = set.view_trackers[v];
+    if (frame.empty()) continue;
+    counts.assign(frame.size() * (n + 1), 0);
+    for (size_t i = 0; i < frame.size(); ++i) {
+      for (uint32_t g : set.trackers[frame[i]].gaussians) ++counts[i * (n + 1) + instance_of[g]];
+    }
+    std::fill(total.begin(), total.end(), 0u);
+    std::fill(best.begin(), best.end(), 0u);
+    std::fill(holder.begin(), holder.end(), -1);
+    for (size_t i = 0; i < frame.size(); ++i) {
+      for (size_t a = 1; a <= n; ++a) {
+        const uint32_t c = counts[i * (n + 1) + a];
+        total[a] += c;
+        if (c > best[a]) {
+          best[a] = c;
+          holder[a] = static_cast<int64_t>(i);
+        }
+      }
+    }
+    std::vector<uint32_t> held;  // instances held by one mask in this frame
+    for (size_t a = 1; a <= n; ++a) {
+      if (total[a] >= static_cast<uint32_t>(options.min_tracker_gaussians) &&
+          best[a] > options.contained_threshold * total[a]) {
+        held.push_back(static_cast<uint32_t>(a - 1));
+      }
+    }
+    for (size_t i = 0; i < held.size(); ++i) {
+      for (size_t k = i + 1; k < held.size(); ++k) {
+        const uint32_t a = held[i], b = held[k];
+        auto& e = evidence[uint64_t{a} * n + b];
+        (holder[a + 1] == holder[b + 1] ? e.first : e.second) += 1;
+      }
+    }
+  }
+  std::vector<uint32_t> parent(n);
+  std::iota(parent.begin(), parent.end(), 0u);
+  auto find = [&](uint32_t x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  };
+  int merges = 0;
+  for (const auto& [key, e] : evidence) {  // components do not depend on the visiting order
+    const double j = e.first, s = e.second;
+    if (j < options.merge_min_joins || s > options.merge_max_separation * (j + s)) continue;
+    const uint32_t ra = find(static_cast<uint32_t>(key / n)),
+                   rb = find(static_cast<uint32_t>(key % n));
+    if (ra == rb) continue;
+    parent[std::max(ra, rb)] = std::min(ra, rb);
+    ++merges;
+  }
+  if (merges == 0) return 0;
+  std::vector<Instance> merged;
+  std::vector<int64_t> slot(n, -1);
+  for (uint32_t a = 0; a < n; ++a) {
+    const uint32_t root = find(a);
+    if (slot[root] < 0) {
+      slot[root] = static_cast<int64_t>(merged.size());
+      merged.push_back(std::move((*instances)[a]));
+      continue;
+    }
+    Instance& target = merged[slot[root]];
+    Instance& source = (*instances)[a];
+    std::vector<uint32_t> uni;
+    std::set_union(target.gaussians.begin(), target.gaussians.end(), source.gaussians.begin(),
+                   source.gaussians.end(), std::back_inserter(uni));
+    target.gaussians.swap(uni);
+    target.masks.insert(target.masks.end(), source.masks.begin(), source.masks.end());
+    target.coverage.insert(target.coverage.end(), source.coverage.begin(), source.coverage.end());
+    target.box.extend(source.box);
+  }
+  instances->swap(merged);
+  return merges;
 }
 
 std::vector<uint32_t> RemedyUndersegmented(const TrackerSet& set, const MaskJudgement& judgement,

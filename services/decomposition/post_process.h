@@ -39,6 +39,14 @@ int RejudgeUndersegmented(const TrackerSet& trackers, const std::vector<Instance
                           const DecompositionOptions& options,
                           std::vector<uint8_t>* undersegmented);
 
+// Merging of unseparated instances: per frame, an instance is held by a mask when at least
+// min_tracker_gaussians of its Gaussians lie in the frame's masks and one mask holds more than
+// contained_threshold of them. Pairs held by one mask count a join, by two masks a separation;
+// pairs with >= merge_min_joins joins and separations <= merge_max_separation of their frames
+// merge (transitively). Returns the number of merges.
+int MergeUnseparatedInstances(const TrackerSet& trackers, const DecompositionOptions& options,
+                              std::vector<Instance>* instances);
+
 // 4.8: under-segmented masks whose tracker lies > remedy_ratio inside one instance join that
 // instance's 2D cluster; returns the masks that remain under-segmented.
 std::vector<uint32_t> RemedyUndersegmented(const TrackerSet& trackers,

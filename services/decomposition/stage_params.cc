@@ -7,7 +7,7 @@ absl::Status DecompositionOptions::Validate() const {
   if (!in01(mask_visible_threshold) || !in01(contained_threshold) ||
       !in01(undersegment_threshold) || !in01(view_consensus_threshold) ||
       !in01(point_filter_threshold) || !in01(overlap_ratio) || !in01(remedy_ratio) ||
-      !in01(rejudge_min_coverage)) {
+      !in01(rejudge_min_coverage) || !in01(merge_max_separation)) {
     return absl::InvalidArgumentError("decomposition thresholds must lie in [0, 1]");
   }
   if (!(tracker_min_weight >= 0.0f && tracker_min_weight < 1.0f)) {
@@ -15,6 +15,7 @@ absl::Status DecompositionOptions::Validate() const {
   }
   if (rejudge_passes < 0 || rejudge_passes > 8)
     return absl::InvalidArgumentError("rejudge_passes must lie in [0, 8]");
+  if (merge_min_joins < 0) return absl::InvalidArgumentError("merge_min_joins must be >= 0");
   if (min_tracker_gaussians < 1)
     return absl::InvalidArgumentError("min_tracker_gaussians must be >= 1");
   if (!(dbscan_eps > 0.0) || dbscan_min_points < 1) {
@@ -54,6 +55,11 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
         .Int("rejudge_passes", &O::rejudge_passes, 0, 8,
              "Re-judge under-segmented masks against the instances found and recluster, up to "
              "this many times (0 = the released code)")
+        .Int("merge_min_joins", &O::merge_min_joins, 0, 1000000,
+             "Merge two instances one mask holds together in at least this many frames (and "
+             "that masks rarely hold apart); 0 = off (the released code)")
+        .Real("merge_max_separation", &O::merge_max_separation, 0.0, 1.0,
+              "Largest share of frames holding two instances apart that still allows the merge")
         .Real("rejudge_min_coverage", &O::rejudge_min_coverage, 0.0, 1.0,
               "Share of a mask's tracker that must lie in instances before it is re-judged")
         .Check([](const O& o) { return o.Validate(); });

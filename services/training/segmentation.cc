@@ -56,8 +56,13 @@ std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int 
       ++selected[best_id];
     }
   }
-  for (size_t g = 0; g < n; ++g) {  // instances that select nothing keep their coarse mask
-    if (coarse[g] != 0 && selected[coarse[g]] == 0 && labels[g] == 0) labels[g] = coarse[g];
+  // Instances that select (almost) nothing keep their coarse mask.
+  std::map<uint32_t, bool> fallback;
+  for (const auto& [id, c] : count) {
+    fallback[id] = selected[id] == 0 || selected[id] < options.min_kept_share * c;
+  }
+  for (size_t g = 0; g < n; ++g) {
+    if (coarse[g] != 0 && fallback[coarse[g]]) labels[g] = coarse[g];
   }
   return labels;
 }
@@ -81,7 +86,7 @@ absl::StatusOr<std::vector<uint32_t>> FinalLabels(const SegmentationResult& trai
   if (options.labelling == "tau") {
     (*metadata)["threshold"] = options.threshold;
     return SegmentByFeatures(trained.features, trained.feature_dim, trained.labels,
-                             SegmentOptions{options.threshold});
+                             SegmentOptions{options.threshold, options.min_kept_share});
   }
   DensityLabelOptions o;
   o.hdbscan.min_samples = options.min_samples;

@@ -20,6 +20,10 @@ namespace instascene::training {
 
 struct SegmentOptions {
   double threshold = 0.9;  // paper tau_seg, against the un-normalised mean
+  // An instance whose features select fewer than this share of its coarse Gaussians was not held
+  // apart by the feature field (under-trained, or a look-alike neighbour took it over): it keeps
+  // its coarse mask instead of vanishing into a sliver.
+  double min_kept_share = 0.25;
 };
 
 // labels: per Gaussian, the coarse instance id (0 = none) used to define the instances; returns

@@ -62,10 +62,11 @@ absl::StatusOr<pipeline::StageResult> RunSegment(const pipeline::StageContext& c
   SegmentationResult out = in;
   out.stage = "segment";
   if (in.feature_dim > 0) {
-    out.labels =
-        SegmentByFeatures(in.features, in.feature_dim, in.labels, SegmentOptions{o.threshold});
+    out.labels = SegmentByFeatures(in.features, in.feature_dim, in.labels,
+                                   SegmentOptions{o.threshold, o.min_kept_share});
   }
   out.metadata["threshold"] = o.threshold;
+  out.metadata["min_kept_share"] = o.min_kept_share;
   c.Report("exporting", 0, 1);
   RETURN_IF_ERROR(WriteResult(c.out_dir, out, cloud));
   RETURN_IF_ERROR(ExportInstances(c.out_dir, cloud, out.labels));

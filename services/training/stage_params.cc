@@ -63,6 +63,9 @@ const pipeline::ParamCodec<SegmentStageOptions>& SegmentCodec() {
         .Real("threshold", &O::threshold, -1.0, 1.0,
               "Segmentation threshold tau: a Gaussian joins an instance when its feature's "
               "similarity to the instance mean exceeds it")
+        .Real("min_kept_share", &O::min_kept_share, 0.0, 1.0,
+              "tau: an instance whose features select less than this share of its coarse "
+              "Gaussians keeps its coarse mask")
         .Int("min_samples", &O::min_samples, 1, 1000, "hdbscan: neighbours of a core point")
         .Int("min_cluster_size", &O::min_cluster_size, 2, 100000, "hdbscan: smallest cluster")
         .Real("cluster_selection_epsilon", &O::cluster_selection_epsilon, 0.0, 2.0,

@@ -18,7 +18,8 @@ struct SegmentStageOptions {
   // "tau": each coarse instance selects the Gaussians whose feature matches its mean (paper);
   // "hdbscan": density clustering of the features (the released code's final labelling).
   std::string labelling = "tau";
-  double threshold = 0.9;  // tau_seg (paper), against the un-normalised mean
+  double threshold = 0.9;        // tau_seg (paper), against the un-normalised mean
+  double min_kept_share = 0.25;  // tau: below this share of its coarse mask, an instance keeps it
   // hdbscan (ALGORITHM.md 5.5; max_points bounds the O(n^2) clustering on CPU)
   int min_samples = 30;
   int min_cluster_size = 30;

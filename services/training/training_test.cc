@@ -126,6 +126,20 @@ TEST(Segmentation, AssignsByMeanFeatureWithThreshold) {
   EXPECT_EQ(labels, (std::vector<uint32_t>{1, 1, 2, 2, 2, 0}));  // (0.7, 0.7) is below 0.9 for both
 }
 
+TEST(Segmentation, AnInstanceItsFeaturesCannotHoldKeepsItsCoarseMask) {
+  // Instance 2's five Gaussians carry instance 1's feature but one: at tau 0.15 its features select
+  // only that one (1 of 5 < 25 %), so it keeps its coarse mask; instance 1 is intact.
+  const std::vector<float> f = {1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 1, 0, 0, 1};
+  const std::vector<uint32_t> coarse = {1, 1, 1, 2, 2, 2, 2, 2};
+  SegmentOptions options;
+  options.threshold = 0.15;
+  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, options),
+            (std::vector<uint32_t>{1, 1, 1, 2, 2, 2, 2, 2}));
+  options.min_kept_share = 0.0;  // the plain tau rule: the sliver
+  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, options),
+            (std::vector<uint32_t>{1, 1, 1, 1, 1, 1, 1, 2}));
+}
+
 TEST(FeatureField, TrainingOnASyntheticSceneSeparatesInstances) {
   const instascene::testing::ScopedTempDir temp("training_scene");
   const std::string dir = temp.Sub("scene");
