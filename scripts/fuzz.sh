@@ -12,7 +12,7 @@ EACH=${FUZZ_SECONDS:-60}
 RUNS=()
 [ -z "${FUZZ_RUNS:-}" ] || RUNS=(-runs="$FUZZ_RUNS")
 HARNESSES=("$@")
-[ ${#HARNESSES[@]} -gt 0 ] || HARNESSES=(ply scene_json manifest stage_params transforms_json)
+[ ${#HARNESSES[@]} -gt 0 ] || HARNESSES=(ply scene_json manifest stage_params transforms_json colmap image_probe)
 cmake -S . -B "$DIR" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ \
   -DINSTASCENE_FUZZ=ON -DINSTASCENE_WERROR=OFF -DINSTASCENE_BUILD_BENCHMARKS=OFF >/dev/null || exit 1
 cmake --build "$DIR" --target fuzzers || exit 1
@@ -25,7 +25,8 @@ for h in "${HARNESSES[@]}"; do
   cp "tests/fuzz/corpus/$h/"* "$corpus/"
   mkdir -p "$DIR/crashes/$h"
   log="$DIR/fuzz-$h.log"
-  if UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 "$DIR/tests/fuzz/${h}_fuzz" \
+  if UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1 \
+      LSAN_OPTIONS=suppressions=tests/fuzz/lsan.supp "$DIR/tests/fuzz/${h}_fuzz" \
       -max_total_time="$EACH" "${RUNS[@]}" -print_final_stats=1 -rss_limit_mb=2048 -max_len=65536 \
       -artifact_prefix="$DIR/crashes/$h/" "$corpus" >"$log" 2>&1; then
     outcome="0 crashes"

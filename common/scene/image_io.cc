@@ -19,8 +19,6 @@
 namespace instascene {
 namespace {
 
-constexpr int kMaxImageSide = 16384;
-
 absl::Status OiioError(const std::string& path, const std::string& what,
                        const std::string& detail) {
   return absl::InvalidArgumentError(
@@ -46,21 +44,63 @@ absl::Status WritePixels(const std::string& path, int width, int height, int cha
       path, absl::string_view(reinterpret_cast<const char*>(encoded.data()), encoded.size()));
 }
 
+absl::StatusOr<ImageHeader> HeaderOf(const OIIO::ImageSpec& spec, const std::string& name) {
+  if (spec.width <= 0 || spec.height <= 0 || spec.width > kMaxImageSide ||
+      spec.height > kMaxImageSide ||
+      int64_t{spec.width} * spec.height > kMaxImagePixels || spec.nchannels <= 0 ||
+      spec.nchannels > 4) {
+    return OiioError(name,
+                     absl::StrCat("unsupported image size ", spec.width, "x", spec.height, "x",
+                                  spec.nchannels, " (at most ", kMaxImageSide, " px per side, ",
+                                  kMaxImagePixels, " pixels, 4 channels)"),
+                     "");
+  }
+  ImageHeader h;
+  h.width = spec.width;
+  h.height = spec.height;
+  h.channels = spec.nchannels;
+  h.label_map = spec.nchannels == 1 &&
+                (spec.format == OIIO::TypeDesc::UINT8 || spec.format == OIIO::TypeDesc::UINT16);
+  return h;
+}
+
+// Opens `path` for decoding after checking it is a regular file and its header within limits.
+absl::StatusOr<std::unique_ptr<OIIO::ImageInput>> OpenChecked(const std::string& path,
+                                                              const char* what) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    return absl::NotFoundError(absl::StrCat(path, ": no such file (or not a regular file)"));
+  auto in = OIIO::ImageInput::open(path);
+  if (!in) return OiioError(path, absl::StrCat("cannot decode ", what), OIIO::geterror());
+  RETURN_IF_ERROR(HeaderOf(in->spec(), path).status());
+  return in;
+}
+
 }  // namespace
 
+absl::StatusOr<ImageHeader> ProbeImage(const std::string& path) {
+  ASSIGN_OR_RETURN(std::unique_ptr<OIIO::ImageInput> in, OpenChecked(path, "image"));
+  return HeaderOf(in->spec(), path);
+}
+
+absl::StatusOr<ImageHeader> ProbeImageBytes(absl::string_view bytes, const std::string& name) {
+  OIIO::Filesystem::IOMemReader proxy(bytes.data(), bytes.size());
+  // The reader from the extension alone (create() given a path would read the file itself).
+  const std::string extension = std::filesystem::path(name).extension().string();
+  auto in = extension.size() > 1 ? OIIO::ImageInput::create(extension.substr(1), false) : nullptr;
+  if (!in) return OiioError(name, "no reader for this extension", OIIO::geterror());
+  if (!in->supports("ioproxy"))
+    return absl::InvalidArgumentError(
+        absl::StrCat(name, ": ", in->format_name(), " images cannot be probed in memory"));
+  OIIO::ImageSpec spec;
+  if (!in->set_ioproxy(&proxy) || !in->open(name, spec))
+    return absl::DataLossError(absl::StrCat(name, ": unreadable image header: ", in->geterror()));
+  return HeaderOf(spec, name);
+}
+
 absl::StatusOr<Image> ReadImage(const std::string& path) {
-  if (!std::filesystem::is_regular_file(path))
-    return absl::NotFoundError(absl::StrCat(path, ": no such file"));
-  auto in = OIIO::ImageInput::open(path);
-  if (!in) return OiioError(path, "cannot decode image", OIIO::geterror());
+  ASSIGN_OR_RETURN(std::unique_ptr<OIIO::ImageInput> in, OpenChecked(path, "image"));
   const OIIO::ImageSpec& spec = in->spec();
-  if (spec.width <= 0 || spec.height <= 0 || spec.width > kMaxImageSide ||
-      spec.height > kMaxImageSide || spec.nchannels <= 0 || spec.nchannels > 4) {
-    return OiioError(
-        path,
-        absl::StrCat("unsupported image size ", spec.width, "x", spec.height, "x", spec.nchannels),
-        "");
-  }
   Image image;
   image.width = spec.width;
   image.height = spec.height;
@@ -93,10 +133,7 @@ absl::Status WriteImage(const std::string& path, const Image& image, int bits) {
 }
 
 absl::StatusOr<LabelMap> ReadLabelMap(const std::string& path) {
-  if (!std::filesystem::is_regular_file(path))
-    return absl::NotFoundError(absl::StrCat(path, ": no such file"));
-  auto in = OIIO::ImageInput::open(path);
-  if (!in) return OiioError(path, "cannot decode label map", OIIO::geterror());
+  ASSIGN_OR_RETURN(std::unique_ptr<OIIO::ImageInput> in, OpenChecked(path, "label map"));
   const OIIO::ImageSpec& spec = in->spec();
   if (spec.nchannels != 1) {
     return OiioError(path, absl::StrCat("label map must have 1 channel, has ", spec.nchannels), "");
@@ -104,10 +141,6 @@ absl::StatusOr<LabelMap> ReadLabelMap(const std::string& path) {
   if (spec.format != OIIO::TypeDesc::UINT8 && spec.format != OIIO::TypeDesc::UINT16) {
     return OiioError(
         path, absl::StrCat("label map must be 8- or 16-bit integer, is ", spec.format.c_str()), "");
-  }
-  if (spec.width <= 0 || spec.height <= 0 || spec.width > kMaxImageSide ||
-      spec.height > kMaxImageSide) {
-    return OiioError(path, "unsupported label map size", "");
   }
   LabelMap map;
   map.width = spec.width;
@@ -136,25 +169,47 @@ absl::Status WriteLabelMap(const std::string& path, const LabelMap& labels) {
 absl::StatusOr<Image> ReadViewImage(const Scene& scene, int view) {
   const SceneView& v = scene.views.at(view);
   if (v.image.empty()) return absl::NotFoundError(absl::StrCat("view '", v.name, "' has no image"));
-  ASSIGN_OR_RETURN(Image image, ReadImage(scene.Path(v.image)));
-  if (image.width != v.camera.width || image.height != v.camera.height) {
+  ASSIGN_OR_RETURN(ImageHeader header, ProbeImage(scene.Path(v.image)));
+  if (header.width != v.camera.width || header.height != v.camera.height) {
     return absl::InvalidArgumentError(
-        absl::StrCat(scene.Path(v.image), ": image is ", image.width, "x", image.height,
+        absl::StrCat(scene.Path(v.image), ": image is ", header.width, "x", header.height,
                      " but view '", v.name, "' camera is ", v.camera.width, "x", v.camera.height));
   }
-  return image;
+  return ReadImage(scene.Path(v.image));
 }
 
 absl::StatusOr<LabelMap> ReadViewMask(const Scene& scene, int view) {
   const SceneView& v = scene.views.at(view);
   if (v.mask.empty()) return absl::NotFoundError(absl::StrCat("view '", v.name, "' has no mask"));
-  ASSIGN_OR_RETURN(LabelMap mask, ReadLabelMap(scene.Path(v.mask)));
-  if (mask.width != v.camera.width || mask.height != v.camera.height) {
+  ASSIGN_OR_RETURN(ImageHeader header, ProbeImage(scene.Path(v.mask)));
+  if (header.width != v.camera.width || header.height != v.camera.height) {
     return absl::InvalidArgumentError(
-        absl::StrCat(scene.Path(v.mask), ": mask is ", mask.width, "x", mask.height, " but view '",
-                     v.name, "' camera is ", v.camera.width, "x", v.camera.height));
+        absl::StrCat(scene.Path(v.mask), ": mask is ", header.width, "x", header.height,
+                     " but view '", v.name, "' camera is ", v.camera.width, "x", v.camera.height));
   }
-  return mask;
+  return ReadLabelMap(scene.Path(v.mask));
+}
+
+absl::Status CheckViewFiles(const Scene& scene) {
+  for (const SceneView& v : scene.views) {
+    for (const std::string* rel : {&v.image, &v.mask}) {
+      if (rel->empty()) continue;
+      ASSIGN_OR_RETURN(ImageHeader header, ProbeImage(scene.Path(*rel)));
+      const char* what = rel == &v.image ? "image" : "mask";
+      if (header.width != v.camera.width || header.height != v.camera.height) {
+        return absl::InvalidArgumentError(absl::StrCat(
+            scene.Path(*rel), ": ", what, " is ", header.width, "x", header.height, " but view '",
+            v.name, "' camera is ", v.camera.width, "x", v.camera.height));
+      }
+      if (rel == &v.mask && !header.label_map) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(scene.Path(*rel), ": mask of view '", v.name,
+                         "' must be a single-channel 8- or 16-bit integer image, has ",
+                         header.channels, " channels"));
+      }
+    }
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace instascene

@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 
 namespace instascene {
 
@@ -26,6 +27,24 @@ struct LabelMap {
   std::vector<uint16_t> labels;  // row-major, 0 = no label
 };
 
+// What an image file's header says, read without decoding any pixel.
+struct ImageHeader {
+  int width = 0;
+  int height = 0;
+  int channels = 0;
+  bool label_map = false;  // single-channel 8- or 16-bit integer: usable as a mask
+};
+// Largest image side and pixel count read (a header can claim anything; decoding allocates what
+// it claims): 16384 px per side, 64 M pixels.
+inline constexpr int kMaxImageSide = 16384;
+inline constexpr int64_t kMaxImagePixels = int64_t{64} << 20;
+
+// Header only; only regular files. Sizes beyond the limits above are refused.
+absl::StatusOr<ImageHeader> ProbeImage(const std::string& path);
+// The same from the first bytes of an image (the upload check reads a prefix from the store);
+// `name` is used in errors. A prefix too short to hold the header is a DATA_LOSS error.
+absl::StatusOr<ImageHeader> ProbeImageBytes(absl::string_view bytes, const std::string& name);
+
 // Reads any format OpenImageIO knows (PNG, JPEG, EXR, ...).
 absl::StatusOr<Image> ReadImage(const std::string& path);
 // Writes 8-bit (or 16-bit when bits == 16) PNG/JPEG by extension; values clamped to [0, 1].
@@ -38,8 +57,12 @@ absl::StatusOr<LabelMap> ReadLabelMap(const std::string& path);
 absl::Status WriteLabelMap(const std::string& path, const LabelMap& labels);
 
 struct Scene;
-// Reads a view's image / mask and checks its size against the view's camera.
+// Reads a view's image / mask, its header checked against the view's camera before any pixel is
+// decoded.
 absl::StatusOr<Image> ReadViewImage(const Scene& scene, int view);
 absl::StatusOr<LabelMap> ReadViewMask(const Scene& scene, int view);
+// Probes every view's image and mask (headers only): regular files, the camera's size, masks
+// single-channel 8/16-bit integer. What `submit` checks before uploading anything.
+absl::Status CheckViewFiles(const Scene& scene);
 
 }  // namespace instascene

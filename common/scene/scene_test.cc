@@ -8,6 +8,7 @@
 #include <filesystem>
 #include <fstream>
 
+#include "common/core/file_io.h"
 #include "common/scene/image_io.h"
 #include "common/scene/importers.h"
 #include "common/scene/scene.h"
@@ -152,6 +153,87 @@ TEST(Scene, ViewImageSizeMustMatchCamera) {
   absl::StatusOr<Image> image = ReadViewImage(scene, 0);
   ASSERT_FALSE(image.ok());
   EXPECT_NE(image.status().message().find("31x24"), std::string::npos) << image.status();
+}
+
+// A PNG that is only a signature and an IHDR chunk claiming width x height RGB 8-bit: what a
+// hostile upload of a few bytes looks like.
+std::string ForgedPngHeader(uint32_t width, uint32_t height) {
+  auto crc32 = [](const std::string& bytes) {
+    uint32_t c = 0xffffffffu;
+    for (unsigned char b : bytes) {
+      c ^= b;
+      for (int k = 0; k < 8; ++k) c = (c >> 1) ^ (0xedb88320u & (0u - (c & 1u)));
+    }
+    return c ^ 0xffffffffu;
+  };
+  auto be32 = [](uint32_t v) {
+    return std::string{static_cast<char>(v >> 24), static_cast<char>(v >> 16),
+                       static_cast<char>(v >> 8), static_cast<char>(v)};
+  };
+  std::string chunk = "IHDR" + be32(width) + be32(height);
+  chunk += std::string{8, 2, 0, 0, 0};  // 8 bits, RGB, deflate, no filter, no interlace
+  const std::string data = "IDAT\x78\x9c";  // the start of a zlib stream, then nothing
+  return std::string("\x89PNG\r\n\x1a\n", 8) + be32(13) + chunk + be32(crc32(chunk)) + be32(2) +
+         data + be32(crc32(data));
+}
+
+TEST(ImageIo, ProbeReadsTheHeaderOnly) {
+  const std::string dir = FreshDir("probe");
+  ASSERT_TRUE(WriteImage(dir + "/rgb.png", Image{64, 48, 3, std::vector<float>(64 * 48 * 3)}).ok());
+  ASSERT_TRUE(WriteLabelMap(dir + "/mask.png", LabelMap{64, 48, std::vector<uint16_t>(64 * 48)}).ok());
+  absl::StatusOr<ImageHeader> rgb = ProbeImage(dir + "/rgb.png");
+  ASSERT_TRUE(rgb.ok()) << rgb.status();
+  EXPECT_EQ(rgb->width, 64);
+  EXPECT_EQ(rgb->height, 48);
+  EXPECT_EQ(rgb->channels, 3);
+  EXPECT_FALSE(rgb->label_map);
+  absl::StatusOr<ImageHeader> mask = ProbeImage(dir + "/mask.png");
+  ASSERT_TRUE(mask.ok()) << mask.status();
+  EXPECT_TRUE(mask->label_map);
+  // From a prefix of the bytes (the upload check), and a prefix too short for the header.
+  std::ifstream in(dir + "/rgb.png", std::ios::binary);
+  const std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  absl::StatusOr<ImageHeader> prefix = ProbeImageBytes(bytes.substr(0, 64), "rgb.png");
+  ASSERT_TRUE(prefix.ok()) << prefix.status();
+  EXPECT_EQ(prefix->width, 64);
+  absl::StatusOr<ImageHeader> cut = ProbeImageBytes(bytes.substr(0, 12), "rgb.png");
+  EXPECT_EQ(cut.status().code(), absl::StatusCode::kDataLoss) << cut.status();
+  // Headers beyond the limits, and what is not a regular file.
+  ASSERT_TRUE(WriteFileAtomically(dir + "/huge.png", ForgedPngHeader(16000, 16000)).ok());
+  absl::StatusOr<ImageHeader> huge = ProbeImage(dir + "/huge.png");
+  ASSERT_FALSE(huge.ok());
+  EXPECT_NE(huge.status().message().find("16000x16000"), std::string::npos) << huge.status();
+  EXPECT_FALSE(ReadImage(dir + "/huge.png").ok());
+  EXPECT_EQ(ProbeImage(dir).status().code(), absl::StatusCode::kNotFound);
+}
+
+TEST(Scene, AViewImageIsCheckedAgainstItsCameraBeforeDecoding) {
+  // 8000 x 8000 is within the limits, so only the camera check can stop it; decoding first would
+  // allocate 768 MB and then fail on the missing pixel data (DATA_LOSS).
+  Scene scene;
+  scene.directory = FreshDir("forged");
+  scene.views = {MakeView("a", 0)};
+  fs::create_directories(scene.directory + "/images");
+  fs::create_directories(scene.directory + "/masks");
+  ASSERT_TRUE(WriteFileAtomically(scene.Path("images/a.png"), ForgedPngHeader(8000, 8000)).ok());
+  ASSERT_TRUE(WriteFileAtomically(scene.Path("masks/a.png"), ForgedPngHeader(8000, 8000)).ok());
+  absl::StatusOr<Image> image = ReadViewImage(scene, 0);
+  EXPECT_EQ(image.status().code(), absl::StatusCode::kInvalidArgument) << image.status();
+  EXPECT_NE(image.status().message().find("camera is 32x24"), std::string::npos);
+  absl::StatusOr<LabelMap> mask = ReadViewMask(scene, 0);
+  EXPECT_EQ(mask.status().code(), absl::StatusCode::kInvalidArgument) << mask.status();
+  EXPECT_EQ(CheckViewFiles(scene).code(), absl::StatusCode::kInvalidArgument);
+  // Right sizes pass; an RGB "mask" does not.
+  ASSERT_TRUE(WriteImage(scene.Path("images/a.png"), Image{32, 24, 3, std::vector<float>(32 * 24 * 3)})
+                  .ok());
+  ASSERT_TRUE(
+      WriteLabelMap(scene.Path("masks/a.png"), LabelMap{32, 24, std::vector<uint16_t>(32 * 24)})
+          .ok());
+  EXPECT_TRUE(CheckViewFiles(scene).ok()) << CheckViewFiles(scene);
+  ASSERT_TRUE(WriteImage(scene.Path("masks/a.png"), Image{32, 24, 3, std::vector<float>(32 * 24 * 3)})
+                  .ok());
+  const absl::Status rgb_mask = CheckViewFiles(scene);
+  EXPECT_NE(rgb_mask.message().find("single-channel"), std::string::npos) << rgb_mask;
 }
 
 // Writes a tiny COLMAP model in the binary or text format.
