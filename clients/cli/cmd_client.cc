@@ -12,6 +12,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "clients/cli/cli.h"
+#include "common/scene/image_io.h"
 #include "clients/cli/progress.h"
 #include "common/core/status.h"
 #include "common/rpc/status.h"
@@ -172,6 +173,10 @@ void AddClientCommands(CLI::App& app, Action* action) {
           return absl::InvalidArgumentError("--params is not a JSON object");
       }
       if (a.iterations > 0) params["train"]["iterations"] = a.iterations;
+      {  // every image and mask against its camera (headers only) before anything is sent
+        ASSIGN_OR_RETURN(Scene scene, ReadScene(a.scene));
+        RETURN_IF_ERROR(CheckViewFiles(scene));
+      }
       ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(a.server, a.store));
       client::SubmitRequest request;
       request.scene_dir = a.scene;
