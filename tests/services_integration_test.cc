@@ -292,6 +292,42 @@ TEST_F(ServicesTest, BadRequestsAreRejectedAndLeaveNoTrace) {
   grpc::ClientContext context;
   const grpc::Status s = scheduler_->CompleteJob(&context, complete, &ignored);
   EXPECT_EQ(s.error_code(), grpc::StatusCode::FAILED_PRECONDITION) << s.error_message();
+  // Nor with a forged output: someone else's lease, a manifest of another stage, one naming blobs
+  // the store lacks, one without the files its stage always writes.
+  store::Manifest forged;
+  forged.kind = "decompose";
+  forged.files["result.json"] = put("{}");
+  forged.files["labels.ply"] = put("ply");
+  store::Manifest wrong_kind = forged;
+  wrong_kind.kind = "segment";
+  store::Manifest dangling = forged;
+  dangling.files["decomposition.json"] = store::ComputeDigest("never uploaded either");
+  struct Completion {
+    std::string name, token;
+    store::Digest output;
+    grpc::StatusCode code;
+    std::string says;
+  };
+  const std::vector<Completion> completions = {
+      {"another lease's token", "not-the-token", put(store::SerializeManifest(forged)),
+       grpc::StatusCode::FAILED_PRECONDITION, "lease token"},
+      {"a segment manifest", (*lease)->token, put(store::SerializeManifest(wrong_kind)),
+       grpc::StatusCode::INVALID_ARGUMENT, "of kind \"segment\""},
+      {"a manifest naming a missing blob", (*lease)->token, put(store::SerializeManifest(dangling)),
+       grpc::StatusCode::FAILED_PRECONDITION, "blobs the store lacks"},
+      {"no decomposition.json", (*lease)->token, put(store::SerializeManifest(forged)),
+       grpc::StatusCode::INVALID_ARGUMENT, "lacks decomposition.json"},
+  };
+  for (const Completion& c : completions) {
+    complete.set_lease_token(c.token);
+    rpc::ToProto(c.output, complete.mutable_output_manifest());
+    grpc::ClientContext ctx;
+    const grpc::Status bad = scheduler_->CompleteJob(&ctx, complete, &ignored);
+    EXPECT_EQ(bad.error_code(), c.code) << c.name << ": " << bad.error_message();
+    EXPECT_NE(bad.error_message().find(c.says), std::string::npos)
+        << c.name << ": " << bad.error_message();
+  }
+  EXPECT_EQ(queue_->Get((*lease)->job.id)->state, scheduler::JobState::kLeased);
   ASSERT_TRUE(
       queue_->Fail((*lease)->job.id, (*lease)->token, scheduler::FailureKind::kReleased, "test")
           .ok());
@@ -303,7 +339,7 @@ TEST_F(ServicesTest, BadRequestsAreRejectedAndLeaveNoTrace) {
     EXPECT_EQ(now.state(), v1::JOB_STATE_QUEUED);
     EXPECT_EQ(now.attempts(), 0);
   }
-  EXPECT_EQ(store_->Stats()->blob_count, blobs_before + 5);  // the blobs put above
+  EXPECT_EQ(store_->Stats()->blob_count, blobs_before + 10);  // the blobs put above
   EXPECT_EQ(CountFiles(root_ + "/store/uploads"), 0u);
   EXPECT_EQ(CountFiles(root_ + "/store/tmp"), 0u);
 }

@@ -12,10 +12,10 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "clients/cli/cli.h"
-#include "common/scene/image_io.h"
 #include "clients/cli/progress.h"
 #include "common/core/status.h"
 #include "common/rpc/status.h"
+#include "common/scene/image_io.h"
 #include "instascene/client/services.h"
 #include "services/scheduler/job_proto.h"
 

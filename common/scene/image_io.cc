@@ -46,9 +46,8 @@ absl::Status WritePixels(const std::string& path, int width, int height, int cha
 
 absl::StatusOr<ImageHeader> HeaderOf(const OIIO::ImageSpec& spec, const std::string& name) {
   if (spec.width <= 0 || spec.height <= 0 || spec.width > kMaxImageSide ||
-      spec.height > kMaxImageSide ||
-      int64_t{spec.width} * spec.height > kMaxImagePixels || spec.nchannels <= 0 ||
-      spec.nchannels > 4) {
+      spec.height > kMaxImageSide || int64_t{spec.width} * spec.height > kMaxImagePixels ||
+      spec.nchannels <= 0 || spec.nchannels > 4) {
     return OiioError(name,
                      absl::StrCat("unsupported image size ", spec.width, "x", spec.height, "x",
                                   spec.nchannels, " (at most ", kMaxImageSide, " px per side, ",

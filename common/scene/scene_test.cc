@@ -171,7 +171,7 @@ std::string ForgedPngHeader(uint32_t width, uint32_t height) {
                        static_cast<char>(v >> 8), static_cast<char>(v)};
   };
   std::string chunk = "IHDR" + be32(width) + be32(height);
-  chunk += std::string{8, 2, 0, 0, 0};  // 8 bits, RGB, deflate, no filter, no interlace
+  chunk += std::string{8, 2, 0, 0, 0};      // 8 bits, RGB, deflate, no filter, no interlace
   const std::string data = "IDAT\x78\x9c";  // the start of a zlib stream, then nothing
   return std::string("\x89PNG\r\n\x1a\n", 8) + be32(13) + chunk + be32(crc32(chunk)) + be32(2) +
          data + be32(crc32(data));
@@ -180,7 +180,8 @@ std::string ForgedPngHeader(uint32_t width, uint32_t height) {
 TEST(ImageIo, ProbeReadsTheHeaderOnly) {
   const std::string dir = FreshDir("probe");
   ASSERT_TRUE(WriteImage(dir + "/rgb.png", Image{64, 48, 3, std::vector<float>(64 * 48 * 3)}).ok());
-  ASSERT_TRUE(WriteLabelMap(dir + "/mask.png", LabelMap{64, 48, std::vector<uint16_t>(64 * 48)}).ok());
+  ASSERT_TRUE(
+      WriteLabelMap(dir + "/mask.png", LabelMap{64, 48, std::vector<uint16_t>(64 * 48)}).ok());
   absl::StatusOr<ImageHeader> rgb = ProbeImage(dir + "/rgb.png");
   ASSERT_TRUE(rgb.ok()) << rgb.status();
   EXPECT_EQ(rgb->width, 64);
@@ -224,14 +225,16 @@ TEST(Scene, AViewImageIsCheckedAgainstItsCameraBeforeDecoding) {
   EXPECT_EQ(mask.status().code(), absl::StatusCode::kInvalidArgument) << mask.status();
   EXPECT_EQ(CheckViewFiles(scene).code(), absl::StatusCode::kInvalidArgument);
   // Right sizes pass; an RGB "mask" does not.
-  ASSERT_TRUE(WriteImage(scene.Path("images/a.png"), Image{32, 24, 3, std::vector<float>(32 * 24 * 3)})
-                  .ok());
+  ASSERT_TRUE(
+      WriteImage(scene.Path("images/a.png"), Image{32, 24, 3, std::vector<float>(32 * 24 * 3)})
+          .ok());
   ASSERT_TRUE(
       WriteLabelMap(scene.Path("masks/a.png"), LabelMap{32, 24, std::vector<uint16_t>(32 * 24)})
           .ok());
   EXPECT_TRUE(CheckViewFiles(scene).ok()) << CheckViewFiles(scene);
-  ASSERT_TRUE(WriteImage(scene.Path("masks/a.png"), Image{32, 24, 3, std::vector<float>(32 * 24 * 3)})
-                  .ok());
+  ASSERT_TRUE(
+      WriteImage(scene.Path("masks/a.png"), Image{32, 24, 3, std::vector<float>(32 * 24 * 3)})
+          .ok());
   const absl::Status rgb_mask = CheckViewFiles(scene);
   EXPECT_NE(rgb_mask.message().find("single-channel"), std::string::npos) << rgb_mask;
 }

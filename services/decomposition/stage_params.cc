@@ -69,10 +69,12 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
 }
 
 pipeline::StageSpec DecomposeSpec() {
-  return pipeline::MakeStageSpec(
+  pipeline::StageSpec spec = pipeline::MakeStageSpec(
       "decompose", "decomposition",
       "Spatial Gaussian trackers + view-consensus mask clustering: coarse 3D instances", {},
       /*fans_out=*/false, DecomposeCodec());
+  spec.required_outputs = {"result.json", "labels.ply", "decomposition.json"};
+  return spec;
 }
 
 }  // namespace instascene::decomposition

@@ -31,10 +31,12 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
 }
 
 pipeline::StageSpec CompleteSpec() {
-  return pipeline::MakeStageSpec(
+  pipeline::StageSpec spec = pipeline::MakeStageSpec(
       "complete", "objects",
       "In-situ completion of one object: viewpoint ring, free space, completion prior, mesh",
       {{"segment", pipeline::InputMode::kEach}}, /*fans_out=*/false, CompleteCodec());
+  spec.required_outputs = {"manifest.json"};
+  return spec;
 }
 
 }  // namespace instascene::generation

@@ -30,6 +30,7 @@ pipeline::StageSpec ExportSpec() {
   // degenerate instance) is left out of the export (the Objects service answers it as a raw crop)
   // instead of failing the scene's export.
   spec.partial_join = true;
+  spec.required_outputs = {"objects.json"};
   return spec;
 }
 

@@ -62,6 +62,8 @@ struct StageSpec {
   // A join (kAll input) that runs over the items that succeeded: a failed or cancelled item is
   // left out (absent from StageContext::inputs) instead of failing the join.
   bool partial_join = false;
+  // Files every output of this stage holds; the scheduler refuses a completion without them.
+  std::vector<std::string> required_outputs;
   std::vector<ParamSpec> parameters;
   std::function<absl::StatusOr<nlohmann::json>(const nlohmann::json&)> canonicalize;
 };

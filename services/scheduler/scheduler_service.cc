@@ -141,17 +141,52 @@ grpc::Status SchedulerService::Heartbeat(grpc::ServerContext*, const v1::Heartbe
   return grpc::Status::OK;
 }
 
+absl::Status SchedulerService::CheckOutput(const std::string& job_id,
+                                           const std::string& lease_token,
+                                           const store::Digest& output) {
+  constexpr int64_t kMaxManifestBytes = int64_t{16} << 20;
+  ASSIGN_OR_RETURN(Job job, queue_->Get(job_id));
+  // Only the holder of the current lease learns anything about its output's validity.
+  if (job.state != JobState::kLeased && job.state != JobState::kRunning)
+    return absl::FailedPreconditionError(absl::StrCat("job ", job_id, " is not leased"));
+  if (lease_token.empty() || lease_token != job.lease_token)
+    return absl::FailedPreconditionError(
+        absl::StrCat("job ", job_id, ": the lease token is not the current lease's"));
+  ASSIGN_OR_RETURN(std::vector<store::Digest> missing, store_->FindMissing({output}));
+  if (!missing.empty())
+    return absl::FailedPreconditionError(
+        absl::StrCat("output manifest ", output.ToString(), " is not in the store"));
+  if (output.size_bytes > kMaxManifestBytes)
+    return absl::InvalidArgumentError(absl::StrCat("output manifest of ", output.size_bytes,
+                                                   " bytes (at most ", kMaxManifestBytes, ")"));
+  ASSIGN_OR_RETURN(std::string bytes, store_->Read(output));
+  ASSIGN_OR_RETURN(store::Manifest manifest, store::ParseManifest(bytes, "output manifest"));
+  if (manifest.kind != job.kind)
+    return absl::InvalidArgumentError(
+        absl::StrCat("output manifest of kind \"", manifest.kind, "\" for a ", job.kind, " job"));
+  ASSIGN_OR_RETURN(missing, store_->FindMissing(manifest.Digests()));
+  if (!missing.empty())
+    return absl::FailedPreconditionError(
+        absl::StrCat("output manifest refers to ", missing.size(),
+                     " blobs the store lacks (first: ", missing[0].ToString(), ")"));
+  if (const pipeline::StageDefinition* stage = stages_ ? stages_->Find(job.kind) : nullptr) {
+    for (const std::string& file : stage->spec.required_outputs) {
+      if (!manifest.files.count(file))
+        return absl::InvalidArgumentError(
+            absl::StrCat("output of a ", job.kind, " job lacks ", file));
+    }
+  }
+  return absl::OkStatus();
+}
+
 grpc::Status SchedulerService::CompleteJob(grpc::ServerContext*,
                                            const v1::CompleteJobRequest* request,
                                            v1::CompleteJobResponse*) {
   absl::StatusOr<store::Digest> output =
       rpc::ParseProtoDigest(request->output_manifest(), "output_manifest");
   if (!output.ok()) return ToGrpcStatus(output.status());
-  absl::StatusOr<std::vector<store::Digest>> missing = store_->FindMissing({*output});
-  if (!missing.ok()) return ToGrpcStatus(missing.status());
-  if (!missing->empty())
-    return ToGrpcStatus(absl::FailedPreconditionError(
-        absl::StrCat("output manifest ", output->ToString(), " is not in the store")));
+  if (absl::Status bad = CheckOutput(request->job_id(), request->lease_token(), *output); !bad.ok())
+    return ToGrpcStatus(bad);
   const absl::Status s =
       queue_->Complete(request->job_id(), request->lease_token(), *output, request->items());
   if (s.ok()) Notify();

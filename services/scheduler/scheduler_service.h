@@ -63,6 +63,10 @@ class SchedulerService final : public v1::Scheduler::Service {
   absl::Status Submit(const v1::SubmitPipelineRequest& request,
                       v1::SubmitPipelineResponse* response);
   absl::Status Lease(const v1::LeaseJobRequest& request, v1::LeaseJobResponse* response);
+  // A completion's output must be the lease holder's, a manifest of the job's kind whose blobs
+  // are all in the store and that holds the files its stage always writes.
+  absl::Status CheckOutput(const std::string& job_id, const std::string& lease_token,
+                           const store::Digest& output);
   void Notify();
   void RescueLoop();
 

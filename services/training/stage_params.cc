@@ -81,17 +81,21 @@ const pipeline::ParamCodec<SegmentStageOptions>& SegmentCodec() {
 }
 
 pipeline::StageSpec TrainSpec() {
-  return pipeline::MakeStageSpec(
+  pipeline::StageSpec spec = pipeline::MakeStageSpec(
       "train", "training",
       "Spatial contrastive feature field on the decomposition (features + coarse labels)",
       {{"decompose", pipeline::InputMode::kOne}}, /*fans_out=*/false, TrainCodec());
+  spec.required_outputs = {"result.json", "labels.ply"};
+  return spec;
 }
 
 pipeline::StageSpec SegmentSpec() {
-  return pipeline::MakeStageSpec(
+  pipeline::StageSpec spec = pipeline::MakeStageSpec(
       "segment", "segmentation",
       "Final labels (tau rule or HDBSCAN); one instance PLY per object (its items)",
       {{"train", pipeline::InputMode::kOne}}, /*fans_out=*/true, SegmentCodec());
+  spec.required_outputs = {"result.json", "labels.ply", "instances.json"};
+  return spec;
 }
 
 }  // namespace instascene::training
