@@ -16,6 +16,7 @@
 #include "common/core/status.h"
 #include "common/rpc/status.h"
 #include "common/scene/image_io.h"
+#include "common/scene/scene.h"
 #include "instascene/client/services.h"
 #include "services/scheduler/job_proto.h"
 
