@@ -62,6 +62,8 @@ check "no job ran twice" test "$(job_field "$ADDR" "$TRAIN" attempts)" = "1"
 # 3. Bad requests: the right status, nothing queued.
 check_fails "bad parameter" "INVALID_ARGUMENT.*'iterations' must be an integer" \
   "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params '{"train":{"iterations":"many"}}'
+check_fails "--iterations -1 is refused, not defaulted" "INVALID_ARGUMENT.*iterations" \
+  "$BIN" submit --scene "$WORK/a" --server "$ADDR" --iterations -1
 check_fails "unknown stage parameter" "INVALID_ARGUMENT.*unknown parameter 'tau'" \
   "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params '{"segment":{"tau":0.5}}'
 check_fails "unknown job" "NOT_FOUND.*job jdoesnotexist" "$BIN" fetch jdoesnotexist --out "$WORK/x" --server "$ADDR"

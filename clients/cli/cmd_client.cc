@@ -141,6 +141,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
     std::string server = kDefaultServer, store, scene, name, params;
     std::vector<std::string> stages;
     int priority = 0, iterations = 0;
+    bool iterations_given = false;
     bool json = false, wait = false;
   };
   auto submit = std::make_shared<SubmitArgs>();
@@ -155,7 +156,9 @@ void AddClientCommands(CLI::App& app, Action* action) {
   s->add_option("--name", submit->name, "Scene name shown in job lists (default: directory name)");
   s->add_option("--params", submit->params,
                 R"(Stage parameters as JSON, e.g. '{"train":{"iterations":500}}')");
-  s->add_option("--iterations", submit->iterations, "Shortcut for train.iterations");
+  CLI::Option* iterations = s->add_option(
+      "--iterations", submit->iterations,
+      "Shortcut for train.iterations (validated by the server like any parameter)");
   s->add_option(
        "--stages", submit->stages,
        "Only these stages, comma-separated (their inputs included), e.g. "
@@ -164,7 +167,8 @@ void AddClientCommands(CLI::App& app, Action* action) {
   s->add_option("--priority", submit->priority, "Higher runs first (interactive requests)");
   s->add_flag("--wait", submit->wait, "Watch the jobs until they finish");
   s->add_flag("--json", submit->json, "Print {\"scene\", \"jobs\", ...} as the last stdout line");
-  s->callback([submit, action] {
+  s->callback([submit, action, iterations] {
+    submit->iterations_given = iterations->count() > 0;
     *action = [submit]() -> absl::Status {
       const SubmitArgs& a = *submit;
       nlohmann::json params = nlohmann::json::object();
@@ -173,7 +177,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
         if (params.is_discarded() || !params.is_object())
           return absl::InvalidArgumentError("--params is not a JSON object");
       }
-      if (a.iterations > 0) params["train"]["iterations"] = a.iterations;
+      if (a.iterations_given) params["train"]["iterations"] = a.iterations;
       {  // every image and mask against its camera (headers only) before anything is sent
         ASSIGN_OR_RETURN(Scene scene, ReadScene(a.scene));
         RETURN_IF_ERROR(CheckViewFiles(scene));
