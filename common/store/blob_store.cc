@@ -17,6 +17,7 @@ namespace fs = std::filesystem;
 absl::Status StoreOptions::Validate() const {
   if (max_blob_bytes <= 0) return absl::InvalidArgumentError("max_blob_bytes must be > 0");
   if (max_batch_bytes <= 0) return absl::InvalidArgumentError("max_batch_bytes must be > 0");
+  if (upload_ttl_seconds < 0) return absl::InvalidArgumentError("upload_ttl_seconds must be >= 0");
   return absl::OkStatus();
 }
 
@@ -117,8 +118,31 @@ absl::StatusOr<std::unique_ptr<FilesystemBlobStore>> FilesystemBlobStore::Open(
   for (const auto& entry : fs::directory_iterator(fs::path(root) / "tmp", ec)) {
     fs::remove(entry.path(), ec);
   }
-  return std::unique_ptr<FilesystemBlobStore>(
+  std::unique_ptr<FilesystemBlobStore> store(
       new FilesystemBlobStore(root, options, std::move(lock)));
+  store->ExpireUploads(/*force=*/true);
+  return store;
+}
+
+void FilesystemBlobStore::ExpireUploads(bool force) {
+  if (options_.upload_ttl_seconds <= 0) return;
+  const auto now = fs::file_time_type::clock::now();
+  const int64_t now_ms = std::chrono::duration_cast<std::chrono::milliseconds>(
+                             std::chrono::steady_clock::now().time_since_epoch())
+                             .count();
+  int64_t last = last_sweep_ms_.load();
+  if (!force && (now_ms - last < 60'000 || !last_sweep_ms_.compare_exchange_strong(last, now_ms)))
+    return;
+  last_sweep_ms_ = now_ms;
+  const auto cutoff = now - std::chrono::seconds(options_.upload_ttl_seconds);
+  std::lock_guard<std::mutex> lock(upload_mutex_);  // never under an Append in progress
+  std::error_code ec;
+  for (const auto& entry : fs::directory_iterator(fs::path(root_) / "uploads", ec)) {
+    std::error_code e;
+    if (entry.path().extension() != ".part" || !entry.is_regular_file(e)) continue;
+    const auto written = entry.last_write_time(e);
+    if (!e && written < cutoff && fs::remove(entry.path(), e)) ++expired_uploads_;
+  }
 }
 
 std::string FilesystemBlobStore::BlobPath(const Digest& digest) const {
@@ -203,6 +227,7 @@ absl::StatusOr<std::string> FilesystemBlobStore::Read(const Digest& digest, int6
 absl::StatusOr<int64_t> FilesystemBlobStore::CommittedSize(const Digest& digest) {
   RETURN_IF_ERROR(ValidateDigest(digest));
   if (Contains(digest)) return digest.size_bytes;
+  ExpireUploads(/*force=*/false);  // an upload (re)starts here: a good moment to sweep
   std::error_code ec;
   const auto size = fs::file_size(PartPath(digest), ec);
   return ec ? 0 : static_cast<int64_t>(size);
@@ -267,6 +292,13 @@ absl::StatusOr<StoreStats> FilesystemBlobStore::Stats() {
       stats.total_bytes += static_cast<int64_t>(it->file_size(ec));
     }
   }
+  for (const auto& entry : fs::directory_iterator(fs::path(root_) / "uploads", ec)) {
+    std::error_code e;
+    if (entry.path().extension() != ".part" || !entry.is_regular_file(e)) continue;
+    ++stats.partial_uploads;
+    stats.partial_bytes += static_cast<int64_t>(entry.file_size(e));
+  }
+  stats.expired_uploads = expired_uploads_.load();
   return stats;
 }
 

@@ -9,6 +9,7 @@
 
 #include <cstdint>
 #include <functional>
+#include <atomic>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -23,6 +24,10 @@ struct StoreOptions {
   int64_t max_blob_bytes = int64_t{16} << 30;  // larger blobs are refused (bytes)
   int64_t max_batch_bytes = int64_t{4} << 20;  // limit of one batch RPC / Put of a small blob
   bool verify_reads = false;                   // re-hash blobs on every full read
+  // Interrupted uploads untouched for this long are removed (filesystem store: at open and at
+  // most once a minute when an upload starts; S3: the bucket's AbortIncompleteMultipartUpload
+  // lifecycle rule, docs/DEPLOY.md). 0 = keep them for ever.
+  int64_t upload_ttl_seconds = 24 * 3600;
 
   absl::Status Validate() const;
 };
@@ -30,6 +35,9 @@ struct StoreOptions {
 struct StoreStats {
   int64_t blob_count = 0;
   int64_t total_bytes = 0;
+  int64_t partial_uploads = 0;  // interrupted uploads still resumable
+  int64_t partial_bytes = 0;
+  int64_t expired_uploads = 0;  // removed by the TTL since the store was opened
 };
 
 // Progress of a transfer: bytes done, bytes total.
@@ -94,6 +102,8 @@ class FilesystemBlobStore final : public BlobStore {
   FilesystemBlobStore(std::string root, StoreOptions options, FileLock lock)
       : root_(std::move(root)), options_(options), lock_(std::move(lock)) {}
   std::string PartPath(const Digest& digest) const;
+  // Removes interrupted uploads older than the TTL; `force` = now, else at most once a minute.
+  void ExpireUploads(bool force);
   bool Contains(const Digest& digest) const;
   // Moves a verified file into cas/ (fsync + rename + directory fsync).
   absl::Status Publish(const std::string& from, const Digest& digest);
@@ -104,6 +114,8 @@ class FilesystemBlobStore final : public BlobStore {
   std::mutex upload_mutex_;  // serialises Append / FinishUpload (one part file per digest)
   std::mutex temp_mutex_;
   uint64_t temp_counter_ = 0;
+  std::atomic<int64_t> last_sweep_ms_{0};
+  std::atomic<int64_t> expired_uploads_{0};
 };
 
 }  // namespace instascene::store

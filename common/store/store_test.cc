@@ -184,5 +184,41 @@ TEST(BlobStoreTest, OneProcessOwnsAStoreFolder) {
   EXPECT_TRUE(FilesystemBlobStore::Open(temp.str(), StoreOptions{}).ok());  // released
 }
 
+TEST(BlobStoreTest, AbandonedUploadsExpireAndCountInTheStatistics) {
+  const instascene::testing::ScopedTempDir temp("store_ttl");
+  const std::string bytes(1000, 'u');
+  const Digest fresh = ComputeDigest(bytes), stale = ComputeDigest(bytes + "x");
+  StoreOptions options;
+  options.upload_ttl_seconds = 3600;
+  {
+    auto store = FilesystemBlobStore::Open(temp.str(), options);
+    ASSERT_TRUE(store.ok());
+    ASSERT_TRUE((*store)->Append(fresh, 0, bytes.substr(0, 300)).ok());
+    ASSERT_TRUE((*store)->Append(stale, 0, bytes.substr(0, 400)).ok());
+    const StoreStats stats = *(*store)->Stats();
+    EXPECT_EQ(stats.partial_uploads, 2);
+    EXPECT_EQ(stats.partial_bytes, 700);
+    EXPECT_EQ(stats.expired_uploads, 0);
+  }
+  // The stale upload was last written two hours ago (set, not waited for).
+  for (const auto& e : std::filesystem::directory_iterator(temp.str() + "/uploads")) {
+    if (e.path().filename().string().rfind(stale.hash, 0) == 0)
+      std::filesystem::last_write_time(e.path(), std::filesystem::file_time_type::clock::now() -
+                                                     std::chrono::hours(2));
+  }
+  auto store = FilesystemBlobStore::Open(temp.str(), options);  // sweeps at open
+  ASSERT_TRUE(store.ok());
+  const StoreStats stats = *(*store)->Stats();
+  EXPECT_EQ(stats.partial_uploads, 1);
+  EXPECT_EQ(stats.partial_bytes, 300);
+  EXPECT_EQ(stats.expired_uploads, 1);
+  EXPECT_EQ(*(*store)->CommittedSize(stale), 0);    // starts over
+  EXPECT_EQ(*(*store)->CommittedSize(fresh), 300);  // resumes
+  ASSERT_TRUE((*store)->Append(fresh, 300, bytes.substr(300)).ok());
+  ASSERT_TRUE((*store)->FinishUpload(fresh).ok());
+  EXPECT_EQ(*(*store)->Read(fresh), bytes);
+  EXPECT_EQ((*store)->Stats()->partial_uploads, 0);
+}
+
 }  // namespace
 }  // namespace instascene::store

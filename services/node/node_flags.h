@@ -60,6 +60,11 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
   app.add_option("--max-blob-bytes", o->store_options.max_blob_bytes,
                  "Largest blob the store accepts")
       ->capture_default_str();
+  app.add_option("--upload-ttl-seconds", o->store_options.upload_ttl_seconds,
+                 "Interrupted uploads untouched for this long are removed (filesystem store; 0 = "
+                 "never)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
 }
 
 // main() of a per-service binary: `stages` are the stages it knows, `services` the stage services

@@ -163,6 +163,9 @@ grpc::Status StoreService::GetStoreInfo(grpc::ServerContext*, const v1::GetStore
   response->set_max_batch_bytes(store_->options().max_batch_bytes);
   response->set_blob_count(stats->blob_count);
   response->set_total_bytes(stats->total_bytes);
+  response->set_partial_uploads(stats->partial_uploads);
+  response->set_partial_bytes(stats->partial_bytes);
+  response->set_expired_uploads(stats->expired_uploads);
   return grpc::Status::OK;
 }
 
