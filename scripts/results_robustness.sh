@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Decomposition robustness on scenes nobody tuned on (docs/RESULTS.md, "Robustness"): for each
-# scene, the full offline pipeline (`instascene run`) with the released code's decomposition
-# constants (min_tracker_gaussians 50, no re-judgement) and with today's defaults, scored by the
+# scene, the full offline pipeline (`instascene run`) with the released code's tracker minimum and
+# no re-judgement (min_tracker_gaussians 50, rejudge_passes 0; everything else at today's defaults,
+# the instance merge included) and with today's defaults, scored by the
 # click protocol on labels (`eval --labels-only`). Scenes: the `small` preset at 320x240 (32 views)
 # and 640x480 (48 views) under both segmenter-noise families, and real-capture composites with the
 # two statues pressed together. Prints a markdown table and mean ± std per group and configuration.
