@@ -1,6 +1,7 @@
 #include "services/decomposition/decompose.h"
 
 #include <filesystem>
+#include <map>
 
 #include <nlohmann/json.hpp>
 
@@ -47,9 +48,15 @@ absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const Gaussian
   result.judgement = judged;
   UndoUndersegmented(result.trackers, &result.judgement);
   if (progress) progress("clustering", 0, 1 + options.rejudge_passes);
+  double post_seconds = 0;  // instance building inside the re-judgement loop is post-processing
+  auto build_instances = [&](const std::vector<MaskNode>& nodes) {
+    Stopwatch post;
+    result.instances = BuildInstances(result.trackers, nodes, cloud, options);
+    post_seconds += post.ElapsedSeconds();
+  };
   std::vector<MaskNode> nodes =
       ClusterMasks(result.trackers, result.judgement, options, &result.schedule);
-  result.instances = BuildInstances(result.trackers, nodes, cloud, options);
+  build_instances(nodes);
   std::vector<uint8_t> flags = judged.undersegmented;
   for (int pass = 0; pass < options.rejudge_passes; ++pass) {
     RETURN_IF_ERROR(CheckCancelled(options.cancel, "decompose"));
@@ -58,24 +65,20 @@ absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const Gaussian
     result.judgement.undersegmented = flags;
     UndoUndersegmented(result.trackers, &result.judgement);
     nodes = ClusterMasks(result.trackers, result.judgement, options, &result.schedule);
-    result.instances = BuildInstances(result.trackers, nodes, cloud, options);
+    build_instances(nodes);
     if (progress) progress("clustering", pass + 2, 1 + options.rejudge_passes);
   }
-  result.merged_instances = MergeUnseparatedInstances(result.trackers, options, &result.instances);
   if (progress) progress("clustering", 1 + options.rejudge_passes, 1 + options.rejudge_passes);
   result.cluster_of.assign(result.trackers.trackers.size(), -1);
-  result.cluster_size.assign(result.trackers.trackers.size(), 0);
   for (size_t k = 0; k < nodes.size(); ++k) {
-    for (uint32_t t : nodes[k].masks) {
-      result.cluster_of[t] = static_cast<int32_t>(k);
-      result.cluster_size[t] = static_cast<uint32_t>(nodes[k].masks.size());
-    }
+    for (uint32_t t : nodes[k].masks) result.cluster_of[t] = static_cast<int32_t>(k);
   }
-  result.clustering_seconds = watch.ElapsedSeconds();
+  result.clustering_seconds = watch.ElapsedSeconds() - post_seconds;
   watch.Restart();
+  result.merged_instances = MergeUnseparatedInstances(result.trackers, options, &result.instances);
   result.undersegmented =
       RemedyUndersegmented(result.trackers, result.judgement, options, &result.instances);
-  result.post_seconds = watch.ElapsedSeconds();
+  result.post_seconds = post_seconds + watch.ElapsedSeconds();
   if (progress) progress("post-processing", 1, 1);
   return result;
 }
@@ -140,6 +143,8 @@ absl::Status WriteDecomposition(const std::string& directory, const Scene& scene
     for (uint32_t t : result.instances[k].masks)
       instance_of_tracker[t] = static_cast<int64_t>(k + 1);
   }
+  std::map<int32_t, int> cluster_size;
+  for (int32_t c : result.cluster_of) ++cluster_size[c];
   nlohmann::json masks = nlohmann::json::array();
   for (size_t t = 0; t < set.trackers.size(); ++t) {
     const Tracker& tracker = set.trackers[t];
@@ -148,7 +153,7 @@ absl::Status WriteDecomposition(const std::string& directory, const Scene& scene
       fate = "instance";
     } else if (result.judgement.undersegmented[t]) {
       fate = "undersegmented";
-    } else if (t < result.cluster_size.size() && result.cluster_size[t] < 2) {
+    } else if (t < result.cluster_of.size() && cluster_size[result.cluster_of[t]] < 2) {
       fate = "unclustered";  // its cluster holds only this mask
     } else {
       fate = "filtered";  // its cluster's sub-object kept < 2 masks, or was a contained duplicate

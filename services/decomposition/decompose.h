@@ -31,10 +31,9 @@ struct DecompositionResult {
   std::vector<double> schedule;
   std::vector<Instance> instances;
   std::vector<uint32_t> undersegmented;  // tracker ids that stay under-segmented
-  // Per tracker: the mask cluster it ended in (-1: judged under-segmented, never a node) and that
-  // cluster's size in masks; written to decomposition.json so a user can see why a mask was lost.
+  // Per tracker: the mask cluster it ended in (-1: judged under-segmented, never a node); written
+  // to decomposition.json so a user can see why a mask was lost.
   std::vector<int32_t> cluster_of;
-  std::vector<uint32_t> cluster_size;
   int merged_instances = 0;  // merges of unseparated instances
   double tracking_seconds = 0, clustering_seconds = 0, post_seconds = 0;
 

@@ -8,6 +8,7 @@
 #include <numeric>
 
 #include "common/core/parallel.h"
+#include "services/decomposition/union_find.h"
 
 namespace instascene::decomposition {
 
@@ -144,15 +145,6 @@ std::vector<double> ObserverSchedule(const MaskJudgement& j, const std::vector<u
   return schedule;
 }
 
-namespace {
-
-uint32_t Find(std::vector<uint32_t>& parent, uint32_t x) {
-  while (parent[x] != x) x = parent[x] = parent[parent[x]];
-  return x;
-}
-
-}  // namespace
-
 std::vector<MaskNode> ClusterMasks(const TrackerSet& set, const MaskJudgement& j,
                                    const DecompositionOptions& options,
                                    std::vector<double>* schedule_out) {
@@ -199,18 +191,14 @@ std::vector<MaskNode> ClusterMasks(const TrackerSet& set, const MaskJudgement& j
                           }
                         });
     });
-    std::vector<uint32_t> parent(n);
-    std::iota(parent.begin(), parent.end(), 0u);
+    UnionFind sets(n);
     for (uint32_t a = 0; a < n; ++a) {
-      for (uint32_t b : partners[a]) {
-        const uint32_t ra = Find(parent, a), rb = Find(parent, b);
-        if (ra != rb) parent[std::max(ra, rb)] = std::min(ra, rb);  // root = smallest index
-      }
+      for (uint32_t b : partners[a]) sets.Union(a, b);
     }
     std::vector<MaskNode> merged;
     std::vector<int64_t> slot(n, -1);
     for (uint32_t a = 0; a < n; ++a) {
-      const uint32_t root = Find(parent, a);
+      const uint32_t root = sets.Find(a);
       if (slot[root] < 0) {
         slot[root] = static_cast<int64_t>(merged.size());
         merged.push_back({{}, ViewSet(set.num_views), {}});

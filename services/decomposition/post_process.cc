@@ -4,10 +4,10 @@
 
 #include <algorithm>
 #include <cmath>
-#include <numeric>
 #include <unordered_map>
 
 #include "common/core/parallel.h"
+#include "services/decomposition/union_find.h"
 
 namespace instascene::decomposition {
 namespace {
@@ -165,12 +165,7 @@ std::vector<int> Dbscan(const std::vector<Eigen::Vector3f>& points, float eps, i
     }
   }
   // Union core cells that have a core pair within eps.
-  std::vector<uint32_t> parent(cells.size());
-  for (uint32_t c = 0; c < cells.size(); ++c) parent[c] = c;
-  auto find = [&](uint32_t x) {
-    while (parent[x] != x) x = parent[x] = parent[parent[x]];
-    return x;
-  };
+  UnionFind sets(cells.size());
   std::vector<std::vector<uint32_t>> core_points(cells.size());
   for (uint32_t c = 0; c < cells.size(); ++c) {
     for (uint32_t i : cells[c]) {
@@ -180,11 +175,11 @@ std::vector<int> Dbscan(const std::vector<Eigen::Vector3f>& points, float eps, i
   for (uint32_t c = 0; c < cells.size(); ++c) {
     if (core_points[c].empty()) continue;
     for_each_neighbour_cell(c, [&](uint32_t d) {
-      if (d <= c || core_points[d].empty() || find(c) == find(d)) return true;
+      if (d <= c || core_points[d].empty() || sets.Find(c) == sets.Find(d)) return true;
       for (uint32_t i : core_points[c]) {
         for (uint32_t j : core_points[d]) {
           if ((points[i] - points[j]).squaredNorm() <= eps2) {
-            parent[std::max(find(c), find(d))] = std::min(find(c), find(d));
+            sets.Union(c, d);
             return true;
           }
         }
@@ -197,7 +192,7 @@ std::vector<int> Dbscan(const std::vector<Eigen::Vector3f>& points, float eps, i
   int next = 0;
   for (uint32_t i = 0; i < n; ++i) {
     if (!core[i]) continue;
-    const uint32_t root = find(cell_of[i]);
+    const uint32_t root = sets.Find(cell_of[i]);
     if (cluster_of_root[root] < 0) cluster_of_root[root] = next++;
     label[i] = cluster_of_root[root];
   }
@@ -333,27 +328,18 @@ int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions&
       }
     }
   }
-  std::vector<uint32_t> parent(n);
-  std::iota(parent.begin(), parent.end(), 0u);
-  auto find = [&](uint32_t x) {
-    while (parent[x] != x) x = parent[x] = parent[parent[x]];
-    return x;
-  };
+  UnionFind sets(n);
   int merges = 0;
   for (const auto& [key, e] : evidence) {  // components do not depend on the visiting order
     const double j = e.first, s = e.second;
     if (j < options.merge_min_joins || s > options.merge_max_separation * (j + s)) continue;
-    const uint32_t ra = find(static_cast<uint32_t>(key / n)),
-                   rb = find(static_cast<uint32_t>(key % n));
-    if (ra == rb) continue;
-    parent[std::max(ra, rb)] = std::min(ra, rb);
-    ++merges;
+    merges += sets.Union(static_cast<uint32_t>(key / n), static_cast<uint32_t>(key % n));
   }
   if (merges == 0) return 0;
   std::vector<Instance> merged;
   std::vector<int64_t> slot(n, -1);
   for (uint32_t a = 0; a < n; ++a) {
-    const uint32_t root = find(a);
+    const uint32_t root = sets.Find(a);
     if (slot[root] < 0) {
       slot[root] = static_cast<int64_t>(merged.size());
       merged.push_back(std::move((*instances)[a]));
