@@ -156,9 +156,9 @@ void AddClientCommands(CLI::App& app, Action* action) {
   s->add_option("--name", submit->name, "Scene name shown in job lists (default: directory name)");
   s->add_option("--params", submit->params,
                 R"(Stage parameters as JSON, e.g. '{"train":{"iterations":500}}')");
-  CLI::Option* iterations = s->add_option(
-      "--iterations", submit->iterations,
-      "Shortcut for train.iterations (validated by the server like any parameter)");
+  CLI::Option* iterations =
+      s->add_option("--iterations", submit->iterations,
+                    "Shortcut for train.iterations (validated by the server like any parameter)");
   s->add_option(
        "--stages", submit->stages,
        "Only these stages, comma-separated (their inputs included), e.g. "

@@ -7,9 +7,9 @@
 // resumed at their committed size. Thread-safe.
 #pragma once
 
+#include <atomic>
 #include <cstdint>
 #include <functional>
-#include <atomic>
 #include <mutex>
 #include <string>
 #include <vector>

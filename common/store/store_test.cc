@@ -203,8 +203,8 @@ TEST(BlobStoreTest, AbandonedUploadsExpireAndCountInTheStatistics) {
   // The stale upload was last written two hours ago (set, not waited for).
   for (const auto& e : std::filesystem::directory_iterator(temp.str() + "/uploads")) {
     if (e.path().filename().string().rfind(stale.hash, 0) == 0)
-      std::filesystem::last_write_time(e.path(), std::filesystem::file_time_type::clock::now() -
-                                                     std::chrono::hours(2));
+      std::filesystem::last_write_time(
+          e.path(), std::filesystem::file_time_type::clock::now() - std::chrono::hours(2));
   }
   auto store = FilesystemBlobStore::Open(temp.str(), options);  // sweeps at open
   ASSERT_TRUE(store.ok());

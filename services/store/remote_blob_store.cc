@@ -168,7 +168,7 @@ absl::StatusOr<store::StoreStats> RemoteBlobStore::Stats() {
   grpc::ClientContext context;
   v1::GetStoreInfoResponse info;
   RETURN_IF_ERROR(FromGrpcStatus(stub_->GetStoreInfo(&context, v1::GetStoreInfoRequest(), &info)));
-  return store::StoreStats{info.blob_count(),     info.total_bytes(),     info.partial_uploads(),
+  return store::StoreStats{info.blob_count(), info.total_bytes(), info.partial_uploads(),
                            info.partial_bytes(), info.expired_uploads()};
 }
 
