@@ -13,6 +13,7 @@
 #include "common/raster/projection.h"
 #include "common/raster/rasterizer.h"
 #include "common/raster/surfel_backward.h"
+#include "common/raster/tile_backward.h"
 #include "common/splat/gaussian_ply.h"
 #include "common/splat/sh.h"
 #include "common/synth/cluttered_scene.h"
@@ -174,6 +175,29 @@ void BM_RasterizerForwardRing(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_RasterizerForwardRing)->Arg(20000)->Unit(benchmark::kMillisecond)->UseRealTime();
+
+// The fast backward (tile_backward.h): the forward it needs (production render + full trace with
+// transmittance) and the backward itself, on the same view.
+void BM_TileForwardForBackward(benchmark::State& state) {
+  const RingObject& o = Object(state.range(0));
+  RenderOptions options;
+  for (auto _ : state) {
+    auto image = RenderForBackward(o.cloud, o.camera, options);
+    benchmark::DoNotOptimize(image);
+  }
+}
+BENCHMARK(BM_TileForwardForBackward)->Arg(20000)->Unit(benchmark::kMillisecond)->UseRealTime();
+void BM_TileBackward(benchmark::State& state) {
+  const RingObject& o = Object(state.range(0));
+  RenderOptions options;
+  auto forward = RenderForBackward(o.cloud, o.camera, options);
+  const std::vector<float> d_color(3 * 256 * 256, 0.1f), d_alpha(256 * 256, 0.1f);
+  for (auto _ : state) {
+    auto grads = TileBackward(o.cloud, o.camera, options, *forward, d_color, d_alpha);
+    benchmark::DoNotOptimize(grads);
+  }
+}
+BENCHMARK(BM_TileBackward)->Arg(20000)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_EvalShDegree3(benchmark::State& state) {
   float coeffs[48];

@@ -72,7 +72,9 @@ SurfelParams<Dual> Seeded(const GaussianCloud& cloud, size_t g) {
 template <typename S>
 struct Splat {
   Eigen::Matrix<S, 3, 1> tu, tv, tw;
-  S center_x, center_y, depth, opacity;
+  S center_x, center_y;  // low-pass filter centre (screen box centre)
+  S proj_x, proj_y;      // projected surfel centre
+  S depth, opacity;
 };
 
 template <typename S>
@@ -99,8 +101,14 @@ Splat<S> Project(const SurfelParams<S>& s, const Camera& cam) {
   sp.tu << ka[0], kb[0], kc[0];
   sp.tv << ka[1], kb[1], kc[1];
   sp.tw << ka[2], kb[2], kc[2];
-  sp.center_x = kc[0] / kc[2];
-  sp.center_y = kc[1] / kc[2];
+  sp.proj_x = kc[0] / kc[2];
+  sp.proj_y = kc[1] / kc[2];
+  // The low-pass filter's centre: the centre of the screen box of the 3-sigma ellipse, as the
+  // production rasterizer (projection.cc, compute_aabb of the 2DGS CUDA code) has it.
+  const S d = S(9) * sp.tw[0] * sp.tw[0] + S(9) * sp.tw[1] * sp.tw[1] - sp.tw[2] * sp.tw[2];
+  const S f0 = S(9) / d, f2 = S(-1) / d;
+  sp.center_x = f0 * sp.tu[0] * sp.tw[0] + f0 * sp.tu[1] * sp.tw[1] + f2 * sp.tu[2] * sp.tw[2];
+  sp.center_y = f0 * sp.tv[0] * sp.tw[0] + f0 * sp.tv[1] * sp.tw[1] + f2 * sp.tv[2] * sp.tw[2];
   sp.depth = c[2];
   sp.opacity = S(1) / (S(1) + exp(-s.logit));
   return sp;
@@ -214,10 +222,10 @@ Prepared Prepare(const GaussianCloud& cloud, const PinholeCamera& camera,
     // Without cut-offs every pixel counts.
     const double reach = options.cutoffs ? 4.0 * sigma_px + 3.0 : 1e9;
     p.boxes[g] = Eigen::Vector4i(
-        static_cast<int>(std::clamp(std::floor(sp.center_x - reach), 0.0, 1.0 * camera.width)),
-        static_cast<int>(std::clamp(std::ceil(sp.center_x + reach) + 1, 0.0, 1.0 * camera.width)),
-        static_cast<int>(std::clamp(std::floor(sp.center_y - reach), 0.0, 1.0 * camera.height)),
-        static_cast<int>(std::clamp(std::ceil(sp.center_y + reach) + 1, 0.0, 1.0 * camera.height)));
+        static_cast<int>(std::clamp(std::floor(sp.proj_x - reach), 0.0, 1.0 * camera.width)),
+        static_cast<int>(std::clamp(std::ceil(sp.proj_x + reach) + 1, 0.0, 1.0 * camera.width)),
+        static_cast<int>(std::clamp(std::floor(sp.proj_y - reach), 0.0, 1.0 * camera.height)),
+        static_cast<int>(std::clamp(std::ceil(sp.proj_y + reach) + 1, 0.0, 1.0 * camera.height)));
     if (p.boxes[g][0] >= p.boxes[g][1] || p.boxes[g][2] >= p.boxes[g][3]) continue;
     p.order.push_back(g);
   }

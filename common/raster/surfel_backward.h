@@ -5,10 +5,10 @@
 // The forward pass is the 2DGS model of the production rasterizer (ALGORITHM.md 2: ray-splat
 // intersection through the homogeneous planes of M = K V H, the min of the 3D and the 2D low-pass
 // distance, alpha = min(0.99, opacity * G), skip alpha < 1/255, stop at T < 1e-4, front to back by
-// centre depth) written once for clarity, in double precision, one pixel at a time; the one
-// difference is the low-pass filter's centre (the projected surfel centre here, the projected
-// footprint's box centre there; they differ only where the 2D filter wins, i.e. on sub-pixel
-// splats). The backward pass walks each pixel's list back to front (the standard alpha-compositing
+// centre depth, the low-pass filter centred on the 3-sigma footprint's screen box) written once
+// for clarity, in double precision, one pixel at a time. It is the reference the fast backward
+// (tile_backward.h) is tested against. The backward pass walks each pixel's list back to front
+// (the standard alpha-compositing
 // adjoint) and differentiates the per-pixel alpha with forward-mode automatic differentiation
 // (Eigen's AutoDiffScalar over the 10 geometric parameters of the surfel), so the maths is not
 // hand-derived twice. SH degree 0 and 1 (the colour's dependence on the position through the view
