@@ -1,0 +1,156 @@
+#include "services/generation/refinement.h"
+
+#include <chrono>
+#include <cmath>
+#include <random>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/raster/rasterizer.h"
+#include "common/raster/tile_backward.h"
+#include "services/generation/image_losses.h"
+
+namespace instascene::generation {
+namespace {
+
+RenderOptions ViewOptions(const RefinementView& view, int num_threads, RasterWorkspace* ws) {
+  RenderOptions o;
+  for (float& b : o.background) b = 1.0f;
+  o.near_plane = view.near_plane;
+  o.num_threads = num_threads;
+  o.workspace = ws;
+  return o;
+}
+
+// The view's loss at `render`; its gradient is added into d_color / d_alpha (zeroed by the caller).
+double ViewLoss(const RefinementView& view, const RenderResult& render,
+                const RefinementOptions& options, std::vector<float>* d_color,
+                std::vector<float>* d_alpha) {
+  if (!view.generated) return MaskedL1(render.color, view.rgb, view.mask, 1.0, d_color);
+  const double l1 = MaskedL1(render.color, view.rgb, {}, 1.0 - options.lambda_dssim, d_color);
+  const double dssim = Dssim(render.color, view.rgb, render.width, render.height,
+                             options.lambda_dssim, d_color);
+  const double bce = AlphaBce(render.alpha, view.mask, options.lambda_mask, d_alpha);
+  return (1.0 - options.lambda_dssim) * l1 + options.lambda_dssim * dssim +
+         options.lambda_mask * bce;
+}
+
+// Mean loss over every view (no gradients kept).
+absl::StatusOr<double> MeanLoss(const GaussianCloud& cloud, const std::vector<RefinementView>& views,
+                                const RefinementOptions& options, RasterWorkspace* ws) {
+  double sum = 0;
+  for (const RefinementView& view : views) {
+    ASSIGN_OR_RETURN(RenderResult r,
+                     Render(cloud, view.camera, ViewOptions(view, options.num_threads, ws)));
+    std::vector<float> dc(r.color.size(), 0.0f), da(r.alpha.size(), 0.0f);
+    sum += ViewLoss(view, r, options, &dc, &da);
+  }
+  return views.empty() ? 0.0 : sum / views.size();
+}
+
+// Adam over one parameter array (beta 0.9 / 0.999, eps 1e-15, as the 3DGS / 2DGS optimisers).
+struct Adam {
+  std::vector<double> m, v;
+  void Step(std::vector<float>* params, const std::vector<float>& grad, int t,
+            const std::function<double(size_t)>& lr) {
+    if (m.empty()) {
+      m.assign(params->size(), 0.0);
+      v.assign(params->size(), 0.0);
+    }
+    const double b1 = 0.9, b2 = 0.999, eps = 1e-15;
+    const double c1 = 1.0 - std::pow(b1, t), c2 = 1.0 - std::pow(b2, t);
+    for (size_t i = 0; i < params->size(); ++i) {
+      m[i] = b1 * m[i] + (1 - b1) * grad[i];
+      v[i] = b2 * v[i] + (1 - b2) * grad[i] * double(grad[i]);
+      const double step = lr(i) * (m[i] / c1) / (std::sqrt(v[i] / c2) + eps);
+      (*params)[i] = static_cast<float>((*params)[i] - step);
+    }
+  }
+};
+
+absl::Status CheckViews(const std::vector<RefinementView>& views) {
+  for (size_t k = 0; k < views.size(); ++k) {
+    const RefinementView& v = views[k];
+    RETURN_IF_ERROR(v.camera.Validate());
+    const size_t pixels = static_cast<size_t>(v.camera.width) * v.camera.height;
+    if (v.rgb.size() != 3 * pixels || v.mask.size() != pixels) {
+      return absl::InvalidArgumentError(
+          absl::StrCat("refinement view ", k, ": image or mask does not match its ",
+                       v.camera.width, "x", v.camera.height, " camera"));
+    }
+    if (!(v.near_plane > 0)) {
+      return absl::InvalidArgumentError(absl::StrCat("refinement view ", k, ": near plane <= 0"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
+                                                 const std::vector<RefinementView>& views,
+                                                 const RefinementOptions& options,
+                                                 const RefinementProgress& progress) {
+  if (cloud->num_scales != 2) return absl::InvalidArgumentError("refinement needs 2DGS surfels");
+  if (options.iterations < 0 || options.fixed_view_every < 1 || options.curve_every < 1 ||
+      !(options.spatial_scale > 0)) {
+    return absl::InvalidArgumentError("refinement: bad options");
+  }
+  RETURN_IF_ERROR(CheckViews(views));
+  const auto start = std::chrono::steady_clock::now();
+  RefinementReport report;
+  for (const RefinementView& v : views) (v.generated ? report.generated_views : report.real_views)++;
+  RasterWorkspace ws;
+  ASSIGN_OR_RETURN(report.initial_loss, MeanLoss(*cloud, views, options, &ws));
+  report.final_loss = report.initial_loss;
+  if (views.empty() || options.iterations == 0 || cloud->size() == 0) return report;
+
+  GaussianCloud work = *cloud;  // the caller's cloud changes only on success
+  Adam adam_pos, adam_scale, adam_rot, adam_opacity, adam_sh;
+  std::mt19937_64 rng(options.seed);
+  std::uniform_int_distribution<size_t> pick(0, views.size() - 1);
+  const int stride = work.sh_stride();
+  double curve_sum = 0;
+  int curve_count = 0;
+  for (int it = 1; it <= options.iterations; ++it) {
+    RETURN_IF_ERROR(CheckCancelled(options.cancel, "refinement"));
+    const size_t chosen = pick(rng);
+    const size_t k = it % options.fixed_view_every == 0 ? 0 : chosen;
+    const RefinementView& view = views[k];
+    const RenderOptions ro = ViewOptions(view, options.num_threads, &ws);
+    ASSIGN_OR_RETURN(RenderResult render, RenderForBackward(work, view.camera, ro));
+    std::vector<float> d_color(render.color.size(), 0.0f), d_alpha(render.alpha.size(), 0.0f);
+    const double loss = ViewLoss(view, render, options, &d_color, &d_alpha);
+    ASSIGN_OR_RETURN(SurfelGradients grad,
+                     TileBackward(work, view.camera, ro, render, d_color, d_alpha));
+    // 2DGS's exponential position schedule (no delay).
+    const double t = options.iterations > 1 ? (it - 1.0) / (options.iterations - 1.0) : 0.0;
+    const double pos_lr = options.spatial_scale *
+                          std::exp(std::log(options.position_lr_init) * (1 - t) +
+                                   std::log(options.position_lr_final) * t);
+    adam_pos.Step(&work.positions, grad.positions, it, [&](size_t) { return pos_lr; });
+    adam_scale.Step(&work.log_scales, grad.log_scales, it,
+                    [&](size_t) { return options.scaling_lr; });
+    adam_rot.Step(&work.rotations, grad.rotations, it, [&](size_t) { return options.rotation_lr; });
+    adam_opacity.Step(&work.opacity_logits, grad.opacity_logits, it,
+                      [&](size_t) { return options.opacity_lr; });
+    adam_sh.Step(&work.sh, grad.sh, it, [&](size_t i) {
+      return static_cast<int>(i % stride) < 3 ? options.sh_dc_lr : options.sh_rest_lr;
+    });
+    curve_sum += loss;
+    if (++curve_count == options.curve_every || it == options.iterations) {
+      report.loss_curve.push_back(curve_sum / curve_count);
+      curve_sum = 0;
+      curve_count = 0;
+    }
+    if (progress && (it % 50 == 0 || it == options.iterations)) progress(it, options.iterations, loss);
+  }
+  report.iterations = options.iterations;
+  ASSIGN_OR_RETURN(report.final_loss, MeanLoss(work, views, options, &ws));
+  *cloud = std::move(work);
+  report.seconds =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  return report;
+}
+
+}  // namespace instascene::generation
