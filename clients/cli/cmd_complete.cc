@@ -13,6 +13,7 @@
 #include "common/core/status.h"
 #include "common/core/timer.h"
 #include "common/eval/result.h"
+#include "common/scene/image_io.h"
 #include "common/scene/scene.h"
 #include "services/generation/completion.h"
 #include "services/generation/stage.h"
@@ -57,6 +58,7 @@ void AddCompleteCommand(CLI::App& app, Action* action) {
       ASSIGN_OR_RETURN(SegmentationResult result, ReadResult(args->result, cloud.size()));
       std::vector<PinholeCamera> cameras;
       for (const SceneView& view : scene.views) cameras.push_back(view.camera);
+      options.load_view = [&scene](int view) { return ReadViewImage(scene, view); };
       std::set<uint32_t> ids(args->objects.begin(), args->objects.end());
       if (ids.empty()) {
         ids.insert(result.labels.begin(), result.labels.end());

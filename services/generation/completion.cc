@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <optional>
 
 #include "absl/strings/str_cat.h"
 #include "common/core/parallel.h"
@@ -12,6 +13,7 @@
 #include "common/mesh/surfel_mesh.h"
 #include "common/scene/image_io.h"
 #include "common/splat/gaussian_ply.h"
+#include "services/generation/refinement_views.h"
 
 namespace instascene::generation {
 namespace {
@@ -110,12 +112,85 @@ nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& optio
         {"vertices", o.mesh.vertices.size()},
         {"triangles", o.mesh.triangles.size()},
         {"closed", IsClosedManifold(o.mesh)}}},
-      {"refinement",
-       {{"status", "not run"},
-        {"reason", "the 2DGS backward pass (GENERATION.md step 5) is not built yet"}}},
+      {"refinement", o.refinement},
       {"seed", options.seed},
   };
   return m;
+}
+
+// The scene's camera extent as 2DGS scales its position learning rate (getNerfppNorm: 1.1 x the
+// largest distance of a camera centre from their mean).
+double CameraExtent(const std::vector<PinholeCamera>& cameras) {
+  Eigen::Vector3d mean = Eigen::Vector3d::Zero();
+  for (const PinholeCamera& c : cameras) mean += c.CenterInWorld();
+  mean /= std::max<size_t>(1, cameras.size());
+  double radius = 0;
+  for (const PinholeCamera& c : cameras) radius = std::max(radius, (c.CenterInWorld() - mean).norm());
+  return radius > 0 ? 1.1 * radius : 1.0;
+}
+
+// Joint refinement of o->object (ALGORITHM.md 7.9): real-view crops first (view 0 is the best
+// training view), then the ring's generated views. Returns the manifest's `refinement`.
+absl::StatusOr<nlohmann::json> Refine(CompletedObject* o, const std::vector<PinholeCamera>& cameras,
+                                      const GaussianCloud& surfels,
+                                      const std::vector<uint32_t>& instance,
+                                      const CompletionOptions& options,
+                                      const CompletionProgress& progress) {
+  if (options.refinement.iterations == 0) {
+    return nlohmann::json{{"status", "not run"}, {"reason", "refinement iterations = 0"}};
+  }
+  std::vector<RefinementView> views;
+  int skipped = 0;
+  if (options.load_view) {
+    for (int v : o->training_views) {
+      absl::StatusOr<Image> image = options.load_view(v);
+      if (absl::IsNotFound(image.status())) {  // a view without an image
+        ++skipped;
+        continue;
+      }
+      RETURN_IF_ERROR(image.status());
+      ASSIGN_OR_RETURN(std::optional<RefinementView> view,
+                       RealRefinementView(cameras[v], *image, o->object, surfels, instance,
+                                          o->frame, options.refine_view_max_side,
+                                          options.num_threads));
+      if (view.has_value()) {
+        views.push_back(std::move(*view));
+      } else {
+        ++skipped;
+      }
+    }
+  }
+  ASSIGN_OR_RETURN(std::vector<RefinementView> generated,
+                   GeneratedRefinementViews(o->object, o->ring, o->frame, o->prior.generated,
+                                            options.num_threads));
+  for (RefinementView& v : generated) views.push_back(std::move(v));
+  RefinementOptions ro = options.refinement;
+  ro.seed = options.seed;
+  ro.num_threads = options.num_threads;
+  ro.cancel = options.cancel;
+  ro.spatial_scale = CameraExtent(cameras);
+  ASSIGN_OR_RETURN(RefinementReport r,
+                   RefineGaussians(&o->object, views, ro, [&](int it, int total, double loss) {
+                     if (progress) progress(absl::StrCat("refining: loss ", loss), it, total);
+                   }));
+  return nlohmann::json{
+      {"status", "done"},
+      {"iterations", r.iterations},
+      {"real_views", r.real_views},
+      {"real_views_skipped", skipped},
+      {"real_images", static_cast<bool>(options.load_view)},
+      {"generated_views", r.generated_views},
+      {"generated_from", o->prior.generated.empty() ? "the object's own renders before refinement"
+                                                    : "the prior's images"},
+      {"initial_loss", r.initial_loss},
+      {"final_loss", r.final_loss},
+      {"loss_curve", r.loss_curve},
+      {"curve_every", ro.curve_every},
+      {"spatial_scale", ro.spatial_scale},
+      {"seconds", r.seconds},
+      {"terms", "real: L1 over the crop, the object rendered in situ (the rest of the scene "
+                "frozen); generated: 0.8 L1 + 0.2 D-SSIM + 0.1 BCE(alpha, mask)"},
+      {"not_implemented", "normal consistency (needs the depth/normal backward)"}};
 }
 
 }  // namespace
@@ -135,7 +210,7 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
   }
   if (surfels.num_scales != 2) return absl::InvalidArgumentError("completion needs 2DGS surfels");
   ASSIGN_OR_RETURN(std::unique_ptr<CompletionPrior> prior, MakePrior(options.prior));
-  report("framing", 0, 6);
+  report("framing", 0, 7);
   ASSIGN_OR_RETURN(InstanceSplit split, SplitInstance(labels, id, options.min_gaussians));
   RemoveStrayGaussians(surfels, &split);
   CompletedObject out;
@@ -148,7 +223,7 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
     return absl::FailedPreconditionError(
         absl::StrCat("instance ", id, " is degenerate: its Gaussians span no volume"));
   }
-  report("scoring views", 1, 6);
+  report("scoring views", 1, 7);
   ASSIGN_OR_RETURN(std::unique_ptr<OcclusionScorer> scorer,
                    OcclusionScorer::Create(surfels, split, out.frame, options.visibility));
   out.training_views = scorer->RankViews(cameras, options.top_training_views);
@@ -159,7 +234,7 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
   out.ring = RingCameras(out.frame, options.ring);
   for (const PinholeCamera& c : out.ring) out.ring_visibility.push_back(scorer->Score(c));
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
-  report("carving free space", 2, 6);
+  report("carving free space", 2, 7);
   std::vector<uint32_t> everything(surfels.size());
   for (uint32_t g = 0; g < everything.size(); ++g) everything[g] = g;
   ASSIGN_OR_RETURN(std::unique_ptr<RayCaster> scene_caster,
@@ -167,7 +242,7 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
   ASSIGN_OR_RETURN(FreeSpaceGrid free_space,
                    FreeSpaceGrid::Carve(cameras, *scene_caster, out.frame, options.free_space));
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
-  report("rendering conditions", 3, 6);
+  report("rendering conditions", 3, 7);
   PriorInput input;
   input.instance = &out.raw;
   input.frame = out.frame;
@@ -183,15 +258,18 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
       input.targets.push_back(out.ring[k]);
     }
   }
-  report("completing", 4, 6);
+  report("completing", 4, 7);
   ASSIGN_OR_RETURN(out.prior, prior->Complete(input));
   out.object = MergeWithProvenance(out.raw, out.prior.added);
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
-  report("meshing", 5, 6);
+  report("refining", 5, 7);
+  ASSIGN_OR_RETURN(out.refinement, Refine(&out, cameras, surfels, split.instance, options, progress));
+  RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
+  report("meshing", 6, 7);
   ASSIGN_OR_RETURN(out.mesh,
                    MeshObject(out.object, out.frame, options.meshing, options.num_threads));
   out.manifest = Manifest(out, options);
-  report("done", 6, 6);
+  report("done", 7, 7);
   return out;
 }
 

@@ -3,8 +3,9 @@
 // viewpoint ring and rank the real views by unoccluded visibility, carve the space real views saw
 // empty, render the condition views, run the completion prior, and mesh the result. Everything
 // stays in the scene's frame ("in situ"); every Gaussian of the output carries its provenance
-// (PLY property `provenance`: 0 observed, 1 completed). Joint refinement with the 2DGS backward
-// pass (step 5) is not built yet: the manifest says so (`refinement.status`).
+// (PLY property `provenance`: 0 observed, 1 completed). The joint refinement (step 5,
+// refinement.h) runs on the ring views and, when a view loader is given, on crops of the real
+// training views; the manifest reports it (`refinement`).
 // Deterministic for a given input and seed; thread-count independent. Thread-safe.
 #pragma once
 
@@ -18,17 +19,22 @@
 #include "absl/status/statusor.h"
 #include "common/core/cancel.h"
 #include "common/geometry/triangle_mesh.h"
+#include "common/scene/image_io.h"
 #include "common/splat/gaussian_cloud.h"
 #include "services/generation/free_space.h"
 #include "services/generation/object_frame.h"
 #include "services/generation/object_mesh.h"
 #include "services/generation/prior.h"
+#include "services/generation/refinement.h"
 #include "services/generation/viewpoints.h"
 
 namespace instascene::generation {
 
 inline constexpr char kObjectFormat[] = "instascene.object/1";
 inline constexpr char kProvenanceChannel[] = "provenance";
+
+// The RGB image of real view `view` (an index into the scene's cameras).
+using ViewImageLoader = std::function<absl::StatusOr<Image>(int view)>;
 
 struct CompletionOptions {
   std::string prior = "geometric";  // geometric | none
@@ -38,6 +44,11 @@ struct CompletionOptions {
   MeshingOptions meshing;
   int top_training_views = 10;  // real views kept for refinement (ALGORITHM.md 7.3)
   size_t min_gaussians = 50;    // fewer: a degenerate object, failed permanently
+  // Joint refinement; off unless iterations > 0 (the stage default, see stage_params.h).
+  RefinementOptions refinement{.iterations = 0};
+  int refine_view_max_side = 256;  // real views are cropped and binned to at most this, px
+  // Real images for the refinement; nullptr: it uses the generated (ring) views only.
+  ViewImageLoader load_view;
   uint64_t seed = 1;
   int num_threads = 0;                 // 0 = all cores; never changes results
   const CancelFlag* cancel = nullptr;  // not owned
@@ -56,6 +67,7 @@ struct CompletedObject {
   std::vector<ViewVisibility> ring_visibility;
   std::vector<int> training_views;  // indices into the scene's views, best first
   PriorOutput prior;
+  nlohmann::json refinement;  // the manifest's `refinement`: status, views, losses, time
   nlohmann::json manifest;
 };
 

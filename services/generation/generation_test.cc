@@ -7,6 +7,7 @@
 #include "common/mesh/mesh_volume.h"
 #include "common/mesh/ray_caster.h"
 #include "common/mesh/surfel_mesh.h"
+#include "common/raster/rasterizer.h"
 #include "common/splat/gaussian_ply.h"
 #include "common/synth/cluttered_scene.h"
 #include "common/synth/observed_surfels.h"
@@ -189,6 +190,49 @@ TEST(Completion, CompletesAPartlySeenBottleWithinTheFreeSpace) {
   EXPECT_LT(far, completed / 10);
   EXPECT_TRUE(done->manifest["mesh"]["closed"].get<bool>());
   EXPECT_EQ(done->manifest["format"], kObjectFormat);
+}
+
+// The joint refinement inside the completion: real views cropped and rendered in situ (their
+// images here are renders of the scene itself), the ring's generated views; the object keeps its
+// surfel count and provenance, and views without an image are skipped and counted.
+TEST(Completion, RefinesWithRealAndGeneratedViews) {
+  const PartialObject scene = MakePartialObject(Bottle(), 2500, 17);
+  CompletionOptions options;
+  options.meshing.size_px = 64;
+  options.refinement.iterations = 30;
+  int loads = 0;
+  options.load_view = [&](int view) -> absl::StatusOr<Image> {
+    ++loads;
+    RenderOptions o;
+    auto r = Render(scene.cloud, scene.cameras.at(view), o);
+    if (!r.ok()) return r.status();
+    return Image{r->width, r->height, 3, r->color};
+  };
+  auto done = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
+  ASSERT_TRUE(done.ok()) << done.status();
+  const nlohmann::json& r = done->manifest["refinement"];
+  EXPECT_EQ(r["status"], "done");
+  EXPECT_EQ(r["iterations"], 30);
+  EXPECT_EQ(r["generated_views"], 16);
+  EXPECT_GT(r["real_views"].get<int>(), 0);
+  EXPECT_EQ(r["real_views"].get<int>() + r["real_views_skipped"].get<int>(), loads);
+  EXPECT_TRUE(std::isfinite(r["final_loss"].get<double>()));
+  const ExtraChannel* provenance = done->object.FindExtra(kProvenanceChannel);
+  ASSERT_NE(provenance, nullptr);
+  EXPECT_EQ(provenance->values.size(), done->object.size());
+  for (float v : done->object.positions) ASSERT_TRUE(std::isfinite(v));
+
+  options.load_view = [](int) -> absl::StatusOr<Image> {
+    return absl::NotFoundError("no image");
+  };
+  auto no_images = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
+  ASSERT_TRUE(no_images.ok()) << no_images.status();
+  EXPECT_EQ(no_images->manifest["refinement"]["real_views"], 0);
+  EXPECT_GT(no_images->manifest["refinement"]["real_views_skipped"].get<int>(), 0);
+  options.refinement.iterations = 0;
+  auto off = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
+  ASSERT_TRUE(off.ok());
+  EXPECT_EQ(off->manifest["refinement"]["status"], "not run");
 }
 
 TEST(Completion, ResultsDoNotDependOnThreadCount) {

@@ -22,6 +22,26 @@ RenderOptions ViewOptions(const RefinementView& view, int num_threads, RasterWor
   return o;
 }
 
+// The object followed by the view's frozen context (core attributes only).
+const GaussianCloud& WithContext(const GaussianCloud& object, const RefinementView& view,
+                                 GaussianCloud* scratch) {
+  if (view.context.size() == 0) return object;
+  GaussianCloud& out = *scratch;
+  out.num_scales = 2;
+  out.sh_degree = object.sh_degree;
+  out.extras.clear();
+  auto join = [](const std::vector<float>& a, const std::vector<float>& b, std::vector<float>* o) {
+    o->assign(a.begin(), a.end());
+    o->insert(o->end(), b.begin(), b.end());
+  };
+  join(object.positions, view.context.positions, &out.positions);
+  join(object.log_scales, view.context.log_scales, &out.log_scales);
+  join(object.rotations, view.context.rotations, &out.rotations);
+  join(object.opacity_logits, view.context.opacity_logits, &out.opacity_logits);
+  join(object.sh, view.context.sh, &out.sh);
+  return out;
+}
+
 // The view's loss at `render`; its gradient is added into d_color / d_alpha (zeroed by the caller).
 double ViewLoss(const RefinementView& view, const RenderResult& render,
                 const RefinementOptions& options, std::vector<float>* d_color,
@@ -39,9 +59,10 @@ double ViewLoss(const RefinementView& view, const RenderResult& render,
 absl::StatusOr<double> MeanLoss(const GaussianCloud& cloud, const std::vector<RefinementView>& views,
                                 const RefinementOptions& options, RasterWorkspace* ws) {
   double sum = 0;
+  GaussianCloud scratch;
   for (const RefinementView& view : views) {
-    ASSIGN_OR_RETURN(RenderResult r,
-                     Render(cloud, view.camera, ViewOptions(view, options.num_threads, ws)));
+    ASSIGN_OR_RETURN(RenderResult r, Render(WithContext(cloud, view, &scratch), view.camera,
+                                            ViewOptions(view, options.num_threads, ws)));
     std::vector<float> dc(r.color.size(), 0.0f), da(r.alpha.size(), 0.0f);
     sum += ViewLoss(view, r, options, &dc, &da);
   }
@@ -68,7 +89,7 @@ struct Adam {
   }
 };
 
-absl::Status CheckViews(const std::vector<RefinementView>& views) {
+absl::Status CheckViews(const std::vector<RefinementView>& views, int sh_degree) {
   for (size_t k = 0; k < views.size(); ++k) {
     const RefinementView& v = views[k];
     RETURN_IF_ERROR(v.camera.Validate());
@@ -77,6 +98,10 @@ absl::Status CheckViews(const std::vector<RefinementView>& views) {
       return absl::InvalidArgumentError(
           absl::StrCat("refinement view ", k, ": image or mask does not match its ",
                        v.camera.width, "x", v.camera.height, " camera"));
+    }
+    if (v.context.size() > 0 && (v.context.num_scales != 2 || v.context.sh_degree != sh_degree)) {
+      return absl::InvalidArgumentError(absl::StrCat(
+          "refinement view ", k, ": its context is not 2DGS of the object's SH degree"));
     }
     if (!(v.near_plane > 0)) {
       return absl::InvalidArgumentError(absl::StrCat("refinement view ", k, ": near plane <= 0"));
@@ -96,7 +121,7 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
       !(options.spatial_scale > 0)) {
     return absl::InvalidArgumentError("refinement: bad options");
   }
-  RETURN_IF_ERROR(CheckViews(views));
+  RETURN_IF_ERROR(CheckViews(views, cloud->sh_degree));
   const auto start = std::chrono::steady_clock::now();
   RefinementReport report;
   for (const RefinementView& v : views) (v.generated ? report.generated_views : report.real_views)++;
@@ -112,17 +137,27 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
   const int stride = work.sh_stride();
   double curve_sum = 0;
   int curve_count = 0;
+  GaussianCloud scratch;
   for (int it = 1; it <= options.iterations; ++it) {
     RETURN_IF_ERROR(CheckCancelled(options.cancel, "refinement"));
     const size_t chosen = pick(rng);
     const size_t k = it % options.fixed_view_every == 0 ? 0 : chosen;
     const RefinementView& view = views[k];
     const RenderOptions ro = ViewOptions(view, options.num_threads, &ws);
-    ASSIGN_OR_RETURN(RenderResult render, RenderForBackward(work, view.camera, ro));
+    const GaussianCloud& scene = WithContext(work, view, &scratch);
+    ASSIGN_OR_RETURN(RenderResult render, RenderForBackward(scene, view.camera, ro));
     std::vector<float> d_color(render.color.size(), 0.0f), d_alpha(render.alpha.size(), 0.0f);
     const double loss = ViewLoss(view, render, options, &d_color, &d_alpha);
     ASSIGN_OR_RETURN(SurfelGradients grad,
-                     TileBackward(work, view.camera, ro, render, d_color, d_alpha));
+                     TileBackward(scene, view.camera, ro, render, d_color, d_alpha));
+    if (view.context.size() > 0) {  // the context is frozen: keep the object's gradients
+      const size_t n = work.size();
+      grad.positions.resize(3 * n);
+      grad.log_scales.resize(2 * n);
+      grad.rotations.resize(4 * n);
+      grad.opacity_logits.resize(n);
+      grad.sh.resize(static_cast<size_t>(stride) * n);
+    }
     // 2DGS's exponential position schedule (no delay).
     const double t = options.iterations > 1 ? (it - 1.0) / (options.iterations - 1.0) : 0.0;
     const double pos_lr = options.spatial_scale *

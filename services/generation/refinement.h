@@ -1,7 +1,10 @@
 // services/generation/refinement.h: joint refinement of a completed object's surfels
 // (ALGORITHM.md 7.9, GENERATION.md step 5). Every iteration renders one view (a random one; every
 // `fixed_view_every`-th iteration view 0) with the production rasterizer, takes its loss:
-//   real views:      L1 inside the instance's (unoccluded) mask;
+//   real views:      L1 inside the mask, the object rendered in situ: with the view's `context`
+//                    (the rest of the scene that the view sees, frozen) in front of and behind it,
+//                    so the real image is explained everywhere and only what the object changes
+//                    matters;
 //   generated views: (1 - lambda_dssim) L1 + lambda_dssim (1 - SSIM) over the image, white
 //                    background, + lambda_mask BCE(alpha, mask);
 // back-propagates it with the fast 2DGS backward pass (common/raster/tile_backward.h) and takes
@@ -30,6 +33,8 @@ struct RefinementView {
   std::vector<uint8_t> mask;  // HxW: real views: where the loss applies; generated: BCE target
   bool generated = false;
   float near_plane = 0.01f;  // scene units
+  // Frozen surfels rendered together with the object (same SH degree; no gradient reaches them).
+  GaussianCloud context;
 };
 
 struct RefinementOptions {

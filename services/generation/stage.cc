@@ -8,6 +8,7 @@
 #include "common/core/file_io.h"
 #include "common/core/status.h"
 #include "common/eval/result.h"
+#include "common/scene/image_io.h"
 #include "common/scene/scene.h"
 #include "services/generation/completion.h"
 #include "services/generation/stage_params.h"
@@ -47,6 +48,8 @@ CompletionOptions ToCompletionOptions(const CompleteStageOptions& o) {
   options.meshing.min_alpha = static_cast<float>(o.mesh_min_alpha);
   options.min_gaussians = static_cast<size_t>(o.min_gaussians);
   options.seed = o.seed;
+  options.refinement.iterations = o.refine_iterations;
+  options.refine_view_max_side = o.refine_view_size;
   return options;
 }
 
@@ -66,6 +69,7 @@ absl::StatusOr<pipeline::StageResult> RunComplete(const pipeline::StageContext& 
   ASSIGN_OR_RETURN(SegmentationResult result, ReadResult(segment, cloud.size()));
   std::vector<PinholeCamera> cameras;
   for (const SceneView& view : scene.views) cameras.push_back(view.camera);
+  options.load_view = [&scene](int view) { return ReadViewImage(scene, view); };
   ASSIGN_OR_RETURN(CompletedObject object,
                    CompleteObject(cameras, cloud, result.labels, id, options,
                                   [&](const std::string& phase, int step, int total) {

@@ -23,6 +23,11 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
               "inflation by the surfels' footprint)")
         .Int("min_gaussians", &O::min_gaussians, 1, 1000000,
              "Instances with fewer Gaussians fail as degenerate")
+        .Int("refine_iterations", &O::refine_iterations, 0, 20000,
+             "Joint refinement iterations (one view, one Adam step each); 0 = not run")
+        .Int("refine_view_size", &O::refine_view_size, 32, 1024,
+             "Joint refinement: real views are cropped to the object and binned to at most this, "
+             "px")
         .Int<uint64_t>("prior_seed", &O::seed, 0, int64_t{1} << 53,
                        "Random seed of the completion prior");
     return c;

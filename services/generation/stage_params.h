@@ -21,6 +21,11 @@ struct CompleteStageOptions {
   int mesh_size = 160;             // meshing view size, px
   double mesh_min_alpha = 0.9;     // meshing: alpha a fused pixel needs
   int min_gaussians = 50;          // fewer: a degenerate object (fails permanently)
+  // Joint refinement (ALGORITHM.md 7.9); 0 = not run. Off by default: with the geometric prior it
+  // measured no gain at the 2DGS learning rates (docs/RESULTS.md "Joint refinement"); the
+  // prototype's setting is 2000.
+  int refine_iterations = 0;
+  int refine_view_size = 256;      // real views cropped and binned to at most this, px
   uint64_t seed = 1;
 };
 
