@@ -4,6 +4,7 @@
 #include <nlohmann/json.hpp>
 
 #include "absl/strings/str_cat.h"
+#include "clients/cli/bench_complete.h"
 #include "clients/cli/cli.h"
 #include "common/core/parallel.h"
 #include "common/core/statistics.h"
@@ -259,11 +260,13 @@ void AddBenchCommand(CLI::App& app, Action* action) {
       app.add_subcommand("bench", "Benchmarks on synthetic scenes (medians over frames)");
   cmd->add_option(
          "what", args->what,
-         "raster (color+depth, and with tracing), decompose or train (preset scene end to end)")
+         "raster (color+depth, and with tracing), decompose or train (preset scene end to end), "
+         "complete (one object: completion + joint refinement)")
       ->required()
-      ->check(CLI::IsMember({"raster", "trace", "decompose", "train"}));
+      ->check(CLI::IsMember({"raster", "trace", "decompose", "train", "complete"}));
   cmd->add_option("--iterations", args->iterations,
-                  "train: optimisation steps (default: the training default)");
+                  "train: optimisation steps (default: the training default); complete: "
+                  "refinement iterations (default 2000)");
   cmd->add_option("--preset", args->preset, "decompose: scene preset (default medium)");
   cmd->add_option("--work", args->work,
                   "decompose: where to write the generated scene (default: a temp folder)");
@@ -273,9 +276,10 @@ void AddBenchCommand(CLI::App& app, Action* action) {
         args->gaussians = v;
         args->gaussians_set = true;
       },
-      "Scene size (raster default 1000000; decompose: the preset's)");
-  cmd->add_option("--width", args->width, "Frame width, px (default 1280)");
-  cmd->add_option("--height", args->height, "Frame height, px (default 720)");
+      "Scene size (raster default 1000000; decompose: the preset's; complete: the object's "
+      "surfels before its unseen half is dropped, default 20000)");
+  cmd->add_option("--width", args->width, "Frame width, px (default 1280; complete: 640)");
+  cmd->add_option("--height", args->height, "Frame height, px (default 720; complete: 480)");
   cmd->add_option_function<int>(
          "--frames",
          [args](int v) {
@@ -292,6 +296,17 @@ void AddBenchCommand(CLI::App& app, Action* action) {
     *action = [args]() -> absl::Status {
       if (args->what == "decompose") return BenchDecompose(*args);
       if (args->what == "train") return BenchTrain(*args);
+      if (args->what == "complete") {
+        CompleteBenchArgs c;
+        if (args->gaussians_set) c.gaussians = args->gaussians;
+        if (args->iterations > 0) c.iterations = args->iterations;
+        if (args->width != 1280) c.width = args->width;
+        if (args->height != 720) c.height = args->height;
+        c.threads = args->threads;
+        c.seed = args->seed;
+        c.json = args->json;
+        return BenchComplete(c);
+      }
       return BenchRaster(*args);
     };
   });

@@ -130,8 +130,7 @@ absl::StatusOr<RenderResult> RenderForBackward(const GaussianCloud& cloud,
   o.model = SplatModel::kSurfel2d;
   o.color = true;
   o.trace = TraceOptions{};
-  o.trace.enabled = true;
-  o.trace.transmittance = true;
+  o.trace.enabled = true;  // weights only (the fast vector trace): T is recovered from them
   return Render(cloud, camera, o);
 }
 
@@ -145,7 +144,7 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
   const size_t pixels = static_cast<size_t>(camera.width) * camera.height;
   const ContributorTrace& trace = forward.trace;
   if (forward.width != camera.width || forward.height != camera.height ||
-      trace.pixels.size() != pixels || trace.transmittance.size() != trace.entries.size() ||
+      trace.pixels.size() != pixels || trace.offsets.size() != pixels + 1 ||
       forward.visible.size() != cloud.size()) {
     return absl::InvalidArgumentError(
         "backward: the forward is not a full trace with transmittance of this cloud and camera");
@@ -176,6 +175,7 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
       }
       return out.grads[slot[g]];
     };
+    std::vector<double> transmittance;
     const int y_end = std::min(camera.height, (band + 1) * kTileSize);
     for (int y = band * kTileSize; y < y_end; ++y) {
       for (int x = 0; x < camera.width; ++x) {
@@ -185,13 +185,20 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
         const double dc[3] = {dloss_dcolor[3 * i], dloss_dcolor[3 * i + 1],
                               dloss_dcolor[3 * i + 2]};
         const double da = dloss_dalpha.empty() ? 0.0 : dloss_dalpha[i];
-        const double T_final = 1.0 - forward.alpha[i];
+        // T before each contributor, front to back: T_0 = 1, T_{k+1} = T_k - w_k (w = alpha T).
+        transmittance.resize(last - first);
+        double T_run = 1.0;
+        for (uint64_t e = first; e < last; ++e) {
+          transmittance[e - first] = T_run;
+          T_run -= trace.entries[e].weight;
+        }
+        const double T_final = T_run;
         // Back to front: "after" = the colour behind contributor k (background included).
         double after[3] = {T_final * bg[0], T_final * bg[1], T_final * bg[2]};
         for (uint64_t e = last; e-- > first;) {
           const uint32_t g = trace.entries[e].gaussian;
           const ProjectedSplat& s = splats[g];
-          const double T = trace.transmittance[e];
+          const double T = transmittance[e - first];
           const double w = trace.entries[e].weight;
           const double alpha = w / T;
           SplatGrad& grad = at(g);

@@ -2,7 +2,8 @@
 // forward (ALGORITHM.md 7.9: the joint refinement needs gradients for colour/SH, opacity,
 // position, scale and rotation, thousands of times per object).
 //
-// The forward is Render (rasterizer.h) with contributor tracing and transmittance, so the
+// The forward is Render (rasterizer.h) with contributor tracing (weights w = alpha T; the
+// transmittance is recovered as T_{k+1} = T_k - w_k), so the
 // backward differentiates exactly the model that produced the image (float, the box-centre
 // low-pass filter, every cut-off). The backward walks each pixel's traced list back to front (the
 // alpha-compositing adjoint) and differentiates the per-pixel alpha analytically with respect to
@@ -26,8 +27,7 @@
 
 namespace instascene {
 
-// Renders a 2DGS cloud with what the backward needs (colour, alpha, the full contributor trace
-// with transmittance); `options` chooses background, near plane, SH degree, threads, workspace,
+// Renders a 2DGS cloud with what the backward needs (colour, alpha, the full contributor trace); `options` chooses background, near plane, SH degree, threads, workspace,
 // and may ask for depth/normals too. Fails on a 3DGS cloud or invalid camera/options.
 absl::StatusOr<RenderResult> RenderForBackward(const GaussianCloud& cloud,
                                                const PinholeCamera& camera,

@@ -72,19 +72,22 @@ absl::StatusOr<double> MeanLoss(const GaussianCloud& cloud, const std::vector<Re
 // Adam over one parameter array (beta 0.9 / 0.999, eps 1e-15, as the 3DGS / 2DGS optimisers).
 struct Adam {
   std::vector<double> m, v;
+  // lr_every[i % period] is parameter i's learning rate.
   void Step(std::vector<float>* params, const std::vector<float>& grad, int t,
-            const std::function<double(size_t)>& lr) {
+            const std::vector<double>& lr_every) {
     if (m.empty()) {
       m.assign(params->size(), 0.0);
       v.assign(params->size(), 0.0);
     }
     const double b1 = 0.9, b2 = 0.999, eps = 1e-15;
     const double c1 = 1.0 - std::pow(b1, t), c2 = 1.0 - std::pow(b2, t);
-    for (size_t i = 0; i < params->size(); ++i) {
-      m[i] = b1 * m[i] + (1 - b1) * grad[i];
-      v[i] = b2 * v[i] + (1 - b2) * grad[i] * double(grad[i]);
-      const double step = lr(i) * (m[i] / c1) / (std::sqrt(v[i] / c2) + eps);
-      (*params)[i] = static_cast<float>((*params)[i] - step);
+    const size_t period = lr_every.size();
+    float* p = params->data();
+    for (size_t i = 0, k = 0; i < params->size(); ++i, k = k + 1 == period ? 0 : k + 1) {
+      const double g = grad[i];
+      m[i] = b1 * m[i] + (1 - b1) * g;
+      v[i] = b2 * v[i] + (1 - b2) * g * g;
+      p[i] = static_cast<float>(p[i] - lr_every[k] * (m[i] / c1) / (std::sqrt(v[i] / c2) + eps));
     }
   }
 };
@@ -135,6 +138,8 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
   std::mt19937_64 rng(options.seed);
   std::uniform_int_distribution<size_t> pick(0, views.size() - 1);
   const int stride = work.sh_stride();
+  std::vector<double> sh_lr(stride, options.sh_rest_lr);  // per SH value of one Gaussian
+  for (int k = 0; k < 3; ++k) sh_lr[k] = options.sh_dc_lr;
   double curve_sum = 0;
   int curve_count = 0;
   GaussianCloud scratch;
@@ -163,15 +168,11 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
     const double pos_lr = options.spatial_scale *
                           std::exp(std::log(options.position_lr_init) * (1 - t) +
                                    std::log(options.position_lr_final) * t);
-    adam_pos.Step(&work.positions, grad.positions, it, [&](size_t) { return pos_lr; });
-    adam_scale.Step(&work.log_scales, grad.log_scales, it,
-                    [&](size_t) { return options.scaling_lr; });
-    adam_rot.Step(&work.rotations, grad.rotations, it, [&](size_t) { return options.rotation_lr; });
-    adam_opacity.Step(&work.opacity_logits, grad.opacity_logits, it,
-                      [&](size_t) { return options.opacity_lr; });
-    adam_sh.Step(&work.sh, grad.sh, it, [&](size_t i) {
-      return static_cast<int>(i % stride) < 3 ? options.sh_dc_lr : options.sh_rest_lr;
-    });
+    adam_pos.Step(&work.positions, grad.positions, it, {pos_lr});
+    adam_scale.Step(&work.log_scales, grad.log_scales, it, {options.scaling_lr});
+    adam_rot.Step(&work.rotations, grad.rotations, it, {options.rotation_lr});
+    adam_opacity.Step(&work.opacity_logits, grad.opacity_logits, it, {options.opacity_lr});
+    adam_sh.Step(&work.sh, grad.sh, it, sh_lr);
     curve_sum += loss;
     if (++curve_count == options.curve_every || it == options.iterations) {
       report.loss_curve.push_back(curve_sum / curve_count);

@@ -1,0 +1,22 @@
+// clients/cli/bench_complete.h: `instascene bench complete`, the in-situ completion of one object
+// (ISSUE 13's speed figure: ~20k Gaussians, 2000 refinement iterations).
+#pragma once
+
+#include <cstdint>
+
+#include "absl/status/status.h"
+
+namespace instascene::cli {
+
+struct CompleteBenchArgs {
+  int64_t gaussians = 20000;  // object surfels before the unseen half is dropped
+  int iterations = 2000;      // joint refinement iterations
+  int width = 640, height = 480;
+  int threads = 0;
+  uint64_t seed = 1;
+  bool json = false;
+};
+
+absl::Status BenchComplete(const CompleteBenchArgs& args);
+
+}  // namespace instascene::cli
