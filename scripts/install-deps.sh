@@ -25,6 +25,7 @@ PACKAGES=(
   libssl-dev libcurl4-openssl-dev
   libnanoflann-dev
   libcpp-httplib-dev
+  prometheus-cpp-dev prometheus
   libqhull-dev liburdfdom-tools libmujoco-dev
   libpqxx-dev postgresql-15
   yamllint nodejs

@@ -1,12 +1,15 @@
 // common/rpc/server.h: runs a gRPC server with an explicit lifecycle
 // STARTING -> SERVING -> DRAINING -> STOPPED, reported through the standard grpc.health.v1 service
-// (per registered service name and overall ""), server reflection, message-size limits, and a
+// (per registered service name and overall ""), server reflection, message-size limits, optional
+// interceptors (the node's RPC metrics, common/metrics/rpc_metrics.h), and a
 // graceful drain against a deadline (stop accepting, let in-flight calls finish, then cancel).
 // Also: waiting for SIGTERM / SIGINT. Thread-safe.
 #pragma once
 
 #include <grpcpp/grpcpp.h>
+#include <grpcpp/support/server_interceptor.h>
 
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -18,6 +21,9 @@ namespace instascene::rpc {
 struct ServerOptions {
   std::string listen = "127.0.0.1:50051";  // host:port; port 0 = pick a free one
   int max_message_bytes = 64 << 20;        // per message, both directions
+  // Server interceptors (e.g. metrics::RpcMetricsInterceptors); null = none.
+  std::function<std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>()>
+      interceptors;
 };
 
 class Server {

@@ -11,9 +11,12 @@
 #include "absl/strings/str_join.h"
 #include "common/core/file_io.h"
 #include "common/core/status.h"
+#include "common/metrics/metrics.h"
+#include "common/metrics/rpc_metrics.h"
 #include "common/rpc/server.h"
 #include "common/store/blob_store_uri.h"
 #include "services/scheduler/postgres_queue_store.h"
+#include "services/scheduler/scheduler_metrics.h"
 #include "services/scheduler/scheduler_service.h"
 #include "services/scheduler/sqlite_queue_store.h"
 #include "services/store/remote_blob_store.h"
@@ -57,6 +60,42 @@ absl::StatusOr<std::unique_ptr<scheduler::JobQueue>> OpenQueue(
     return scheduler::OpenPostgresJobQueue(q, queue_options);
   return absl::InvalidArgumentError(
       absl::StrCat("--queue: expected sqlite:PATH or postgres://..., not '", q.substr(0, 80), "'"));
+}
+
+// Store contents and the data directory's disk, read at scrape time.
+std::shared_ptr<prometheus::Collectable> StoreCollector(store::BlobStore* store, bool has_store,
+                                                        const std::string& data_dir) {
+  return std::make_shared<metrics::CallbackCollectable>([store, has_store, data_dir] {
+    std::vector<prometheus::MetricFamily> out;
+    if (has_store) {
+      if (absl::StatusOr<store::StoreStats> s = store->Stats(); s.ok()) {
+        auto add = [&](const char* name, const char* help, double value) {
+          prometheus::MetricFamily f = metrics::GaugeFamily(name, help);
+          metrics::AddGauge(&f, {}, value);
+          out.push_back(std::move(f));
+        };
+        add("instascene_store_bytes", "Bytes of committed blobs", s->total_bytes);
+        add("instascene_store_blobs", "Committed blobs", s->blob_count);
+        add("instascene_store_partial_upload_bytes", "Bytes of interrupted, resumable uploads",
+            s->partial_bytes);
+        add("instascene_store_partial_uploads", "Interrupted, resumable uploads",
+            s->partial_uploads);
+      }
+    }
+    std::error_code ec;
+    const fs::space_info space = fs::space(data_dir, ec);
+    if (!ec) {
+      prometheus::MetricFamily capacity = metrics::GaugeFamily(
+          "instascene_data_dir_capacity_bytes", "Size of the file system holding --data");
+      metrics::AddGauge(&capacity, {}, static_cast<double>(space.capacity));
+      prometheus::MetricFamily available = metrics::GaugeFamily(
+          "instascene_data_dir_available_bytes", "Free bytes on the file system holding --data");
+      metrics::AddGauge(&available, {}, static_cast<double>(space.available));
+      out.push_back(std::move(capacity));
+      out.push_back(std::move(available));
+    }
+    return out;
+  });
 }
 
 }  // namespace
@@ -155,8 +194,19 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
     names.push_back(hosted_service->grpc_name);
   }
 
+  // Metrics before the server: a refused metrics address stops the node before anything runs.
+  std::unique_ptr<metrics::Endpoint> metrics_endpoint;
+  std::vector<std::shared_ptr<prometheus::Collectable>> collectors;
+  if (!options.metrics_listen.empty()) {
+    ASSIGN_OR_RETURN(metrics_endpoint, metrics::Endpoint::Start(options.metrics_listen));
+    if (queue) collectors.push_back(scheduler::QueueCollector(queue.get()));
+    collectors.push_back(StoreCollector(blob_store, options.run_store, options.data_dir));
+    for (const auto& c : collectors) metrics_endpoint->Add(c);
+  }
+
   rpc::ServerOptions server_options;
   server_options.listen = options.listen;
+  server_options.interceptors = metrics::RpcMetricsInterceptors;  // call latencies by method
   server_options.max_message_bytes = static_cast<int>(
       std::min<int64_t>(options.store_options.max_batch_bytes + (1 << 20), 1 << 30));
   ASSIGN_OR_RETURN(std::unique_ptr<rpc::Server> server,
@@ -173,8 +223,11 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
   }
   spdlog::info("instascene node serving on {} (data {}): {}", server->address(), options.data_dir,
                absl::StrJoin(names, ", "));
+  if (metrics_endpoint) spdlog::info("metrics at http://{}/metrics", metrics_endpoint->address());
   if (!options.ready_file.empty()) {
-    RETURN_IF_ERROR(WriteFileAtomically(options.ready_file, server->address() + "\n"));
+    std::string ready = server->address() + "\n";
+    if (metrics_endpoint) absl::StrAppend(&ready, "metrics=", metrics_endpoint->address(), "\n");
+    RETURN_IF_ERROR(WriteFileAtomically(options.ready_file, ready));
   }
 
   const int sig = rpc::WaitForShutdownSignal();
@@ -186,6 +239,7 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
   for (std::thread& t : drains) t.join();
   if (scheduler_svc) scheduler_svc->Stop();
   server->Drain(std::chrono::seconds(5));
+  metrics_endpoint.reset();
   if (!options.ready_file.empty()) fs::remove(options.ready_file, ec);
   spdlog::info("stopped");
   return absl::OkStatus();

@@ -48,6 +48,9 @@ struct NodeOptions {
   int64_t cache_bytes = int64_t{20} << 30;  // per worker: input cache budget (0 = unlimited)
   int64_t index_cache_bytes = int64_t{4} << 30;  // Objects service: loaded scene indexes
   std::string ready_file;  // written with the bound address once serving ("" = none)
+  // Prometheus /metrics on this host:port ("" = off): RPC latencies, the queue (with a
+  // scheduler), the store (with a store), workers' jobs, the data directory's disk space.
+  std::string metrics_listen;
   store::StoreOptions store_options;
 
   absl::Status Validate() const;

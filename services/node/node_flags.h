@@ -56,7 +56,11 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
                  "always kept)")
       ->capture_default_str();
   app.add_option("--ready-file", o->ready_file,
-                 "Write the bound address here once serving (removed at exit)");
+                 "Write the bound address here once serving (removed at exit); with --metrics a "
+                 "second line metrics=HOST:PORT");
+  app.add_option("--metrics", o->metrics_listen,
+                 "Serve Prometheus metrics at http://HOST:PORT/metrics (port 0 = any free port; "
+                 "default: off)");
   app.add_option("--max-blob-bytes", o->store_options.max_blob_bytes,
                  "Largest blob the store accepts")
       ->capture_default_str();

@@ -28,6 +28,15 @@ struct QueueStats {
   std::vector<std::pair<std::string, int64_t>> jobs_by_state;
   int64_t scenes = 0;
   int64_t oldest_queued_age_ms = 0;
+  // Per stage (job kind): jobs in each state (kinds with jobs only), and the age of the oldest
+  // queued job (kinds with queued jobs only). For the metrics (instascene_jobs,
+  // instascene_queue_oldest_queued_age_seconds).
+  struct StageState {
+    std::string stage, state;
+    int64_t jobs = 0;
+  };
+  std::vector<StageState> jobs_by_stage;
+  std::vector<std::pair<std::string, int64_t>> oldest_queued_age_ms_by_stage;
 };
 
 // One transaction's view of the stored jobs.

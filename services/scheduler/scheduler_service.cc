@@ -12,6 +12,7 @@
 #include "common/rpc/status.h"
 #include "common/store/manifest.h"
 #include "services/scheduler/job_proto.h"
+#include "services/scheduler/scheduler_metrics.h"
 
 namespace instascene::scheduler {
 
@@ -51,6 +52,7 @@ void SchedulerService::RescueLoop() {
     if (stopping_) break;
     lock.unlock();
     absl::StatusOr<int> rescued = queue_->RescueExpired();
+    if (rescued.ok()) RecordRescued(*rescued);
     if (options_.retention_ms > 0 &&
         prune_watch.ElapsedSeconds() * 1000 >= options_.prune_interval_ms) {
       prune_watch = Stopwatch();
@@ -116,6 +118,9 @@ absl::Status SchedulerService::Lease(const v1::LeaseJobRequest& request,
       std::optional<scheduler::Lease> lease,
       queue_->LeaseNext(kinds, request.worker_id(), int64_t{request.lease_seconds()} * 1000));
   if (!lease) return absl::OkStatus();
+  const int64_t ready_ms = std::max(lease->job.created_ms, lease->job.not_before_ms);
+  RecordLease(lease->job.kind,
+              std::max<int64_t>(0, lease->job.updated_ms - ready_ms) / 1000.0);
   ToProto(lease->job, response->mutable_job());
   response->set_lease_token(lease->token);
   for (const auto& [name, digest] : lease->inputs)
@@ -189,7 +194,11 @@ grpc::Status SchedulerService::CompleteJob(grpc::ServerContext*,
     return ToGrpcStatus(bad);
   const absl::Status s =
       queue_->Complete(request->job_id(), request->lease_token(), *output, request->items());
-  if (s.ok()) Notify();
+  if (s.ok()) {
+    if (absl::StatusOr<Job> job = queue_->Get(request->job_id()); job.ok())
+      RecordFinished(job->kind, "succeeded");
+    Notify();
+  }
   return ToGrpcStatus(s);
 }
 
@@ -199,7 +208,14 @@ grpc::Status SchedulerService::FailJob(grpc::ServerContext*, const v1::FailJobRe
   if (!kind.ok()) return ToGrpcStatus(kind.status());
   const absl::Status s =
       queue_->Fail(request->job_id(), request->lease_token(), *kind, request->error());
-  if (s.ok()) Notify();
+  if (s.ok()) {
+    if (absl::StatusOr<Job> job = queue_->Get(request->job_id()); job.ok()) {
+      RecordFinished(job->kind, job->state == JobState::kQueued      ? "retried"
+                                : job->state == JobState::kCancelled ? "cancelled"
+                                                                     : "failed");
+    }
+    Notify();
+  }
   return ToGrpcStatus(s);
 }
 

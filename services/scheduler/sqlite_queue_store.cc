@@ -260,6 +260,23 @@ class SqliteTx final : public QueueTx {
     oldest.Bind(1, Code(JobState::kQueued));
     ASSIGN_OR_RETURN(row, oldest.Step());
     if (row && oldest.Int(0) > 0) stats.oldest_queued_age_ms = now_ms - oldest.Int(0);
+    Statement by_stage(db_, "SELECT kind, state, COUNT(*) FROM jobs GROUP BY kind, state ORDER BY kind, state");
+    while (true) {
+      ASSIGN_OR_RETURN(bool more, by_stage.Step());
+      if (!more) break;
+      stats.jobs_by_stage.push_back({by_stage.Text(0),
+                                     JobStateName(static_cast<JobState>(by_stage.Int(1))),
+                                     by_stage.Int(2)});
+    }
+    Statement oldest_by_stage(
+        db_, "SELECT kind, MIN(created_ms) FROM jobs WHERE state = ? GROUP BY kind ORDER BY kind");
+    oldest_by_stage.Bind(1, Code(JobState::kQueued));
+    while (true) {
+      ASSIGN_OR_RETURN(bool more, oldest_by_stage.Step());
+      if (!more) break;
+      stats.oldest_queued_age_ms_by_stage.emplace_back(oldest_by_stage.Text(0),
+                                                       now_ms - oldest_by_stage.Int(1));
+    }
     return stats;
   }
 

@@ -10,6 +10,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "common/core/status.h"
+#include "common/metrics/metrics.h"
 #include "common/core/timer.h"
 #include "common/rpc/status.h"
 #include "common/store/manifest.h"
@@ -19,6 +20,25 @@ namespace instascene::worker {
 namespace fs = std::filesystem;
 
 namespace {
+
+// Worker metrics (issue 16): jobs running in this process and how long each attempt took.
+prometheus::Family<prometheus::Gauge>& JobsRunning() {
+  static auto& f = prometheus::BuildGauge()
+                       .Name("instascene_worker_jobs_running")
+                       .Help("Jobs this process is running now (busy workers), by stage")
+                       .Register(metrics::Registry());
+  return f;
+}
+
+prometheus::Family<prometheus::Histogram>& JobDurations() {
+  static auto& f = prometheus::BuildHistogram()
+                       .Name("instascene_worker_job_duration_seconds")
+                       .Help("Wall time of a job attempt in the worker (inputs, stage, upload), by "
+                             "stage and outcome")
+                       .Register(metrics::Registry());
+  return f;
+}
+
 
 // Bad input or parameters will fail again: permanent. Everything else may be transient.
 v1::FailureKind FailureFor(absl::StatusCode code) {
@@ -235,6 +255,7 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
   spdlog::info("worker {}: job {} ({} of scene {}, attempt {})", options_.worker_id, job.id(),
                job.kind(), job.scene(), job.attempts());
   Stopwatch watch;
+  JobsRunning().Add({{"stage", job.kind()}}).Increment();
   ProgressTracker progress;
   std::atomic<bool> cancel_requested{false}, lease_lost{false}, stop_heartbeat{false};
   std::mutex hb_mutex;
@@ -325,6 +346,15 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
   if (!reply.ok())
     spdlog::warn("worker {}: reporting job {}: {}", options_.worker_id, job.id(),
                  reply.error_message());
+  JobsRunning().Add({{"stage", job.kind()}}).Decrement();
+  const char* outcome = lease_lost         ? "lease_lost"
+                        : status.ok()      ? "succeeded"
+                        : cancel_requested ? "cancelled"
+                        : handed_back      ? "handed_back"
+                                           : "failed";
+  JobDurations()
+      .Add({{"stage", job.kind()}, {"outcome", outcome}}, metrics::JobBuckets())
+      .Observe(watch.ElapsedSeconds());
   fs::remove_all(job_dir, ec);  // outputs live in the store now
   {
     std::lock_guard<std::mutex> lock(mutex_);

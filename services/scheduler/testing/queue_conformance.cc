@@ -360,6 +360,22 @@ TEST_P(JobQueueConformanceTest, ListAndStats) {
   EXPECT_EQ(stats->scenes, 2);
   EXPECT_EQ(stats->jobs_by_state[0], (std::pair<std::string, int64_t>{"queued", 3}));
   EXPECT_EQ(stats->oldest_queued_age_ms, 500);
+  // Per stage: two queued decompose jobs, one queued train; ages per stage.
+  ASSERT_EQ(stats->jobs_by_stage.size(), 2u);
+  EXPECT_EQ(stats->jobs_by_stage[0].stage, "decompose");
+  EXPECT_EQ(stats->jobs_by_stage[0].state, "queued");
+  EXPECT_EQ(stats->jobs_by_stage[0].jobs, 2);
+  EXPECT_EQ(stats->jobs_by_stage[1].stage, "train");
+  EXPECT_EQ(stats->jobs_by_stage[1].jobs, 1);
+  ASSERT_EQ(stats->oldest_queued_age_ms_by_stage.size(), 2u);
+  EXPECT_EQ(stats->oldest_queued_age_ms_by_stage[0],
+            (std::pair<std::string, int64_t>{"decompose", 500}));
+  auto lease = MustLease({"train", "decompose"});
+  ASSERT_TRUE(lease.has_value());
+  stats = queue_->Stats();
+  int64_t leased = 0;
+  for (const auto& s : stats->jobs_by_stage) leased += s.state == "leased" ? s.jobs : 0;
+  EXPECT_EQ(leased, 1);
 }
 
 TEST_P(JobQueueConformanceTest, PruningRemovesOldFinishedJobsNothingStillNeeded) {

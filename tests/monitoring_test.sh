@@ -1,0 +1,80 @@
+#!/usr/bin/env bash
+# Monitoring (issue 16): promtool checks the scrape configuration and the alert rules and runs the
+# alerts' unit tests (deploy/monitoring/); a pipeline through `instascene serve --metrics` shows
+# up in /metrics (jobs by stage and state, queue waits, leases, finished jobs, worker durations,
+# RPC latencies, store and disk), and `promtool check metrics` passes on the output of serve and
+# of every per-service binary. Prints "N passed, N failed"; exits 1 on any failure.
+set -uo pipefail
+BIN=$1      # the instascene command
+BINDIR=$2   # folder with instascene-store, -scheduler, -decomposition, -training, -generation, -objects
+SRC=$3      # the source tree (deploy/monitoring)
+source "$(dirname "$0")/test_lib.sh"
+command -v promtool >/dev/null || { echo "FAIL: promtool missing (scripts/install-deps.sh installs prometheus)"; exit 1; }
+MON="$SRC/deploy/monitoring"
+
+check "promtool check config" promtool check config "$MON/prometheus.yml"
+check "promtool check rules" promtool check rules "$MON/alerts.yml"
+check "promtool test rules (the alerts fire as specified)" bash -c "cd '$MON' && promtool test rules alerts_test.yml"
+
+scrape() {  # scrape HOST:PORT FILE
+  python3 -c "import sys, urllib.request; sys.stdout.write(urllib.request.urlopen('http://$1/metrics', timeout=10).read().decode())" >"$2"
+}
+metric() {  # metric FILE PATTERN: the value of the first sample line matching PATTERN (regex)
+  python3 - "$1" "$2" <<'PY'
+import re, sys
+for line in open(sys.argv[1]):
+    if not line.startswith('#') and re.search(sys.argv[2], line):
+        print(float(line.rsplit(' ', 1)[1])); break
+else:
+    print('absent')
+PY
+}
+positive() { python3 -c "import sys; sys.exit(0 if '$1' != 'absent' and float('$1') > 0 else 1)"; }
+
+# 1. The embedded server: a pipeline, then its metrics.
+check "synth scene" "$BIN" synth --out "$WORK/s" --preset tiny --seed 6
+start serve "$WORK/ready" "$BIN" serve --data "$WORK/data" --listen 127.0.0.1:0 --ready-file "$WORK/ready" --metrics 127.0.0.1:0
+ADDR=$(head -n 1 "$WORK/ready")
+METRICS=$(sed -n 's/^metrics=//p' "$WORK/ready")
+check "the ready file names the metrics address" test -n "$METRICS"
+check "submit" "$BIN" submit --scene "$WORK/s" --server "$ADDR" --stages decompose,train,segment \
+  --params '{"train":{"iterations":40,"samples":512,"pixel_pool":1024}}' --json
+IDS=$(json_get "$WORK/out.txt" "' '.join(j['id'] for j in d['jobs'])")
+check "watch until done" "$BIN" watch $IDS --server "$ADDR" --json
+check "scrape serve" scrape "$METRICS" "$WORK/serve.txt"
+check "promtool check metrics (serve)" bash -c "promtool check metrics < '$WORK/serve.txt'"
+check "segment succeeded in instascene_jobs" test "$(metric "$WORK/serve.txt" '^instascene_jobs\{stage="segment",state="succeeded"\}')" = 1.0
+check "three jobs finished as succeeded" test "$(python3 -c "
+import re
+print(sum(float(l.rsplit(' ',1)[1]) for l in open('$WORK/serve.txt') if l.startswith('instascene_jobs_finished_total{') and 'outcome=\"succeeded\"' in l))")" = 3.0
+check "a queue wait per lease" test "$(metric "$WORK/serve.txt" '^instascene_job_queue_wait_seconds_count\{stage="train"\}')" = 1.0
+check "leases counted" test "$(metric "$WORK/serve.txt" '^instascene_job_leases_total\{stage="decompose"\}')" = 1.0
+check "worker durations by stage and outcome" test "$(metric "$WORK/serve.txt" '^instascene_worker_job_duration_seconds_count\{.*stage="train"')" = 1.0
+check "no job running now" test "$(metric "$WORK/serve.txt" '^instascene_worker_jobs_running\{stage="segment"\}')" = 0.0
+check "LeaseJob latencies by code" positive "$(metric "$WORK/serve.txt" '^instascene_rpc_duration_seconds_count\{.*method="LeaseJob"')"
+check "store bytes" positive "$(metric "$WORK/serve.txt" '^instascene_store_bytes ')"
+check "store blobs" positive "$(metric "$WORK/serve.txt" '^instascene_store_blobs ')"
+check "disk capacity" positive "$(metric "$WORK/serve.txt" '^instascene_data_dir_capacity_bytes ')"
+check "no queued job left (no age series)" test "$(metric "$WORK/serve.txt" '^instascene_queue_oldest_queued_age_seconds')" = absent
+check_fails "a taken metrics port is refused" "cannot listen on $METRICS" \
+  "$BIN" serve --data "$WORK/data2" --listen 127.0.0.1:0 --metrics "$METRICS"
+
+# 2. Every per-service binary serves metrics that promtool accepts.
+start store "$WORK/r-store" "$BINDIR/instascene-store" --data "$WORK/d-store" --listen 127.0.0.1:0 --ready-file "$WORK/r-store" --metrics 127.0.0.1:0
+STORE=$(head -n 1 "$WORK/r-store")
+start scheduler "$WORK/r-sched" "$BINDIR/instascene-scheduler" --data "$WORK/d-sched" --listen 127.0.0.1:0 --ready-file "$WORK/r-sched" --store "$STORE" --metrics 127.0.0.1:0
+SCHED=$(head -n 1 "$WORK/r-sched")
+for svc in decomposition training generation objects; do
+  start "$svc" "$WORK/r-$svc" "$BINDIR/instascene-$svc" --data "$WORK/d-$svc" --listen 127.0.0.1:0 --store "$STORE" --scheduler "$SCHED" --ready-file "$WORK/r-$svc" --metrics 127.0.0.1:0
+done
+for svc in store sched decomposition training generation objects; do
+  M=$(sed -n 's/^metrics=//p' "$WORK/r-$svc")
+  check "scrape instascene-$svc" scrape "$M" "$WORK/m-$svc.txt"
+  check "promtool check metrics (instascene-$svc)" bash -c "promtool check metrics < '$WORK/m-$svc.txt'"
+done
+check "the scheduler reports the queue" grep -q '^# TYPE instascene_jobs gauge' "$WORK/m-sched.txt"
+check "the store reports its blobs" grep -q '^instascene_store_blobs ' "$WORK/m-store.txt"
+check "a worker reports no store of its own" test "$(metric "$WORK/m-training.txt" '^instascene_store_blobs ')" = absent
+
+echo "$passed passed, $failed failed"
+[ "$failed" -eq 0 ]
