@@ -23,7 +23,8 @@ namespace instascene::cli {
 // would have nothing there. The views' images are renders of the complete scene.
 absl::Status BenchComplete(const CompleteBenchArgs& args) {
   if (args.gaussians < 1000 || args.gaussians > 2'000'000 || args.iterations < 0) {
-    return absl::InvalidArgumentError("bench complete: --gaussians in [1000, 2e6], iterations >= 0");
+    return absl::InvalidArgumentError(
+        "bench complete: --gaussians in [1000, 2e6], iterations >= 0");
   }
   std::mt19937_64 rng(args.seed);
   Appearance table_look, bottle_look;

@@ -83,7 +83,8 @@ void ChainToParameters(const GaussianCloud& cloud, size_t g, const ProjectionPar
   out[3] = dcol[0].dot(a);  // d a / d log su = a
   out[4] = dcol[1].dot(b);
   Eigen::Vector4d d_quat = Eigen::Vector4d::Zero();
-  for (int k = 0; k < 3; ++k) d_quat += d_r0[k] * r0[k].derivatives() + d_r1[k] * r1[k].derivatives();
+  for (int k = 0; k < 3; ++k)
+    d_quat += d_r0[k] * r0[k].derivatives() + d_r1[k] * r1[k].derivatives();
   for (int k = 0; k < 4; ++k) out[5 + k] = d_quat[k];
   const double opacity = 1.0 / (1.0 + std::exp(-double(cloud.opacity_logits[g])));
   out[9] = d_opacity * opacity * (1.0 - opacity);
@@ -155,104 +156,114 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
   }
   const ProjectionParams params = MakeProjectionParams(camera, options, cloud.sh_degree);
   const size_t n = cloud.size();
-  // The splats exactly as the forward blended them.
-  std::vector<ProjectedSplat> splats(n);
-  std::vector<uint8_t> visible(n);
-  ProjectSurfels(cloud, 0, n, params, splats.data(), visible.data());
+  // The splats exactly as the forward blended them: the forward's own when it left them in the
+  // workspace, else projected again (the same function, the same result).
+  std::vector<ProjectedSplat> own;
+  const ProjectedSplat* splats_ptr = nullptr;
+  if (options.workspace != nullptr && options.workspace->splats.size() == n) {
+    splats_ptr = options.workspace->splats.data();
+  } else {
+    own.resize(n);
+    std::vector<uint8_t> visible(n);
+    ProjectSurfels(cloud, 0, n, params, own.data(), visible.data());
+    splats_ptr = own.data();
+  }
+  const ProjectedSplat* splats = splats_ptr;
   const double bg[3] = {options.background[0], options.background[1], options.background[2]};
 
   const int bands = (camera.height + kTileSize - 1) / kTileSize;
   std::vector<Band> band_grads(bands);
   RunWithThreads(options.num_threads, [&] {
-  tbb::parallel_for(0, bands, [&](int band) {
-    Band& out = band_grads[band];
-    std::vector<int32_t> slot(n, -1);
-    auto at = [&](uint32_t g) -> SplatGrad& {
-      if (slot[g] < 0) {
-        slot[g] = static_cast<int32_t>(out.touched.size());
-        out.touched.push_back(g);
-        out.grads.push_back(SplatGrad{});
-      }
-      return out.grads[slot[g]];
-    };
-    std::vector<double> transmittance;
-    const int y_end = std::min(camera.height, (band + 1) * kTileSize);
-    for (int y = band * kTileSize; y < y_end; ++y) {
-      for (int x = 0; x < camera.width; ++x) {
-        const size_t i = static_cast<size_t>(y) * camera.width + x;
-        const uint64_t first = trace.offsets[i], last = trace.offsets[i + 1];
-        if (first == last) continue;
-        const double dc[3] = {dloss_dcolor[3 * i], dloss_dcolor[3 * i + 1],
-                              dloss_dcolor[3 * i + 2]};
-        const double da = dloss_dalpha.empty() ? 0.0 : dloss_dalpha[i];
-        // T before each contributor, front to back: T_0 = 1, T_{k+1} = T_k - w_k (w = alpha T).
-        transmittance.resize(last - first);
-        double T_run = 1.0;
-        for (uint64_t e = first; e < last; ++e) {
-          transmittance[e - first] = T_run;
-          T_run -= trace.entries[e].weight;
+    tbb::parallel_for(0, bands, [&](int band) {
+      Band& out = band_grads[band];
+      std::vector<int32_t> slot(n, -1);
+      auto at = [&](uint32_t g) -> SplatGrad& {
+        if (slot[g] < 0) {
+          slot[g] = static_cast<int32_t>(out.touched.size());
+          out.touched.push_back(g);
+          out.grads.push_back(SplatGrad{});
         }
-        const double T_final = T_run;
-        // Back to front: "after" = the colour behind contributor k (background included).
-        double after[3] = {T_final * bg[0], T_final * bg[1], T_final * bg[2]};
-        for (uint64_t e = last; e-- > first;) {
-          const uint32_t g = trace.entries[e].gaussian;
-          const ProjectedSplat& s = splats[g];
-          const double T = transmittance[e - first];
-          const double w = trace.entries[e].weight;
-          const double alpha = w / T;
-          SplatGrad& grad = at(g);
-          // C = sum c_j a_j T_j + T_N bg: dC/da_k = c_k T_k - after_k / (1 - a_k);
-          // A = 1 - T_N: dA/da_k = T_N / (1 - a_k).
-          double dl_dalpha = da * T_final / (1.0 - alpha);
-          for (int c = 0; c < 3; ++c) {
-            grad.rgb[c] += w * dc[c];
-            dl_dalpha += dc[c] * (s.rgb[c] * T - after[c] / (1.0 - alpha));
-            after[c] += w * s.rgb[c];
+        return out.grads[slot[g]];
+      };
+      std::vector<double> transmittance;
+      const int y_end = std::min(camera.height, (band + 1) * kTileSize);
+      for (int y = band * kTileSize; y < y_end; ++y) {
+        for (int x = 0; x < camera.width; ++x) {
+          const size_t i = static_cast<size_t>(y) * camera.width + x;
+          const uint64_t first = trace.offsets[i], last = trace.offsets[i + 1];
+          if (first == last) continue;
+          const double dc[3] = {dloss_dcolor[3 * i], dloss_dcolor[3 * i + 1],
+                                dloss_dcolor[3 * i + 2]};
+          const double da = dloss_dalpha.empty() ? 0.0 : dloss_dalpha[i];
+          // T before each contributor, front to back: T_0 = 1, T_{k+1} = T_k - w_k (w = alpha T).
+          transmittance.resize(last - first);
+          double T_run = 1.0;
+          for (uint64_t e = first; e < last; ++e) {
+            transmittance[e - first] = T_run;
+            T_run -= trace.entries[e].weight;
           }
-          // The 0.99 clamp passes no gradient (w / T is 0.99 up to float rounding there);
-          // otherwise alpha = opacity * G.
-          if (alpha > kAlphaMax - 1e-5) continue;
-          grad.opacity += dl_dalpha * alpha / s.opacity;
-          const float d_power = static_cast<float>(dl_dalpha * alpha);  // d alpha / d power
-          // The per-pixel planes, intersection and branch exactly as the forward computed them
-          // (tile_blend.h, float); the derivatives are taken in float too and summed in double.
-          const float rx = static_cast<float>(x - s.origin_px[0]);
-          const float ry = static_cast<float>(y - s.origin_px[1]);
-          const float k[3] = {rx * s.tw[0] + s.tu[0], rx * s.tw[1] + s.tu[1],
-                              rx * s.tw[2] + s.tu[2]};
-          const float l[3] = {ry * s.tw[0] + s.tv[0], ry * s.tw[1] + s.tv[1],
-                              ry * s.tw[2] + s.tv[2]};
-          const float pz = k[0] * l[1] - k[1] * l[0];
-          const float inv = 1.0f / pz;
-          const float u = (k[1] * l[2] - k[2] * l[1]) * inv, v = (k[2] * l[0] - k[0] * l[2]) * inv;
-          const float dx = s.mean_px[0] - static_cast<float>(x);
-          const float dy = s.mean_px[1] - static_cast<float>(y);
-          if (!(u * u + v * v <= 2.0f * (dx * dx + dy * dy))) {  // 2D: power = -(dx^2 + dy^2)
-            grad.mean[0] += d_power * -2.0f * dx;
-            grad.mean[1] += d_power * -2.0f * dy;
-            continue;
-          }
-          // 3D: power = -(u^2 + v^2) / 2, u = nu / pz, v = nv / pz.
-          const float du = -d_power * u, dv = -d_power * v;
-          const float dnu = du * inv, dnv = dv * inv, dpz = -(du * u + dv * v) * inv;
-          float dk[3], dl[3];
-          // nu = k1 l2 - k2 l1, nv = k2 l0 - k0 l2, pz = k0 l1 - k1 l0.
-          dk[0] = -dnv * l[2] + dpz * l[1];
-          dk[1] = dnu * l[2] - dpz * l[0];
-          dk[2] = -dnu * l[1] + dnv * l[0];
-          dl[0] = dnv * k[2] - dpz * k[1];
-          dl[1] = -dnu * k[2] + dpz * k[0];
-          dl[2] = dnu * k[1] - dnv * k[0];
-          for (int c = 0; c < 3; ++c) {  // k = rx Tw + tu', l = ry Tw + tv'
-            grad.tu[c] += dk[c];
-            grad.tv[c] += dl[c];
-            grad.tw[c] += rx * dk[c] + ry * dl[c];
+          const double T_final = T_run;
+          // Back to front: "after" = the colour behind contributor k (background included).
+          double after[3] = {T_final * bg[0], T_final * bg[1], T_final * bg[2]};
+          for (uint64_t e = last; e-- > first;) {
+            const uint32_t g = trace.entries[e].gaussian;
+            const ProjectedSplat& s = splats[g];
+            const double T = transmittance[e - first];
+            const double w = trace.entries[e].weight;
+            const double alpha = w / T;
+            SplatGrad& grad = at(g);
+            // C = sum c_j a_j T_j + T_N bg: dC/da_k = c_k T_k - after_k / (1 - a_k);
+            // A = 1 - T_N: dA/da_k = T_N / (1 - a_k).
+            double dl_dalpha = da * T_final / (1.0 - alpha);
+            for (int c = 0; c < 3; ++c) {
+              grad.rgb[c] += w * dc[c];
+              dl_dalpha += dc[c] * (s.rgb[c] * T - after[c] / (1.0 - alpha));
+              after[c] += w * s.rgb[c];
+            }
+            // The 0.99 clamp passes no gradient (w / T is 0.99 up to float rounding there);
+            // otherwise alpha = opacity * G.
+            if (alpha > kAlphaMax - 1e-5) continue;
+            grad.opacity += dl_dalpha * alpha / s.opacity;
+            const float d_power = static_cast<float>(dl_dalpha * alpha);  // d alpha / d power
+            // The per-pixel planes, intersection and branch exactly as the forward computed them
+            // (tile_blend.h, float); the derivatives are taken in float too and summed in double.
+            const float rx = static_cast<float>(x - s.origin_px[0]);
+            const float ry = static_cast<float>(y - s.origin_px[1]);
+            const float k[3] = {rx * s.tw[0] + s.tu[0], rx * s.tw[1] + s.tu[1],
+                                rx * s.tw[2] + s.tu[2]};
+            const float l[3] = {ry * s.tw[0] + s.tv[0], ry * s.tw[1] + s.tv[1],
+                                ry * s.tw[2] + s.tv[2]};
+            const float pz = k[0] * l[1] - k[1] * l[0];
+            const float inv = 1.0f / pz;
+            const float u = (k[1] * l[2] - k[2] * l[1]) * inv,
+                        v = (k[2] * l[0] - k[0] * l[2]) * inv;
+            const float dx = s.mean_px[0] - static_cast<float>(x);
+            const float dy = s.mean_px[1] - static_cast<float>(y);
+            if (!(u * u + v * v <= 2.0f * (dx * dx + dy * dy))) {  // 2D: power = -(dx^2 + dy^2)
+              grad.mean[0] += d_power * -2.0f * dx;
+              grad.mean[1] += d_power * -2.0f * dy;
+              continue;
+            }
+            // 3D: power = -(u^2 + v^2) / 2, u = nu / pz, v = nv / pz.
+            const float du = -d_power * u, dv = -d_power * v;
+            const float dnu = du * inv, dnv = dv * inv, dpz = -(du * u + dv * v) * inv;
+            float dk[3], dl[3];
+            // nu = k1 l2 - k2 l1, nv = k2 l0 - k0 l2, pz = k0 l1 - k1 l0.
+            dk[0] = -dnv * l[2] + dpz * l[1];
+            dk[1] = dnu * l[2] - dpz * l[0];
+            dk[2] = -dnu * l[1] + dnv * l[0];
+            dl[0] = dnv * k[2] - dpz * k[1];
+            dl[1] = -dnu * k[2] + dpz * k[0];
+            dl[2] = dnu * k[1] - dnv * k[0];
+            for (int c = 0; c < 3; ++c) {  // k = rx Tw + tu', l = ry Tw + tv'
+              grad.tu[c] += dk[c];
+              grad.tv[c] += dl[c];
+              grad.tw[c] += rx * dk[c] + ry * dl[c];
+            }
           }
         }
       }
-    }
-  });
+    });
   });
   std::vector<SplatGrad> total(n, SplatGrad{});
   std::vector<uint8_t> touched(n, 0);
@@ -285,46 +296,46 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
   const Eigen::Vector3d eye(params.camera_center[0], params.camera_center[1],
                             params.camera_center[2]);
   RunWithThreads(options.num_threads, [&] {
-  tbb::parallel_for(0, static_cast<int>(n), [&](int gi) {
-    const size_t g = static_cast<size_t>(gi);
-    if (!touched[g]) return;
-    const SplatGrad& t = total[g];
-    const ProjectedSplat& s = splats[g];
-    // Back from the stored planes: tu' = ox Tw - Tu, tv' = oy Tw - Tv.
-    double dTu[3], dTv[3], dTw[3];
-    for (int c = 0; c < 3; ++c) {
-      dTu[c] = -t.tu[c];
-      dTv[c] = -t.tv[c];
-      dTw[c] = t.tw[c] + s.origin_px[0] * t.tu[c] + s.origin_px[1] * t.tv[c];
-    }
-    double geo[10];
-    ChainToParameters(cloud, g, params, dTu, dTv, dTw, t.mean, t.opacity, geo);
-    // Colour: rgb = max(0, 0.5 + sum basis_k(dir) sh_k), dir = (p - eye) / |p - eye|.
-    using D3 = Eigen::AutoDiffScalar<Eigen::Vector3d>;
-    Eigen::Matrix<D3, 3, 1> dir;
-    for (int k = 0; k < 3; ++k) {
-      dir[k] = D3(cloud.positions[3 * g + k] - eye[k], Eigen::Vector3d::Unit(k));
-    }
-    const D3 len = sqrt(dir.squaredNorm());
-    for (int k = 0; k < 3; ++k) dir[k] = dir[k] / len;
-    D3 basis[16];
-    ShBasis(degree, dir[0], dir[1], dir[2], basis);
-    const float* sh = &cloud.sh[stride * g];
-    Eigen::Vector3d d_pos(geo[0], geo[1], geo[2]);
-    for (int c = 0; c < 3; ++c) {
-      D3 value = D3(0.5);
-      for (int k = 0; k < coeffs; ++k) value += basis[k] * double(sh[3 * k + c]);
-      if (value.value() < 0) continue;  // clamped: no gradient
-      d_pos += t.rgb[c] * value.derivatives();
-      for (int k = 0; k < coeffs; ++k) {
-        out.sh[stride * g + 3 * k + c] = static_cast<float>(t.rgb[c] * basis[k].value());
+    tbb::parallel_for(0, static_cast<int>(n), [&](int gi) {
+      const size_t g = static_cast<size_t>(gi);
+      if (!touched[g]) return;
+      const SplatGrad& t = total[g];
+      const ProjectedSplat& s = splats[g];
+      // Back from the stored planes: tu' = ox Tw - Tu, tv' = oy Tw - Tv.
+      double dTu[3], dTv[3], dTw[3];
+      for (int c = 0; c < 3; ++c) {
+        dTu[c] = -t.tu[c];
+        dTv[c] = -t.tv[c];
+        dTw[c] = t.tw[c] + s.origin_px[0] * t.tu[c] + s.origin_px[1] * t.tv[c];
       }
-    }
-    for (int k = 0; k < 3; ++k) out.positions[3 * g + k] = static_cast<float>(d_pos[k]);
-    for (int k = 0; k < 2; ++k) out.log_scales[2 * g + k] = static_cast<float>(geo[3 + k]);
-    for (int k = 0; k < 4; ++k) out.rotations[4 * g + k] = static_cast<float>(geo[5 + k]);
-    out.opacity_logits[g] = static_cast<float>(geo[9]);
-  });
+      double geo[10];
+      ChainToParameters(cloud, g, params, dTu, dTv, dTw, t.mean, t.opacity, geo);
+      // Colour: rgb = max(0, 0.5 + sum basis_k(dir) sh_k), dir = (p - eye) / |p - eye|.
+      using D3 = Eigen::AutoDiffScalar<Eigen::Vector3d>;
+      Eigen::Matrix<D3, 3, 1> dir;
+      for (int k = 0; k < 3; ++k) {
+        dir[k] = D3(cloud.positions[3 * g + k] - eye[k], Eigen::Vector3d::Unit(k));
+      }
+      const D3 len = sqrt(dir.squaredNorm());
+      for (int k = 0; k < 3; ++k) dir[k] = dir[k] / len;
+      D3 basis[16];
+      ShBasis(degree, dir[0], dir[1], dir[2], basis);
+      const float* sh = &cloud.sh[stride * g];
+      Eigen::Vector3d d_pos(geo[0], geo[1], geo[2]);
+      for (int c = 0; c < 3; ++c) {
+        D3 value = D3(0.5);
+        for (int k = 0; k < coeffs; ++k) value += basis[k] * double(sh[3 * k + c]);
+        if (value.value() < 0) continue;  // clamped: no gradient
+        d_pos += t.rgb[c] * value.derivatives();
+        for (int k = 0; k < coeffs; ++k) {
+          out.sh[stride * g + 3 * k + c] = static_cast<float>(t.rgb[c] * basis[k].value());
+        }
+      }
+      for (int k = 0; k < 3; ++k) out.positions[3 * g + k] = static_cast<float>(d_pos[k]);
+      for (int k = 0; k < 2; ++k) out.log_scales[2 * g + k] = static_cast<float>(geo[3 + k]);
+      for (int k = 0; k < 4; ++k) out.rotations[4 * g + k] = static_cast<float>(geo[5 + k]);
+      out.opacity_logits[g] = static_cast<float>(geo[9]);
+    });
   });
   return out;
 }

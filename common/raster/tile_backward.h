@@ -27,8 +27,9 @@
 
 namespace instascene {
 
-// Renders a 2DGS cloud with what the backward needs (colour, alpha, the full contributor trace); `options` chooses background, near plane, SH degree, threads, workspace,
-// and may ask for depth/normals too. Fails on a 3DGS cloud or invalid camera/options.
+// Renders a 2DGS cloud with what the backward needs (colour, alpha, the full contributor trace);
+// `options` chooses background, near plane, SH degree, threads, workspace, and may ask for
+// depth/normals too. Fails on a 3DGS cloud or invalid camera/options.
 absl::StatusOr<RenderResult> RenderForBackward(const GaussianCloud& cloud,
                                                const PinholeCamera& camera,
                                                const RenderOptions& options);
@@ -36,7 +37,8 @@ absl::StatusOr<RenderResult> RenderForBackward(const GaussianCloud& cloud,
 // Gradients of a loss L with respect to every parameter of every surfel, given dL/dcolor (HxWx3)
 // and dL/dalpha (HxW, may be empty) at the image `forward` that RenderForBackward made from the
 // same cloud, camera and options. The SH gradient covers the coefficients the forward used
-// (options.max_sh_degree); the others get 0.
+// (options.max_sh_degree); the others get 0. With options.workspace set, it must be the workspace
+// the forward rendered with, not used since: its projected splats are reused.
 absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
                                              const PinholeCamera& camera,
                                              const RenderOptions& options,

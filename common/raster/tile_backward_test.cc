@@ -100,9 +100,10 @@ TEST(TileBackward, MatchesTheReferenceKernel) {
                               RelativeError(fast->sh, slow->sh)};
     for (int k = 0; k < 5; ++k) worst[k] = std::max(worst[k], errors[k]);
   }
-  std::printf("relative error vs reference: position %.2e log-scale %.2e rotation %.2e "
-              "opacity %.2e sh %.2e\n",
-              worst[0], worst[1], worst[2], worst[3], worst[4]);
+  std::printf(
+      "relative error vs reference: position %.2e log-scale %.2e rotation %.2e "
+      "opacity %.2e sh %.2e\n",
+      worst[0], worst[1], worst[2], worst[3], worst[4]);
   for (double e : worst) EXPECT_LT(e, 3e-2);
 }
 
@@ -145,8 +146,7 @@ TEST(TileBackward, MatchesFiniteDifferencesWithDegree3Colour) {
   const double sh_error = RelativeError(grad->sh, numeric(&GaussianCloud::sh, 0.05f));
   const double pos_error =
       RelativeError(grad->positions, numeric(&GaussianCloud::positions, 2e-3f));
-  std::printf("relative error vs finite differences: sh %.2e position %.2e\n", sh_error,
-              pos_error);
+  std::printf("relative error vs finite differences: sh %.2e position %.2e\n", sh_error, pos_error);
   EXPECT_LT(sh_error, 1e-3);
   EXPECT_LT(pos_error, 3e-2);
 }

@@ -22,7 +22,8 @@ struct ServerOptions {
   std::string listen = "127.0.0.1:50051";  // host:port; port 0 = pick a free one
   int max_message_bytes = 64 << 20;        // per message, both directions
   // Server interceptors (e.g. metrics::RpcMetricsInterceptors); null = none.
-  std::function<std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>()>
+  std::function<
+      std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>()>
       interceptors;
 };
 

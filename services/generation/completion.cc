@@ -125,7 +125,8 @@ double CameraExtent(const std::vector<PinholeCamera>& cameras) {
   for (const PinholeCamera& c : cameras) mean += c.CenterInWorld();
   mean /= std::max<size_t>(1, cameras.size());
   double radius = 0;
-  for (const PinholeCamera& c : cameras) radius = std::max(radius, (c.CenterInWorld() - mean).norm());
+  for (const PinholeCamera& c : cameras)
+    radius = std::max(radius, (c.CenterInWorld() - mean).norm());
   return radius > 0 ? 1.1 * radius : 1.0;
 }
 
@@ -149,10 +150,10 @@ absl::StatusOr<nlohmann::json> Refine(CompletedObject* o, const std::vector<Pinh
         continue;
       }
       RETURN_IF_ERROR(image.status());
-      ASSIGN_OR_RETURN(std::optional<RefinementView> view,
-                       RealRefinementView(cameras[v], *image, o->object, surfels, instance,
-                                          o->frame, options.refine_view_max_side,
-                                          options.num_threads));
+      ASSIGN_OR_RETURN(
+          std::optional<RefinementView> view,
+          RealRefinementView(cameras[v], *image, o->object, surfels, instance, o->frame,
+                             options.refine_view_max_side, options.num_threads));
       if (view.has_value()) {
         views.push_back(std::move(*view));
       } else {
@@ -188,8 +189,9 @@ absl::StatusOr<nlohmann::json> Refine(CompletedObject* o, const std::vector<Pinh
       {"curve_every", ro.curve_every},
       {"spatial_scale", ro.spatial_scale},
       {"seconds", r.seconds},
-      {"terms", "real: L1 over the crop, the object rendered in situ (the rest of the scene "
-                "frozen); generated: 0.8 L1 + 0.2 D-SSIM + 0.1 BCE(alpha, mask)"},
+      {"terms",
+       "real: L1 over the crop, the object rendered in situ (the rest of the scene "
+       "frozen); generated: 0.8 L1 + 0.2 D-SSIM + 0.1 BCE(alpha, mask)"},
       {"not_implemented", "normal consistency (needs the depth/normal backward)"}};
 }
 
@@ -263,7 +265,8 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
   out.object = MergeWithProvenance(out.raw, out.prior.added);
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
   report("refining", 5, 7);
-  ASSIGN_OR_RETURN(out.refinement, Refine(&out, cameras, surfels, split.instance, options, progress));
+  ASSIGN_OR_RETURN(out.refinement,
+                   Refine(&out, cameras, surfels, split.instance, options, progress));
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
   report("meshing", 6, 7);
   ASSIGN_OR_RETURN(out.mesh,

@@ -222,9 +222,7 @@ TEST(Completion, RefinesWithRealAndGeneratedViews) {
   EXPECT_EQ(provenance->values.size(), done->object.size());
   for (float v : done->object.positions) ASSERT_TRUE(std::isfinite(v));
 
-  options.load_view = [](int) -> absl::StatusOr<Image> {
-    return absl::NotFoundError("no image");
-  };
+  options.load_view = [](int) -> absl::StatusOr<Image> { return absl::NotFoundError("no image"); };
   auto no_images = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
   ASSERT_TRUE(no_images.ok()) << no_images.status();
   EXPECT_EQ(no_images->manifest["refinement"]["real_views"], 0);

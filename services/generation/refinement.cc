@@ -48,15 +48,16 @@ double ViewLoss(const RefinementView& view, const RenderResult& render,
                 std::vector<float>* d_alpha) {
   if (!view.generated) return MaskedL1(render.color, view.rgb, view.mask, 1.0, d_color);
   const double l1 = MaskedL1(render.color, view.rgb, {}, 1.0 - options.lambda_dssim, d_color);
-  const double dssim = Dssim(render.color, view.rgb, render.width, render.height,
-                             options.lambda_dssim, d_color);
+  const double dssim =
+      Dssim(render.color, view.rgb, render.width, render.height, options.lambda_dssim, d_color);
   const double bce = AlphaBce(render.alpha, view.mask, options.lambda_mask, d_alpha);
   return (1.0 - options.lambda_dssim) * l1 + options.lambda_dssim * dssim +
          options.lambda_mask * bce;
 }
 
 // Mean loss over every view (no gradients kept).
-absl::StatusOr<double> MeanLoss(const GaussianCloud& cloud, const std::vector<RefinementView>& views,
+absl::StatusOr<double> MeanLoss(const GaussianCloud& cloud,
+                                const std::vector<RefinementView>& views,
                                 const RefinementOptions& options, RasterWorkspace* ws) {
   double sum = 0;
   GaussianCloud scratch;
@@ -99,8 +100,8 @@ absl::Status CheckViews(const std::vector<RefinementView>& views, int sh_degree)
     const size_t pixels = static_cast<size_t>(v.camera.width) * v.camera.height;
     if (v.rgb.size() != 3 * pixels || v.mask.size() != pixels) {
       return absl::InvalidArgumentError(
-          absl::StrCat("refinement view ", k, ": image or mask does not match its ",
-                       v.camera.width, "x", v.camera.height, " camera"));
+          absl::StrCat("refinement view ", k, ": image or mask does not match its ", v.camera.width,
+                       "x", v.camera.height, " camera"));
     }
     if (v.context.size() > 0 && (v.context.num_scales != 2 || v.context.sh_degree != sh_degree)) {
       return absl::InvalidArgumentError(absl::StrCat(
@@ -127,7 +128,8 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
   RETURN_IF_ERROR(CheckViews(views, cloud->sh_degree));
   const auto start = std::chrono::steady_clock::now();
   RefinementReport report;
-  for (const RefinementView& v : views) (v.generated ? report.generated_views : report.real_views)++;
+  for (const RefinementView& v : views)
+    (v.generated ? report.generated_views : report.real_views)++;
   RasterWorkspace ws;
   ASSIGN_OR_RETURN(report.initial_loss, MeanLoss(*cloud, views, options, &ws));
   report.final_loss = report.initial_loss;
@@ -165,9 +167,9 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
     }
     // 2DGS's exponential position schedule (no delay).
     const double t = options.iterations > 1 ? (it - 1.0) / (options.iterations - 1.0) : 0.0;
-    const double pos_lr = options.spatial_scale *
-                          std::exp(std::log(options.position_lr_init) * (1 - t) +
-                                   std::log(options.position_lr_final) * t);
+    const double pos_lr =
+        options.spatial_scale * std::exp(std::log(options.position_lr_init) * (1 - t) +
+                                         std::log(options.position_lr_final) * t);
     adam_pos.Step(&work.positions, grad.positions, it, {pos_lr});
     adam_scale.Step(&work.log_scales, grad.log_scales, it, {options.scaling_lr});
     adam_rot.Step(&work.rotations, grad.rotations, it, {options.rotation_lr});
@@ -179,13 +181,13 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
       curve_sum = 0;
       curve_count = 0;
     }
-    if (progress && (it % 50 == 0 || it == options.iterations)) progress(it, options.iterations, loss);
+    if (progress && (it % 50 == 0 || it == options.iterations))
+      progress(it, options.iterations, loss);
   }
   report.iterations = options.iterations;
   ASSIGN_OR_RETURN(report.final_loss, MeanLoss(work, views, options, &ws));
   *cloud = std::move(work);
-  report.seconds =
-      std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+  report.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return report;
 }
 

@@ -56,7 +56,7 @@ struct RefinementOptions {
 struct RefinementReport {
   int iterations = 0;
   int real_views = 0, generated_views = 0;
-  std::vector<double> loss_curve;        // mean loss per curve_every iterations
+  std::vector<double> loss_curve;           // mean loss per curve_every iterations
   double initial_loss = 0, final_loss = 0;  // mean loss over all views before / after
   double seconds = 0;
 };

@@ -82,11 +82,10 @@ TEST(ImageLosses, L1AndBceMatchFiniteDifferences) {
             1e-3);
   std::vector<size_t> alpha_probes;
   for (size_t i = 0; i < pixels; i += 3) alpha_probes.push_back(i);
-  EXPECT_LT(WorstRelativeError(RandomImage(5, pixels), alpha_probes,
-                               [&](const auto& a, auto* grad) {
-                                 return AlphaBce(a, mask, 1.0, grad);
-                               }),
-            1e-3);
+  EXPECT_LT(
+      WorstRelativeError(RandomImage(5, pixels), alpha_probes,
+                         [&](const auto& a, auto* grad) { return AlphaBce(a, mask, 1.0, grad); }),
+      1e-3);
 }
 
 // A textured bottle of surfels and a ring of 64x64 views around it.

@@ -126,7 +126,8 @@ absl::StatusOr<std::optional<RefinementView>> RealRefinementView(
       for (int dy = 0; dy < factor; ++dy) {
         for (int dx = 0; dx < factor; ++dx) {
           const size_t i = static_cast<size_t>(y0 + y * factor + dy) * w + x0 + x * factor + dx;
-          for (int c = 0; c < 3; ++c) rgb[c] += image.pixels[i * channels + (channels >= 3 ? c : 0)];
+          for (int c = 0; c < 3; ++c)
+            rgb[c] += image.pixels[i * channels + (channels >= 3 ? c : 0)];
         }
       }
       const size_t o = static_cast<size_t>(y) * out_w + x;

@@ -25,7 +25,7 @@ struct CompleteStageOptions {
   // measured no gain at the 2DGS learning rates (docs/RESULTS.md "Joint refinement"); the
   // prototype's setting is 2000.
   int refine_iterations = 0;
-  int refine_view_size = 256;      // real views cropped and binned to at most this, px
+  int refine_view_size = 256;  // real views cropped and binned to at most this, px
   uint64_t seed = 1;
 };
 

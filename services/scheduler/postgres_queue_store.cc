@@ -250,8 +250,8 @@ class PostgresTx final : public QueueTx {
     stats.scenes = tx_.exec("SELECT COUNT(DISTINCT scene) FROM jobs")[0][0].as<int64_t>();
     const pqxx::row oldest = tx_.exec("SELECT MIN(created_ms) FROM jobs WHERE state = 1")[0];
     if (!oldest[0].is_null()) stats.oldest_queued_age_ms = now_ms - oldest[0].as<int64_t>();
-    for (const pqxx::row& row :
-         tx_.exec("SELECT kind, state, COUNT(*) FROM jobs GROUP BY kind, state ORDER BY kind, state"))
+    for (const pqxx::row& row : tx_.exec(
+             "SELECT kind, state, COUNT(*) FROM jobs GROUP BY kind, state ORDER BY kind, state"))
       stats.jobs_by_stage.push_back({row[0].as<std::string>(),
                                      JobStateName(static_cast<JobState>(row[1].as<int>())),
                                      row[2].as<int64_t>()});

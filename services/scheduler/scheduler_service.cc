@@ -119,8 +119,7 @@ absl::Status SchedulerService::Lease(const v1::LeaseJobRequest& request,
       queue_->LeaseNext(kinds, request.worker_id(), int64_t{request.lease_seconds()} * 1000));
   if (!lease) return absl::OkStatus();
   const int64_t ready_ms = std::max(lease->job.created_ms, lease->job.not_before_ms);
-  RecordLease(lease->job.kind,
-              std::max<int64_t>(0, lease->job.updated_ms - ready_ms) / 1000.0);
+  RecordLease(lease->job.kind, std::max<int64_t>(0, lease->job.updated_ms - ready_ms) / 1000.0);
   ToProto(lease->job, response->mutable_job());
   response->set_lease_token(lease->token);
   for (const auto& [name, digest] : lease->inputs)

@@ -260,7 +260,8 @@ class SqliteTx final : public QueueTx {
     oldest.Bind(1, Code(JobState::kQueued));
     ASSIGN_OR_RETURN(row, oldest.Step());
     if (row && oldest.Int(0) > 0) stats.oldest_queued_age_ms = now_ms - oldest.Int(0);
-    Statement by_stage(db_, "SELECT kind, state, COUNT(*) FROM jobs GROUP BY kind, state ORDER BY kind, state");
+    Statement by_stage(
+        db_, "SELECT kind, state, COUNT(*) FROM jobs GROUP BY kind, state ORDER BY kind, state");
     while (true) {
       ASSIGN_OR_RETURN(bool more, by_stage.Step());
       if (!more) break;

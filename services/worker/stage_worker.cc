@@ -10,8 +10,8 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "common/core/status.h"
-#include "common/metrics/metrics.h"
 #include "common/core/timer.h"
+#include "common/metrics/metrics.h"
 #include "common/rpc/status.h"
 #include "common/store/manifest.h"
 #include "services/worker/input_cache.h"
@@ -33,12 +33,12 @@ prometheus::Family<prometheus::Gauge>& JobsRunning() {
 prometheus::Family<prometheus::Histogram>& JobDurations() {
   static auto& f = prometheus::BuildHistogram()
                        .Name("instascene_worker_job_duration_seconds")
-                       .Help("Wall time of a job attempt in the worker (inputs, stage, upload), by "
-                             "stage and outcome")
+                       .Help(
+                           "Wall time of a job attempt in the worker (inputs, stage, upload), by "
+                           "stage and outcome")
                        .Register(metrics::Registry());
   return f;
 }
-
 
 // Bad input or parameters will fail again: permanent. Everything else may be transient.
 v1::FailureKind FailureFor(absl::StatusCode code) {
