@@ -277,7 +277,7 @@ void AddBenchCommand(CLI::App& app, Action* action) {
         args->gaussians_set = true;
       },
       "Scene size (raster default 1000000; decompose: the preset's; complete: the object's "
-      "surfels before its unseen half is dropped, default 20000)");
+      "surfels before the never-seen ones are dropped, default 25000: ~20k stay)");
   cmd->add_option("--width", args->width, "Frame width, px (default 1280; complete: 640)");
   cmd->add_option("--height", args->height, "Frame height, px (default 720; complete: 480)");
   cmd->add_option_function<int>(
