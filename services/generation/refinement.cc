@@ -123,7 +123,9 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
   if (cloud->num_scales != 2) return absl::InvalidArgumentError("refinement needs 2DGS surfels");
   if (options.iterations < 0 || options.fixed_view_every < 1 || options.curve_every < 1 ||
       !(options.spatial_scale > 0)) {
-    return absl::InvalidArgumentError("refinement: bad options");
+    return absl::InvalidArgumentError(
+        "refinement: needs iterations >= 0, fixed_view_every >= 1, curve_every >= 1, "
+        "spatial_scale > 0");
   }
   RETURN_IF_ERROR(CheckViews(views, cloud->sh_degree));
   const auto start = std::chrono::steady_clock::now();
