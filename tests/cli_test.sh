@@ -54,7 +54,8 @@ check "eval --completion" "$BIN" eval --scene "$WORK/u" --completion "$WORK/u/ob
 check "eval --completion reports three versions" bash -c "tail -n 1 '$WORK/out.txt' | python3 -c \"import json,sys; d=json.load(sys.stdin); assert d['matched'] > 0 and set(d['mean']) == {'raw','closed','completed'}\""
 mkdir -p "$WORK/u/broken" && cp -r "$(ls -d "$WORK"/u/objects/*/ | head -n 1)" "$WORK/u/broken/1" && echo '{"id": 1}' > "$WORK/u/broken/1/manifest.json"
 check_fails "eval --completion on a malformed manifest" "malformed JSON field" "$BIN" eval --scene "$WORK/u" --completion "$WORK/u/broken"
-check_fails "complete with an unknown prior" "diffusion" "$BIN" complete --scene "$WORK/u" --result "$WORK/u/gt" --out "$WORK/u/x" --prior diffusion
+check_fails "complete with an unknown prior" "magic" "$BIN" complete --scene "$WORK/u" --result "$WORK/u/gt" --out "$WORK/u/x" --prior magic
+check_fails "the diffusion prior without a denoiser" "needs --denoiser grpc://HOST:PORT" "$BIN" complete --scene "$WORK/u" --result "$WORK/u/gt" --out "$WORK/u/x" --prior diffusion
 check_fails "complete an absent object" "no object could be completed" "$BIN" complete --scene "$WORK/u" --result "$WORK/u/gt" --out "$WORK/u/y" --object 999
 check_fails "eval needs exactly one of --result and --completion" "exactly one" "$BIN" eval --scene "$WORK/u" --result "$WORK/u/gt" --completion "$WORK/u/objects"
 check "segment again" "$BIN" segment --scene "$WORK/s" --features "$WORK/run/segmentation" --out "$WORK/seg2" --threshold 0.8

@@ -25,6 +25,7 @@ void AddCompleteCommand(CLI::App& app, Action* action) {
   struct Args {
     std::string scene, result, out;
     std::vector<uint32_t> objects;
+    std::string denoiser;
     StageFlags flags;
     int threads = 0;
     bool json = false;
@@ -41,6 +42,10 @@ void AddCompleteCommand(CLI::App& app, Action* action) {
   cmd->add_option("--out", args->out, "Output directory (one <id>/ folder per object)")->required();
   cmd->add_option("--object", args->objects, "Instance ids to complete (default: all)");
   args->flags.Add(cmd, generation::CompleteSpec());
+  cmd->add_option(
+      "--denoiser", args->denoiser,
+      "--prior diffusion: the Denoiser service, grpc://HOST:PORT (no model weights ship "
+      "with InstaScene; docs/GENERATION.md)");
   cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");
   cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
   cmd->callback([args, action] {
@@ -52,6 +57,7 @@ void AddCompleteCommand(CLI::App& app, Action* action) {
                            parameters.value("complete", nlohmann::json::object())));
       generation::CompletionOptions options = generation::ToCompletionOptions(stage_options);
       options.num_threads = args->threads;
+      options.denoiser = args->denoiser;
       ASSIGN_OR_RETURN(Scene scene, ReadScene(args->scene));
       ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
       cloud = ToSurfels(cloud);

@@ -37,7 +37,8 @@ inline constexpr char kProvenanceChannel[] = "provenance";
 using ViewImageLoader = std::function<absl::StatusOr<Image>(int view)>;
 
 struct CompletionOptions {
-  std::string prior = "geometric";  // geometric | none
+  std::string prior = "geometric";  // geometric | none | diffusion
+  std::string denoiser;             // the diffusion prior's Denoiser service: grpc://HOST:PORT
   RingOptions ring;
   VisibilityOptions visibility;
   FreeSpaceOptions free_space;

@@ -8,12 +8,15 @@
 #include "common/mesh/ray_caster.h"
 #include "common/mesh/surfel_mesh.h"
 #include "common/raster/rasterizer.h"
+#include "common/rpc/server.h"
 #include "common/splat/gaussian_ply.h"
 #include "common/synth/cluttered_scene.h"
 #include "common/synth/observed_surfels.h"
 #include "common/synth/primitives.h"
 #include "common/synth/surfels.h"
 #include "services/generation/completion.h"
+#include "services/generation/diffusion/analytic_denoiser.h"
+#include "services/generation/diffusion/grpc_denoiser.h"
 #include "services/generation/symmetry.h"
 
 namespace instascene::generation {
@@ -231,6 +234,64 @@ TEST(Completion, RefinesWithRealAndGeneratedViews) {
   auto off = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
   ASSERT_TRUE(off.ok());
   EXPECT_EQ(off->manifest["refinement"]["status"], "not run");
+}
+
+// The diffusion prior through a loopback Denoiser service (the analytic denoiser: it proves the
+// plumbing, not the images): it generates one image per unknown ring view, which the refinement
+// then fits; an unreachable or misbehaving denoiser fails the object with a message naming it.
+TEST(Completion, DiffusionPriorThroughADenoiserService) {
+  const diffusion::NoiseSchedule schedule = diffusion::NoiseSchedule::ScaledLinear();
+  std::vector<double> means(16, 0.2);  // one data mean per possible condition view
+  diffusion::AnalyticDenoiser analytic(schedule, means, 0.0, 0.4);
+  diffusion::DenoiserService service(&analytic, "analytic-gaussian", {3, 32, 32}, 1000);
+  rpc::ServerOptions server_options;
+  server_options.listen = "127.0.0.1:0";
+  auto server = rpc::Server::Start(server_options, {&service}, {"instascene.v1.Denoiser"});
+  ASSERT_TRUE(server.ok());
+  PartialObject scene = MakePartialObject(Bottle(), 2500, 19);
+  // A wall behind the bottle (x = -0.12): the ring views from that side see it occluded, so they
+  // are unknown and become the sampler's targets.
+  TriangleMesh wall = MakeRectangle(0.6f, 0.5f, 6, 5);
+  for (auto& v : wall.vertices) v = Eigen::Vector3f(-0.12f, v.x(), v.y() + 0.25f);
+  std::mt19937_64 rng(3);
+  const size_t before = scene.cloud.size();
+  AppendSurfels(wall, 3000, Appearance{}, SurfelSampling{}, rng, &scene.cloud);
+  scene.labels.resize(scene.cloud.size(), 0);
+  ASSERT_GT(scene.cloud.size(), before);
+  CompletionOptions options;
+  options.meshing.size_px = 64;
+  options.prior = "diffusion";
+  options.denoiser = "grpc://" + (*server)->address();
+  options.refinement.iterations = 5;
+  auto done = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
+  ASSERT_TRUE(done.ok()) << done.status();
+  const int unknown = done->manifest["unknown_views"].get<int>();
+  ASSERT_GT(unknown, 0);
+  EXPECT_EQ(done->manifest["prior"], "diffusion");
+  EXPECT_EQ(static_cast<int>(done->prior.generated.size()), unknown);
+  for (const ViewImages& v : done->prior.generated) {
+    EXPECT_EQ(v.rgb.size(), static_cast<size_t>(3) * v.camera.width * v.camera.height);
+  }
+  EXPECT_GT(done->prior.report["warped_latent_pixels"].get<int64_t>(), 0);
+  EXPECT_EQ(done->manifest["refinement"]["generated_from"], "the prior's images");
+  EXPECT_EQ(done->object.size(), done->raw.size());  // this prior adds images, not surfels
+
+  options.denoiser = "grpc://127.0.0.1:1";  // nothing listens there
+  auto unreachable = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
+  EXPECT_EQ(unreachable.status().code(), absl::StatusCode::kUnavailable);
+  EXPECT_NE(unreachable.status().message().find("denoiser"), std::string::npos);
+  diffusion::DenoiserService wrong(&analytic, "analytic-gaussian", {3, 32, 32}, 10);
+  auto wrong_server = rpc::Server::Start(server_options, {&wrong}, {"instascene.v1.Denoiser"});
+  ASSERT_TRUE(wrong_server.ok());
+  options.denoiser = "grpc://" + (*wrong_server)->address();  // refuses timesteps >= 10
+  auto refused = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_NE(refused.status().message().find("timestep"), std::string::npos) << refused.status();
+  options.denoiser = "onnx:model.json";
+  EXPECT_EQ(CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options).status().code(),
+            absl::StatusCode::kUnimplemented);
+  (*server)->Drain(std::chrono::milliseconds(100));
+  (*wrong_server)->Drain(std::chrono::milliseconds(100));
 }
 
 TEST(Completion, ResultsDoNotDependOnThreadCount) {

@@ -221,11 +221,5 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   return out;
 }
 
-absl::StatusOr<std::unique_ptr<CompletionPrior>> MakePrior(const std::string& name) {
-  if (name == "geometric") return std::make_unique<GeometricPrior>();
-  if (name == "none") return std::make_unique<NoPrior>();
-  return absl::InvalidArgumentError(
-      absl::StrCat("unknown completion prior '", name, "' (known: geometric, none)"));
-}
 
 }  // namespace instascene::generation

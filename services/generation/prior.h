@@ -55,7 +55,10 @@ class CompletionPrior {
   virtual absl::StatusOr<PriorOutput> Complete(const PriorInput& input) const = 0;
 };
 
-// The prior named `name` ("geometric" or "none"); InvalidArgument for an unknown name.
-absl::StatusOr<std::unique_ptr<CompletionPrior>> MakePrior(const std::string& name);
+// The prior named `name`: "geometric", "none", or "diffusion" (which needs `denoiser`, a
+// Denoiser service as grpc://HOST:PORT; diffusion/diffusion_prior.h). InvalidArgument for an
+// unknown name or a missing / malformed denoiser.
+absl::StatusOr<std::unique_ptr<CompletionPrior>> MakePrior(const std::string& name,
+                                                           const std::string& denoiser = "");
 
 }  // namespace instascene::generation

@@ -57,6 +57,11 @@ namespace {
 
 absl::StatusOr<pipeline::StageResult> RunComplete(const pipeline::StageContext& c) {
   ASSIGN_OR_RETURN(CompleteStageOptions o, CompleteCodec().Decode(c.parameters));
+  if (o.prior == "diffusion") {
+    return absl::InvalidArgumentError(
+        "the diffusion prior runs offline only for now (instascene complete --prior diffusion "
+        "--denoiser grpc://HOST:PORT): workers have no denoiser setting yet");
+  }
   ASSIGN_OR_RETURN(std::string segment, c.Input("segment"));
   ASSIGN_OR_RETURN(uint32_t id, InstanceOfItem(segment, c.item));
   CompletionOptions options = ToCompletionOptions(o);

@@ -1,0 +1,186 @@
+#include "services/generation/diffusion/diffusion_prior.h"
+
+#include <algorithm>
+#include <cmath>
+#include <random>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/mesh/ray_caster.h"
+#include "common/mesh/surfel_mesh.h"
+#include "common/rpc/server.h"
+#include "services/generation/diffusion/grpc_denoiser.h"
+#include "services/generation/diffusion/warping.h"
+
+namespace instascene::generation::diffusion {
+namespace {
+
+// Identity VAE: area-average an HxWx3 [0, 1] image to n x n, map to [-1, 1], channel-major.
+std::vector<float> Encode(const std::vector<float>& rgb, int width, int height, int n) {
+  std::vector<float> latent(static_cast<size_t>(3) * n * n, 0.0f);
+  std::vector<int> count(static_cast<size_t>(n) * n, 0);
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      const int ly = y * n / height, lx = x * n / width;
+      const size_t cell = static_cast<size_t>(ly) * n + lx;
+      ++count[cell];
+      for (int c = 0; c < 3; ++c)
+        latent[c * n * n + cell] += rgb[(static_cast<size_t>(y) * width + x) * 3 + c];
+    }
+  }
+  for (int c = 0; c < 3; ++c) {
+    for (size_t cell = 0; cell < count.size(); ++cell)
+      latent[c * n * n + cell] = 2.0f * latent[c * n * n + cell] / std::max(1, count[cell]) - 1.0f;
+  }
+  return latent;
+}
+
+// The camera of the latent grid: the view scaled to n x n.
+PinholeCamera LatentCamera(const PinholeCamera& c, int n) {
+  return c.Scaled(static_cast<double>(n) / c.width);
+}
+
+}  // namespace
+
+DiffusionPrior::DiffusionPrior(std::shared_ptr<const Denoiser> denoiser, std::string where,
+                               DiffusionPriorOptions options)
+    : denoiser_(std::move(denoiser)), where_(std::move(where)), options_(options) {}
+
+absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) const {
+  PriorOutput out;
+  out.added.num_scales = 2;
+  out.added.sh_degree = input.instance->sh_degree;
+  if (input.targets.empty() || input.conditions.empty()) {
+    out.abstained = true;
+    out.reason = input.targets.empty() ? "no unknown ring view to generate"
+                                       : "no known ring view to condition on";
+    out.report = {{"denoiser", where_}};
+    return out;
+  }
+  const int n = options_.latent_size;
+  // Known views on the latent grid, and the mesh the warping casts against.
+  std::vector<KnownView> known;
+  std::vector<std::vector<float>> condition_latents;
+  for (const ViewImages& v : input.conditions) {
+    condition_latents.push_back(Encode(v.rgb, v.camera.width, v.camera.height, n));
+    // Warping copies latent values: store them HxWxC for the warper.
+    KnownView k{LatentCamera(v.camera, n), std::vector<float>(static_cast<size_t>(3) * n * n)};
+    for (int c = 0; c < 3; ++c) {
+      for (int cell = 0; cell < n * n; ++cell)
+        k.values[cell * 3 + c] = condition_latents.back()[c * n * n + cell];
+    }
+    known.push_back(std::move(k));
+  }
+  ASSIGN_OR_RETURN(std::unique_ptr<RayCaster> mesh,
+                   RayCaster::Create(SurfelDiscs(*input.instance, {}, SurfelDiscOptions{})));
+  std::vector<WarpResult> warped;
+  int64_t warped_pixels = 0;
+  for (const PinholeCamera& target : input.targets) {
+    // Nearest known views first (by the angle between viewing directions).
+    std::vector<KnownView> order = known;
+    const Eigen::Vector3d dir_t = target.camera_from_world.rotation.row(2).transpose();
+    std::stable_sort(order.begin(), order.end(), [&](const KnownView& a, const KnownView& b) {
+      return a.camera.camera_from_world.rotation.row(2).dot(dir_t.transpose()) >
+             b.camera.camera_from_world.rotation.row(2).dot(dir_t.transpose());
+    });
+    ASSIGN_OR_RETURN(WarpResult w,
+                     WarpIntoTarget(*mesh, order, LatentCamera(target, n), WarpOptions{}));
+    warped_pixels += w.written;
+    warped.push_back(std::move(w));
+  }
+  RETURN_IF_ERROR(CheckCancelled(input.cancel, "diffusion prior"));
+  const NoiseSchedule schedule = NoiseSchedule::ScaledLinear();
+  DdimOptions ddim = options_.ddim;
+  ddim.guidance = options_.guidance;
+  ddim.seed = input.seed;
+  std::vector<int> conditions(input.conditions.size());
+  for (size_t k = 0; k < conditions.size(); ++k) conditions[k] = static_cast<int>(k);
+  std::mt19937_64 replace_rng(input.seed ^ 0x5eedULL);
+  std::normal_distribution<double> normal(0.0, 1.0);
+  // RePaint: after each step, pixels a known view sees take the known latent noised to the
+  // level the latents are now at (clean after the last step).
+  StepHook hook = [&](int, int timestep, std::vector<std::vector<float>>* latents) -> absl::Status {
+    RETURN_IF_ERROR(CheckCancelled(input.cancel, "diffusion prior"));
+    if (!options_.replace_known) return absl::OkStatus();
+    const double a = timestep < 0 ? 1.0 : schedule.alphas_cumprod[timestep];
+    for (size_t t = 0; t < latents->size(); ++t) {
+      for (int cell = 0; cell < n * n; ++cell) {
+        if (!warped[t].known[cell]) continue;
+        for (int c = 0; c < 3; ++c) {
+          const double x0 = warped[t].values[cell * 3 + c];
+          (*latents)[t][c * n * n + cell] =
+              static_cast<float>(std::sqrt(a) * x0 + std::sqrt(1.0 - a) * normal(replace_rng));
+        }
+      }
+    }
+    return absl::OkStatus();
+  };
+  absl::StatusOr<std::vector<std::vector<float>>> latents =
+      SampleDdim(*denoiser_, schedule, static_cast<int>(input.targets.size()), 3 * n * n,
+                 conditions, ddim, hook);
+  if (!latents.ok()) {
+    return absl::Status(latents.status().code(), absl::StrCat("diffusion prior (denoiser ", where_,
+                                                              "): ", latents.status().message()));
+  }
+  // Decode (identity VAE): nearest upsampling to the ring size, [-1, 1] -> [0, 1].
+  for (size_t t = 0; t < input.targets.size(); ++t) {
+    const PinholeCamera& cam = input.targets[t];
+    ViewImages v;
+    v.camera = cam;
+    const size_t pixels = static_cast<size_t>(cam.width) * cam.height;
+    v.rgb.resize(3 * pixels);
+    v.alpha.assign(pixels, 0.0f);
+    v.mask.assign(pixels, 0);
+    v.depth.assign(pixels, 0.0f);
+    for (int y = 0; y < cam.height; ++y) {
+      for (int x = 0; x < cam.width; ++x) {
+        const int cell = (y * n / cam.height) * n + x * n / cam.width;
+        const size_t i = static_cast<size_t>(y) * cam.width + x;
+        bool white = true;
+        for (int c = 0; c < 3; ++c) {
+          const float value =
+              std::clamp(0.5f * ((*latents)[t][c * n * n + cell] + 1.0f), 0.0f, 1.0f);
+          v.rgb[3 * i + c] = value;
+          white = white && value > 0.98f;
+        }
+        v.mask[i] = !white;  // the ring's background is white
+        v.alpha[i] = v.mask[i] ? 1.0f : 0.0f;
+      }
+    }
+    out.generated.push_back(std::move(v));
+  }
+  out.reason = absl::StrCat("generated ", input.targets.size(), " unknown views from ",
+                            input.conditions.size(), " known ones");
+  out.report = {{"denoiser", where_},
+                {"latent_size", n},
+                {"steps", ddim.steps},
+                {"eta", ddim.eta},
+                {"guidance", ddim.guidance},
+                {"replace_known", options_.replace_known},
+                {"warped_latent_pixels", warped_pixels},
+                {"vae", "identity (area average to the latent grid)"}};
+  return out;
+}
+
+absl::StatusOr<std::unique_ptr<CompletionPrior>> MakeDiffusionPrior(const std::string& denoiser) {
+  if (absl::StartsWith(denoiser, "grpc://")) {
+    const std::string address = denoiser.substr(7);
+    if (address.empty())
+      return absl::InvalidArgumentError("--denoiser grpc://HOST:PORT: no address");
+    GrpcDenoiserOptions options;
+    options.latent_shape = {3, DiffusionPriorOptions{}.latent_size,
+                            DiffusionPriorOptions{}.latent_size};
+    auto client = std::make_shared<GrpcDenoiser>(rpc::Connect(address), address, options);
+    return std::make_unique<DiffusionPrior>(client, denoiser);
+  }
+  if (absl::StartsWith(denoiser, "onnx:"))
+    return absl::UnimplementedError(
+        "--denoiser onnx:FILE.json: the ONNX runner is not built (OpenCV 4.6's ONNX importer "
+        "cannot run a timestep-indexed model; docs/GENERATION.md)");
+  return absl::InvalidArgumentError(absl::StrCat(
+      "the diffusion prior needs --denoiser grpc://HOST:PORT (a Denoiser service), not '",
+      denoiser.substr(0, 80), "'"));
+}
+
+}  // namespace instascene::generation::diffusion

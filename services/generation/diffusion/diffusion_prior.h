@@ -1,0 +1,48 @@
+// services/generation/diffusion/diffusion_prior.h: the `diffusion` completion prior (issue 18;
+// GENERATION.md step 4; ALGORITHM.md 7.5-7.7). Known ring views are the conditions, unknown ring
+// views the targets; each target starts from noise, its latent's pixels that a known view sees
+// (geometry-aware warping through a mesh of the observed surfels, nearest azimuth first) are
+// replaced at every step by the known latent noised to the step's level (RePaint-style); the
+// DDIM sampler averages the denoiser's noise over the conditions (Eq. 9). The VAE is the identity
+// here: a latent is the RGB image area-averaged to latent_size² and mapped to [-1, 1] (a site's
+// model with a real VAE encodes/decodes around its own Denoiser service). The output is one
+// generated RGB image per target (and its mask: where the warped known latents or the sampled
+// ones say the object is not background white), which the joint refinement fits. No weights ship
+// with the project: the denoiser is a gRPC service (grpc://HOST:PORT). Thread-compatible.
+#pragma once
+
+#include <memory>
+#include <string>
+
+#include "services/generation/diffusion/ddim.h"
+#include "services/generation/diffusion/denoiser.h"
+#include "services/generation/prior.h"
+
+namespace instascene::generation::diffusion {
+
+struct DiffusionPriorOptions {
+  int latent_size = 32;       // latent grid per side (MVD-Fusion: 32 for 256² views)
+  DdimOptions ddim;           // 50 steps, eta 1
+  double guidance = 2.5;      // classifier-free guidance (MVD-Fusion's scale)
+  bool replace_known = true;  // RePaint-style replacement of warped known pixels at every step
+};
+
+class DiffusionPrior : public CompletionPrior {
+ public:
+  // `denoiser` must outlive the prior; `where` names it in messages.
+  DiffusionPrior(std::shared_ptr<const Denoiser> denoiser, std::string where,
+                 DiffusionPriorOptions options = {});
+  std::string name() const override { return "diffusion"; }
+  absl::StatusOr<PriorOutput> Complete(const PriorInput& input) const override;
+
+ private:
+  std::shared_ptr<const Denoiser> denoiser_;
+  std::string where_;
+  DiffusionPriorOptions options_;
+};
+
+// The prior for a denoiser URI: "grpc://HOST:PORT" (the Denoiser service). "onnx:FILE.json" is
+// refused with Unimplemented (see docs/GENERATION.md); anything else with InvalidArgument.
+absl::StatusOr<std::unique_ptr<CompletionPrior>> MakeDiffusionPrior(const std::string& denoiser);
+
+}  // namespace instascene::generation::diffusion
