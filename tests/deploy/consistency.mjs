@@ -1,6 +1,7 @@
 // Checks rendered manifests against the build and the Dockerfile: every container's command is a
 // binary the build produced (in BIN_DIR) and an ENTRYPOINT of docker/Dockerfile, and every
-// container port is the port its --listen argument binds. Usage: node consistency.mjs BIN_DIR
+// container port is the port its --listen argument binds (the port named "metrics": its --metrics
+// argument, which the pod's prometheus.io/port annotation names too). Usage: node consistency.mjs BIN_DIR
 // DOCKERFILE FILE.yaml... Prints "N passed, N failed"; exits 1 on any mismatch.
 import { existsSync, readFileSync } from "node:fs";
 import { basename, join } from "node:path";
@@ -25,11 +26,21 @@ for (const file of files) {
       const command = (c.command ?? [])[0] ?? "";
       check(existsSync(join(binDir, basename(command))), `${what}: ${command} is not in ${binDir}`);
       check(docker.includes(`ENTRYPOINT ["${command}"]`), `${what}: no Dockerfile ENTRYPOINT ${command}`);
-      const listen = (c.args ?? []).map((a) => a.replace(/^--listen=/, "")).find((a, i, all) =>
-        (c.args[i].startsWith("--listen=")) || (i > 0 && c.args[i - 1] === "--listen"));
+      const flag = (name) => (c.args ?? []).map((a) => a.replace(new RegExp(`^--${name}=`), "")).find((a, i) =>
+        (c.args[i].startsWith(`--${name}=`)) || (i > 0 && c.args[i - 1] === `--${name}`));
+      const listen = flag("listen");
       const port = listen ? Number(listen.split(":").pop()) : NaN;
-      for (const p of c.ports ?? [])
-        check(p.containerPort === port, `${what}: containerPort ${p.containerPort} but --listen ${listen}`);
+      const metrics = flag("metrics");
+      const metricsPort = metrics ? Number(metrics.split(":").pop()) : NaN;
+      for (const p of c.ports ?? []) {
+        if (p.name === "metrics") {
+          check(p.containerPort === metricsPort, `${what}: metrics port ${p.containerPort} but --metrics ${metrics}`);
+          const annotated = doc.spec.template.metadata?.annotations?.["prometheus.io/port"];
+          check(Number(annotated) === metricsPort, `${what}: prometheus.io/port ${annotated} but --metrics ${metrics}`);
+        } else {
+          check(p.containerPort === port, `${what}: containerPort ${p.containerPort} but --listen ${listen}`);
+        }
+      }
       for (const probe of [c.readinessProbe, c.livenessProbe])
         check(probe?.grpc?.port === port, `${what}: a gRPC probe is not on port ${port}`);
     }
