@@ -45,12 +45,12 @@ check "render labels" "$BIN" render --scene "$WORK/s" --view 2 --mode labels --r
 check "synth with unseen surfels dropped" "$BIN" synth --out "$WORK/u" --preset tiny --seed 5 --unseen drop --mask-noise none
 check "fewer surfels than the full scene" test "$(python3 -c "import json; print(json.load(open('$WORK/u/scene.json'))['gt']['unseen_surfels'])")" = dropped
 check "complete the ground-truth objects (with 20 refinement iterations)" "$BIN" complete --scene "$WORK/u" --result "$WORK/u/gt" --out "$WORK/u/objects" --mesh-size 64 --refine-iterations 20 --json
+check "completion json lists objects" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"objects\":\[{'"
 check "the refinement ran on real and generated views" python3 -c "
 import glob, json
 ms = [json.load(open(p))['refinement'] for p in glob.glob('$WORK/u/objects/*/manifest.json')]
 assert ms and all(m['status'] == 'done' and m['iterations'] == 20 and m['generated_views'] == 16 for m in ms), ms
 assert sum(m['real_views'] for m in ms) > 0, ms  # small objects at 96x72 may show < 64 px"
-check "completion json lists objects" bash -c "tail -n 1 '$WORK/out.txt' | grep -q '\"objects\":\[{'"
 check "eval --completion" "$BIN" eval --scene "$WORK/u" --completion "$WORK/u/objects" --json
 check "eval --completion reports three versions" bash -c "tail -n 1 '$WORK/out.txt' | python3 -c \"import json,sys; d=json.load(sys.stdin); assert d['matched'] > 0 and set(d['mean']) == {'raw','closed','completed'}\""
 mkdir -p "$WORK/u/broken" && cp -r "$(ls -d "$WORK"/u/objects/*/ | head -n 1)" "$WORK/u/broken/1" && echo '{"id": 1}' > "$WORK/u/broken/1/manifest.json"

@@ -17,6 +17,7 @@
 #include "services/generation/completion.h"
 #include "services/generation/diffusion/analytic_denoiser.h"
 #include "services/generation/diffusion/grpc_denoiser.h"
+#include "services/generation/stage.h"
 #include "services/generation/symmetry.h"
 
 namespace instascene::generation {
@@ -292,6 +293,20 @@ TEST(Completion, DiffusionPriorThroughADenoiserService) {
             absl::StatusCode::kUnimplemented);
   (*server)->Drain(std::chrono::milliseconds(100));
   (*wrong_server)->Drain(std::chrono::milliseconds(100));
+}
+
+// The complete stage takes the denoiser from the worker's settings, never from the job.
+TEST(CompleteStage, DiffusionNeedsAWorkerWithADenoiser) {
+  const pipeline::StageDefinition stage = CompleteStage();
+  pipeline::StageContext context;
+  context.parameters = {{"prior", "diffusion"}};
+  auto without = stage.run(context);
+  EXPECT_EQ(without.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(without.status().message().find("--denoiser grpc://HOST:PORT"), std::string::npos);
+  context.settings["denoiser"] = "grpc://127.0.0.1:1";
+  auto with = stage.run(context);  // past the check: this context has no segment input
+  EXPECT_NE(with.status().code(), absl::StatusCode::kFailedPrecondition) << with.status();
+  EXPECT_NE(with.status().message().find("segment"), std::string::npos) << with.status();
 }
 
 TEST(Completion, ResultsDoNotDependOnThreadCount) {

@@ -57,16 +57,18 @@ namespace {
 
 absl::StatusOr<pipeline::StageResult> RunComplete(const pipeline::StageContext& c) {
   ASSIGN_OR_RETURN(CompleteStageOptions o, CompleteCodec().Decode(c.parameters));
-  if (o.prior == "diffusion") {
-    return absl::InvalidArgumentError(
-        "the diffusion prior runs offline only for now (instascene complete --prior diffusion "
-        "--denoiser grpc://HOST:PORT): workers have no denoiser setting yet");
+  auto denoiser = c.settings.find("denoiser");
+  if (o.prior == "diffusion" && denoiser == c.settings.end()) {
+    return absl::FailedPreconditionError(
+        "prior diffusion: this worker has no Denoiser service (start it with --denoiser "
+        "grpc://HOST:PORT)");
   }
   ASSIGN_OR_RETURN(std::string segment, c.Input("segment"));
   ASSIGN_OR_RETURN(uint32_t id, InstanceOfItem(segment, c.item));
   CompletionOptions options = ToCompletionOptions(o);
   options.num_threads = c.num_threads;
   options.cancel = c.cancel;
+  if (denoiser != c.settings.end()) options.denoiser = denoiser->second;
   c.Report("loading", 0, 1);
   ASSIGN_OR_RETURN(Scene scene, ReadScene(c.scene_dir));
   ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));

@@ -6,9 +6,11 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
   using O = CompleteStageOptions;
   static const auto* codec = [] {
     auto* c = new pipeline::ParamCodec<O>("complete");
-    c->Choice("prior", &O::prior, {"geometric", "none", "diffusion"},
-              "Completion prior: geometric (symmetry + support, no weights), none (closed crop) or "
-              "diffusion (a Denoiser service: instascene complete --denoiser; offline only)")
+    c->Choice(
+         "prior", &O::prior, {"geometric", "none", "diffusion"},
+         "Completion prior: geometric (symmetry + support, no weights), none (closed crop) or "
+         "diffusion (a Denoiser service: instascene complete --denoiser, or workers started with "
+         "--denoiser)")
         .Int("ring_views", &O::ring_views, 4, 64, "Cameras on the viewpoint ring")
         .Real("ring_elevation", &O::ring_elevation, -80.0, 80.0, "Ring elevation, degrees")
         .Int("ring_size", &O::ring_size, 32, 1024, "Ring image size, px")

@@ -180,6 +180,7 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
     w.num_threads = options.num_threads;
     w.lease_seconds = options.lease_seconds;
     w.cache_bytes = options.cache_bytes;
+    if (!options.denoiser.empty()) w.stage_settings["denoiser"] = options.denoiser;
     w.heartbeat_interval_ms = std::min(1000, options.lease_seconds * 1000 / 4);  // live progress
     RETURN_IF_ERROR(w.Validate(stages));
     workers.push_back(std::make_unique<worker::StageWorker>(w, blob_store, &stages));

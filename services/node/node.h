@@ -51,6 +51,9 @@ struct NodeOptions {
   // Prometheus /metrics on this host:port ("" = off): RPC latencies, the queue (with a
   // scheduler), the store (with a store), workers' jobs, the data directory's disk space.
   std::string metrics_listen;
+  // Generation workers: the diffusion prior's Denoiser service (grpc://HOST:PORT; "" = none, and
+  // complete jobs asking for prior "diffusion" fail).
+  std::string denoiser;
   store::StoreOptions store_options;
 
   absl::Status Validate() const;

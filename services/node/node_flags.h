@@ -58,6 +58,9 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
   app.add_option("--ready-file", o->ready_file,
                  "Write the bound address here once serving (removed at exit); with --metrics a "
                  "second line metrics=HOST:PORT");
+  app.add_option("--denoiser", o->denoiser,
+                 "Generation workers: the diffusion prior's Denoiser service, grpc://HOST:PORT "
+                 "(default: none; complete jobs with prior diffusion then fail)");
   app.add_option("--metrics", o->metrics_listen,
                  "Serve Prometheus metrics at http://HOST:PORT/metrics (port 0 = any free port; "
                  "default: off)");

@@ -57,7 +57,7 @@ TEST(Registry, CodecsValidateAndCanonicalize) {
            {"decompose", {{"dbscan_eps_relative", 1}}, "true or false"},
            {"render", nlohmann::json::object(), "unknown stage 'render'"},
            {"segment", nlohmann::json::array(), "must be a JSON object"},
-           {"complete", {{"prior", "diffusion"}}, "diffusion"},
+           {"complete", {{"prior", "magic"}}, "magic"},
            {"complete", {{"ring_views", 1000}}, "ring_views"}}) {
     const absl::Status s = r.Canonicalize(c.kind, c.p).status();
     EXPECT_EQ(s.code(), absl::StatusCode::kInvalidArgument) << c.p.dump();

@@ -37,6 +37,9 @@ struct StageContext {
   int num_threads = 0;                                   // 0 = all cores; never changes results
   std::function<void(const StageProgress&)> progress;    // may be null
   const CancelFlag* cancel = nullptr;                    // not owned
+  // The worker's deployment settings a stage may need (not job parameters: a client cannot set
+  // them). Keys in use: "denoiser" (complete: the diffusion prior's Denoiser, grpc://HOST:PORT).
+  std::map<std::string, std::string> settings;
 
   // The directory of input `name`; InvalidArgument when the job has no such input.
   absl::StatusOr<std::string> Input(const std::string& name) const;

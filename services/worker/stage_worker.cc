@@ -225,6 +225,7 @@ absl::Status StageWorker::Execute(const v1::LeaseJobResponse& lease, const std::
   context.item = job.item();
   context.num_threads = options_.num_threads;
   context.cancel = cancel;
+  context.settings = options_.stage_settings;
   context.progress = progress;
   ASSIGN_OR_RETURN(pipeline::StageResult result, stages_->Run(job.kind(), context));
   RETURN_IF_ERROR(CheckCancelled(cancel, job.kind()));

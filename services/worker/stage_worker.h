@@ -11,6 +11,7 @@
 
 #include <atomic>
 #include <condition_variable>
+#include <map>
 #include <memory>
 #include <mutex>
 #include <string>
@@ -33,6 +34,7 @@ struct WorkerOptions {
   int heartbeat_interval_ms = 1000;         // progress + lease extension period
   int lease_seconds = 0;                    // requested lease length; 0 = the scheduler's default
   int64_t cache_bytes = int64_t{20} << 30;  // input cache budget, LRU-evicted (0 = unlimited)
+  std::map<std::string, std::string> stage_settings;  // given to every stage (StageContext)
 
   absl::Status Validate(const pipeline::StageRegistry& stages) const;
 };
