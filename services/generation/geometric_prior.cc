@@ -221,5 +221,4 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   return out;
 }
 
-
 }  // namespace instascene::generation
