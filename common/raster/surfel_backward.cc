@@ -270,6 +270,17 @@ double BlendPixel(const Prepared& p, int x, int y, std::vector<Contributor>* lis
 
 }  // namespace
 
+SurfelGradients SurfelGradients::Zeros(const GaussianCloud& cloud) {
+  const size_t n = cloud.size();
+  SurfelGradients out;
+  out.positions.assign(3 * n, 0.0f);
+  out.log_scales.assign(2 * n, 0.0f);
+  out.rotations.assign(4 * n, 0.0f);
+  out.opacity_logits.assign(n, 0.0f);
+  out.sh.assign(cloud.sh.size(), 0.0f);
+  return out;
+}
+
 absl::StatusOr<SurfelImage> RenderSurfelsDifferentiable(const GaussianCloud& cloud,
                                                         const PinholeCamera& camera,
                                                         const SurfelRenderOptions& options) {
@@ -391,12 +402,7 @@ absl::StatusOr<SurfelGradients> SurfelBackward(const GaussianCloud& cloud,
       d_colour[band.touched[k]] += band.colour[k];
     }
   }
-  SurfelGradients out;
-  out.positions.assign(3 * n, 0.0f);
-  out.log_scales.assign(2 * n, 0.0f);
-  out.rotations.assign(4 * n, 0.0f);
-  out.opacity_logits.assign(n, 0.0f);
-  out.sh.assign(cloud.sh.size(), 0.0f);
+  SurfelGradients out = SurfelGradients::Zeros(cloud);
   const int stride = cloud.sh_stride();
   const int coeffs = cloud.sh_degree == 0 ? 1 : 4;
   for (size_t g = 0; g < n; ++g) {

@@ -44,6 +44,7 @@ struct SurfelImage {
 // Gradients in the layout of GaussianCloud's arrays (same sizes).
 struct SurfelGradients {
   std::vector<float> positions, log_scales, rotations, opacity_logits, sh;
+  static SurfelGradients Zeros(const GaussianCloud& cloud);  // every array sized, all 0
 };
 
 // Forward. Fails on a cloud that is not 2DGS, has SH degree > 1, or an invalid camera.

@@ -284,12 +284,7 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
     }
   }
 
-  SurfelGradients out;
-  out.positions.assign(3 * n, 0.0f);
-  out.log_scales.assign(2 * n, 0.0f);
-  out.rotations.assign(4 * n, 0.0f);
-  out.opacity_logits.assign(n, 0.0f);
-  out.sh.assign(cloud.sh.size(), 0.0f);
+  SurfelGradients out = SurfelGradients::Zeros(cloud);
   const int stride = cloud.sh_stride();
   const int degree = params.sh_degree;
   const int coeffs = NumShCoeffs(degree);
