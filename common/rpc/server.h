@@ -1,7 +1,7 @@
 // common/rpc/server.h: runs a gRPC server with an explicit lifecycle
 // STARTING -> SERVING -> DRAINING -> STOPPED, reported through the standard grpc.health.v1 service
 // (per registered service name and overall ""), server reflection, message-size limits, optional
-// interceptors (the node's RPC metrics, common/metrics/rpc_metrics.h), and a
+// TLS (common/rpc/credentials.h), interceptors (the node's RPC metrics, common/metrics/rpc_metrics.h), and a
 // graceful drain against a deadline (stop accepting, let in-flight calls finish, then cancel).
 // Also: waiting for SIGTERM / SIGINT. Thread-safe.
 #pragma once
@@ -15,12 +15,14 @@
 #include <vector>
 
 #include "absl/status/statusor.h"
+#include "common/rpc/credentials.h"
 
 namespace instascene::rpc {
 
 struct ServerOptions {
   std::string listen = "127.0.0.1:50051";  // host:port; port 0 = pick a free one
   int max_message_bytes = 64 << 20;        // per message, both directions
+  TlsServerOptions tls;                    // none = plaintext
   // Server interceptors (e.g. metrics::RpcMetricsInterceptors); null = none.
   std::function<
       std::vector<std::unique_ptr<grpc::experimental::ServerInterceptorFactoryInterface>>()>
@@ -36,8 +38,9 @@ class Server {
   ~Server();
 
   std::string address() const { return address_; }  // with the bound port
-  // An in-process channel to this server (no sockets), for services hosted in the same process.
-  std::shared_ptr<grpc::Channel> InProcessChannel();
+  // An in-process channel to this server (no sockets), for services hosted in the same process;
+  // every call carries `token` when one is given.
+  std::shared_ptr<grpc::Channel> InProcessChannel(const std::string& token = "");
   // Health NOT_SERVING, then Shutdown with the deadline: in-flight calls get until then.
   void Drain(std::chrono::milliseconds deadline);
 
