@@ -43,6 +43,13 @@ absl::Status VerifyBlobBytes(const Digest& digest, absl::string_view bytes) {
   return absl::OkStatus();
 }
 
+absl::Status CheckTenantName(absl::string_view tenant) {
+  bool ok = !tenant.empty() && tenant.size() <= 32 && tenant[0] != '-';
+  for (char c : tenant) ok &= (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '-';
+  if (!ok) return absl::InvalidArgumentError("tenant: 1-32 of a-z, 0-9 and '-'");
+  return absl::OkStatus();
+}
+
 absl::Status BlobStore::PutFile(const Digest& digest, const std::string& path,
                                 const TransferProgress& progress) {
   RETURN_IF_ERROR(ValidateDigest(digest));
@@ -104,6 +111,30 @@ absl::Status BlobStore::GetFile(const Digest& digest, const std::string& path) {
   return RenameDurably(temp, path);
 }
 
+namespace {
+absl::Status NoTenants() {
+  return absl::UnimplementedError("this store keeps no tenant grants");
+}
+}  // namespace
+
+absl::Status BlobStore::Grant(const std::string&, const std::vector<Digest>&) {
+  return NoTenants();
+}
+absl::StatusOr<std::vector<Digest>> BlobStore::FindUngranted(const std::string&,
+                                                             const std::vector<Digest>&) {
+  return NoTenants();
+}
+absl::StatusOr<int64_t> BlobStore::TenantCommittedSize(const std::string&, const Digest&) {
+  return NoTenants();
+}
+absl::StatusOr<int64_t> BlobStore::TenantAppend(const std::string&, const Digest&, int64_t,
+                                                absl::string_view) {
+  return NoTenants();
+}
+absl::Status BlobStore::TenantFinishUpload(const std::string&, const Digest&) {
+  return NoTenants();
+}
+
 absl::StatusOr<std::unique_ptr<FilesystemBlobStore>> FilesystemBlobStore::Open(
     const std::string& root, const StoreOptions& options) {
   RETURN_IF_ERROR(options.Validate());
@@ -149,8 +180,16 @@ std::string FilesystemBlobStore::BlobPath(const Digest& digest) const {
   return (fs::path(root_) / "cas" / digest.hash.substr(0, 2) / digest.hash).string();
 }
 
-std::string FilesystemBlobStore::PartPath(const Digest& digest) const {
-  return (fs::path(root_) / "uploads" / absl::StrCat(digest.hash, "-", digest.size_bytes, ".part"))
+std::string FilesystemBlobStore::PartPath(const Digest& digest, const std::string& space) const {
+  return (fs::path(root_) / "uploads" /
+          absl::StrCat(space, space.empty() ? "" : ".", digest.hash, "-", digest.size_bytes,
+                       ".part"))
+      .string();
+}
+
+std::string FilesystemBlobStore::GrantPath(const std::string& tenant, const Digest& digest) const {
+  return (fs::path(root_) / "grants" / tenant / digest.hash.substr(0, 2) /
+          absl::StrCat(digest.hash, "-", digest.size_bytes))
       .string();
 }
 
@@ -235,10 +274,16 @@ absl::StatusOr<int64_t> FilesystemBlobStore::CommittedSize(const Digest& digest)
 
 absl::StatusOr<int64_t> FilesystemBlobStore::Append(const Digest& digest, int64_t offset,
                                                     absl::string_view data) {
+  return AppendPart(digest, "", offset, data);
+}
+
+absl::StatusOr<int64_t> FilesystemBlobStore::AppendPart(const Digest& digest,
+                                                        const std::string& space, int64_t offset,
+                                                        absl::string_view data) {
   RETURN_IF_ERROR(CheckWritable(digest, options_));
   std::lock_guard<std::mutex> lock(upload_mutex_);
-  if (Contains(digest)) return digest.size_bytes;
-  const std::string part = PartPath(digest);
+  if (space.empty() && Contains(digest)) return digest.size_bytes;
+  const std::string part = PartPath(digest, space);
   std::error_code ec;
   const auto existing = fs::file_size(part, ec);
   const int64_t committed = ec ? 0 : static_cast<int64_t>(existing);
@@ -253,15 +298,19 @@ absl::StatusOr<int64_t> FilesystemBlobStore::Append(const Digest& digest, int64_
   std::ofstream out(part, std::ios::binary | std::ios::app);
   out.write(data.data(), static_cast<std::streamsize>(data.size()));
   out.flush();
-  if (!out) return absl::UnavailableError(absl::StrCat(part, ": write failed"));
+  if (!out) return absl::UnavailableError(absl::StrCat("upload of ", digest.ToString(), ": write failed"));
   return committed + static_cast<int64_t>(data.size());
 }
 
 absl::Status FilesystemBlobStore::FinishUpload(const Digest& digest) {
+  return FinishPart(digest, "");
+}
+
+absl::Status FilesystemBlobStore::FinishPart(const Digest& digest, const std::string& space) {
   RETURN_IF_ERROR(CheckWritable(digest, options_));
   std::lock_guard<std::mutex> lock(upload_mutex_);
-  if (Contains(digest)) return absl::OkStatus();
-  const std::string part = PartPath(digest);
+  if (space.empty() && Contains(digest)) return absl::OkStatus();
+  const std::string part = PartPath(digest, space);
   std::error_code size_ec;
   const auto part_size = fs::file_size(part, size_ec);
   const int64_t committed = size_ec ? 0 : static_cast<int64_t>(part_size);
@@ -270,15 +319,76 @@ absl::Status FilesystemBlobStore::FinishUpload(const Digest& digest) {
                                                       ": upload incomplete, ", committed, " of ",
                                                       digest.size_bytes, " bytes committed"));
   ASSIGN_OR_RETURN(Digest actual, DigestFile(part));
+  std::error_code ec;
   if (actual != digest) {
-    std::error_code ec;
     fs::remove(part, ec);  // a wrong upload is never kept, not even to resume
     return absl::InvalidArgumentError(absl::StrCat("digest mismatch: claimed ", digest.ToString(),
                                                    ", uploaded bytes are ", actual.ToString(),
                                                    "; upload discarded"));
   }
+  if (Contains(digest)) {  // a tenant proved it holds a blob the store has: nothing to publish
+    fs::remove(part, ec);
+    return absl::OkStatus();
+  }
   RETURN_IF_ERROR(SyncPath(part, /*directory=*/false));
   return Publish(part, digest);
+}
+
+absl::Status FilesystemBlobStore::Grant(const std::string& tenant,
+                                        const std::vector<Digest>& digests) {
+  RETURN_IF_ERROR(CheckTenantName(tenant));
+  for (const Digest& d : digests) {
+    RETURN_IF_ERROR(ValidateDigest(d));
+    if (!Contains(d))
+      return absl::FailedPreconditionError(
+          absl::StrCat("blob ", d.ToString(), " is not in the store: nothing to grant"));
+    const fs::path path = GrantPath(tenant, d);
+    std::error_code ec;
+    if (fs::exists(path, ec)) continue;
+    fs::create_directories(path.parent_path(), ec);
+    // Not fsynced: a grant lost in a crash costs the tenant an upload, never exposes a blob.
+    std::ofstream touch(path, std::ios::binary);
+    if (!touch) return absl::UnavailableError(absl::StrCat("grant of ", d.ToString(), ": cannot write"));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::vector<Digest>> FilesystemBlobStore::FindUngranted(
+    const std::string& tenant, const std::vector<Digest>& digests) {
+  RETURN_IF_ERROR(CheckTenantName(tenant));
+  std::vector<Digest> out;
+  for (const Digest& d : digests) {
+    RETURN_IF_ERROR(ValidateDigest(d));
+    std::error_code ec;
+    if (!fs::exists(GrantPath(tenant, d), ec) || !Contains(d)) out.push_back(d);
+  }
+  return out;
+}
+
+absl::StatusOr<int64_t> FilesystemBlobStore::TenantCommittedSize(const std::string& tenant,
+                                                                 const Digest& digest) {
+  RETURN_IF_ERROR(ValidateDigest(digest));
+  ASSIGN_OR_RETURN(std::vector<Digest> ungranted, FindUngranted(tenant, {digest}));
+  if (ungranted.empty()) return digest.size_bytes;
+  ExpireUploads(/*force=*/false);
+  std::error_code ec;
+  const auto size = fs::file_size(PartPath(digest, tenant), ec);
+  return ec ? 0 : static_cast<int64_t>(size);
+}
+
+absl::StatusOr<int64_t> FilesystemBlobStore::TenantAppend(const std::string& tenant,
+                                                          const Digest& digest, int64_t offset,
+                                                          absl::string_view data) {
+  RETURN_IF_ERROR(CheckTenantName(tenant));
+  return AppendPart(digest, tenant, offset, data);
+}
+
+absl::Status FilesystemBlobStore::TenantFinishUpload(const std::string& tenant,
+                                                     const Digest& digest) {
+  ASSIGN_OR_RETURN(std::vector<Digest> ungranted, FindUngranted(tenant, {digest}));
+  if (ungranted.empty()) return absl::OkStatus();
+  RETURN_IF_ERROR(FinishPart(digest, tenant));
+  return Grant(tenant, {digest});
 }
 
 absl::StatusOr<StoreStats> FilesystemBlobStore::Stats() {

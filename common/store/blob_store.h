@@ -48,6 +48,9 @@ using TransferProgress = std::function<void(int64_t done, int64_t total)>;
 // stored").
 absl::Status CheckWritable(const Digest& digest, const StoreOptions& options);
 absl::Status VerifyBlobBytes(const Digest& digest, absl::string_view bytes);
+// A tenant name safe as a path or key component: 1-32 of [a-z0-9-], not starting with '-' (the
+// rule common/auth/tokens.h documents; checked here too because the store sits below auth).
+absl::Status CheckTenantName(absl::string_view tenant);
 
 class BlobStore {
  public:
@@ -76,10 +79,28 @@ class BlobStore {
                                const TransferProgress& progress = nullptr);
   // Downloads a blob into a local file (written to a temp file, verified, renamed).
   virtual absl::Status GetFile(const Digest& digest, const std::string& path);
+
+  // Tenants (docs/SERVICES.md, "Authentication and tenants"). The store is shared, but a tenant
+  // sees only the blobs granted to it: those it uploaded itself (proving it holds the bytes) and
+  // those jobs of its scenes wrote. A grant is a marker beside the blob; granting a blob the store
+  // lacks is FailedPrecondition. The base class has none (Unimplemented).
+  virtual absl::Status Grant(const std::string& tenant, const std::vector<Digest>& digests);
+  // The digests (of `digests`) not granted to `tenant`, whether or not the store holds them.
+  virtual absl::StatusOr<std::vector<Digest>> FindUngranted(const std::string& tenant,
+                                                            const std::vector<Digest>& digests);
+  // A tenant's own resumable upload, staged apart from everyone else's: its progress says nothing
+  // about whether the store or another tenant holds the blob. Finishing verifies the bytes,
+  // publishes them when the store lacks the blob (else drops them) and grants the blob.
+  virtual absl::StatusOr<int64_t> TenantCommittedSize(const std::string& tenant,
+                                                      const Digest& digest);
+  virtual absl::StatusOr<int64_t> TenantAppend(const std::string& tenant, const Digest& digest,
+                                               int64_t offset, absl::string_view data);
+  virtual absl::Status TenantFinishUpload(const std::string& tenant, const Digest& digest);
 };
 
-// Blobs under <root>/cas/<hash[0:2]>/<hash>, interrupted uploads under <root>/uploads/, temp files
-// under <root>/tmp/ (cleared at open). Writes: temp file + fsync + rename + directory fsync.
+// Blobs under <root>/cas/<hash[0:2]>/<hash>, interrupted uploads under <root>/uploads/ (a
+// tenant's own as <tenant>.<hash>-<size>.part), grants as empty files
+// <root>/grants/<tenant>/<hash[0:2]>/<hash>-<size>, temp files under <root>/tmp/ (cleared at open). Writes: temp file + fsync + rename + directory fsync.
 class FilesystemBlobStore final : public BlobStore {
  public:
   static absl::StatusOr<std::unique_ptr<FilesystemBlobStore>> Open(const std::string& root,
@@ -95,13 +116,26 @@ class FilesystemBlobStore final : public BlobStore {
                                  absl::string_view data) override;
   absl::Status FinishUpload(const Digest& digest) override;
   absl::StatusOr<StoreStats> Stats() override;
+  absl::Status Grant(const std::string& tenant, const std::vector<Digest>& digests) override;
+  absl::StatusOr<std::vector<Digest>> FindUngranted(const std::string& tenant,
+                                                    const std::vector<Digest>& digests) override;
+  absl::StatusOr<int64_t> TenantCommittedSize(const std::string& tenant,
+                                              const Digest& digest) override;
+  absl::StatusOr<int64_t> TenantAppend(const std::string& tenant, const Digest& digest,
+                                       int64_t offset, absl::string_view data) override;
+  absl::Status TenantFinishUpload(const std::string& tenant, const Digest& digest) override;
 
   std::string BlobPath(const Digest& digest) const;
 
  private:
   FilesystemBlobStore(std::string root, StoreOptions options, FileLock lock)
       : root_(std::move(root)), options_(options), lock_(std::move(lock)) {}
-  std::string PartPath(const Digest& digest) const;
+  // The upload's part file: the shared one (space "") or a tenant's own.
+  std::string PartPath(const Digest& digest, const std::string& space = "") const;
+  std::string GrantPath(const std::string& tenant, const Digest& digest) const;
+  absl::StatusOr<int64_t> AppendPart(const Digest& digest, const std::string& space,
+                                     int64_t offset, absl::string_view data);
+  absl::Status FinishPart(const Digest& digest, const std::string& space);
   // Removes interrupted uploads older than the TTL; `force` = now, else at most once a minute.
   void ExpireUploads(bool force);
   bool Contains(const Digest& digest) const;

@@ -48,8 +48,14 @@ std::string S3BlobStore::BlobKey(const Digest& digest) const {
   return absl::StrCat(client_->location().prefix, "cas/", digest.hash);
 }
 
-std::string S3BlobStore::UploadKey(const Digest& digest) const {
-  return absl::StrCat(client_->location().prefix, "uploads/", digest.hash, "-", digest.size_bytes);
+std::string S3BlobStore::UploadKey(const Digest& digest, const std::string& space) const {
+  return absl::StrCat(client_->location().prefix, "uploads/", space, space.empty() ? "" : "/",
+                      digest.hash, "-", digest.size_bytes);
+}
+
+std::string S3BlobStore::GrantKey(const std::string& tenant, const Digest& digest) const {
+  return absl::StrCat(client_->location().prefix, "grants/", tenant, "/", digest.hash, "-",
+                      digest.size_bytes);
 }
 
 absl::StatusOr<bool> S3BlobStore::Contains(const Digest& digest) {
@@ -126,9 +132,8 @@ absl::StatusOr<std::string> S3BlobStore::Read(const Digest& digest, int64_t offs
   return bytes;
 }
 
-std::shared_ptr<S3BlobStore::Upload> S3BlobStore::GetUpload(const Digest& digest) {
+std::shared_ptr<S3BlobStore::Upload> S3BlobStore::GetUpload(const std::string& key) {
   std::lock_guard<std::mutex> lock(uploads_mutex_);
-  const std::string key = UploadKey(digest);
   auto it = uploads_.find(key);
   if (it != uploads_.end()) return it->second;
   if (uploads_.size() >= kMaxTrackedUploads) {
@@ -141,19 +146,19 @@ std::shared_ptr<S3BlobStore::Upload> S3BlobStore::GetUpload(const Digest& digest
       i = idle ? uploads_.erase(i) : std::next(i);
     }
   }
-  return uploads_[key] = std::make_shared<Upload>();
+  auto upload = std::make_shared<Upload>();
+  upload->key = key;
+  return uploads_[key] = upload;
 }
 
-void S3BlobStore::Forget(const Digest& digest) {
+void S3BlobStore::Forget(const std::string& key) {
   std::lock_guard<std::mutex> lock(uploads_mutex_);
-  const std::string key = UploadKey(digest);
   uploads_.erase(key);
   buffered_.remove(key);
 }
 
-void S3BlobStore::NoteBuffered(const Digest& digest) {
+void S3BlobStore::NoteBuffered(const std::string& key) {
   std::lock_guard<std::mutex> lock(uploads_mutex_);
-  const std::string key = UploadKey(digest);
   buffered_.remove(key);
   buffered_.push_back(key);
   // Bound the memory of buffers: the oldest upload loses its unsent bytes (its client is told
@@ -173,7 +178,7 @@ void S3BlobStore::NoteBuffered(const Digest& digest) {
 
 absl::Status S3BlobStore::Load(const Digest& digest, Upload& upload) {
   if (upload.loaded) return absl::OkStatus();
-  const std::string key = UploadKey(digest);
+  const std::string& key = upload.key;
   ASSIGN_OR_RETURN(std::optional<int64_t> assembled, client_->HeadObject(key));
   upload.assembled = assembled.has_value() && *assembled == digest.size_bytes;
   if (!upload.assembled) {
@@ -198,8 +203,8 @@ absl::Status S3BlobStore::Load(const Digest& digest, Upload& upload) {
   return absl::OkStatus();
 }
 
-absl::Status S3BlobStore::SendFullParts(const Digest& digest, Upload& upload) {
-  const std::string key = UploadKey(digest);
+absl::Status S3BlobStore::SendFullParts(Upload& upload) {
+  const std::string& key = upload.key;
   size_t sent = 0;
   while (static_cast<int64_t>(upload.buffer.size() - sent) >= s3_options_.part_bytes) {
     if (upload.upload_id.empty()) {
@@ -224,7 +229,11 @@ absl::StatusOr<int64_t> S3BlobStore::CommittedSize(const Digest& digest) {
   RETURN_IF_ERROR(ValidateDigest(digest));
   ASSIGN_OR_RETURN(bool present, Contains(digest));
   if (present) return digest.size_bytes;
-  std::shared_ptr<Upload> upload = GetUpload(digest);
+  return PartSize(digest, "");
+}
+
+absl::StatusOr<int64_t> S3BlobStore::PartSize(const Digest& digest, const std::string& space) {
+  std::shared_ptr<Upload> upload = GetUpload(UploadKey(digest, space));
   std::lock_guard<std::mutex> lock(upload->mutex);
   RETURN_IF_ERROR(Load(digest, *upload));
   if (upload->assembled) return digest.size_bytes;
@@ -233,13 +242,20 @@ absl::StatusOr<int64_t> S3BlobStore::CommittedSize(const Digest& digest) {
 
 absl::StatusOr<int64_t> S3BlobStore::Append(const Digest& digest, int64_t offset,
                                             absl::string_view data) {
+  return AppendPart(digest, "", offset, data);
+}
+
+absl::StatusOr<int64_t> S3BlobStore::AppendPart(const Digest& digest, const std::string& space,
+                                                int64_t offset, absl::string_view data) {
   RETURN_IF_ERROR(CheckWritable(digest, options_));
-  std::shared_ptr<Upload> upload = GetUpload(digest);
+  std::shared_ptr<Upload> upload = GetUpload(UploadKey(digest, space));
   {
     std::lock_guard<std::mutex> lock(upload->mutex);
     if (!upload->loaded) {  // the first append of this process: not on every chunk
-      ASSIGN_OR_RETURN(bool present, Contains(digest));
-      if (present) return digest.size_bytes;
+      if (space.empty()) {
+        ASSIGN_OR_RETURN(bool present, Contains(digest));
+        if (present) return digest.size_bytes;
+      }
       RETURN_IF_ERROR(Load(digest, *upload));
     }
     if (upload->assembled) return digest.size_bytes;
@@ -257,15 +273,15 @@ absl::StatusOr<int64_t> S3BlobStore::Append(const Digest& digest, int64_t offset
                                                      offset + static_cast<int64_t>(data.size()),
                                                      " bytes sent, more than the digest's size"));
     upload->buffer.append(data.data(), data.size());
-    RETURN_IF_ERROR(SendFullParts(digest, *upload));
+    RETURN_IF_ERROR(SendFullParts(*upload));
     if (upload->buffer.empty()) return offset + static_cast<int64_t>(data.size());
   }
-  NoteBuffered(digest);
+  NoteBuffered(upload->key);
   return offset + static_cast<int64_t>(data.size());
 }
 
 absl::Status S3BlobStore::Assemble(const Digest& digest, Upload& upload) {
-  const std::string key = UploadKey(digest);
+  const std::string& key = upload.key;
   const int64_t committed = upload.durable() + static_cast<int64_t>(upload.buffer.size());
   if (committed != digest.size_bytes)
     return absl::FailedPreconditionError(absl::StrCat("blob ", digest.ToString(),
@@ -309,8 +325,7 @@ absl::Status S3BlobStore::CopyToBlob(const std::string& from, const Digest& dige
   return s;
 }
 
-absl::Status S3BlobStore::VerifyAndPublish(const Digest& digest) {
-  const std::string key = UploadKey(digest);
+absl::Status S3BlobStore::VerifyAndPublish(const Digest& digest, const std::string& key) {
   Sha256 sha;
   int64_t size = 0;
   for (;;) {
@@ -329,7 +344,8 @@ absl::Status S3BlobStore::VerifyAndPublish(const Digest& digest) {
                                                    ", uploaded bytes are ", actual.ToString(),
                                                    "; upload discarded"));
   }
-  RETURN_IF_ERROR(CopyToBlob(key, digest));
+  ASSIGN_OR_RETURN(bool present, Contains(digest));  // a tenant's proof of a blob already here
+  if (!present) RETURN_IF_ERROR(CopyToBlob(key, digest));
   return client_->DeleteObject(key);
 }
 
@@ -337,20 +353,75 @@ absl::Status S3BlobStore::FinishUpload(const Digest& digest) {
   RETURN_IF_ERROR(CheckWritable(digest, options_));
   ASSIGN_OR_RETURN(bool present, Contains(digest));
   if (present) {
-    Forget(digest);
+    Forget(UploadKey(digest, ""));
     return absl::OkStatus();
   }
-  std::shared_ptr<Upload> upload = GetUpload(digest);
+  return FinishPart(digest, "");
+}
+
+absl::Status S3BlobStore::FinishPart(const Digest& digest, const std::string& space) {
+  const std::string key = UploadKey(digest, space);
+  std::shared_ptr<Upload> upload = GetUpload(key);
   absl::Status status;
   {
     std::lock_guard<std::mutex> lock(upload->mutex);
     RETURN_IF_ERROR(Load(digest, *upload));
     if (!upload->assembled) RETURN_IF_ERROR(Assemble(digest, *upload));
-    status = VerifyAndPublish(digest);
+    status = VerifyAndPublish(digest, key);
     if (!status.ok() && !absl::IsInvalidArgument(status)) return status;  // retry later
   }
-  Forget(digest);
+  Forget(key);
   return status;
+}
+
+absl::Status S3BlobStore::Grant(const std::string& tenant, const std::vector<Digest>& digests) {
+  RETURN_IF_ERROR(CheckTenantName(tenant));
+  for (const Digest& d : digests) {
+    RETURN_IF_ERROR(ValidateDigest(d));
+    ASSIGN_OR_RETURN(bool present, Contains(d));
+    if (!present)
+      return absl::FailedPreconditionError(
+          absl::StrCat("blob ", d.ToString(), " is not in the store: nothing to grant"));
+    RETURN_IF_ERROR(client_->PutObject(GrantKey(tenant, d), ""));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::vector<Digest>> S3BlobStore::FindUngranted(const std::string& tenant,
+                                                               const std::vector<Digest>& digests) {
+  RETURN_IF_ERROR(CheckTenantName(tenant));
+  std::vector<Digest> out;
+  for (const Digest& d : digests) {
+    RETURN_IF_ERROR(ValidateDigest(d));
+    ASSIGN_OR_RETURN(std::optional<int64_t> grant, client_->HeadObject(GrantKey(tenant, d)));
+    bool granted = grant.has_value();
+    if (granted) {
+      ASSIGN_OR_RETURN(granted, Contains(d));
+    }
+    if (!granted) out.push_back(d);
+  }
+  return out;
+}
+
+absl::StatusOr<int64_t> S3BlobStore::TenantCommittedSize(const std::string& tenant,
+                                                         const Digest& digest) {
+  ASSIGN_OR_RETURN(std::vector<Digest> ungranted, FindUngranted(tenant, {digest}));
+  if (ungranted.empty()) return digest.size_bytes;
+  return PartSize(digest, tenant);
+}
+
+absl::StatusOr<int64_t> S3BlobStore::TenantAppend(const std::string& tenant, const Digest& digest,
+                                                  int64_t offset, absl::string_view data) {
+  RETURN_IF_ERROR(CheckTenantName(tenant));
+  return AppendPart(digest, tenant, offset, data);
+}
+
+absl::Status S3BlobStore::TenantFinishUpload(const std::string& tenant, const Digest& digest) {
+  ASSIGN_OR_RETURN(std::vector<Digest> ungranted, FindUngranted(tenant, {digest}));
+  if (ungranted.empty()) return absl::OkStatus();
+  RETURN_IF_ERROR(CheckWritable(digest, options_));
+  RETURN_IF_ERROR(FinishPart(digest, tenant));
+  return Grant(tenant, {digest});
 }
 
 absl::StatusOr<StoreStats> S3BlobStore::Stats() {

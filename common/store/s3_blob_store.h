@@ -56,15 +56,26 @@ class S3BlobStore final : public BlobStore {
                                  absl::string_view data) override;
   absl::Status FinishUpload(const Digest& digest) override;
   absl::StatusOr<StoreStats> Stats() override;
+  absl::Status Grant(const std::string& tenant, const std::vector<Digest>& digests) override;
+  absl::StatusOr<std::vector<Digest>> FindUngranted(const std::string& tenant,
+                                                    const std::vector<Digest>& digests) override;
+  absl::StatusOr<int64_t> TenantCommittedSize(const std::string& tenant,
+                                              const Digest& digest) override;
+  absl::StatusOr<int64_t> TenantAppend(const std::string& tenant, const Digest& digest,
+                                       int64_t offset, absl::string_view data) override;
+  absl::Status TenantFinishUpload(const std::string& tenant, const Digest& digest) override;
 
   std::string BlobKey(const Digest& digest) const;
-  std::string UploadKey(const Digest& digest) const;
+  // The upload's staging key: the shared one (space "") or a tenant's own.
+  std::string UploadKey(const Digest& digest, const std::string& space) const;
+  std::string GrantKey(const std::string& tenant, const Digest& digest) const;
   S3Client& client() { return *client_; }
 
  private:
   // One resumable upload: the multipart upload S3 holds and the bytes not yet sent as a part.
   struct Upload {
     std::mutex mutex;
+    std::string key;         // UploadKey
     bool loaded = false;     // state read from S3
     bool assembled = false;  // the object under uploads/ is complete (awaits verification)
     std::string upload_id;   // "" = no multipart upload yet
@@ -76,14 +87,18 @@ class S3BlobStore final : public BlobStore {
   S3BlobStore(std::unique_ptr<S3Client> client, StoreOptions options, S3StoreOptions s3_options)
       : client_(std::move(client)), options_(options), s3_options_(s3_options) {}
   absl::StatusOr<bool> Contains(const Digest& digest);
-  std::shared_ptr<Upload> GetUpload(const Digest& digest);
-  void Forget(const Digest& digest);
-  void NoteBuffered(const Digest& digest);  // LRU of uploads holding a buffer
+  std::shared_ptr<Upload> GetUpload(const std::string& key);
+  void Forget(const std::string& key);
+  void NoteBuffered(const std::string& key);  // LRU of uploads holding a buffer
+  absl::StatusOr<int64_t> PartSize(const Digest& digest, const std::string& space);
+  absl::StatusOr<int64_t> AppendPart(const Digest& digest, const std::string& space,
+                                     int64_t offset, absl::string_view data);
+  absl::Status FinishPart(const Digest& digest, const std::string& space);
   absl::Status Load(const Digest& digest, Upload& upload);
-  absl::Status SendFullParts(const Digest& digest, Upload& upload);
+  absl::Status SendFullParts(Upload& upload);
   absl::Status Assemble(const Digest& digest, Upload& upload);
   // Hashes the assembled upload; publishes it to cas/ or deletes it.
-  absl::Status VerifyAndPublish(const Digest& digest);
+  absl::Status VerifyAndPublish(const Digest& digest, const std::string& key);
   absl::Status CopyToBlob(const std::string& from, const Digest& digest);
 
   std::unique_ptr<S3Client> client_;

@@ -56,6 +56,38 @@ absl::StatusOr<std::vector<store::Digest>> RemoteBlobStore::FindMissing(
   return missing;
 }
 
+absl::Status RemoteBlobStore::Grant(const std::string& tenant,
+                                    const std::vector<store::Digest>& digests) {
+  constexpr size_t kPerCall = 10000;
+  for (size_t b = 0; b < digests.size(); b += kPerCall) {
+    v1::GrantBlobsRequest request;
+    request.set_tenant(tenant);
+    for (size_t i = b; i < std::min(digests.size(), b + kPerCall); ++i)
+      rpc::ToProto(digests[i], request.add_digests());
+    v1::GrantBlobsResponse response;
+    grpc::ClientContext context;
+    RETURN_IF_ERROR(FromGrpcStatus(stub_->GrantBlobs(&context, request, &response)));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::vector<store::Digest>> RemoteBlobStore::FindUngranted(
+    const std::string& tenant, const std::vector<store::Digest>& digests) {
+  std::vector<store::Digest> out;
+  constexpr size_t kPerCall = 10000;
+  for (size_t b = 0; b < digests.size(); b += kPerCall) {
+    v1::FindUngrantedBlobsRequest request;
+    request.set_tenant(tenant);
+    for (size_t i = b; i < std::min(digests.size(), b + kPerCall); ++i)
+      rpc::ToProto(digests[i], request.add_digests());
+    v1::FindUngrantedBlobsResponse response;
+    grpc::ClientContext context;
+    RETURN_IF_ERROR(FromGrpcStatus(stub_->FindUngrantedBlobs(&context, request, &response)));
+    for (const auto& d : response.ungranted()) out.push_back(rpc::FromProto(d));
+  }
+  return out;
+}
+
 absl::Status RemoteBlobStore::Put(const store::Digest& digest, absl::string_view bytes) {
   RETURN_IF_ERROR(CheckSize(digest));
   if (static_cast<int64_t>(bytes.size()) <= options_.max_batch_bytes) {

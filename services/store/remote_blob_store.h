@@ -28,6 +28,11 @@ class RemoteBlobStore final : public store::BlobStore {
                                  absl::string_view data) override;
   absl::Status FinishUpload(const store::Digest& digest) override;
   absl::StatusOr<store::StoreStats> Stats() override;
+  // Through GrantBlobs / FindUngrantedBlobs (a worker or admin token). Tenant uploads are the
+  // store service's own business: a client's uploads are already tenant uploads there.
+  absl::Status Grant(const std::string& tenant, const std::vector<store::Digest>& digests) override;
+  absl::StatusOr<std::vector<store::Digest>> FindUngranted(
+      const std::string& tenant, const std::vector<store::Digest>& digests) override;
   absl::Status PutFile(const store::Digest& digest, const std::string& path,
                        const store::TransferProgress& progress = nullptr) override;
 

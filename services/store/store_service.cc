@@ -16,27 +16,58 @@ void SetBlobStatus(const store::Digest& d, const absl::Status& s, v1::BlobStatus
   out->set_code(static_cast<int>(s.code()));
   out->set_message(std::string(s.message()));
 }
+
+using auth::Role;
+constexpr size_t kMaxDigestsPerCall = 10000;
+
+absl::StatusOr<std::vector<store::Digest>> ParseDigests(
+    const google::protobuf::RepeatedPtrField<v1::Digest>& in) {
+  if (in.size() > static_cast<int>(kMaxDigestsPerCall))
+    return absl::InvalidArgumentError(
+        absl::StrCat(in.size(), " digests in one call (at most ", kMaxDigestsPerCall, ")"));
+  std::vector<store::Digest> digests;
+  for (int i = 0; i < in.size(); ++i) {
+    ASSIGN_OR_RETURN(store::Digest d,
+                     rpc::ParseProtoDigest(in.Get(i), absl::StrCat("digests[", i, "]")));
+    digests.push_back(d);
+  }
+  return digests;
+}
+
 }  // namespace
 
-grpc::Status StoreService::FindMissingBlobs(grpc::ServerContext*,
+absl::StatusOr<auth::Identity> StoreService::Caller(grpc::ServerContext* context) const {
+  return auth::Authorize(auth_, context, {Role::kClient, Role::kWorker, Role::kAdmin});
+}
+
+absl::Status StoreService::CheckReadable(const auth::Identity& who,
+                                         const store::Digest& digest) const {
+  if (!who.scoped()) return absl::OkStatus();
+  ASSIGN_OR_RETURN(std::vector<store::Digest> ungranted, store_->FindUngranted(who.tenant, {digest}));
+  if (!ungranted.empty())
+    return absl::NotFoundError(absl::StrCat("blob ", digest.ToString(), " is not in the store"));
+  return absl::OkStatus();
+}
+
+grpc::Status StoreService::FindMissingBlobs(grpc::ServerContext* context,
                                             const v1::FindMissingBlobsRequest* request,
                                             v1::FindMissingBlobsResponse* response) {
-  std::vector<store::Digest> digests;
-  for (int i = 0; i < request->digests_size(); ++i) {
-    absl::StatusOr<store::Digest> d =
-        rpc::ParseProtoDigest(request->digests(i), absl::StrCat("digests[", i, "]"));
-    if (!d.ok()) return ToGrpcStatus(d.status());
-    digests.push_back(*d);
-  }
-  absl::StatusOr<std::vector<store::Digest>> missing = store_->FindMissing(digests);
+  absl::StatusOr<auth::Identity> who = Caller(context);
+  if (!who.ok()) return ToGrpcStatus(who.status());
+  absl::StatusOr<std::vector<store::Digest>> digests = ParseDigests(request->digests());
+  if (!digests.ok()) return ToGrpcStatus(digests.status());
+  absl::StatusOr<std::vector<store::Digest>> missing =
+      who->scoped() ? store_->FindUngranted(who->tenant, *digests) : store_->FindMissing(*digests);
   if (!missing.ok()) return ToGrpcStatus(missing.status());
   for (const store::Digest& d : *missing) rpc::ToProto(d, response->add_missing());
   return grpc::Status::OK;
 }
 
-grpc::Status StoreService::BatchUpdateBlobs(grpc::ServerContext*,
+grpc::Status StoreService::BatchUpdateBlobs(grpc::ServerContext* context,
                                             const v1::BatchUpdateBlobsRequest* request,
                                             v1::BatchUpdateBlobsResponse* response) {
+  absl::StatusOr<auth::Identity> who = Caller(context);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   int64_t total = 0;
   for (const auto& blob : request->blobs()) total += static_cast<int64_t>(blob.data().size());
   if (total > store_->options().max_batch_bytes)
@@ -48,15 +79,19 @@ grpc::Status StoreService::BatchUpdateBlobs(grpc::ServerContext*,
     const auto& blob = request->blobs(i);
     absl::StatusOr<store::Digest> d =
         rpc::ParseProtoDigest(blob.digest(), absl::StrCat("blobs[", i, "].digest"));
-    const absl::Status s = d.ok() ? store_->Put(*d, blob.data()) : d.status();
+    // Put verifies the bytes even when the store holds the blob: a tenant proves possession.
+    absl::Status s = d.ok() ? store_->Put(*d, blob.data()) : d.status();
+    if (s.ok() && who->scoped()) s = store_->Grant(who->tenant, {*d});
     SetBlobStatus(rpc::FromProto(blob.digest()), s, response->add_statuses());
   }
   return grpc::Status::OK;
 }
 
-grpc::Status StoreService::BatchReadBlobs(grpc::ServerContext*,
+grpc::Status StoreService::BatchReadBlobs(grpc::ServerContext* context,
                                           const v1::BatchReadBlobsRequest* request,
                                           v1::BatchReadBlobsResponse* response) {
+  absl::StatusOr<auth::Identity> who = Caller(context);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   int64_t total = 0;
   for (int i = 0; i < request->digests_size(); ++i) {
     auto* out = response->add_blobs();
@@ -67,7 +102,7 @@ grpc::Status StoreService::BatchReadBlobs(grpc::ServerContext*,
       total += d->size_bytes;
       if (total > store_->options().max_batch_bytes) {
         s = absl::ResourceExhaustedError("batch read over the batch limit; use Read");
-      } else {
+      } else if (s = CheckReadable(*who, *d); s.ok()) {
         absl::StatusOr<std::string> bytes = store_->Read(*d, 0, 0);
         s = bytes.status();
         if (bytes.ok()) *out->mutable_data() = std::move(*bytes);
@@ -78,8 +113,23 @@ grpc::Status StoreService::BatchReadBlobs(grpc::ServerContext*,
   return grpc::Status::OK;
 }
 
-grpc::Status StoreService::Write(grpc::ServerContext*, grpc::ServerReader<v1::WriteRequest>* reader,
+grpc::Status StoreService::Write(grpc::ServerContext* context,
+                                 grpc::ServerReader<v1::WriteRequest>* reader,
                                  v1::WriteResponse* response) {
+  absl::StatusOr<auth::Identity> who = Caller(context);
+  if (!who.ok()) return ToGrpcStatus(who.status());
+  // A tenant's upload is its own (BlobStore::Tenant*); everyone else's is the shared one.
+  const std::string tenant = who->tenant;
+  auto committed_size = [&](const store::Digest& d) {
+    return tenant.empty() ? store_->CommittedSize(d) : store_->TenantCommittedSize(tenant, d);
+  };
+  auto append = [&](const store::Digest& d, int64_t offset, absl::string_view data) {
+    return tenant.empty() ? store_->Append(d, offset, data)
+                          : store_->TenantAppend(tenant, d, offset, data);
+  };
+  auto finish = [&](const store::Digest& d) {
+    return tenant.empty() ? store_->FinishUpload(d) : store_->TenantFinishUpload(tenant, d);
+  };
   v1::WriteRequest request;
   if (!reader->Read(&request))
     return ToGrpcStatus(absl::InvalidArgumentError("Write: empty stream"));
@@ -89,7 +139,7 @@ grpc::Status StoreService::Write(grpc::ServerContext*, grpc::ServerReader<v1::Wr
     return ToGrpcStatus(absl::ResourceExhaustedError(
         absl::StrCat("blob ", d->ToString(), " is larger than the store's limit of ",
                      store_->options().max_blob_bytes, " bytes")));
-  absl::StatusOr<int64_t> committed = store_->CommittedSize(*d);
+  absl::StatusOr<int64_t> committed = committed_size(*d);
   if (!committed.ok()) return ToGrpcStatus(committed.status());
   bool finished = false;
   do {
@@ -98,31 +148,36 @@ grpc::Status StoreService::Write(grpc::ServerContext*, grpc::ServerReader<v1::Wr
       if (*committed == d->size_bytes && request.data().empty()) {
         // Already complete (e.g. resumed after the final chunk landed): nothing to append.
       } else {
-        committed = store_->Append(*d, request.write_offset(), request.data());
+        committed = append(*d, request.write_offset(), request.data());
         if (!committed.ok()) return ToGrpcStatus(committed.status());
       }
     }
     if (request.finish_write()) {
-      if (absl::Status s = store_->FinishUpload(*d); !s.ok()) return ToGrpcStatus(s);
+      if (absl::Status s = finish(*d); !s.ok()) return ToGrpcStatus(s);
       finished = true;
     }
   } while (reader->Read(&request));
   if (!finished && *committed == d->size_bytes) {
     // All bytes arrived but the client did not say finish: publish anyway (verified).
-    if (absl::Status s = store_->FinishUpload(*d); !s.ok()) return ToGrpcStatus(s);
+    if (absl::Status s = finish(*d); !s.ok()) return ToGrpcStatus(s);
   }
   response->set_committed_size(*committed);
   return grpc::Status::OK;
 }
 
-grpc::Status StoreService::QueryWriteStatus(grpc::ServerContext*,
+grpc::Status StoreService::QueryWriteStatus(grpc::ServerContext* context,
                                             const v1::QueryWriteStatusRequest* request,
                                             v1::QueryWriteStatusResponse* response) {
+  absl::StatusOr<auth::Identity> who = Caller(context);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   absl::StatusOr<store::Digest> d = rpc::ParseProtoDigest(request->digest(), "digest");
   if (!d.ok()) return ToGrpcStatus(d.status());
-  absl::StatusOr<int64_t> committed = store_->CommittedSize(*d);
+  absl::StatusOr<int64_t> committed = who->scoped()
+                                          ? store_->TenantCommittedSize(who->tenant, *d)
+                                          : store_->CommittedSize(*d);
   if (!committed.ok()) return ToGrpcStatus(committed.status());
-  absl::StatusOr<std::vector<store::Digest>> missing = store_->FindMissing({*d});
+  absl::StatusOr<std::vector<store::Digest>> missing =
+      who->scoped() ? store_->FindUngranted(who->tenant, {*d}) : store_->FindMissing({*d});
   if (!missing.ok()) return ToGrpcStatus(missing.status());
   response->set_committed_size(*committed);
   response->set_complete(missing->empty());
@@ -131,8 +186,11 @@ grpc::Status StoreService::QueryWriteStatus(grpc::ServerContext*,
 
 grpc::Status StoreService::Read(grpc::ServerContext* context, const v1::ReadRequest* request,
                                 grpc::ServerWriter<v1::ReadResponse>* writer) {
+  absl::StatusOr<auth::Identity> who = Caller(context);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   absl::StatusOr<store::Digest> d = rpc::ParseProtoDigest(request->digest(), "digest");
   if (!d.ok()) return ToGrpcStatus(d.status());
+  if (absl::Status s = CheckReadable(*who, *d); !s.ok()) return ToGrpcStatus(s);
   const int64_t begin = request->read_offset();
   if (begin < 0 || begin > d->size_bytes || request->read_limit() < 0)
     return ToGrpcStatus(absl::OutOfRangeError(
@@ -155,17 +213,44 @@ grpc::Status StoreService::Read(grpc::ServerContext* context, const v1::ReadRequ
   return grpc::Status::OK;
 }
 
-grpc::Status StoreService::GetStoreInfo(grpc::ServerContext*, const v1::GetStoreInfoRequest*,
+grpc::Status StoreService::GetStoreInfo(grpc::ServerContext* context,
+                                        const v1::GetStoreInfoRequest*,
                                         v1::GetStoreInfoResponse* response) {
-  absl::StatusOr<store::StoreStats> stats = store_->Stats();
-  if (!stats.ok()) return ToGrpcStatus(stats.status());
+  absl::StatusOr<auth::Identity> who = Caller(context);
+  if (!who.ok()) return ToGrpcStatus(who.status());
   response->set_max_blob_bytes(store_->options().max_blob_bytes);
   response->set_max_batch_bytes(store_->options().max_batch_bytes);
+  if (who->scoped()) return grpc::Status::OK;  // the store's contents are not a tenant's business
+  absl::StatusOr<store::StoreStats> stats = store_->Stats();
+  if (!stats.ok()) return ToGrpcStatus(stats.status());
   response->set_blob_count(stats->blob_count);
   response->set_total_bytes(stats->total_bytes);
   response->set_partial_uploads(stats->partial_uploads);
   response->set_partial_bytes(stats->partial_bytes);
   response->set_expired_uploads(stats->expired_uploads);
+  return grpc::Status::OK;
+}
+
+grpc::Status StoreService::GrantBlobs(grpc::ServerContext* context,
+                                      const v1::GrantBlobsRequest* request, v1::GrantBlobsResponse*) {
+  absl::StatusOr<auth::Identity> who = auth::Authorize(auth_, context, {Role::kWorker, Role::kAdmin});
+  if (!who.ok()) return ToGrpcStatus(who.status());
+  absl::StatusOr<std::vector<store::Digest>> digests = ParseDigests(request->digests());
+  if (!digests.ok()) return ToGrpcStatus(digests.status());
+  return ToGrpcStatus(store_->Grant(request->tenant(), *digests));
+}
+
+grpc::Status StoreService::FindUngrantedBlobs(grpc::ServerContext* context,
+                                              const v1::FindUngrantedBlobsRequest* request,
+                                              v1::FindUngrantedBlobsResponse* response) {
+  absl::StatusOr<auth::Identity> who = auth::Authorize(auth_, context, {Role::kWorker, Role::kAdmin});
+  if (!who.ok()) return ToGrpcStatus(who.status());
+  absl::StatusOr<std::vector<store::Digest>> digests = ParseDigests(request->digests());
+  if (!digests.ok()) return ToGrpcStatus(digests.status());
+  absl::StatusOr<std::vector<store::Digest>> ungranted =
+      store_->FindUngranted(request->tenant(), *digests);
+  if (!ungranted.ok()) return ToGrpcStatus(ungranted.status());
+  for (const store::Digest& d : *ungranted) rpc::ToProto(d, response->add_ungranted());
   return grpc::Status::OK;
 }
 

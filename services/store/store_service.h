@@ -2,9 +2,12 @@
 // a BlobStore. Statuses: INVALID_ARGUMENT malformed digest or digest mismatch (nothing stored),
 // RESOURCE_EXHAUSTED blob or batch over the limits, NOT_FOUND unknown digest, FAILED_PRECONDITION
 // write at the wrong offset (the message names the committed size to resume at), OUT_OF_RANGE bad
-// read range. Thread-safe (the BlobStore is).
+// read range. Every call is authorized first (common/auth): clients see their tenant's blobs only
+// (store.proto says how), workers and admins the whole store; UNAUTHENTICATED without a valid
+// token, PERMISSION_DENIED for a role a method does not allow. Thread-safe (the BlobStore is).
 #pragma once
 
+#include "common/auth/authenticator.h"
 #include "common/store/blob_store.h"
 #include "instascene/v1/store.grpc.pb.h"
 
@@ -12,7 +15,9 @@ namespace instascene::store_service {
 
 class StoreService final : public v1::ContentStore::Service {
  public:
-  explicit StoreService(store::BlobStore* store) : store_(store) {}
+  // `auth` null = authentication off (every caller unrestricted). Both must outlive the service.
+  explicit StoreService(store::BlobStore* store, auth::Authenticator* auth = nullptr)
+      : store_(store), auth_(auth) {}
 
   grpc::Status FindMissingBlobs(grpc::ServerContext*, const v1::FindMissingBlobsRequest* request,
                                 v1::FindMissingBlobsResponse* response) override;
@@ -28,9 +33,18 @@ class StoreService final : public v1::ContentStore::Service {
                     grpc::ServerWriter<v1::ReadResponse>* writer) override;
   grpc::Status GetStoreInfo(grpc::ServerContext*, const v1::GetStoreInfoRequest*,
                             v1::GetStoreInfoResponse* response) override;
+  grpc::Status GrantBlobs(grpc::ServerContext*, const v1::GrantBlobsRequest* request,
+                          v1::GrantBlobsResponse* response) override;
+  grpc::Status FindUngrantedBlobs(grpc::ServerContext*, const v1::FindUngrantedBlobsRequest* request,
+                                  v1::FindUngrantedBlobsResponse* response) override;
 
  private:
-  store::BlobStore* store_;  // not owned
+  absl::StatusOr<auth::Identity> Caller(grpc::ServerContext* context) const;
+  // NotFound for a blob the caller may not read (the same answer as for a blob nobody stored).
+  absl::Status CheckReadable(const auth::Identity& who, const store::Digest& digest) const;
+
+  store::BlobStore* store_;     // not owned
+  auth::Authenticator* auth_;  // not owned; null = off
 };
 
 }  // namespace instascene::store_service

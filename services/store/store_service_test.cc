@@ -7,6 +7,7 @@
 
 #include "common/core/status.h"
 #include "common/core/testing/files.h"
+#include "common/auth/tokens.h"
 #include "common/core/testing/temp_dir.h"
 #include "common/rpc/server.h"
 #include "common/rpc/status.h"
@@ -41,6 +42,7 @@ class RemoteBackend : public store::testing::BlobStoreBackend {
                      RemoteBlobStore::Connect(rpc::Connect(server_->address())));
     return std::unique_ptr<store::BlobStore>(std::move(remote));
   }
+  bool tenant_uploads() const override { return false; }  // the service's backend has them
 
  private:
   instascene::testing::ScopedTempDir temp_{"remote_conformance"};
@@ -189,4 +191,56 @@ TEST_F(StoreServiceTest, ManifestUploadThroughTheServiceSendsOnlyMissingFiles) {
 }
 
 }  // namespace
+
+// Tenants through the service: each client token sees only what its tenant uploaded or was granted.
+TEST(StoreServiceAuth, TenantsSeeOnlyTheirBlobsAndRolesAreEnforced) {
+  instascene::testing::ScopedTempDir temp("store_auth");
+  const std::string tokens = temp.Sub("tokens.json");
+  const std::string acme = *auth::CreateToken(tokens, auth::Role::kClient, "acme", "");
+  const std::string beta = *auth::CreateToken(tokens, auth::Role::kClient, "beta", "");
+  const std::string worker = *auth::CreateToken(tokens, auth::Role::kWorker, "", "");
+  std::shared_ptr<auth::Authenticator> authenticator = *auth::Authenticator::FromFile(tokens);
+  store::StoreOptions options;
+  options.max_batch_bytes = 64 << 10;  // larger blobs take the Write stream
+  auto local = *store::FilesystemBlobStore::Open(temp.Sub("store"), options);
+  StoreService service(local.get(), authenticator.get());
+  rpc::ServerOptions server_options;
+  server_options.listen = "127.0.0.1:0";
+  auto server = *rpc::Server::Start(server_options, {&service}, {"instascene.v1.ContentStore"});
+  auto connect = [&](const std::string& token) {
+    rpc::ChannelOptions channel;
+    channel.token = token;
+    return RemoteBlobStore::Connect(*rpc::Connect(server->address(), channel));
+  };
+  EXPECT_EQ(connect("").status().code(), absl::StatusCode::kUnauthenticated);
+  auto a = *connect(acme);
+  auto b = *connect(beta);
+  auto w = *connect(worker);
+  const std::string small = RandomBytes(1000, 31), large = RandomBytes(300 << 10, 32);
+  const store::Digest ds = store::ComputeDigest(small), dl = store::ComputeDigest(large);
+  ASSERT_TRUE(a->Put(ds, small).ok());
+  ASSERT_TRUE(a->Put(dl, large).ok());
+  EXPECT_TRUE(a->FindMissing({ds, dl})->empty());
+  EXPECT_EQ(*a->Read(dl), large);
+  // beta learns nothing: both blobs are missing to it, reads are NOT_FOUND like unknown blobs.
+  EXPECT_EQ(b->FindMissing({ds, dl})->size(), 2u);
+  EXPECT_EQ(b->Read(ds).status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(*b->CommittedSize(dl), 0);
+  EXPECT_EQ(b->Stats()->blob_count, 0) << "store statistics are for workers and admins";
+  EXPECT_EQ(w->Stats()->blob_count, 2);
+  // beta uploads the same large blob in full and is granted it; the store keeps one copy.
+  ASSERT_TRUE(b->Put(dl, large).ok());
+  EXPECT_EQ(*b->Read(dl), large);
+  EXPECT_EQ(b->FindMissing({ds})->size(), 1u);
+  EXPECT_EQ(w->Stats()->blob_count, 2);
+  // Workers read everything and grant; clients may not grant.
+  EXPECT_EQ(*w->Read(ds), small);
+  EXPECT_EQ(b->Grant("beta", {ds}).code(), absl::StatusCode::kPermissionDenied);
+  ASSERT_TRUE(w->Grant("beta", {ds}).ok());
+  EXPECT_EQ(*b->Read(ds), small);
+  EXPECT_TRUE(w->FindUngranted("beta", {ds, dl})->empty());
+  EXPECT_EQ(w->Grant("beta", {store::ComputeDigest("absent")}).code(),
+            absl::StatusCode::kFailedPrecondition);
+}
+
 }  // namespace instascene::store_service

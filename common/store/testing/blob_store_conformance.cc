@@ -205,3 +205,68 @@ TEST_P(BlobStoreConformanceTest, ConcurrentPutsOfTheSameBlobsAgree) {
 }
 
 }  // namespace instascene::store::testing
+
+namespace instascene::store::testing {
+
+TEST_P(BlobStoreConformanceTest, GrantsAreKeptPerTenant) {
+  auto store = Open();
+  ASSERT_NE(store, nullptr);
+  const std::string data = RandomBytes(1000, 21);
+  const Digest d = ComputeDigest(data);
+  const Digest absent = ComputeDigest("never stored");
+  ASSERT_TRUE(store->Put(d, data).ok());
+  EXPECT_EQ(store->FindUngranted("acme", {d, absent})->size(), 2u);
+  EXPECT_EQ(store->Grant("acme", {absent}).code(), absl::StatusCode::kFailedPrecondition);
+  ASSERT_TRUE(store->Grant("acme", {d}).ok());
+  ASSERT_TRUE(store->Grant("acme", {d}).ok());  // idempotent
+  EXPECT_TRUE(store->FindUngranted("acme", {d})->empty());
+  EXPECT_EQ(store->FindUngranted("beta", {d})->size(), 1u);
+  EXPECT_EQ(store->Grant("../x", {d}).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(store->FindUngranted("Acme", {d}).status().code(), absl::StatusCode::kInvalidArgument);
+  store.reset();
+  store = Open();  // grants are durable
+  ASSERT_NE(store, nullptr);
+  EXPECT_TRUE(store->FindUngranted("acme", {d})->empty());
+}
+
+TEST_P(BlobStoreConformanceTest, TenantUploadsRevealNothingAndProvePossession) {
+  if (!backend_->tenant_uploads()) GTEST_SKIP() << "no tenant uploads on this backend";
+  const std::string data = RandomBytes(3 * kMiB + 5, 22);
+  const Digest d = ComputeDigest(data);
+  const int64_t half = int64_t{3} << 19;
+  {
+    auto store = Open();
+    ASSERT_NE(store, nullptr);
+    EXPECT_EQ(*store->TenantCommittedSize("acme", d), 0);
+    ASSERT_EQ(*store->TenantAppend("acme", d, 0, Slice(data, 0, half)), half);
+    // Neither the shared upload nor another tenant sees acme's progress.
+    EXPECT_EQ(*store->CommittedSize(d), 0);
+    EXPECT_EQ(*store->TenantCommittedSize("beta", d), 0);
+  }
+  auto store = Open();  // resumable across a restart, like the shared upload
+  ASSERT_NE(store, nullptr);
+  int64_t at = *store->TenantCommittedSize("acme", d);
+  EXPECT_LE(at, half);
+  EXPECT_GE(at, half - backend_->resume_loss_bytes());
+  ASSERT_TRUE(store->TenantAppend("acme", d, at, Slice(data, at, d.size_bytes - at)).ok());
+  ASSERT_TRUE(store->TenantFinishUpload("acme", d).ok());
+  EXPECT_TRUE(store->FindMissing({d})->empty());
+  EXPECT_TRUE(store->FindUngranted("acme", {d})->empty());
+  EXPECT_EQ(*store->TenantCommittedSize("acme", d), d.size_bytes);
+  // beta must send every byte of a blob the store already holds to be granted it.
+  EXPECT_EQ(*store->TenantCommittedSize("beta", d), 0);
+  std::string forged = data;
+  forged[100] ^= 1;
+  ASSERT_TRUE(store->TenantAppend("beta", d, 0, forged).ok());
+  EXPECT_EQ(store->TenantFinishUpload("beta", d).code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(store->FindUngranted("beta", {d})->size(), 1u);
+  EXPECT_EQ(*store->TenantCommittedSize("beta", d), 0) << "a wrong upload is discarded";
+  ASSERT_TRUE(store->TenantAppend("beta", d, 0, data).ok());
+  EXPECT_EQ(store->TenantFinishUpload("beta", d).code(), absl::StatusCode::kOk);
+  EXPECT_TRUE(store->FindUngranted("beta", {d})->empty());
+  EXPECT_EQ(*store->Read(d), data);
+  const StoreStats stats = *store->Stats();
+  EXPECT_EQ(stats.partial_uploads, 0) << "finished tenant uploads leave no part behind";
+}
+
+}  // namespace instascene::store::testing

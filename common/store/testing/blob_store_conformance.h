@@ -28,6 +28,9 @@ class BlobStoreBackend {
   // After a restart, an interrupted upload resumes at most this many bytes before the point the
   // client had reached (0: exactly there; S3: what was buffered below a part is resent).
   virtual int64_t resume_loss_bytes() const { return 0; }
+  // Whether tenant-private uploads are offered (the store service's own backends: filesystem,
+  // S3); grants are offered by every backend.
+  virtual bool tenant_uploads() const { return true; }
 };
 
 // Makes a backend over fresh storage for each test (named for test names and output).
