@@ -67,7 +67,7 @@ class S3BlobStore final : public BlobStore {
 
   std::string BlobKey(const Digest& digest) const;
   // The upload's staging key: the shared one (space "") or a tenant's own.
-  std::string UploadKey(const Digest& digest, const std::string& space) const;
+  std::string UploadKey(const Digest& digest, const std::string& space = "") const;
   std::string GrantKey(const std::string& tenant, const Digest& digest) const;
   S3Client& client() { return *client_; }
 
