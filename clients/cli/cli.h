@@ -30,6 +30,7 @@ void AddCompleteCommand(CLI::App& app, Action* action);
 void AddServeCommand(CLI::App& app, Action* action);
 void AddClientCommands(CLI::App& app, Action* action);  // submit, watch, jobs, fetch, cancel
 void AddObjectCommands(CLI::App& app, Action* action);  // object, objects
+void AddTokenCommand(CLI::App& app, Action* action);    // token create | revoke | list
 
 // Prints one JSON object as the last stdout line (the --json contract).
 void PrintJsonLine(const std::string& json);

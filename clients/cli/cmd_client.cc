@@ -17,6 +17,7 @@
 #include "common/rpc/status.h"
 #include "common/scene/image_io.h"
 #include "common/scene/scene.h"
+#include "clients/cli/connection.h"
 #include "instascene/client/services.h"
 #include "services/scheduler/job_proto.h"
 
@@ -26,11 +27,10 @@ namespace {
 constexpr char kDefaultServer[] = "127.0.0.1:50051";
 
 // Every command connects through the C++ client library (deadlines, retries while UNAVAILABLE).
-absl::StatusOr<std::unique_ptr<client::Client>> ConnectTo(const std::string& server,
+absl::StatusOr<std::unique_ptr<client::Client>> ConnectTo(const ConnectionFlags& connection,
+                                                          const std::string& server,
                                                           const std::string& store = "") {
-  client::ClientOptions options;
-  options.server = server;
-  options.store = store;
+  ASSIGN_OR_RETURN(client::ClientOptions options, ClientOptionsFor(connection, server, store));
   return client::Client::Connect(options);
 }
 
@@ -139,6 +139,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
   // submit
   struct SubmitArgs {
     std::string server = kDefaultServer, store, scene, name, params;
+    ConnectionFlags connection;
     std::vector<std::string> stages;
     int priority = 0, iterations = 0;
     bool iterations_given = false;
@@ -152,6 +153,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
                          "the job ids");
   s->add_option("--scene", submit->scene, "Scene directory")->required();
   s->add_option("--server", submit->server, "Scheduler address")->capture_default_str();
+  AddConnectionFlags(s, &submit->connection);
   s->add_option("--store", submit->store, "Store address (default: --server)");
   s->add_option("--name", submit->name, "Scene name shown in job lists (default: directory name)");
   s->add_option("--params", submit->params,
@@ -182,7 +184,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
         ASSIGN_OR_RETURN(Scene scene, ReadScene(a.scene));
         RETURN_IF_ERROR(CheckViewFiles(scene));
       }
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(a.server, a.store));
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(a.connection, a.server, a.store));
       client::SubmitRequest request;
       request.scene_dir = a.scene;
       request.name = a.name;
@@ -231,6 +233,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
   // watch
   struct WatchArgs {
     std::string server = kDefaultServer, scene;
+    ConnectionFlags connection;
     std::vector<std::string> ids;
     bool json = false;
   };
@@ -242,12 +245,13 @@ void AddClientCommands(CLI::App& app, Action* action) {
   w->add_option("ids", watch->ids, "Job ids");
   w->add_option("--scene", watch->scene, "Every job of this scene");
   w->add_option("--server", watch->server, "Scheduler address")->capture_default_str();
+  AddConnectionFlags(w, &watch->connection);
   w->add_flag("--json", watch->json, "Print the final jobs as one JSON object");
   w->callback([watch, action] {
     *action = [watch]() -> absl::Status {
       if (watch->ids.empty() && watch->scene.empty())
         return absl::InvalidArgumentError("give job ids or --scene");
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(watch->server));
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(watch->connection, watch->server));
       ASSIGN_OR_RETURN(auto jobs, Watch(*c, watch->ids, watch->scene));
       nlohmann::json out = nlohmann::json::array();
       std::string bad;
@@ -267,12 +271,14 @@ void AddClientCommands(CLI::App& app, Action* action) {
   // jobs
   struct JobsArgs {
     std::string server = kDefaultServer, scene, state, page_token;
+    ConnectionFlags connection;
     int limit = 50;
     bool json = false;
   };
   auto list = std::make_shared<JobsArgs>();
   CLI::App* l = app.add_subcommand("jobs", "The job queue as a table, with queue statistics");
   l->add_option("--server", list->server, "Scheduler address")->capture_default_str();
+  AddConnectionFlags(l, &list->connection);
   l->add_option("--scene", list->scene, "Only this scene");
   l->add_option("--state", list->state, "Only this state")
       ->check(CLI::IsMember({"queued", "leased", "running", "succeeded", "failed", "cancelled"}));
@@ -282,7 +288,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
   l->add_flag("--json", list->json, "Print {\"jobs\", \"stats\"} as the last stdout line");
   l->callback([list, action] {
     *action = [list]() -> absl::Status {
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(list->server));
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(list->connection, list->server));
       v1::ListJobsRequest request;
       request.set_scene(list->scene);
       request.set_limit(list->limit);
@@ -352,6 +358,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
   // fetch
   struct FetchArgs {
     std::string server = kDefaultServer, store, id, scene, out;
+    ConnectionFlags connection;
     bool json = false;
   };
   auto fetch = std::make_shared<FetchArgs>();
@@ -363,13 +370,14 @@ void AddClientCommands(CLI::App& app, Action* action) {
   f->add_option("--scene", fetch->scene, "Scene name: every stage's latest output");
   f->add_option("--out", fetch->out, "Directory to write the files to")->required();
   f->add_option("--server", fetch->server, "Scheduler address")->capture_default_str();
+  AddConnectionFlags(f, &fetch->connection);
   f->add_option("--store", fetch->store, "Store address (default: --server)");
   f->add_flag("--json", fetch->json, "Print a JSON summary as the last stdout line");
   f->callback([fetch, action] {
     *action = [fetch]() -> absl::Status {
       if (fetch->id.empty() == fetch->scene.empty())
         return absl::InvalidArgumentError("give a job id or --scene NAME (one of them)");
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(fetch->server, fetch->store));
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(fetch->connection, fetch->server, fetch->store));
       // (stage output, target directory)
       std::vector<std::pair<client::StageOutput, std::string>> outputs;
       if (!fetch->scene.empty()) {
@@ -428,6 +436,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
   // cancel
   struct CancelArgs {
     std::string server = kDefaultServer, id, scene;
+    ConnectionFlags connection;
   };
   auto cancel = std::make_shared<CancelArgs>();
   CLI::App* k = app.add_subcommand(
@@ -437,11 +446,12 @@ void AddClientCommands(CLI::App& app, Action* action) {
   k->add_option("id", cancel->id, "Job id (instead of --scene)");
   k->add_option("--scene", cancel->scene, "Scene name: cancel all its unfinished jobs");
   k->add_option("--server", cancel->server, "Scheduler address")->capture_default_str();
+  AddConnectionFlags(k, &cancel->connection);
   k->callback([cancel, action] {
     *action = [cancel]() -> absl::Status {
       if (cancel->id.empty() == cancel->scene.empty())
         return absl::InvalidArgumentError("give a job id or --scene NAME (one of them)");
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(cancel->server));
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(cancel->connection, cancel->server));
       std::vector<v1::Job> jobs;
       if (!cancel->scene.empty()) {
         v1::CancelSceneRequest request;

@@ -8,6 +8,7 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "clients/cli/cli.h"
+#include "clients/cli/connection.h"
 #include "common/core/status.h"
 #include "instascene/client/client.h"
 
@@ -56,6 +57,7 @@ void PrintObject(const client::ObjectInfo& o) {
 void AddObjectCommands(CLI::App& app, Action* action) {
   struct Args {
     std::string server = "127.0.0.1:50051", store, scene, view, pixel, point, ray, out;
+    ConnectionFlags connection;
     int64_t id = -1;
     double max_distance = 0;
     bool json = false;
@@ -78,6 +80,7 @@ void AddObjectCommands(CLI::App& app, Action* action) {
                   "The Objects service's address (`instascene serve`, or instascene-objects)")
       ->capture_default_str();
   cmd->add_option("--store", args->store, "Store address (default: --server)");
+  AddConnectionFlags(cmd, &args->connection);
   cmd->add_flag("--json", args->json, "Print the object as one JSON line");
   cmd->callback([args, action] {
     *action = [args]() -> absl::Status {
@@ -103,9 +106,8 @@ void AddObjectCommands(CLI::App& app, Action* action) {
         ASSIGN_OR_RETURN(auto v, ParseNumbers(args->ray, 6, "--ray", "OX,OY,OZ,DX,DY,DZ"));
         selector = client::ObjectSelector::Ray({v[0], v[1], v[2]}, {v[3], v[4], v[5]});
       }
-      client::ClientOptions options;
-      options.server = args->server;
-      options.store = args->store;
+      ASSIGN_OR_RETURN(client::ClientOptions options,
+                       ClientOptionsFor(args->connection, args->server, args->store));
       ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, client::Client::Connect(options));
       ASSIGN_OR_RETURN(client::ObjectInfo object, c->GetObject(args->scene, selector));
       PrintObject(object);
@@ -123,6 +125,7 @@ void AddObjectCommands(CLI::App& app, Action* action) {
 
   struct ListArgs {
     std::string server = "127.0.0.1:50051", scene;
+    ConnectionFlags connection;
     bool json = false;
   };
   auto list = std::make_shared<ListArgs>();
@@ -132,11 +135,12 @@ void AddObjectCommands(CLI::App& app, Action* action) {
   ls->add_option("--server", list->server,
                  "The Objects service's address (`instascene serve`, or instascene-objects)")
       ->capture_default_str();
+  AddConnectionFlags(ls, &list->connection);
   ls->add_flag("--json", list->json, "Print {\"objects\": [...]} as the last stdout line");
   ls->callback([list, action] {
     *action = [list]() -> absl::Status {
-      client::ClientOptions options;
-      options.server = list->server;
+      ASSIGN_OR_RETURN(client::ClientOptions options,
+                       ClientOptionsFor(list->connection, list->server));
       ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, client::Client::Connect(options));
       ASSIGN_OR_RETURN(std::vector<client::ObjectInfo> objects, c->ListObjects(list->scene));
       std::printf("%-5s %-9s %-26s %-30s %s\n", "ID", "SOURCE", "SIZE", "COMPLETION", "ARTEFACTS");

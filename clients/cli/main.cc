@@ -52,6 +52,7 @@ int Run(int argc, char** argv) {
   AddServeCommand(app, &action);
   AddClientCommands(app, &action);
   AddObjectCommands(app, &action);
+  AddTokenCommand(app, &action);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -2,11 +2,10 @@
 
 namespace instascene::decomposition {
 
-grpc::Status DecompositionService::GetWorkerStatus(grpc::ServerContext*,
+grpc::Status DecompositionService::GetWorkerStatus(grpc::ServerContext* context,
                                                    const v1::GetWorkerStatusRequest*,
                                                    v1::WorkerStatus* response) {
-  worker::FillWorkerStatus(worker_, {"decompose"}, response);
-  return grpc::Status::OK;
+  return worker::AnswerWorkerStatus(auth_, context, worker_, {"decompose"}, response);
 }
 
 }  // namespace instascene::decomposition

@@ -10,12 +10,15 @@ namespace instascene::decomposition {
 
 class DecompositionService final : public v1::Decomposition::Service {
  public:
-  explicit DecompositionService(const worker::StageWorker* worker) : worker_(worker) {}
+  // auth null = authentication off. Both must outlive the service.
+  explicit DecompositionService(const worker::StageWorker* worker, auth::Authenticator* auth = nullptr)
+      : worker_(worker), auth_(auth) {}
   grpc::Status GetWorkerStatus(grpc::ServerContext*, const v1::GetWorkerStatusRequest*,
                                v1::WorkerStatus* response) override;
 
  private:
   const worker::StageWorker* worker_;  // not owned
+  auth::Authenticator* auth_;
 };
 
 }  // namespace instascene::decomposition

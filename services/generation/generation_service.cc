@@ -2,11 +2,10 @@
 
 namespace instascene::generation {
 
-grpc::Status GenerationService::GetWorkerStatus(grpc::ServerContext*,
+grpc::Status GenerationService::GetWorkerStatus(grpc::ServerContext* context,
                                                 const v1::GetWorkerStatusRequest*,
                                                 v1::WorkerStatus* response) {
-  worker::FillWorkerStatus(worker_, {"complete"}, response);
-  return grpc::Status::OK;
+  return worker::AnswerWorkerStatus(auth_, context, worker_, {"complete"}, response);
 }
 
 }  // namespace instascene::generation

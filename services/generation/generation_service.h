@@ -10,12 +10,15 @@ namespace instascene::generation {
 
 class GenerationService final : public v1::Generation::Service {
  public:
-  explicit GenerationService(const worker::StageWorker* worker) : worker_(worker) {}
+  // auth null = authentication off. Both must outlive the service.
+  explicit GenerationService(const worker::StageWorker* worker, auth::Authenticator* auth = nullptr)
+      : worker_(worker), auth_(auth) {}
   grpc::Status GetWorkerStatus(grpc::ServerContext*, const v1::GetWorkerStatusRequest*,
                                v1::WorkerStatus* response) override;
 
  private:
   const worker::StageWorker* worker_;  // not owned
+  auth::Authenticator* auth_;
 };
 
 }  // namespace instascene::generation

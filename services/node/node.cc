@@ -43,6 +43,9 @@ absl::Status NodeOptions::Validate() const {
   if (index_cache_bytes < 0) return absl::InvalidArgumentError("--index-cache-bytes must be >= 0");
   if (!(retention_hours >= 0 && retention_hours <= 24 * 3650))
     return absl::InvalidArgumentError("--retention-hours must be in [0, 87600]");
+  if (no_auth && !auth_tokens.empty())
+    return absl::InvalidArgumentError("--no-auth and --auth-tokens contradict each other");
+  RETURN_IF_ERROR(rpc::ValidateChannelOptions(peer_tls));
   return store_options.Validate();
 }
 
@@ -98,6 +101,37 @@ std::shared_ptr<prometheus::Collectable> StoreCollector(store::BlobStore* store,
   });
 }
 
+// The authenticator of this node (null with --no-auth). The default token file is created on first
+// start with one admin token, written beside it for the CLI on this machine.
+absl::StatusOr<std::shared_ptr<auth::Authenticator>> OpenAuthenticator(const NodeOptions& options) {
+  if (options.no_auth) {
+    spdlog::warn("authentication is off (--no-auth): every caller is an admin");
+    return std::shared_ptr<auth::Authenticator>();
+  }
+  const fs::path auth_dir = fs::path(options.data_dir) / "auth";
+  const std::string path =
+      options.auth_tokens.empty() ? (auth_dir / "tokens.json").string() : options.auth_tokens;
+  std::error_code ec;
+  if (options.auth_tokens.empty() && !fs::exists(path, ec)) {
+    ASSIGN_OR_RETURN(std::string token,
+                     auth::CreateToken(path, auth::Role::kAdmin, "", "created on first start"));
+    const std::string admin_file = (auth_dir / "admin.token").string();
+    RETURN_IF_ERROR(auth::WriteTokenFile(admin_file, token));
+    spdlog::info("first start: an admin token is in {} (the CLI on this machine finds it)",
+                 admin_file);
+  }
+  return auth::Authenticator::FromFile(path);
+}
+
+// How this node reaches the store / scheduler services it does not host.
+absl::StatusOr<rpc::ChannelOptions> PeerChannelOptions(const NodeOptions& options) {
+  rpc::ChannelOptions channel = options.peer_tls;
+  if (!options.token_file.empty()) {
+    ASSIGN_OR_RETURN(channel.token, auth::ReadTokenFile(options.token_file));
+  }
+  return channel;
+}
+
 }  // namespace
 
 absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& stages,
@@ -120,6 +154,13 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
   std::error_code ec;
   fs::create_directories(options.data_dir, ec);
   if (ec) return absl::UnavailableError(absl::StrCat(options.data_dir, ": ", ec.message()));
+  ASSIGN_OR_RETURN(std::shared_ptr<auth::Authenticator> authenticator, OpenAuthenticator(options));
+  auth::Authenticator* auth = authenticator.get();
+  ASSIGN_OR_RETURN(rpc::ChannelOptions peer, PeerChannelOptions(options));
+  auto connect_peer = [&peer](const std::string& address) {
+    rpc::ChannelOptions c = peer;
+    return rpc::Connect(address, c);
+  };
 
   // The store: local (served here) or remote.
   std::unique_ptr<store::BlobStore> owned_store;
@@ -129,8 +170,8 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
                                 : options.store;
     ASSIGN_OR_RETURN(owned_store, store::OpenBlobStoreUri(uri, options.store_options));
   } else {
-    ASSIGN_OR_RETURN(owned_store,
-                     store_service::RemoteBlobStore::Connect(rpc::Connect(options.store)));
+    ASSIGN_OR_RETURN(std::shared_ptr<grpc::Channel> store_channel, connect_peer(options.store));
+    ASSIGN_OR_RETURN(owned_store, store_service::RemoteBlobStore::Connect(store_channel));
   }
   store::BlobStore* blob_store = owned_store.get();
 
@@ -138,7 +179,7 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
   std::vector<std::string> names;
   std::unique_ptr<store_service::StoreService> store_svc;
   if (options.run_store) {
-    store_svc = std::make_unique<store_service::StoreService>(blob_store);
+    store_svc = std::make_unique<store_service::StoreService>(blob_store, auth);
     services.push_back(store_svc.get());
     names.push_back("instascene.v1.ContentStore");
   }
@@ -155,6 +196,7 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
     scheduler::SchedulerServiceOptions scheduler_options;
     scheduler_options.rescue_interval_ms = std::min(1000, options.lease_seconds * 250);
     scheduler_options.retention_ms = static_cast<int64_t>(options.retention_hours * 3600e3);
+    scheduler_options.auth = auth;
     scheduler_svc = std::make_unique<scheduler::SchedulerService>(queue.get(), blob_store, &stages,
                                                                   scheduler_options);
     services.push_back(scheduler_svc.get());
@@ -190,6 +232,7 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
     context.work_dir = (fs::path(work_dir) / hosted_service->name).string();
     context.scheduler = get_scheduler;
     context.index_cache_bytes = options.index_cache_bytes;
+    context.auth = auth;
     stage_services.push_back(hosted_service->make(context));
     services.push_back(stage_services.back().get());
     names.push_back(hosted_service->grpc_name);
@@ -207,15 +250,24 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
 
   rpc::ServerOptions server_options;
   server_options.listen = options.listen;
+  server_options.tls = options.tls;
   server_options.interceptors = metrics::RpcMetricsInterceptors;  // call latencies by method
   server_options.max_message_bytes = static_cast<int>(
       std::min<int64_t>(options.store_options.max_batch_bytes + (1 << 20), 1 << 30));
   ASSIGN_OR_RETURN(std::unique_ptr<rpc::Server> server,
                    rpc::Server::Start(server_options, services, names));
   if (!workers.empty()) {
-    std::shared_ptr<grpc::Channel> channel = options.run_scheduler
-                                                 ? server->InProcessChannel()
-                                                 : rpc::Connect(options.scheduler_address);
+    // The node's own workers reach an in-process scheduler with a token valid in this process only.
+    std::string process_token;
+    if (auth != nullptr && options.run_scheduler) {
+      ASSIGN_OR_RETURN(process_token, auth->AddProcessToken(auth::Role::kWorker));
+    }
+    std::shared_ptr<grpc::Channel> channel;
+    if (options.run_scheduler) {
+      channel = server->InProcessChannel(process_token);
+    } else {
+      ASSIGN_OR_RETURN(channel, connect_peer(options.scheduler_address));
+    }
     {
       std::lock_guard<std::mutex> lock(scheduler_channel->mutex);
       scheduler_channel->channel = channel;

@@ -19,6 +19,8 @@
 #include <grpcpp/grpcpp.h>
 
 #include "absl/status/status.h"
+#include "common/auth/authenticator.h"
+#include "common/rpc/credentials.h"
 #include "common/store/blob_store.h"
 #include "services/pipeline/registry.h"
 #include "services/worker/stage_worker.h"
@@ -54,6 +56,16 @@ struct NodeOptions {
   // Generation workers: the diffusion prior's Denoiser service (grpc://HOST:PORT; "" = none, and
   // complete jobs asking for prior "diffusion" fail).
   std::string denoiser;
+  // Authentication (docs/SERVICES.md): the token file every call is checked against ("" =
+  // DATA/auth/tokens.json; created on first start with an admin token in DATA/auth/admin.token
+  // when it is the default and absent). no_auth turns checking off (a trusted network only).
+  std::string auth_tokens;
+  bool no_auth = false;
+  // This node's own credential towards the store / scheduler it reaches by address (a worker or
+  // admin token, `instascene token create --role worker`; "" = none).
+  std::string token_file;
+  rpc::TlsServerOptions tls;        // TLS on the gRPC listener (none = plaintext)
+  rpc::ChannelOptions peer_tls;     // TLS towards --store / --scheduler (tls_* fields only)
   store::StoreOptions store_options;
 
   absl::Status Validate() const;
@@ -69,6 +81,7 @@ struct StageServiceContext {
   // per request.
   std::function<std::shared_ptr<grpc::Channel>()> scheduler;
   int64_t index_cache_bytes = 0;  // NodeOptions::index_cache_bytes
+  auth::Authenticator* auth = nullptr;  // null = authentication off
 };
 
 // A stage service a node can host: a worker leasing `kinds` and the gRPC adapter around it.

@@ -64,6 +64,25 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
   app.add_option("--metrics", o->metrics_listen,
                  "Serve Prometheus metrics at http://HOST:PORT/metrics (port 0 = any free port; "
                  "default: off)");
+  app.add_option("--auth-tokens", o->auth_tokens,
+                 "Token file every call is checked against (default DATA/auth/tokens.json, "
+                 "created on first start with an admin token in DATA/auth/admin.token); edit it "
+                 "with `instascene token`");
+  app.add_flag("--no-auth", o->no_auth,
+               "Accept every call without a token, as an admin (trusted networks only)");
+  app.add_option("--token-file", o->token_file,
+                 "This node's token (role worker or admin) for the --store / --scheduler it "
+                 "reaches by address");
+  app.add_option("--tls-cert", o->tls.cert_file, "TLS: this server's certificate chain (PEM)");
+  app.add_option("--tls-key", o->tls.key_file, "TLS: this server's private key (PEM)");
+  app.add_option("--tls-client-ca", o->tls.client_ca_file,
+                 "Mutual TLS: only clients with a certificate signed by this CA (PEM) connect");
+  app.add_option("--tls-ca", o->peer_tls.tls_ca_file,
+                 "TLS towards --store / --scheduler: the CA that signed their certificates (PEM)");
+  app.add_option("--tls-client-cert", o->peer_tls.tls_cert_file,
+                 "Mutual TLS towards --store / --scheduler: this node's certificate (PEM)");
+  app.add_option("--tls-client-key", o->peer_tls.tls_key_file,
+                 "Mutual TLS towards --store / --scheduler: this node's private key (PEM)");
   app.add_option("--max-blob-bytes", o->store_options.max_blob_bytes,
                  "Largest blob the store accepts")
       ->capture_default_str();

@@ -15,20 +15,20 @@ StageService DecompositionStageService() {
           "instascene.v1.Decomposition",
           {"decompose"},
           [](const StageServiceContext& c) {
-            return std::make_unique<decomposition::DecompositionService>(c.worker);
+            return std::make_unique<decomposition::DecompositionService>(c.worker, c.auth);
           }};
 }
 
 StageService TrainingStageService() {
   return {
       "training", "instascene.v1.Training", {"train", "segment"}, [](const StageServiceContext& c) {
-        return std::make_unique<training::TrainingService>(c.worker);
+        return std::make_unique<training::TrainingService>(c.worker, c.auth);
       }};
 }
 
 StageService GenerationStageService() {
   return {"generation", "instascene.v1.Generation", {"complete"}, [](const StageServiceContext& c) {
-            return std::make_unique<generation::GenerationService>(c.worker);
+            return std::make_unique<generation::GenerationService>(c.worker, c.auth);
           }};
 }
 
@@ -52,6 +52,7 @@ StageService ObjectsStageService() {
             };
             objects::ObjectsServiceOptions options;
             options.cache_bytes = c.index_cache_bytes;
+            options.auth = c.auth;
             return std::make_unique<objects::ObjectsService>(c.store, std::move(lookup), c.work_dir,
                                                              options);
           }};

@@ -147,14 +147,19 @@ ObjectsService::CacheStats ObjectsService::cache_stats() const {
   return s;
 }
 
-grpc::Status ObjectsService::GetObject(grpc::ServerContext*, const v1::GetObjectRequest* request,
-                                       v1::Object* response) {
+grpc::Status ObjectsService::GetObject(grpc::ServerContext* context,
+                                       const v1::GetObjectRequest* request, v1::Object* response) {
   auto answer = [&]() -> absl::Status {
+    ASSIGN_OR_RETURN(auth::Identity who, auth::Authorize(options_.auth, context,
+                                                         {auth::Role::kClient, auth::Role::kAdmin}));
     bool fresh = false;
-    ASSIGN_OR_RETURN(std::shared_ptr<const SceneObjects> index, Index(request->scene(), &fresh));
+    RETURN_IF_ERROR(CheckSceneName(request->scene()));
+    ASSIGN_OR_RETURN(std::shared_ptr<const SceneObjects> index,
+                     Index(auth::StoredScene(who, request->scene()), &fresh));
     Stopwatch watch;
     ASSIGN_OR_RETURN(uint32_t id, index->Resolve(request->selector()));
     ASSIGN_OR_RETURN(*response, index->Describe(id));
+    response->set_scene(request->scene());
     response->set_query_microseconds(watch.ElapsedSeconds() * 1e6);
     response->set_index_loaded(!fresh);
     return absl::OkStatus();
@@ -162,10 +167,13 @@ grpc::Status ObjectsService::GetObject(grpc::ServerContext*, const v1::GetObject
   return rpc::ToGrpcStatus(answer());
 }
 
-grpc::Status ObjectsService::ListObjects(grpc::ServerContext*,
+grpc::Status ObjectsService::ListObjects(grpc::ServerContext* context,
                                          const v1::ListObjectsRequest* request,
                                          v1::ListObjectsResponse* response) {
   auto answer = [&]() -> absl::Status {
+    ASSIGN_OR_RETURN(auth::Identity who, auth::Authorize(options_.auth, context,
+                                                         {auth::Role::kClient, auth::Role::kAdmin}));
+    RETURN_IF_ERROR(CheckSceneName(request->scene()));
     const int limit = request->limit() == 0 ? 100 : request->limit();
     if (limit < 0 || limit > options_.max_page)
       return absl::InvalidArgumentError(
@@ -176,14 +184,17 @@ grpc::Status ObjectsService::ListObjects(grpc::ServerContext*,
           absl::StrCat("page_token '", request->page_token().substr(0, 40),
                        "' is not one this service gave (next_page_token)"));
     bool fresh = false;
-    ASSIGN_OR_RETURN(std::shared_ptr<const SceneObjects> index, Index(request->scene(), &fresh));
+    ASSIGN_OR_RETURN(std::shared_ptr<const SceneObjects> index,
+                     Index(auth::StoredScene(who, request->scene()), &fresh));
     for (uint32_t id : index->Ids()) {
       if (id <= after) continue;
       if (response->objects_size() == limit) {
         response->set_next_page_token(std::to_string(response->objects().rbegin()->id()));
         break;
       }
-      ASSIGN_OR_RETURN(*response->add_objects(), index->Describe(id));
+      v1::Object* object = response->add_objects();
+      ASSIGN_OR_RETURN(*object, index->Describe(id));
+      object->set_scene(request->scene());
     }
     return absl::OkStatus();
   };

@@ -12,6 +12,7 @@
 #include <mutex>
 #include <string>
 
+#include "common/auth/authenticator.h"
 #include "common/store/blob_store.h"
 #include "instascene/v1/objects.grpc.pb.h"
 #include "instascene/v1/scheduler.pb.h"
@@ -29,6 +30,9 @@ absl::StatusOr<SceneOutputs> OutputsOf(const v1::Scene& scene);
 struct ObjectsServiceOptions {
   int64_t cache_bytes = int64_t{4} << 30;  // loaded indexes kept (at least the newest one)
   int max_page = 1000;                     // ListObjects page size limit
+  // Clients ask for their tenant's scenes only (the lookup receives the stored scene name,
+  // common/auth/identity.h); null = authentication off. Must outlive the service.
+  auth::Authenticator* auth = nullptr;
 };
 
 class ObjectsService final : public v1::Objects::Service {

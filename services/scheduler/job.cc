@@ -108,14 +108,15 @@ JobProgress JobProgress::FromJson(const nlohmann::json& j) {
 std::string JobKey(const store::Digest& scene_manifest, const std::string& kind,
                    const nlohmann::json& parameters,
                    const std::vector<std::pair<std::string, std::string>>& dependency_keys,
-                   int64_t item) {
+                   int64_t item, const std::string& tenant) {
   nlohmann::json deps = nlohmann::json::object();
   for (const auto& [name, key] : dependency_keys) deps[name] = key;
-  const nlohmann::json j = {{"scene_manifest", scene_manifest.ToString()},
-                            {"kind", kind},
-                            {"parameters", parameters},
-                            {"dependencies", deps},
-                            {"item", item}};
+  nlohmann::json j = {{"scene_manifest", scene_manifest.ToString()},
+                      {"kind", kind},
+                      {"parameters", parameters},
+                      {"dependencies", deps},
+                      {"item", item}};
+  if (!tenant.empty()) j["tenant"] = tenant;  // keys without a tenant stay what they were
   return store::ComputeDigest(j.dump()).hash;
 }
 

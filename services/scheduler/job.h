@@ -102,11 +102,12 @@ struct Job {
   const JobDependency* FindDependency(absl::string_view name) const;
 };
 
-// key = SHA-256 over (scene manifest, kind, canonical parameters, dependency keys by name, item).
+// key = SHA-256 over (scene manifest, kind, canonical parameters, dependency keys by name, item,
+// and the tenant when there is one): tenants never share jobs, even of identical scenes.
 std::string JobKey(const store::Digest& scene_manifest, const std::string& kind,
                    const nlohmann::json& parameters,
                    const std::vector<std::pair<std::string, std::string>>& dependency_keys,
-                   int64_t item);
+                   int64_t item, const std::string& tenant = "");
 // Job ids are derived from keys: the same job has the same id everywhere.
 std::string JobIdFromKey(const std::string& key);
 

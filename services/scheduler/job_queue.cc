@@ -6,6 +6,7 @@
 #include <set>
 
 #include "absl/strings/str_cat.h"
+#include "common/auth/identity.h"
 #include "common/core/status.h"
 
 namespace instascene::scheduler {
@@ -116,7 +117,8 @@ absl::StatusOr<SubmitResult> JobQueue::SubmitOne(QueueTx& tx, const SubmitReques
                           (dep.state == JobState::kFailed || dep.state == JobState::kCancelled);
     pending += dep.state != JobState::kSucceeded && !left_out;
   }
-  const std::string key = JobKey(request.scene_manifest, kind, parameters, keys, item);
+  const std::string key =
+      JobKey(request.scene_manifest, kind, parameters, keys, item, auth::SceneTenant(request.scene));
   const std::string id = JobIdFromKey(key);
   ASSIGN_OR_RETURN(std::optional<Job> existing, tx.Get(id));
   if (existing) {

@@ -18,6 +18,7 @@ namespace instascene::scheduler {
 
 struct JobFilter {
   std::string scene;              // "" = all
+  std::string scene_prefix;       // "" = all; else only scenes whose name starts with it (a tenant)
   std::optional<JobState> state;  // unset = all
   std::vector<std::string> ids;   // non-empty: exactly these (NotFound if one is missing)
   int limit = 100;                // newest first

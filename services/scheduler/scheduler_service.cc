@@ -16,7 +16,38 @@
 
 namespace instascene::scheduler {
 
+using auth::Role;
 using rpc::ToGrpcStatus;
+
+namespace {
+// A job as the caller sees it: its scene under the caller's own name for it.
+void ToCallerProto(const auth::Identity& who, const Job& job, v1::Job* out) {
+  ToProto(job, out);
+  out->set_scene(auth::ShownScene(who, job.scene));
+}
+}  // namespace
+
+absl::StatusOr<auth::Identity> SchedulerService::Caller(grpc::ServerContext* context,
+                                                        std::initializer_list<Role> roles) const {
+  return auth::Authorize(options_.auth, context, roles);
+}
+
+absl::StatusOr<Job> SchedulerService::VisibleJob(const auth::Identity& who, const std::string& id) {
+  ASSIGN_OR_RETURN(Job job, queue_->Get(id));
+  if (!auth::MaySee(who, job.scene))
+    return absl::NotFoundError(absl::StrCat("job ", id.substr(0, 80), " not found"));
+  return job;
+}
+
+absl::Status SchedulerService::GrantOutputs(const Job& job, const store::Digest& output) {
+  const std::string tenant = auth::SceneTenant(job.scene);
+  if (tenant.empty()) return absl::OkStatus();
+  ASSIGN_OR_RETURN(std::string bytes, store_->Read(output));
+  ASSIGN_OR_RETURN(store::Manifest manifest, store::ParseManifest(bytes, "output manifest"));
+  std::vector<store::Digest> digests = manifest.Digests();
+  digests.push_back(output);
+  return store_->Grant(tenant, digests);
+}
 
 SchedulerService::SchedulerService(JobQueue* queue, store::BlobStore* store,
                                    const pipeline::StageRegistry* stages,
@@ -71,12 +102,28 @@ void SchedulerService::RescueLoop() {
   }
 }
 
-absl::Status SchedulerService::Submit(const v1::SubmitPipelineRequest& request,
+absl::Status SchedulerService::Submit(const auth::Identity& who,
+                                      const v1::SubmitPipelineRequest& request,
                                       v1::SubmitPipelineResponse* response) {
   ASSIGN_OR_RETURN(store::Digest manifest_digest,
                    rpc::ParseProtoDigest(request.scene_manifest(), "scene_manifest"));
+  if (who.scoped()) {  // a tenant submits only a scene whose manifest it holds (else: as absent)
+    ASSIGN_OR_RETURN(std::vector<store::Digest> ungranted,
+                     store_->FindUngranted(who.tenant, {manifest_digest}));
+    if (!ungranted.empty())
+      return absl::NotFoundError(
+          absl::StrCat("scene manifest ", manifest_digest.ToString(), " is not in the store"));
+  }
   ASSIGN_OR_RETURN(store::Manifest manifest, store::ReadManifest(*store_, manifest_digest));
   RETURN_IF_ERROR(store::ValidateSceneManifest(*store_, manifest));
+  if (who.scoped()) {  // ... and every file it names
+    ASSIGN_OR_RETURN(std::vector<store::Digest> ungranted,
+                     store_->FindUngranted(who.tenant, manifest.Digests()));
+    if (!ungranted.empty())
+      return absl::FailedPreconditionError(
+          absl::StrCat("scene manifest refers to ", ungranted.size(),
+                       " blobs the store lacks (first: ", ungranted[0].ToString(), ")"));
+  }
   nlohmann::json parameters = nlohmann::json::object();
   if (!request.parameters_json().empty()) {
     parameters = nlohmann::json::parse(request.parameters_json(), nullptr, false);
@@ -89,23 +136,26 @@ absl::Status SchedulerService::Submit(const v1::SubmitPipelineRequest& request,
     return absl::InvalidArgumentError("scene name: at most 256 bytes, no control characters");
   SubmitRequest submit;
   submit.scene_manifest = manifest_digest;
-  submit.scene = request.scene().empty() ? manifest_digest.hash.substr(0, 12) : request.scene();
+  submit.scene = auth::StoredScene(
+      who, request.scene().empty() ? manifest_digest.hash.substr(0, 12) : request.scene());
   submit.priority = request.priority();
   submit.max_attempts = options_.max_attempts;
   ASSIGN_OR_RETURN(submit.stages,
                    stages_->Plan({request.stages().begin(), request.stages().end()}, parameters));
   ASSIGN_OR_RETURN(std::vector<SubmitResult> jobs, queue_->Submit(submit));
   for (const SubmitResult& r : jobs) {
-    ToProto(r.job, response->add_jobs());
+    ToCallerProto(who, r.job, response->add_jobs());
     response->add_created(r.created);
   }
   return absl::OkStatus();
 }
 
-grpc::Status SchedulerService::SubmitPipeline(grpc::ServerContext*,
+grpc::Status SchedulerService::SubmitPipeline(grpc::ServerContext* context,
                                               const v1::SubmitPipelineRequest* request,
                                               v1::SubmitPipelineResponse* response) {
-  const absl::Status s = Submit(*request, response);
+  absl::StatusOr<auth::Identity> who = Caller(context, {Role::kClient, Role::kAdmin});
+  if (!who.ok()) return ToGrpcStatus(who.status());
+  const absl::Status s = Submit(*who, *request, response);
   if (s.ok()) Notify();
   return ToGrpcStatus(s);
 }
@@ -127,15 +177,21 @@ absl::Status SchedulerService::Lease(const v1::LeaseJobRequest& request,
   return absl::OkStatus();
 }
 
-grpc::Status SchedulerService::LeaseJob(grpc::ServerContext*, const v1::LeaseJobRequest* request,
+grpc::Status SchedulerService::LeaseJob(grpc::ServerContext* context,
+                                        const v1::LeaseJobRequest* request,
                                         v1::LeaseJobResponse* response) {
+  if (auto who = Caller(context, {Role::kWorker, Role::kAdmin}); !who.ok())
+    return ToGrpcStatus(who.status());
   const absl::Status s = Lease(*request, response);
   if (s.ok() && response->has_job()) Notify();
   return ToGrpcStatus(s);
 }
 
-grpc::Status SchedulerService::Heartbeat(grpc::ServerContext*, const v1::HeartbeatRequest* request,
+grpc::Status SchedulerService::Heartbeat(grpc::ServerContext* context,
+                                         const v1::HeartbeatRequest* request,
                                          v1::HeartbeatResponse* response) {
+  if (auto who = Caller(context, {Role::kWorker, Role::kAdmin}); !who.ok())
+    return ToGrpcStatus(who.status());
   absl::StatusOr<HeartbeatResult> r =
       queue_->Heartbeat(request->job_id(), request->lease_token(), FromProto(request->progress()));
   if (!r.ok()) return ToGrpcStatus(r.status());
@@ -183,14 +239,22 @@ absl::Status SchedulerService::CheckOutput(const std::string& job_id,
   return absl::OkStatus();
 }
 
-grpc::Status SchedulerService::CompleteJob(grpc::ServerContext*,
+grpc::Status SchedulerService::CompleteJob(grpc::ServerContext* context,
                                            const v1::CompleteJobRequest* request,
                                            v1::CompleteJobResponse*) {
+  if (auto who = Caller(context, {Role::kWorker, Role::kAdmin}); !who.ok())
+    return ToGrpcStatus(who.status());
   absl::StatusOr<store::Digest> output =
       rpc::ParseProtoDigest(request->output_manifest(), "output_manifest");
   if (!output.ok()) return ToGrpcStatus(output.status());
   if (absl::Status bad = CheckOutput(request->job_id(), request->lease_token(), *output); !bad.ok())
     return ToGrpcStatus(bad);
+  // Granted before the job shows as succeeded: its tenant can read what it sees finished.
+  if (absl::StatusOr<Job> job = queue_->Get(request->job_id()); !job.ok()) {
+    return ToGrpcStatus(job.status());
+  } else if (absl::Status granted = GrantOutputs(*job, *output); !granted.ok()) {
+    return ToGrpcStatus(granted);
+  }
   const absl::Status s =
       queue_->Complete(request->job_id(), request->lease_token(), *output, request->items());
   if (s.ok()) {
@@ -201,8 +265,10 @@ grpc::Status SchedulerService::CompleteJob(grpc::ServerContext*,
   return ToGrpcStatus(s);
 }
 
-grpc::Status SchedulerService::FailJob(grpc::ServerContext*, const v1::FailJobRequest* request,
-                                       v1::FailJobResponse*) {
+grpc::Status SchedulerService::FailJob(grpc::ServerContext* context,
+                                       const v1::FailJobRequest* request, v1::FailJobResponse*) {
+  if (auto who = Caller(context, {Role::kWorker, Role::kAdmin}); !who.ok())
+    return ToGrpcStatus(who.status());
   absl::StatusOr<FailureKind> kind = FromProto(request->kind());
   if (!kind.ok()) return ToGrpcStatus(kind.status());
   const absl::Status s =
@@ -218,30 +284,43 @@ grpc::Status SchedulerService::FailJob(grpc::ServerContext*, const v1::FailJobRe
   return ToGrpcStatus(s);
 }
 
-grpc::Status SchedulerService::CancelJob(grpc::ServerContext*, const v1::CancelJobRequest* request,
-                                         v1::Job* response) {
+grpc::Status SchedulerService::CancelJob(grpc::ServerContext* context,
+                                         const v1::CancelJobRequest* request, v1::Job* response) {
+  absl::StatusOr<auth::Identity> who = Caller(context, {Role::kClient, Role::kAdmin});
+  if (!who.ok()) return ToGrpcStatus(who.status());
+  if (auto visible = VisibleJob(*who, request->job_id()); !visible.ok())
+    return ToGrpcStatus(visible.status());
   absl::StatusOr<Job> job = queue_->Cancel(request->job_id());
   if (!job.ok()) return ToGrpcStatus(job.status());
-  ToProto(*job, response);
+  ToCallerProto(*who, *job, response);
   Notify();
   return grpc::Status::OK;
 }
 
-grpc::Status SchedulerService::CancelScene(grpc::ServerContext*,
+grpc::Status SchedulerService::CancelScene(grpc::ServerContext* context,
                                            const v1::CancelSceneRequest* request,
                                            v1::CancelSceneResponse* response) {
-  absl::StatusOr<std::vector<Job>> jobs = queue_->CancelScene(request->scene());
+  absl::StatusOr<auth::Identity> who = Caller(context, {Role::kClient, Role::kAdmin});
+  if (!who.ok()) return ToGrpcStatus(who.status());
+  if (request->scene().empty())
+    return ToGrpcStatus(absl::InvalidArgumentError("CancelScene: no scene given"));
+  absl::StatusOr<std::vector<Job>> jobs =
+      queue_->CancelScene(auth::StoredScene(*who, request->scene()));
   if (!jobs.ok()) return ToGrpcStatus(jobs.status());
-  for (const Job& j : *jobs) ToProto(j, response->add_jobs());
+  for (const Job& j : *jobs) ToCallerProto(*who, j, response->add_jobs());
   Notify();
   return grpc::Status::OK;
 }
 
-grpc::Status SchedulerService::GetScene(grpc::ServerContext*, const v1::GetSceneRequest* request,
-                                        v1::Scene* response) {
-  absl::StatusOr<SceneSummary> scene = queue_->GetScene(request->scene());
+grpc::Status SchedulerService::GetScene(grpc::ServerContext* context,
+                                        const v1::GetSceneRequest* request, v1::Scene* response) {
+  absl::StatusOr<auth::Identity> who = Caller(context, {Role::kClient, Role::kWorker, Role::kAdmin});
+  if (!who.ok()) return ToGrpcStatus(who.status());
+  if (request->scene().empty())
+    return ToGrpcStatus(absl::InvalidArgumentError("GetScene: no scene given"));
+  absl::StatusOr<SceneSummary> scene = queue_->GetScene(auth::StoredScene(*who, request->scene()));
   if (!scene.ok()) return ToGrpcStatus(scene.status());
-  response->set_name(scene->scene);
+  response->set_name(auth::ShownScene(*who, scene->scene));
   rpc::ToProto(scene->scene_manifest, response->mutable_scene_manifest());
   for (const StageOutput& o : scene->outputs) {
     v1::StageOutput* out = response->add_outputs();
@@ -257,8 +336,11 @@ grpc::Status SchedulerService::GetScene(grpc::ServerContext*, const v1::GetScene
   return grpc::Status::OK;
 }
 
-grpc::Status SchedulerService::ListStages(grpc::ServerContext*, const v1::ListStagesRequest*,
+grpc::Status SchedulerService::ListStages(grpc::ServerContext* context,
+                                          const v1::ListStagesRequest*,
                                           v1::ListStagesResponse* response) {
+  if (auto who = Caller(context, {Role::kClient, Role::kWorker, Role::kAdmin}); !who.ok())
+    return ToGrpcStatus(who.status());
   static constexpr const char* kTypes[] = {"bool", "int", "double", "string"};
   for (const std::string& kind : stages_->Kinds()) {
     const pipeline::StageSpec& spec = stages_->Find(kind)->spec;
@@ -285,18 +367,24 @@ grpc::Status SchedulerService::ListStages(grpc::ServerContext*, const v1::ListSt
   return grpc::Status::OK;
 }
 
-grpc::Status SchedulerService::GetJob(grpc::ServerContext*, const v1::GetJobRequest* request,
-                                      v1::Job* response) {
-  absl::StatusOr<Job> job = queue_->Get(request->job_id());
+grpc::Status SchedulerService::GetJob(grpc::ServerContext* context,
+                                      const v1::GetJobRequest* request, v1::Job* response) {
+  absl::StatusOr<auth::Identity> who = Caller(context, {Role::kClient, Role::kWorker, Role::kAdmin});
+  if (!who.ok()) return ToGrpcStatus(who.status());
+  absl::StatusOr<Job> job = VisibleJob(*who, request->job_id());
   if (!job.ok()) return ToGrpcStatus(job.status());
-  ToProto(*job, response);
+  ToCallerProto(*who, *job, response);
   return grpc::Status::OK;
 }
 
-grpc::Status SchedulerService::ListJobs(grpc::ServerContext*, const v1::ListJobsRequest* request,
+grpc::Status SchedulerService::ListJobs(grpc::ServerContext* context,
+                                        const v1::ListJobsRequest* request,
                                         v1::ListJobsResponse* response) {
+  absl::StatusOr<auth::Identity> who = Caller(context, {Role::kClient, Role::kAdmin});
+  if (!who.ok()) return ToGrpcStatus(who.status());
   JobFilter filter;
-  filter.scene = request->scene();
+  filter.scene = auth::StoredScene(*who, request->scene());
+  if (who->scoped()) filter.scene_prefix = who->tenant + ":";
   if (request->state() != v1::JOB_STATE_UNSPECIFIED) {
     if (request->state() < v1::JOB_STATE_QUEUED || request->state() > v1::JOB_STATE_CANCELLED)
       return ToGrpcStatus(absl::InvalidArgumentError("unknown job state"));
@@ -309,14 +397,16 @@ grpc::Status SchedulerService::ListJobs(grpc::ServerContext*, const v1::ListJobs
   }
   absl::StatusOr<std::vector<Job>> jobs = queue_->List(filter);
   if (!jobs.ok()) return ToGrpcStatus(jobs.status());
-  for (const Job& j : *jobs) ToProto(j, response->add_jobs());
+  for (const Job& j : *jobs) ToCallerProto(*who, j, response->add_jobs());
   if (static_cast<int>(jobs->size()) == filter.limit && !jobs->empty())
     response->set_next_page_token(std::to_string(jobs->back().seq));
   return grpc::Status::OK;
 }
 
-grpc::Status SchedulerService::GetQueueStats(grpc::ServerContext*, const v1::GetQueueStatsRequest*,
+grpc::Status SchedulerService::GetQueueStats(grpc::ServerContext* context,
+                                             const v1::GetQueueStatsRequest*,
                                              v1::QueueStats* response) {
+  if (auto who = Caller(context, {Role::kAdmin}); !who.ok()) return ToGrpcStatus(who.status());
   absl::StatusOr<QueueStats> stats = queue_->Stats();
   if (!stats.ok()) return ToGrpcStatus(stats.status());
   for (const auto& [state, n] : stats->jobs_by_state)
@@ -329,9 +419,16 @@ grpc::Status SchedulerService::GetQueueStats(grpc::ServerContext*, const v1::Get
 grpc::Status SchedulerService::WatchJobs(grpc::ServerContext* context,
                                          const v1::WatchJobsRequest* request,
                                          grpc::ServerWriter<v1::Job>* writer) {
+  absl::StatusOr<auth::Identity> who = Caller(context, {Role::kClient, Role::kAdmin});
+  if (!who.ok()) return ToGrpcStatus(who.status());
   JobFilter filter;
   filter.ids.assign(request->job_ids().begin(), request->job_ids().end());
-  filter.scene = request->scene();
+  if (filter.ids.size() > 1000)
+    return ToGrpcStatus(absl::InvalidArgumentError("WatchJobs: at most 1000 job_ids"));
+  for (const std::string& id : filter.ids) {
+    if (auto visible = VisibleJob(*who, id); !visible.ok()) return ToGrpcStatus(visible.status());
+  }
+  filter.scene = auth::StoredScene(*who, request->scene());
   filter.limit = 1000;
   if (filter.ids.empty() && filter.scene.empty())
     return ToGrpcStatus(absl::InvalidArgumentError("WatchJobs: give job_ids or a scene"));
@@ -346,7 +443,7 @@ grpc::Status SchedulerService::WatchJobs(grpc::ServerContext* context,
     absl::StatusOr<std::vector<Job>> jobs = queue_->List(filter);
     if (!jobs.ok()) return ToGrpcStatus(jobs.status());
     if (jobs->empty())
-      return ToGrpcStatus(absl::NotFoundError("no jobs for scene " + filter.scene));
+      return ToGrpcStatus(absl::NotFoundError("no jobs for scene " + request->scene()));
     bool all_final = true;
     for (auto it = jobs->rbegin(); it != jobs->rend(); ++it) {  // oldest first
       const Job& job = *it;
@@ -356,7 +453,7 @@ grpc::Status SchedulerService::WatchJobs(grpc::ServerContext* context,
       if (sent[job.id] == fingerprint) continue;
       sent[job.id] = fingerprint;
       v1::Job out;
-      ToProto(job, &out);
+      ToCallerProto(*who, job, &out);
       if (!writer->Write(out)) return grpc::Status::CANCELLED;
     }
     if (all_final) return grpc::Status::OK;

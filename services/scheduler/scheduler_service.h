@@ -9,6 +9,7 @@
 #include <mutex>
 #include <thread>
 
+#include "common/auth/authenticator.h"
 #include "common/store/blob_store.h"
 #include "instascene/v1/scheduler.grpc.pb.h"
 #include "services/pipeline/registry.h"
@@ -21,6 +22,10 @@ struct SchedulerServiceOptions {
   int max_attempts = 3;           // per job, for submitted pipelines
   int64_t retention_ms = 0;       // finished jobs older than this are pruned (0 = kept for ever)
   int prune_interval_ms = 60000;  // how often the rescuer thread prunes
+  // Who may call what (null = authentication off). Clients act on their tenant's scenes only (a
+  // client's scene "x" is stored as "<tenant>:x", common/auth/identity.h), workers lease and
+  // complete, admins do everything; completing a job grants its outputs to its scene's tenant.
+  auth::Authenticator* auth = nullptr;
 };
 
 class SchedulerService final : public v1::Scheduler::Service {
@@ -60,8 +65,14 @@ class SchedulerService final : public v1::Scheduler::Service {
                          grpc::ServerWriter<v1::Job>* writer) override;
 
  private:
-  absl::Status Submit(const v1::SubmitPipelineRequest& request,
+  absl::Status Submit(const auth::Identity& who, const v1::SubmitPipelineRequest& request,
                       v1::SubmitPipelineResponse* response);
+  absl::StatusOr<auth::Identity> Caller(grpc::ServerContext* context,
+                                        std::initializer_list<auth::Role> roles) const;
+  // The job, if the caller may see it (NotFound otherwise, as for an unknown job).
+  absl::StatusOr<Job> VisibleJob(const auth::Identity& who, const std::string& id);
+  // Grants a finished job's output manifest and every blob it names to its scene's tenant.
+  absl::Status GrantOutputs(const Job& job, const store::Digest& output);
   absl::Status Lease(const v1::LeaseJobRequest& request, v1::LeaseJobResponse* response);
   // A completion's output must be the lease holder's, a manifest of the job's kind whose blobs
   // are all in the store and that holds the files its stage always writes.

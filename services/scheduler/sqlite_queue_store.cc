@@ -212,11 +212,13 @@ class SqliteTx final : public QueueTx {
     Statement s(db_,
                 absl::StrCat("SELECT ", kColumns,
                              ", seq FROM jobs WHERE (? = '' OR scene = ?) AND (? = 0 OR state = ?) "
-                             "AND (? = 0 OR seq < ?) ORDER BY seq DESC LIMIT ?"));
+                             "AND (? = 0 OR seq < ?) AND (? = '' OR substr(scene, 1, length(?)) = ?) "
+                             "ORDER BY seq DESC LIMIT ?"));
     const int64_t state = filter.state ? Code(*filter.state) : 0;
     s.Bind(1, filter.scene).Bind(2, filter.scene).Bind(3, state).Bind(4, state);
     s.Bind(5, filter.before_seq).Bind(6, filter.before_seq);
-    s.Bind(7, int64_t{filter.limit > 0 ? filter.limit : 100});
+    s.Bind(7, filter.scene_prefix).Bind(8, filter.scene_prefix).Bind(9, filter.scene_prefix);
+    s.Bind(10, int64_t{filter.limit > 0 ? filter.limit : 100});
     while (true) {
       ASSIGN_OR_RETURN(bool row, s.Step());
       if (!row) break;

@@ -2,11 +2,10 @@
 
 namespace instascene::training {
 
-grpc::Status TrainingService::GetWorkerStatus(grpc::ServerContext*,
+grpc::Status TrainingService::GetWorkerStatus(grpc::ServerContext* context,
                                               const v1::GetWorkerStatusRequest*,
                                               v1::WorkerStatus* response) {
-  worker::FillWorkerStatus(worker_, {"train", "segment"}, response);
-  return grpc::Status::OK;
+  return worker::AnswerWorkerStatus(auth_, context, worker_, {"train", "segment"}, response);
 }
 
 }  // namespace instascene::training

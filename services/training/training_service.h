@@ -10,13 +10,16 @@ namespace instascene::training {
 
 class TrainingService final : public v1::Training::Service {
  public:
-  explicit TrainingService(const worker::StageWorker* worker) : worker_(worker) {}
+  // auth null = authentication off. Both must outlive the service.
+  explicit TrainingService(const worker::StageWorker* worker, auth::Authenticator* auth = nullptr)
+      : worker_(worker), auth_(auth) {}
 
   grpc::Status GetWorkerStatus(grpc::ServerContext*, const v1::GetWorkerStatusRequest*,
                                v1::WorkerStatus* response) override;
 
  private:
   const worker::StageWorker* worker_;
+  auth::Authenticator* auth_;
 };
 
 }  // namespace instascene::training

@@ -384,4 +384,13 @@ void FillWorkerStatus(const worker::StageWorker* worker, const std::vector<std::
   out->set_state(worker->draining() ? "draining" : "serving");
 }
 
+grpc::Status AnswerWorkerStatus(auth::Authenticator* auth, grpc::ServerContext* context,
+                                const StageWorker* worker, const std::vector<std::string>& kinds,
+                                v1::WorkerStatus* out) {
+  absl::StatusOr<auth::Identity> who = auth::Authorize(auth, context, {auth::Role::kAdmin});
+  if (!who.ok()) return rpc::ToGrpcStatus(who.status());
+  FillWorkerStatus(worker, kinds, out);
+  return grpc::Status::OK;
+}
+
 }  // namespace instascene::worker

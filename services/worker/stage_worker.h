@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "common/core/cancel.h"
+#include "common/auth/authenticator.h"
 #include "common/store/blob_store.h"
 #include "instascene/v1/scheduler.grpc.pb.h"
 #include "services/pipeline/registry.h"
@@ -89,5 +90,9 @@ class StageWorker {
 // The WorkerStatus every stage service reports (worker may be null: a service without a worker).
 void FillWorkerStatus(const StageWorker* worker, const std::vector<std::string>& kinds,
                       v1::WorkerStatus* out);
+// GetWorkerStatus of a stage service: monitoring, for admins only (auth null = off).
+grpc::Status AnswerWorkerStatus(auth::Authenticator* auth, grpc::ServerContext* context,
+                                const StageWorker* worker, const std::vector<std::string>& kinds,
+                                v1::WorkerStatus* out);
 
 }  // namespace instascene::worker

@@ -159,9 +159,21 @@ absl::StatusOr<std::unique_ptr<Client>> Client::Connect(const ClientOptions& opt
   if (options.deadline.count() <= 0) return absl::InvalidArgumentError("deadline must be > 0");
   auto impl = std::make_unique<Impl>();
   impl->options = options;
-  impl->channel = rpc::Connect(options.server);
-  impl->store_channel = options.store.empty() ? impl->channel : rpc::Connect(options.store);
-  impl->objects_channel = options.objects.empty() ? impl->channel : rpc::Connect(options.objects);
+  rpc::ChannelOptions channel;
+  channel.token = options.token;
+  channel.tls_ca_file = options.tls_ca_file;
+  channel.tls_cert_file = options.tls_cert_file;
+  channel.tls_key_file = options.tls_key_file;
+  channel.tls_server_name = options.tls_server_name;
+  ASSIGN_OR_RETURN(impl->channel, rpc::Connect(options.server, channel));
+  impl->store_channel = impl->channel;
+  if (!options.store.empty()) {
+    ASSIGN_OR_RETURN(impl->store_channel, rpc::Connect(options.store, channel));
+  }
+  impl->objects_channel = impl->channel;
+  if (!options.objects.empty()) {
+    ASSIGN_OR_RETURN(impl->objects_channel, rpc::Connect(options.objects, channel));
+  }
   impl->scheduler = v1::Scheduler::NewStub(impl->channel);
   impl->objects = v1::Objects::NewStub(impl->objects_channel);
   return std::unique_ptr<Client>(new Client(std::move(impl)));

@@ -378,6 +378,34 @@ TEST_P(JobQueueConformanceTest, ListAndStats) {
   EXPECT_EQ(leased, 1);
 }
 
+TEST_P(JobQueueConformanceTest, TenantsShareNoJobsAndListOnlyTheirScenes) {
+  // The same scene content under two tenants' names: separate jobs (the tenant is in the key).
+  SubmitRequest r;
+  r.scene_manifest = Out("same");
+  r.stages = {Stage("decompose")};
+  r.scene = "acme:kitchen";
+  const auto a = queue_->Submit(r);
+  r.scene = "acme-2:kitchen";  // a tenant whose name extends the other's
+  const auto b = queue_->Submit(r);
+  r.scene = "kitchen";  // an admin's unprefixed scene keeps the key it always had
+  const auto c = queue_->Submit(r);
+  ASSERT_TRUE(a.ok() && b.ok() && c.ok());
+  EXPECT_TRUE((*b)[0].created);
+  EXPECT_NE((*a)[0].job.id, (*b)[0].job.id);
+  EXPECT_NE((*a)[0].job.id, (*c)[0].job.id);
+  EXPECT_EQ((*c)[0].job.key, JobKey(Out("same"), "decompose", {{"p", 1}}, {}, -1));
+  JobFilter filter;
+  filter.scene_prefix = "acme:";
+  auto listed = queue_->List(filter);
+  ASSERT_TRUE(listed.ok());
+  ASSERT_EQ(listed->size(), 1u);
+  EXPECT_EQ((*listed)[0].scene, "acme:kitchen");
+  filter.scene_prefix = "acme-2:";
+  EXPECT_EQ(queue_->List(filter)->size(), 1u);
+  filter.scene_prefix = "beta:";
+  EXPECT_TRUE(queue_->List(filter)->empty());
+}
+
 TEST_P(JobQueueConformanceTest, PruningRemovesOldFinishedJobsNothingStillNeeded) {
   auto ids = SubmitStages("s", {Stage("decompose"), Stage("train", {{"decompose"}})});
   auto lease = MustLease({"decompose"});

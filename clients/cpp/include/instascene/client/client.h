@@ -30,6 +30,13 @@ struct ClientOptions {
   std::chrono::milliseconds deadline{30000};  // per call (per attempt)
   int max_attempts = 4;                       // attempts while UNAVAILABLE (>= 1)
   std::chrono::milliseconds initial_backoff{200};  // doubled after each failed attempt
+  // Authentication: the bearer token sent with every call ("isk_...", from
+  // `instascene token create`; "" = none, for servers run with --no-auth).
+  std::string token;
+  // TLS (all "" = plaintext): the CA that signed the servers' certificates, and for mutual TLS
+  // this client's certificate and key (PEM files); the name the certificates must carry when it
+  // differs from the address's host.
+  std::string tls_ca_file, tls_cert_file, tls_key_file, tls_server_name;
 };
 
 struct Vec3 {

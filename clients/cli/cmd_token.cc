@@ -1,0 +1,131 @@
+// `instascene token create | revoke | list`: the admin command for bearer tokens. It edits the
+// token file a server checks calls against (default: the one `instascene serve --data DIR` uses,
+// DIR/auth/tokens.json); servers pick up the change within a second, without a restart.
+#include <chrono>
+#include <cstdio>
+#include <ctime>
+#include <filesystem>
+#include <memory>
+
+#include <nlohmann/json.hpp>
+
+#include "clients/cli/cli.h"
+#include "common/auth/tokens.h"
+#include "common/core/status.h"
+
+namespace instascene::cli {
+namespace {
+
+std::string TokenFilePath(const std::string& tokens, const std::string& data) {
+  if (!tokens.empty()) return tokens;
+  return (std::filesystem::path(data) / "auth" / "tokens.json").string();
+}
+
+std::string Time(int64_t unix_ms) {
+  if (unix_ms == 0) return "-";
+  const std::time_t t = static_cast<std::time_t>(unix_ms / 1000);
+  std::tm tm{};
+  gmtime_r(&t, &tm);
+  char buffer[32];
+  std::strftime(buffer, sizeof buffer, "%Y-%m-%dT%H:%M:%SZ", &tm);
+  return buffer;
+}
+
+}  // namespace
+
+void AddTokenCommand(CLI::App& app, Action* action) {
+  CLI::App* token = app.add_subcommand(
+      "token", "Bearer tokens of a server's tenants (create, revoke, list); stored hashed");
+  token->require_subcommand(1);
+  struct Args {
+    std::string data = "instascene-data", tokens, role = "client", tenant, note, out, id;
+    bool json = false;
+  };
+  auto args = std::make_shared<Args>();
+  auto add_file_flags = [args](CLI::App* cmd) {
+    cmd->add_option("--data", args->data, "The server's data directory (its DATA/auth/tokens.json)")
+        ->capture_default_str();
+    cmd->add_option("--tokens", args->tokens, "The token file itself (overrides --data)");
+  };
+
+  CLI::App* create = token->add_subcommand(
+      "create", "Create a token and print it once (the file keeps only its SHA-256)");
+  add_file_flags(create);
+  create->add_option("--role", args->role, "client (one tenant's scenes), worker or admin")
+      ->capture_default_str();
+  create->add_option("--tenant", args->tenant,
+                     "The tenant of a client token: 1-32 of a-z, 0-9 and '-'");
+  create->add_option("--note", args->note, "Who or what holds it (shown by list)");
+  create->add_option("--out", args->out,
+                     "Write the token to this file (mode 0600) instead of printing it");
+  create->add_flag("--json", args->json, "Print {\"id\", \"token\", ...} as one JSON line");
+  create->callback([args, action] {
+    *action = [args]() -> absl::Status {
+      ASSIGN_OR_RETURN(auth::Role role, auth::ParseRole(args->role));
+      const std::string path = TokenFilePath(args->tokens, args->data);
+      auth::TokenRecord record;
+      ASSIGN_OR_RETURN(std::string secret,
+                       auth::CreateToken(path, role, args->tenant, args->note, &record));
+      if (!args->out.empty()) {
+        RETURN_IF_ERROR(auth::WriteTokenFile(args->out, secret));
+        secret.clear();
+      }
+      if (args->json) {
+        nlohmann::json out = {{"id", record.id},
+                              {"role", auth::RoleName(record.role)},
+                              {"tenant", record.tenant}};
+        if (!secret.empty()) out["token"] = secret;
+        if (!args->out.empty()) out["token_file"] = args->out;
+        PrintJsonLine(out.dump());
+      } else if (!secret.empty()) {
+        std::printf("%s\n", secret.c_str());
+        std::fprintf(stderr, "token %s (%s%s%s) created in %s; it is shown only this once\n",
+                     record.id.c_str(), auth::RoleName(record.role),
+                     record.tenant.empty() ? "" : ", tenant ", record.tenant.c_str(), path.c_str());
+      } else {
+        std::printf("token %s written to %s\n", record.id.c_str(), args->out.c_str());
+      }
+      return absl::OkStatus();
+    };
+  });
+
+  CLI::App* revoke = token->add_subcommand("revoke", "Revoke a token by its id (see list)");
+  add_file_flags(revoke);
+  revoke->add_option("id", args->id, "The token's id (12 hex digits)")->required();
+  revoke->callback([args, action] {
+    *action = [args]() -> absl::Status {
+      const std::string path = TokenFilePath(args->tokens, args->data);
+      RETURN_IF_ERROR(auth::RevokeToken(path, args->id));
+      std::printf("token %s revoked in %s\n", args->id.c_str(), path.c_str());
+      return absl::OkStatus();
+    };
+  });
+
+  CLI::App* list = token->add_subcommand("list", "List the tokens (never their secrets)");
+  add_file_flags(list);
+  list->add_flag("--json", args->json, "Print {\"tokens\": [...]} as the last stdout line");
+  list->callback([args, action] {
+    *action = [args]() -> absl::Status {
+      const std::string path = TokenFilePath(args->tokens, args->data);
+      ASSIGN_OR_RETURN(auth::TokenFile file, auth::LoadTokenFile(path));
+      std::printf("%-13s %-7s %-16s %-21s %-21s %s\n", "ID", "ROLE", "TENANT", "CREATED",
+                  "REVOKED", "NOTE");
+      nlohmann::json all = nlohmann::json::array();
+      for (const auth::TokenRecord& t : file.tokens) {
+        std::printf("%-13s %-7s %-16s %-21s %-21s %s\n", t.id.c_str(), auth::RoleName(t.role),
+                    t.tenant.empty() ? "-" : t.tenant.c_str(), Time(t.created_unix_ms).c_str(),
+                    Time(t.revoked_unix_ms).c_str(), t.note.c_str());
+        all.push_back({{"id", t.id},
+                       {"role", auth::RoleName(t.role)},
+                       {"tenant", t.tenant},
+                       {"note", t.note},
+                       {"created_unix_ms", t.created_unix_ms},
+                       {"revoked", t.revoked_unix_ms != 0}});
+      }
+      if (args->json) PrintJsonLine(nlohmann::json{{"tokens", all}}.dump());
+      return absl::OkStatus();
+    };
+  });
+}
+
+}  // namespace instascene::cli
