@@ -22,7 +22,7 @@ PACKAGES=(
   libcli11-dev
   libgtest-dev libgmock-dev
   libbenchmark-dev
-  libssl-dev libcurl4-openssl-dev
+  libssl-dev libcurl4-openssl-dev openssl
   libnanoflann-dev
   libcpp-httplib-dev
   prometheus-cpp-dev prometheus

@@ -21,6 +21,10 @@ check "synth scene B" "$BIN" synth --out "$WORK/b" --preset tiny --seed 4
 start serve "$WORK/ready" "$BIN" serve --data "$WORK/data" --listen 127.0.0.1:0 --ready-file "$WORK/ready" --lease-seconds 2
 SERVE=$LAST_PID
 ADDR=$(cat "$WORK/ready")
+# The admin token serve wrote on first start (the CLI finds it by itself in ./instascene-data).
+export INSTASCENE_TOKEN_FILE="$WORK/data/auth/admin.token"
+check "serve wrote an admin token on first start" test -s "$INSTASCENE_TOKEN_FILE"
+check "readable by its owner only" test "$(stat -c %a "$INSTASCENE_TOKEN_FILE")" = "600"
 check_fails "a second serve on the same data folder is refused" "in use by another process" \
   "$BIN" serve --data "$WORK/data" --listen 127.0.0.1:0
 check_fails "a second serve on the same port is refused" "cannot listen on $ADDR" \
@@ -109,18 +113,20 @@ kill -TERM "$SERVE"; wait "$SERVE"
 check "serve exited cleanly on SIGTERM" test $? -eq 0
 check "drain log" grep -q "draining" "$WORK/serve2.log"
 
-# 7. Workers as separate processes; one killed with SIGKILL mid-job.
+# 7. Workers as separate processes (each with a worker token); one killed with SIGKILL mid-job.
+check "a worker token" "$BIN" token create --data "$WORK/data" --role worker --note "test workers" --out "$WORK/worker.token"
+WT="--token-file $WORK/worker.token"
 start store "$WORK/ready-store" "$BINDIR/instascene-store" --data "$WORK/data" --listen 127.0.0.1:0 --ready-file "$WORK/ready-store"
 STORE=$(cat "$WORK/ready-store")
-start scheduler "$WORK/ready-sched" "$BINDIR/instascene-scheduler" --data "$WORK/data" --listen 127.0.0.1:0 --ready-file "$WORK/ready-sched" --store "$STORE" --lease-seconds 2
+start scheduler "$WORK/ready-sched" "$BINDIR/instascene-scheduler" --data "$WORK/data" --listen 127.0.0.1:0 --ready-file "$WORK/ready-sched" --store "$STORE" --lease-seconds 2 $WT
 SCHED=$(cat "$WORK/ready-sched")
 check "the handed-back job is queued" test "$(job_field "$SCHED" "$DRAIN" state)" = "queued"
 check "handed back, not failed" grep -q "handed back" <(job_field "$SCHED" "$DRAIN" error)
-start trainer1 "$WORK/ready-t1" "$BINDIR/instascene-training" --data "$WORK/w1" --store "$STORE" --scheduler "$SCHED" --lease-seconds 2 --ready-file "$WORK/ready-t1"
+start trainer1 "$WORK/ready-t1" "$BINDIR/instascene-training" --data "$WORK/w1" --store "$STORE" --scheduler "$SCHED" --lease-seconds 2 --ready-file "$WORK/ready-t1" $WT
 T1=$LAST_PID
 check "worker 1 takes the job" wait_state "$SCHED" "$DRAIN" running training
 kill -9 "$T1"; wait "$T1" 2>/dev/null
-start trainer2 "$WORK/ready-t2" "$BINDIR/instascene-training" --data "$WORK/w2" --store "$STORE" --scheduler "$SCHED" --lease-seconds 2 --ready-file "$WORK/ready-t2" --cache-bytes 1
+start trainer2 "$WORK/ready-t2" "$BINDIR/instascene-training" --data "$WORK/w2" --store "$STORE" --scheduler "$SCHED" --lease-seconds 2 --ready-file "$WORK/ready-t2" --cache-bytes 1 $WT
 check "the killed worker's job is retried and succeeds" "$BIN" watch "$DRAIN" --server "$SCHED"
 check "two attempts: the killed one and the successful one (the hand-back is free)" test "$(job_field "$SCHED" "$DRAIN" attempts)" = "2"
 check "exactly one result recorded" test -n "$(job_field "$SCHED" "$DRAIN" output_manifest)"
@@ -130,7 +136,7 @@ check "worker 2's 1-byte input cache evicted what the next job did not need" gre
 
 # 8. Per-object completion: the generation worker takes one complete job per segmented object; a
 # degenerate object fails its own job permanently with a message, the others succeed.
-start generator "$WORK/ready-g" "$BINDIR/instascene-generation" --data "$WORK/w3" --store "$STORE" --scheduler "$SCHED" --ready-file "$WORK/ready-g"
+start generator "$WORK/ready-g" "$BINDIR/instascene-generation" --data "$WORK/w3" --store "$STORE" --scheduler "$SCHED" --ready-file "$WORK/ready-g" $WT
 # (The parameters of A's latest pipeline, so that `fetch --scene` shows its objects.)
 check "submit A with completion" "$BIN" submit --scene "$WORK/a" --server "$SCHED" --store "$STORE" --params "$(slow 4000)" --json
 cp "$WORK/out.txt" "$WORK/submit7.json"
@@ -148,6 +154,55 @@ done
 check "fetch the scene with its objects" "$BIN" fetch --scene a --out "$WORK/scene-a2" --server "$SCHED" --store "$STORE" --json
 check "one complete job per instance" test "$(echo $COMPLETE | wc -w)" = "$(python3 -c "import json,sys; print(len(json.load(open(sys.argv[1]))))" "$WORK/scene-a2/segment/instances.json")"
 check "objects have manifests and meshes" test -n "$(ls "$WORK"/scene-a2/complete/*/manifest.json)" -a -n "$(ls "$WORK"/scene-a2/complete/*/mesh.ply)"
+
+# 9. Tenants, tokens and TLS on a second embedded server: a client token sees its tenant's scenes
+# only; revoked tokens stop working without a restart; plaintext clients cannot reach a TLS
+# listener; with mutual TLS a client needs a certificate the server's CA signed.
+unset INSTASCENE_TOKEN_FILE
+pki() {  # a CA, and certificates it signs for the server (localhost / 127.0.0.1) and a client
+  cd "$WORK" &&
+  openssl req -x509 -newkey rsa:2048 -nodes -days 1 -subj /CN=test-ca -keyout ca.key -out ca.pem &&
+  for who in server client; do
+    openssl req -newkey rsa:2048 -nodes -subj "/CN=$who" -keyout $who.key -out $who.csr &&
+    printf 'subjectAltName=DNS:localhost,IP:127.0.0.1\n' > $who.ext &&
+    openssl x509 -req -in $who.csr -CA ca.pem -CAkey ca.key -CAcreateserial -days 1 -out $who.pem -extfile $who.ext || return 1
+  done
+}
+check "test certificates" pki
+start serve3 "$WORK/ready3" "$BIN" serve --data "$WORK/data3" --listen 127.0.0.1:0 --ready-file "$WORK/ready3" --workers decomposition --tls-cert "$WORK/server.pem" --tls-key "$WORK/server.key"
+ADDR3=$(cat "$WORK/ready3")
+TLS="--tls-ca $WORK/ca.pem"
+check "tenant acme's token" "$BIN" token create --data "$WORK/data3" --tenant acme --note "acme robots" --out "$WORK/acme.token"
+check "tenant beta's token" "$BIN" token create --data "$WORK/data3" --tenant beta --out "$WORK/beta.token"
+ACME="--token-file $WORK/acme.token"; BETA="--token-file $WORK/beta.token"; ADMIN="--token-file $WORK/data3/auth/admin.token"
+check "the token file holds no token" bash -c "! grep -q \"\$(cut -c18- '$WORK/acme.token')\" '$WORK/data3/auth/tokens.json'"
+check "token list" "$BIN" token list --data "$WORK/data3" --json
+check "three tokens listed" test "$(json_get "$WORK/out.txt" "len(d['tokens'])")" = "3"
+check_fails "a plaintext client cannot talk to the TLS listener" "unreachable\|UNAVAILABLE" "$BIN" jobs --server "$ADDR3" $ADMIN
+check_fails "no token: UNAUTHENTICATED" "UNAUTHENTICATED" bash -c "cd '$WORK' && '$BIN' jobs --server '$ADDR3' $TLS"
+check "acme submits scene A" "$BIN" submit --scene "$WORK/a" --server "$ADDR3" --stages decompose $TLS $ACME --json
+ACMEJOB=$(json_get "$WORK/out.txt" "d['jobs'][0]['id']")
+check "acme's job finishes" "$BIN" watch "$ACMEJOB" --server "$ADDR3" $TLS $ACME
+check "acme fetches its result" "$BIN" fetch "$ACMEJOB" --out "$WORK/acme-out" --server "$ADDR3" $TLS $ACME
+check "acme sees its scene under its own name" test "$(json_get <("$BIN" jobs --server "$ADDR3" $TLS $ACME --json) "d['jobs'][0]['scene']")" = "a"
+check "beta sees no job" test "$(json_get <("$BIN" jobs --server "$ADDR3" $TLS $BETA --json) "len(d['jobs'])")" = "0"
+check_fails "beta cannot fetch acme's job" "NOT_FOUND" "$BIN" fetch "$ACMEJOB" --out "$WORK/beta-out" --server "$ADDR3" $TLS $BETA
+check_fails "beta cannot cancel acme's job" "NOT_FOUND" "$BIN" cancel "$ACMEJOB" --server "$ADDR3" $TLS $BETA
+check_fails "beta cannot fetch acme's scene" "NOT_FOUND" "$BIN" fetch --scene a --out "$WORK/beta-out" --server "$ADDR3" $TLS $BETA
+check "the admin sees the stored name" test "$(json_get <("$BIN" jobs --server "$ADDR3" $TLS $ADMIN --json) "d['jobs'][0]['scene']")" = "acme:a"
+ACMEID=$(cut -c5-16 "$WORK/acme.token")
+check "revoke acme's token" "$BIN" token revoke "$ACMEID" --data "$WORK/data3"
+revoked() {  # servers re-read the token file at most once a second: poll for up to 5 s
+  for _ in $(seq 50); do
+    grep -q UNAUTHENTICATED <<<"$("$BIN" jobs --server "$ADDR3" $TLS $ACME 2>&1)" && return 0; sleep 0.1
+  done; return 1
+}
+check "the revoked token is refused without a restart" revoked
+start serve4 "$WORK/ready4" "$BIN" serve --data "$WORK/data4" --listen 127.0.0.1:0 --ready-file "$WORK/ready4" --workers none --tls-cert "$WORK/server.pem" --tls-key "$WORK/server.key" --tls-client-ca "$WORK/ca.pem"
+ADDR4=$(cat "$WORK/ready4")
+ADMIN4="--token-file $WORK/data4/auth/admin.token"
+check_fails "mutual TLS: no client certificate, no connection" "unreachable\|UNAVAILABLE" "$BIN" jobs --server "$ADDR4" $TLS $ADMIN4
+check "mutual TLS: with the client certificate" "$BIN" jobs --server "$ADDR4" $TLS $ADMIN4 --tls-client-cert "$WORK/client.pem" --tls-client-key "$WORK/client.key"
 
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

@@ -303,10 +303,13 @@ void AddClientCommands(CLI::App& app, Action* action) {
       RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
         return client::SchedulerStub(*c).ListJobs(context, request, &response);
       }));
+      // Queue-wide figures are monitoring (admins); a client token lists its own jobs only.
       v1::QueueStats stats;
-      RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
+      const absl::Status stats_status = client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
         return client::SchedulerStub(*c).GetQueueStats(context, v1::GetQueueStatsRequest(), &stats);
-      }));
+      });
+      if (!stats_status.ok() && !absl::IsPermissionDenied(stats_status)) return stats_status;
+      const bool has_stats = stats_status.ok();
       std::printf("%-17s %-22s %-16s %-9s %-3s %s\n", "JOB", "KIND", "SCENE", "STATE", "TRY",
                   "PROGRESS / ERROR");
       nlohmann::json jobs = nlohmann::json::array();
@@ -339,18 +342,21 @@ void AddClientCommands(CLI::App& app, Action* action) {
         by_state[state] = n;
         absl::StrAppend(&line, state, " ", n, "  ");
       }
-      std::printf("queue: %s| scenes %lld | oldest queued %.1f s\n", line.c_str(),
-                  static_cast<long long>(stats.scenes()), stats.oldest_queued_age_ms() / 1000.0);
+      if (has_stats)
+        std::printf("queue: %s| scenes %lld | oldest queued %.1f s\n", line.c_str(),
+                    static_cast<long long>(stats.scenes()), stats.oldest_queued_age_ms() / 1000.0);
       if (!response.next_page_token().empty())
         std::printf("more: --page-token %s\n", response.next_page_token().c_str());
       if (list->json)
-        PrintJsonLine(nlohmann::json({{"jobs", jobs},
-                                      {"next_page_token", response.next_page_token()},
-                                      {"stats",
-                                       {{"jobs_by_state", by_state},
-                                        {"scenes", stats.scenes()},
-                                        {"oldest_queued_age_ms", stats.oldest_queued_age_ms()}}}})
-                          .dump());
+        PrintJsonLine(
+            nlohmann::json({{"jobs", jobs},
+                            {"next_page_token", response.next_page_token()},
+                            {"stats", has_stats ? nlohmann::json{{"jobs_by_state", by_state},
+                                                                 {"scenes", stats.scenes()},
+                                                                 {"oldest_queued_age_ms",
+                                                                  stats.oldest_queued_age_ms()}}
+                                                : nlohmann::json(nullptr)}})
+                .dump());
       return absl::OkStatus();
     };
   });
