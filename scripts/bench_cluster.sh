@@ -18,6 +18,11 @@ start_s3 instascene-bench
 now() { date +%s.%N; }
 for s in $(seq "$SCENES"); do "$BIN" synth --out "$WORK/s$s" --preset tiny --seed "$s" >/dev/null 2>&1; done
 PARAMS='{"train":{"iterations":1500,"samples":256,"pixel_pool":512}}'
+# One token file for the processes (worker token between them, admin token for the CLI).
+"$BIN" token create --tokens "$WORK/tokens.json" --role worker --out "$WORK/worker.token" >/dev/null
+"$BIN" token create --tokens "$WORK/tokens.json" --role admin --out "$WORK/admin.token" >/dev/null
+export INSTASCENE_TOKEN_FILE="$WORK/admin.token"
+AUTH="--auth-tokens $WORK/tokens.json --token-file $WORK/worker.token"
 run=0
 for sets in 1 3; do
   for rep in $(seq "$REPEATS"); do
@@ -28,12 +33,12 @@ for sets in 1 3; do
     queue="postgresql:///$db?host=$WORK/pg&port=5433&user=postgres"
     uri="s3://$S3_BUCKET/run$run?endpoint=$S3_ENDPOINT&query_slash=literal"
     first=${#PIDS[@]}
-    start "store$run" "$WORK/rs$run" "$BINDIR/instascene-store" --data "$WORK/st$run" --store "$uri" --listen 127.0.0.1:0 --ready-file "$WORK/rs$run"
-    start "sched$run" "$WORK/rq$run" "$BINDIR/instascene-scheduler" --data "$WORK/sc$run" --queue "$queue" --store "$uri" --listen 127.0.0.1:0 --ready-file "$WORK/rq$run"
+    start "store$run" "$WORK/rs$run" "$BINDIR/instascene-store" --data "$WORK/st$run" --store "$uri" --listen 127.0.0.1:0 --ready-file "$WORK/rs$run" $AUTH
+    start "sched$run" "$WORK/rq$run" "$BINDIR/instascene-scheduler" --data "$WORK/sc$run" --queue "$queue" --store "$uri" --listen 127.0.0.1:0 --ready-file "$WORK/rq$run" $AUTH
     store=$(cat "$WORK/rs$run"); sched=$(cat "$WORK/rq$run")
     for w in $(seq "$sets"); do
-      start "dec$run-$w" "$WORK/rd$run-$w" "$BINDIR/instascene-decomposition" --data "$WORK/wd$run-$w" --store "$uri" --scheduler "$sched" --threads 1 --ready-file "$WORK/rd$run-$w"
-      start "tr$run-$w" "$WORK/rt$run-$w" "$BINDIR/instascene-training" --data "$WORK/wt$run-$w" --store "$uri" --scheduler "$sched" --threads 1 --ready-file "$WORK/rt$run-$w"
+      start "dec$run-$w" "$WORK/rd$run-$w" "$BINDIR/instascene-decomposition" --data "$WORK/wd$run-$w" --store "$uri" --scheduler "$sched" --threads 1 --ready-file "$WORK/rd$run-$w" $AUTH
+      start "tr$run-$w" "$WORK/rt$run-$w" "$BINDIR/instascene-training" --data "$WORK/wt$run-$w" --store "$uri" --scheduler "$sched" --threads 1 --ready-file "$WORK/rt$run-$w" $AUTH
     done
     t0=$(now)
     for s in $(seq "$SCENES"); do

@@ -16,6 +16,7 @@ serve() {  # serve DATA WORKERS: starts a server, sets ADDR and SERVER_PID
   SERVER_PID=$!
   for _ in $(seq 200); do [ -s "$WORK/ready" ] && break; sleep 0.05; done
   ADDR=$(cat "$WORK/ready")
+  export INSTASCENE_TOKEN_FILE="$1/auth/admin.token"  # written on first start
 }
 
 "$BIN" synth --out "$WORK/medium" --preset medium --seed 1 >/dev/null 2>&1

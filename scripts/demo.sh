@@ -59,7 +59,9 @@ SERVER_PID=$!
 trap 'kill -TERM $SERVER_PID 2>/dev/null || true' EXIT
 for _ in $(seq 200); do [ -s "$OUT/server.addr" ] && break; sleep 0.05; done
 ADDR=$(cat "$OUT/server.addr")
-echo "server: $ADDR (log: $OUT/server.log, data: $OUT/server/)"
+# On first start the server wrote an admin token beside its data; the clients below use it.
+export INSTASCENE_TOKEN_FILE="$OUT/server/auth/admin.token"
+echo "server: $ADDR (log: $OUT/server.log, data: $OUT/server/, admin token: $INSTASCENE_TOKEN_FILE)"
 scenes=(synthetic)
 [ -d "$OUT/composite" ] && scenes+=(composite)
 # The synthetic scene (metric: meters_per_unit 1) also gets the robot-ready export of every object.

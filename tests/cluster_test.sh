@@ -14,19 +14,24 @@ source "$(dirname "$0")/test_lib.sh"
 source "$(dirname "$0")/cluster_lib.sh"
 start_postgres
 start_s3 instascene-cluster
+# One token file for the cluster: processes reach each other with a worker token, the CLI is admin.
+check "a worker token" "$BIN" token create --tokens "$WORK/tokens.json" --role worker --out "$WORK/worker.token"
+check "an admin token" "$BIN" token create --tokens "$WORK/tokens.json" --role admin --out "$WORK/admin.token"
+export INSTASCENE_TOKEN_FILE="$WORK/admin.token"
+AUTH="--auth-tokens $WORK/tokens.json --token-file $WORK/worker.token"
 
-start store "$WORK/ready-store" "$BINDIR/instascene-store" --data "$WORK/store" --store "$STORE_URI" --listen 127.0.0.1:0 --ready-file "$WORK/ready-store"
+start store "$WORK/ready-store" "$BINDIR/instascene-store" --data "$WORK/store" --store "$STORE_URI" --listen 127.0.0.1:0 --ready-file "$WORK/ready-store" $AUTH
 STORE=$(cat "$WORK/ready-store")
 for r in a b; do
   start "sched-$r" "$WORK/ready-$r" "$BINDIR/instascene-scheduler" --data "$WORK/sched-$r" --queue "$QUEUE" \
-    --store "$STORE_URI" --listen 127.0.0.1:0 --ready-file "$WORK/ready-$r" --lease-seconds 2
+    --store "$STORE_URI" --listen 127.0.0.1:0 --ready-file "$WORK/ready-$r" $AUTH --lease-seconds 2
 done
 A=$(cat "$WORK/ready-a")
 B=$(cat "$WORK/ready-b")
 SCHED_B=$LAST_PID  # the last started: replica b
-start dec "$WORK/ready-dec" "$BINDIR/instascene-decomposition" --data "$WORK/w-dec" --store "$STORE_URI" --scheduler "$A" --lease-seconds 2 --ready-file "$WORK/ready-dec"
-start train-a "$WORK/ready-ta" "$BINDIR/instascene-training" --data "$WORK/w-ta" --store "$STORE_URI" --scheduler "$A" --lease-seconds 2 --ready-file "$WORK/ready-ta"
-start train-b "$WORK/ready-tb" "$BINDIR/instascene-training" --data "$WORK/w-tb" --store "$STORE_URI" --scheduler "$B" --lease-seconds 2 --ready-file "$WORK/ready-tb"
+start dec "$WORK/ready-dec" "$BINDIR/instascene-decomposition" --data "$WORK/w-dec" --store "$STORE_URI" --scheduler "$A" --lease-seconds 2 --ready-file "$WORK/ready-dec" $AUTH
+start train-a "$WORK/ready-ta" "$BINDIR/instascene-training" --data "$WORK/w-ta" --store "$STORE_URI" --scheduler "$A" --lease-seconds 2 --ready-file "$WORK/ready-ta" $AUTH
+start train-b "$WORK/ready-tb" "$BINDIR/instascene-training" --data "$WORK/w-tb" --store "$STORE_URI" --scheduler "$B" --lease-seconds 2 --ready-file "$WORK/ready-tb" $AUTH
 TRAIN_B=$LAST_PID
 
 # As soon as replica B's worker starts a training job (its log says so: an event, not a poll of the

@@ -36,6 +36,7 @@ check "synth scene" "$BIN" synth --out "$WORK/s" --preset tiny --seed 6
 start serve "$WORK/ready" "$BIN" serve --data "$WORK/data" --listen 127.0.0.1:0 --ready-file "$WORK/ready" --metrics 127.0.0.1:0
 ADDR=$(head -n 1 "$WORK/ready")
 METRICS=$(sed -n 's/^metrics=//p' "$WORK/ready")
+export INSTASCENE_TOKEN_FILE="$WORK/data/auth/admin.token"  # written by serve on first start
 check "the ready file names the metrics address" test -n "$METRICS"
 check "submit" "$BIN" submit --scene "$WORK/s" --server "$ADDR" --stages decompose,train,segment \
   --params '{"train":{"iterations":40,"samples":512,"pixel_pool":1024}}' --json
@@ -59,13 +60,16 @@ check "no queued job left (no age series)" test "$(metric "$WORK/serve.txt" '^in
 check_fails "a taken metrics port is refused" "cannot listen on $METRICS" \
   "$BIN" serve --data "$WORK/data2" --listen 127.0.0.1:0 --metrics "$METRICS"
 
-# 2. Every per-service binary serves metrics that promtool accepts.
-start store "$WORK/r-store" "$BINDIR/instascene-store" --data "$WORK/d-store" --listen 127.0.0.1:0 --ready-file "$WORK/r-store" --metrics 127.0.0.1:0
+# 2. Every per-service binary serves metrics that promtool accepts (one token file for all, each
+# process reaching the others with a worker token).
+check "a worker token" "$BIN" token create --tokens "$WORK/tokens.json" --role worker --out "$WORK/worker.token"
+AUTH="--auth-tokens $WORK/tokens.json --token-file $WORK/worker.token"
+start store "$WORK/r-store" "$BINDIR/instascene-store" --data "$WORK/d-store" --listen 127.0.0.1:0 --ready-file "$WORK/r-store" --metrics 127.0.0.1:0 $AUTH
 STORE=$(head -n 1 "$WORK/r-store")
-start scheduler "$WORK/r-sched" "$BINDIR/instascene-scheduler" --data "$WORK/d-sched" --listen 127.0.0.1:0 --ready-file "$WORK/r-sched" --store "$STORE" --metrics 127.0.0.1:0
+start scheduler "$WORK/r-sched" "$BINDIR/instascene-scheduler" --data "$WORK/d-sched" --listen 127.0.0.1:0 --ready-file "$WORK/r-sched" --store "$STORE" --metrics 127.0.0.1:0 $AUTH
 SCHED=$(head -n 1 "$WORK/r-sched")
 for svc in decomposition training generation objects; do
-  start "$svc" "$WORK/r-$svc" "$BINDIR/instascene-$svc" --data "$WORK/d-$svc" --listen 127.0.0.1:0 --store "$STORE" --scheduler "$SCHED" --ready-file "$WORK/r-$svc" --metrics 127.0.0.1:0
+  start "$svc" "$WORK/r-$svc" "$BINDIR/instascene-$svc" --data "$WORK/d-$svc" --listen 127.0.0.1:0 --store "$STORE" --scheduler "$SCHED" --ready-file "$WORK/r-$svc" --metrics 127.0.0.1:0 $AUTH
 done
 for svc in store sched decomposition training generation objects; do
   M=$(sed -n 's/^metrics=//p' "$WORK/r-$svc")

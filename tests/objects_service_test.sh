@@ -22,6 +22,7 @@ check "synth scene a" "$BIN" synth --out "$WORK/a" --preset tiny --seed 1
 check "synth scene b" "$BIN" synth --out "$WORK/b" --preset tiny --seed 2
 start serve "$WORK/ready" "$BIN" serve --data "$WORK/data" --listen 127.0.0.1:0 --ready-file "$WORK/ready"
 ADDR=$(cat "$WORK/ready")
+export INSTASCENE_TOKEN_FILE="$WORK/data/auth/admin.token"  # written by serve on first start
 check "submit a with export" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --params "$SMALL" \
   --stages decompose,train,segment,complete,export
 check "submit b without export" "$BIN" submit --scene "$WORK/b" --server "$ADDR" --params "$SMALL" \

@@ -2,9 +2,12 @@
 // scene on an InstaScene server, prints its pose, metric size and artefacts, and downloads them.
 //
 //   object_at_point SERVER SCENE X Y Z [OUT_DIR]
-//   object_at_point 127.0.0.1:50051 kitchen 0.42 -0.10 0.78 /tmp/cup
+//   INSTASCENE_TOKEN_FILE=robot.token object_at_point 127.0.0.1:50051 kitchen 0.42 -0.10 0.78 /tmp/cup
+// The bearer token (`instascene token create --tenant ...` makes one for a robot fleet) comes from
+// the file named by $INSTASCENE_TOKEN_FILE, or $INSTASCENE_TOKEN itself.
 #include <cstdio>
 #include <cstdlib>
+#include <fstream>
 #include <string>
 
 #include "instascene/client/client.h"
@@ -18,6 +21,14 @@ int main(int argc, char** argv) {
   using instascene::client::ObjectSelector;
   instascene::client::ClientOptions options;
   options.server = argv[1];
+  if (const char* token = std::getenv("INSTASCENE_TOKEN")) options.token = token;
+  if (const char* file = std::getenv("INSTASCENE_TOKEN_FILE")) {
+    std::ifstream in(file);
+    if (!std::getline(in, options.token)) {
+      std::fprintf(stderr, "cannot read a token from %s\n", file);
+      return 1;
+    }
+  }
   auto client = Client::Connect(options);
   if (!client.ok()) {
     std::fprintf(stderr, "connect: %s\n", client.status().ToString().c_str());
