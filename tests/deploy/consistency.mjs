@@ -1,7 +1,8 @@
 // Checks rendered manifests against the build and the Dockerfile: every container's command is a
 // binary the build produced (in BIN_DIR) and an ENTRYPOINT of docker/Dockerfile, and every
 // container port is the port its --listen argument binds (the port named "metrics": its --metrics
-// argument, which the pod's prometheus.io/port annotation names too). Usage: node consistency.mjs BIN_DIR
+// argument, which the pod's prometheus.io/port annotation names too); every container checks
+// tokens from the instascene-auth Secret, and one that reaches other services has its own token. Usage: node consistency.mjs BIN_DIR
 // DOCKERFILE FILE.yaml... Prints "N passed, N failed"; exits 1 on any mismatch.
 import { existsSync, readFileSync } from "node:fs";
 import { basename, join } from "node:path";
@@ -41,6 +42,16 @@ for (const file of files) {
           check(p.containerPort === port, `${what}: containerPort ${p.containerPort} but --listen ${listen}`);
         }
       }
+      // Authentication: the token file (and this process's own token) come from the auth Secret.
+      const authDir = (flag("auth-tokens") ?? "").replace(/\/[^/]*$/, "");
+      const mount = (c.volumeMounts ?? []).find((m) => m.mountPath === authDir);
+      const volume = (doc.spec.template.spec.volumes ?? []).find((v) => v.name === mount?.name);
+      check(volume?.secret?.secretName === "instascene-auth",
+        `${what}: --auth-tokens is not read from the instascene-auth Secret`);
+      const reachesOthers = flag("scheduler") !== undefined || command.endsWith("instascene-scheduler");
+      if (reachesOthers)
+        check((flag("token-file") ?? "").startsWith(authDir + "/"),
+          `${what}: reaches other services without a --token-file from the auth Secret`);
       for (const probe of [c.readinessProbe, c.livenessProbe])
         check(probe?.grpc?.port === port, `${what}: a gRPC probe is not on port ${port}`);
     }
