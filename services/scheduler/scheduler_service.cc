@@ -271,8 +271,9 @@ grpc::Status SchedulerService::FailJob(grpc::ServerContext* context,
     return ToGrpcStatus(who.status());
   absl::StatusOr<FailureKind> kind = FromProto(request->kind());
   if (!kind.ok()) return ToGrpcStatus(kind.status());
-  const absl::Status s =
-      queue_->Fail(request->job_id(), request->lease_token(), *kind, request->error());
+  // A worker's error reaches clients (GetJob): no server paths, and bounded.
+  const absl::Status s = queue_->Fail(request->job_id(), request->lease_token(), *kind,
+                                      rpc::ScrubPaths(request->error().substr(0, 4096)));
   if (s.ok()) {
     if (absl::StatusOr<Job> job = queue_->Get(request->job_id()); job.ok()) {
       RecordFinished(job->kind, job->state == JobState::kQueued      ? "retried"

@@ -337,7 +337,7 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
       request.set_error(absl::StrCat("handed back by worker ", options_.worker_id, " (draining)"));
     } else {
       request.set_kind(FailureFor(status.code()));
-      request.set_error(status.ToString());
+      request.set_error(rpc::ScrubPaths(status.ToString()));  // read by clients
     }
     v1::FailJobResponse response;
     reply = scheduler_->FailJob(&context, request, &response);
