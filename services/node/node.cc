@@ -15,6 +15,7 @@
 #include "common/metrics/rpc_metrics.h"
 #include "common/rpc/server.h"
 #include "common/store/blob_store_uri.h"
+#include "services/pipeline/memory.h"
 #include "services/scheduler/postgres_queue_store.h"
 #include "services/scheduler/scheduler_metrics.h"
 #include "services/scheduler/scheduler_service.h"
@@ -40,6 +41,8 @@ absl::Status NodeOptions::Validate() const {
     return absl::InvalidArgumentError("nothing to run");
   if (lease_seconds < 2) return absl::InvalidArgumentError("--lease-seconds must be >= 2");
   if (drain_seconds < 0) return absl::InvalidArgumentError("--drain-seconds must be >= 0");
+  if (memory_budget_bytes < -1)
+    return absl::InvalidArgumentError("--memory-budget-bytes must be >= 0 (or -1: no limit)");
   if (index_cache_bytes < 0) return absl::InvalidArgumentError("--index-cache-bytes must be >= 0");
   if (!(retention_hours >= 0 && retention_hours <= 24 * 3650))
     return absl::InvalidArgumentError("--retention-hours must be in [0, 87600]");
@@ -223,6 +226,9 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
     w.lease_seconds = options.lease_seconds;
     w.cache_bytes = options.cache_bytes;
     if (!options.denoiser.empty()) w.stage_settings["denoiser"] = options.denoiser;
+    w.memory_budget_bytes = options.memory_budget_bytes == 0 ? pipeline::PhysicalMemoryBytes()
+                            : options.memory_budget_bytes < 0 ? 0
+                                                               : options.memory_budget_bytes;
     w.heartbeat_interval_ms = std::min(1000, options.lease_seconds * 1000 / 4);  // live progress
     RETURN_IF_ERROR(w.Validate(stages));
     workers.push_back(std::make_unique<worker::StageWorker>(w, blob_store, &stages));

@@ -56,6 +56,9 @@ struct NodeOptions {
   // Generation workers: the diffusion prior's Denoiser service (grpc://HOST:PORT; "" = none, and
   // complete jobs asking for prior "diffusion" fail).
   std::string denoiser;
+  // Workers: the most one job may allocate; a larger estimate fails the job before it runs
+  // (RESOURCE_EXHAUSTED). 0 = the machine's physical memory; -1 = no limit.
+  int64_t memory_budget_bytes = 0;
   // Authentication (docs/SERVICES.md): the token file every call is checked against ("" =
   // DATA/auth/tokens.json; created on first start with an admin token in DATA/auth/admin.token
   // when it is the default and absent). no_auth turns checking off (a trusted network only).

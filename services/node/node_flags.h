@@ -61,6 +61,11 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
   app.add_option("--denoiser", o->denoiser,
                  "Generation workers: the diffusion prior's Denoiser service, grpc://HOST:PORT "
                  "(default: none; complete jobs with prior diffusion then fail)");
+  app.add_option("--memory-budget-bytes", o->memory_budget_bytes,
+                 "Workers: the most one job may allocate; a job whose stage estimates more fails "
+                 "with RESOURCE_EXHAUSTED before it runs (0 = the machine's physical memory, -1 = "
+                 "no limit)")
+      ->capture_default_str();
   app.add_option("--metrics", o->metrics_listen,
                  "Serve Prometheus metrics at http://HOST:PORT/metrics (port 0 = any free port; "
                  "default: off)");

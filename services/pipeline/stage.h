@@ -40,6 +40,9 @@ struct StageContext {
   // The worker's deployment settings a stage may need (not job parameters: a client cannot set
   // them). Keys in use: "denoiser" (complete: the diffusion prior's Denoiser, grpc://HOST:PORT).
   std::map<std::string, std::string> settings;
+  // The most this job may allocate (bytes; 0 = no limit): a stage whose estimate is larger is
+  // refused with RESOURCE_EXHAUSTED before it runs (services/pipeline/memory.h).
+  int64_t memory_budget_bytes = 0;
 
   // The directory of input `name`; InvalidArgument when the job has no such input.
   absl::StatusOr<std::string> Input(const std::string& name) const;
@@ -53,6 +56,8 @@ struct StageResult {
 };
 
 using RunFunction = std::function<absl::StatusOr<StageResult>(const StageContext&)>;
+// Bytes a job will allocate, from its inputs' sizes and its (canonical) parameters, before it runs.
+using MemoryEstimate = std::function<absl::StatusOr<int64_t>(const StageContext&)>;
 
 // The part of a stage every binary can link: no stage library, no heavy dependency.
 struct StageSpec {
@@ -90,6 +95,7 @@ StageSpec MakeStageSpec(std::string kind, std::string directory, std::string des
 struct StageDefinition {
   StageSpec spec;
   RunFunction run;  // null: this binary validates the stage's parameters but cannot run it
+  MemoryEstimate estimate;  // null: no estimate (the budget is not checked)
 };
 
 }  // namespace instascene::pipeline

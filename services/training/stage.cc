@@ -3,6 +3,7 @@
 #include <set>
 
 #include "common/core/status.h"
+#include "services/pipeline/memory.h"
 #include "common/eval/result.h"
 #include "common/scene/scene.h"
 #include "services/training/feature_field.h"
@@ -75,9 +76,25 @@ absl::StatusOr<pipeline::StageResult> RunSegment(const pipeline::StageContext& c
   return pipeline::StageResult{static_cast<int64_t>(instances.size())};
 }
 
+// The splat, the feature field with its gradient and Adam moments (4 x D floats per Gaussian),
+// the traced pixel pool of every view (contributors with weights) and the label maps.
+absl::StatusOr<int64_t> EstimateTrain(const pipeline::StageContext& c) {
+  ASSIGN_OR_RETURN(TrainStageOptions o, TrainCodec().Decode(c.parameters));
+  ASSIGN_OR_RETURN(pipeline::SceneFootprint f, pipeline::ReadSceneFootprint(c.scene_dir));
+  const int64_t pool = std::min<int64_t>(o.pixel_pool, f.max_view_pixels);
+  return 96 * pipeline::kMiB + 320 * f.gaussians + 16 * int64_t{o.feature_dim} * f.gaussians +
+         f.views * pool * 512 + 12 * f.total_pixels + int64_t{o.samples} * o.feature_dim * 64;
+}
+
+// The splat with its features and labels; HDBSCAN works on at most max_points voxels.
+absl::StatusOr<int64_t> EstimateSegment(const pipeline::StageContext& c) {
+  ASSIGN_OR_RETURN(pipeline::SceneFootprint f, pipeline::ReadSceneFootprint(c.scene_dir));
+  return 64 * pipeline::kMiB + 512 * f.gaussians;
+}
+
 }  // namespace
 
-pipeline::StageDefinition TrainStage() { return {TrainSpec(), RunTrain}; }
-pipeline::StageDefinition SegmentStage() { return {SegmentSpec(), RunSegment}; }
+pipeline::StageDefinition TrainStage() { return {TrainSpec(), RunTrain, EstimateTrain}; }
+pipeline::StageDefinition SegmentStage() { return {SegmentSpec(), RunSegment, EstimateSegment}; }
 
 }  // namespace instascene::training

@@ -226,6 +226,7 @@ absl::Status StageWorker::Execute(const v1::LeaseJobResponse& lease, const std::
   context.num_threads = options_.num_threads;
   context.cancel = cancel;
   context.settings = options_.stage_settings;
+  context.memory_budget_bytes = options_.memory_budget_bytes;
   context.progress = progress;
   ASSIGN_OR_RETURN(pipeline::StageResult result, stages_->Run(job.kind(), context));
   RETURN_IF_ERROR(CheckCancelled(cancel, job.kind()));

@@ -36,6 +36,9 @@ struct WorkerOptions {
   int lease_seconds = 0;                    // requested lease length; 0 = the scheduler's default
   int64_t cache_bytes = int64_t{20} << 30;  // input cache budget, LRU-evicted (0 = unlimited)
   std::map<std::string, std::string> stage_settings;  // given to every stage (StageContext)
+  // The most one job may allocate (bytes): a job whose stage estimates more fails permanently with
+  // RESOURCE_EXHAUSTED before it runs (services/pipeline/memory.h). 0 = no limit.
+  int64_t memory_budget_bytes = 0;
 
   absl::Status Validate(const pipeline::StageRegistry& stages) const;
 };

@@ -1,0 +1,45 @@
+#include "services/pipeline/memory.h"
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <fstream>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/scene/scene.h"
+#include "common/splat/ply.h"
+
+namespace instascene::pipeline {
+
+absl::StatusOr<int64_t> ReadGaussianCount(const std::string& ply_path) {
+  std::ifstream in(ply_path, std::ios::binary);
+  if (!in) return absl::NotFoundError(absl::StrCat("cannot open the splat ", ply_path));
+  std::string head(1 << 20, '\0');  // any sane header fits in the first MiB
+  in.read(head.data(), static_cast<std::streamsize>(head.size()));
+  head.resize(static_cast<size_t>(in.gcount()));
+  ASSIGN_OR_RETURN(PlyHeader header, ParsePlyHeader(head, ply_path));
+  for (const PlyElement& e : header.elements)
+    if (e.name == "vertex") return e.count;
+  return absl::InvalidArgumentError(absl::StrCat(ply_path, ": no vertex element"));
+}
+
+absl::StatusOr<SceneFootprint> ReadSceneFootprint(const std::string& scene_dir) {
+  ASSIGN_OR_RETURN(Scene scene, ReadScene(scene_dir));
+  SceneFootprint f;
+  f.views = static_cast<int64_t>(scene.views.size());
+  for (const SceneView& v : scene.views) {
+    const int64_t pixels = int64_t{v.camera.width} * v.camera.height;
+    f.total_pixels += pixels;
+    f.max_view_pixels = std::max(f.max_view_pixels, pixels);
+  }
+  ASSIGN_OR_RETURN(f.gaussians, ReadGaussianCount(scene.Path(scene.gaussians)));
+  return f;
+}
+
+int64_t PhysicalMemoryBytes() {
+  const long pages = ::sysconf(_SC_PHYS_PAGES), page = ::sysconf(_SC_PAGESIZE);
+  return pages > 0 && page > 0 ? int64_t{pages} * page : 0;
+}
+
+}  // namespace instascene::pipeline
