@@ -7,7 +7,7 @@ SANITIZE_DIR ?= build-sanitize
 JOBS         ?= $(shell nproc)
 CMAKE_FLAGS  ?=
 
-.PHONY: all deps configure build test test-sanitize fuzz bench demo format tidy clean
+.PHONY: all deps configure build test test-sanitize fuzz load chaos bench demo format tidy clean
 
 all: build
 
@@ -39,6 +39,13 @@ test-sanitize: deps
 # libFuzzer harnesses under ASan/UBSan (clang), FUZZ_SECONDS each (default 60); not part of `make test`.
 fuzz: deps
 	scripts/fuzz.sh
+
+# Long runs, not part of `make test` (figures in docs/RELIABILITY.md).
+load: build
+	scripts/load.sh $(BUILD_DIR)
+
+chaos: build
+	scripts/chaos.sh $(BUILD_DIR)
 
 bench: build
 	scripts/bench.sh $(BUILD_DIR)
