@@ -25,7 +25,7 @@ declare -A CMD PID
 launch() {
   local name=$1
   rm -f "$WORK/ready-$name"
-  eval "${CMD[$name]} --ready-file '$WORK/ready-$name'" >>"$WORK/$name.log" 2>&1 8>&- 9>&- &
+  eval "exec ${CMD[$name]} --ready-file '$WORK/ready-$name'" >>"$WORK/$name.log" 2>&1 8>&- 9>&- &
   PID[$name]=$!
   PIDS+=("$!")
   for _ in $(seq 600); do [ -s "$WORK/ready-$name" ] && return 0; sleep 0.05; done
@@ -49,7 +49,7 @@ for w in dec1 dec2 train; do launch "$w" || exit 1; done
 PARAMS='{"train":{"iterations":150,"samples":256,"pixel_pool":512}}'
 (
   n=0
-  while [ ! -e "$WORK/stop" ]; do
+  while [ -d "$WORK" ] && [ ! -e "$WORK/stop" ]; do
     n=$((n + 1))
     "$BIN" synth --out "$WORK/s$n" --preset tiny --seed "$n" >/dev/null 2>&1
     if "$BIN" submit --scene "$WORK/s$n" --server "$SCHED" --store "$STORE" --params "$PARAMS" \
@@ -59,6 +59,7 @@ PARAMS='{"train":{"iterations":150,"samples":256,"pixel_pool":512}}'
   done
 ) 8>&- 9>&- &
 SUBMITTER=$!
+PIDS+=("$SUBMITTER")
 
 # The killer.
 names=(store scheduler dec1 dec2 train)
@@ -73,7 +74,7 @@ while [ $SECONDS -lt $end ]; do
   launch "$victim" || exit 1
 done
 touch "$WORK/stop"; wait "$SUBMITTER"
-acked=$(wc -l <"$WORK/acked.txt"); refused=$(wc -l <"$WORK/refused.txt" 2>/dev/null || echo 0)
+acked=$(cat "$WORK/acked.txt" 2>/dev/null | wc -l); refused=$(cat "$WORK/refused.txt" 2>/dev/null | wc -l)
 echo "$DURATION s, $kills kills ($(cut -d' ' -f3 "$WORK/kills.txt" | sort | uniq -c | tr -s ' ' | tr '\n' ',')), $acked scenes acknowledged, $refused refused while a process was down"
 for s in $(cat "$WORK/acked.txt"); do "$BIN" watch --scene "$s" --server "$SCHED" >/dev/null 2>&1 || echo "scene $s did not finish cleanly"; done
 "$BIN" jobs --server "$SCHED" --limit 1000 --json 2>/dev/null | tail -n 1 >"$WORK/all.json"

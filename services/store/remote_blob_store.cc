@@ -198,8 +198,10 @@ absl::Status RemoteBlobStore::FinishUpload(const store::Digest& digest) {
 
 absl::StatusOr<store::StoreStats> RemoteBlobStore::Stats() {
   grpc::ClientContext context;
+  v1::GetStoreInfoRequest request;
+  request.set_statistics(true);
   v1::GetStoreInfoResponse info;
-  RETURN_IF_ERROR(FromGrpcStatus(stub_->GetStoreInfo(&context, v1::GetStoreInfoRequest(), &info)));
+  RETURN_IF_ERROR(FromGrpcStatus(stub_->GetStoreInfo(&context, request, &info)));
   return store::StoreStats{info.blob_count(), info.total_bytes(), info.partial_uploads(),
                            info.partial_bytes(), info.expired_uploads()};
 }
