@@ -2,8 +2,8 @@
 // of every service refuses a call without a valid token; roles limit what a token may call; two
 // tenants share the store and the queue and see nothing of each other (scenes, jobs, blobs), while
 // workers and admins see everything; a completed job's outputs are granted to its tenant only.
-#include <gtest/gtest.h>
 #include <grpcpp/generic/generic_stub.h>
+#include <gtest/gtest.h>
 
 #include <future>
 
@@ -49,8 +49,8 @@ class AuthTest : public ::testing::Test {
     store_service_ = std::make_unique<store_service::StoreService>(store_.get(), auth_.get());
     scheduler::SchedulerServiceOptions scheduler_options;
     scheduler_options.auth = auth_.get();
-    scheduler_service_ = std::make_unique<scheduler::SchedulerService>(
-        queue_.get(), store_.get(), &stages_, scheduler_options);
+    scheduler_service_ = std::make_unique<scheduler::SchedulerService>(queue_.get(), store_.get(),
+                                                                       &stages_, scheduler_options);
     objects::ObjectsServiceOptions objects_options;
     objects_options.auth = auth_.get();
     objects_service_ = std::make_unique<objects::ObjectsService>(
@@ -118,7 +118,8 @@ class AuthTest : public ::testing::Test {
 
 // The status of calling `method` (full name) with an empty request as `token` (generic stub: no
 // generated code, so every method of every service is reached the same way).
-grpc::StatusCode CallEmpty(const std::shared_ptr<grpc::Channel>& channel, const std::string& method) {
+grpc::StatusCode CallEmpty(const std::shared_ptr<grpc::Channel>& channel,
+                           const std::string& method) {
   grpc::GenericStub stub(channel);
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
@@ -144,13 +145,12 @@ TEST_F(AuthTest, EveryMethodOfEveryServiceRefusesCallsWithoutAValidToken) {
   ASSERT_TRUE(auth::RevokeToken(temp_.Sub("tokens.json"), revoked_id).ok());
   std::string forged = admin_;
   forged.back() = forged.back() == 'a' ? 'b' : 'a';
-  for (const char* name : {"ContentStore", "Scheduler", "Objects", "Decomposition", "Training",
-                           "Generation"}) {
+  for (const char* name :
+       {"ContentStore", "Scheduler", "Objects", "Decomposition", "Training", "Generation"}) {
     const auto* service = pool->FindServiceByName(std::string("instascene.v1.") + name);
     ASSERT_NE(service, nullptr) << name;
     for (int m = 0; m < service->method_count(); ++m, ++methods) {
-      const std::string method =
-          "/" + service->full_name() + "/" + service->method(m)->name();
+      const std::string method = "/" + service->full_name() + "/" + service->method(m)->name();
       EXPECT_EQ(CallEmpty(Channel(""), method), grpc::StatusCode::UNAUTHENTICATED) << method;
       EXPECT_EQ(CallEmpty(Channel("isk_nope"), method), grpc::StatusCode::UNAUTHENTICATED)
           << method;
@@ -168,17 +168,17 @@ TEST_F(AuthTest, RolesLimitWhatATokenMayCall) {
     return CallEmpty(Channel(token), method);
   };
   // Clients: no leasing, completing, monitoring or granting.
-  for (const char* m : {"/instascene.v1.Scheduler/LeaseJob", "/instascene.v1.Scheduler/CompleteJob",
-                        "/instascene.v1.Scheduler/FailJob", "/instascene.v1.Scheduler/Heartbeat",
-                        "/instascene.v1.Scheduler/GetQueueStats",
-                        "/instascene.v1.ContentStore/GrantBlobs",
-                        "/instascene.v1.Training/GetWorkerStatus"})
+  for (const char* m :
+       {"/instascene.v1.Scheduler/LeaseJob", "/instascene.v1.Scheduler/CompleteJob",
+        "/instascene.v1.Scheduler/FailJob", "/instascene.v1.Scheduler/Heartbeat",
+        "/instascene.v1.Scheduler/GetQueueStats", "/instascene.v1.ContentStore/GrantBlobs",
+        "/instascene.v1.Training/GetWorkerStatus"})
     EXPECT_EQ(code(acme_, m), grpc::StatusCode::PERMISSION_DENIED) << m;
   // Workers: no submitting, listing, cancelling or monitoring.
-  for (const char* m : {"/instascene.v1.Scheduler/SubmitPipeline",
-                        "/instascene.v1.Scheduler/ListJobs", "/instascene.v1.Scheduler/CancelJob",
-                        "/instascene.v1.Objects/GetObject",
-                        "/instascene.v1.Generation/GetWorkerStatus"})
+  for (const char* m :
+       {"/instascene.v1.Scheduler/SubmitPipeline", "/instascene.v1.Scheduler/ListJobs",
+        "/instascene.v1.Scheduler/CancelJob", "/instascene.v1.Objects/GetObject",
+        "/instascene.v1.Generation/GetWorkerStatus"})
     EXPECT_EQ(code(worker_, m), grpc::StatusCode::PERMISSION_DENIED) << m;
   // Admins: monitoring works.
   EXPECT_EQ(code(admin_, "/instascene.v1.Scheduler/GetQueueStats"), grpc::StatusCode::OK);

@@ -12,12 +12,12 @@
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "clients/cli/cli.h"
+#include "clients/cli/connection.h"
 #include "clients/cli/progress.h"
 #include "common/core/status.h"
 #include "common/rpc/status.h"
 #include "common/scene/image_io.h"
 #include "common/scene/scene.h"
-#include "clients/cli/connection.h"
 #include "instascene/client/services.h"
 #include "services/scheduler/job_proto.h"
 
@@ -184,7 +184,8 @@ void AddClientCommands(CLI::App& app, Action* action) {
         ASSIGN_OR_RETURN(Scene scene, ReadScene(a.scene));
         RETURN_IF_ERROR(CheckViewFiles(scene));
       }
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(a.connection, a.server, a.store));
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
+                       ConnectTo(a.connection, a.server, a.store));
       client::SubmitRequest request;
       request.scene_dir = a.scene;
       request.name = a.name;
@@ -251,7 +252,8 @@ void AddClientCommands(CLI::App& app, Action* action) {
     *action = [watch]() -> absl::Status {
       if (watch->ids.empty() && watch->scene.empty())
         return absl::InvalidArgumentError("give job ids or --scene");
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(watch->connection, watch->server));
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
+                       ConnectTo(watch->connection, watch->server));
       ASSIGN_OR_RETURN(auto jobs, Watch(*c, watch->ids, watch->scene));
       nlohmann::json out = nlohmann::json::array();
       std::string bad;
@@ -288,7 +290,8 @@ void AddClientCommands(CLI::App& app, Action* action) {
   l->add_flag("--json", list->json, "Print {\"jobs\", \"stats\"} as the last stdout line");
   l->callback([list, action] {
     *action = [list]() -> absl::Status {
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(list->connection, list->server));
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
+                       ConnectTo(list->connection, list->server));
       v1::ListJobsRequest request;
       request.set_scene(list->scene);
       request.set_limit(list->limit);
@@ -305,9 +308,11 @@ void AddClientCommands(CLI::App& app, Action* action) {
       }));
       // Queue-wide figures are monitoring (admins); a client token lists its own jobs only.
       v1::QueueStats stats;
-      const absl::Status stats_status = client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
-        return client::SchedulerStub(*c).GetQueueStats(context, v1::GetQueueStatsRequest(), &stats);
-      });
+      const absl::Status stats_status =
+          client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
+            return client::SchedulerStub(*c).GetQueueStats(context, v1::GetQueueStatsRequest(),
+                                                           &stats);
+          });
       if (!stats_status.ok() && !absl::IsPermissionDenied(stats_status)) return stats_status;
       const bool has_stats = stats_status.ok();
       std::printf("%-17s %-22s %-16s %-9s %-3s %s\n", "JOB", "KIND", "SCENE", "STATE", "TRY",
@@ -383,7 +388,8 @@ void AddClientCommands(CLI::App& app, Action* action) {
     *action = [fetch]() -> absl::Status {
       if (fetch->id.empty() == fetch->scene.empty())
         return absl::InvalidArgumentError("give a job id or --scene NAME (one of them)");
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(fetch->connection, fetch->server, fetch->store));
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
+                       ConnectTo(fetch->connection, fetch->server, fetch->store));
       // (stage output, target directory)
       std::vector<std::pair<client::StageOutput, std::string>> outputs;
       if (!fetch->scene.empty()) {
@@ -457,7 +463,8 @@ void AddClientCommands(CLI::App& app, Action* action) {
     *action = [cancel]() -> absl::Status {
       if (cancel->id.empty() == cancel->scene.empty())
         return absl::InvalidArgumentError("give a job id or --scene NAME (one of them)");
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectTo(cancel->connection, cancel->server));
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
+                       ConnectTo(cancel->connection, cancel->server));
       std::vector<v1::Job> jobs;
       if (!cancel->scene.empty()) {
         v1::CancelSceneRequest request;

@@ -71,9 +71,8 @@ void AddTokenCommand(CLI::App& app, Action* action) {
         secret.clear();
       }
       if (args->json) {
-        nlohmann::json out = {{"id", record.id},
-                              {"role", auth::RoleName(record.role)},
-                              {"tenant", record.tenant}};
+        nlohmann::json out = {
+            {"id", record.id}, {"role", auth::RoleName(record.role)}, {"tenant", record.tenant}};
         if (!secret.empty()) out["token"] = secret;
         if (!args->out.empty()) out["token_file"] = args->out;
         PrintJsonLine(out.dump());
@@ -108,8 +107,8 @@ void AddTokenCommand(CLI::App& app, Action* action) {
     *action = [args]() -> absl::Status {
       const std::string path = TokenFilePath(args->tokens, args->data);
       ASSIGN_OR_RETURN(auth::TokenFile file, auth::LoadTokenFile(path));
-      std::printf("%-13s %-7s %-16s %-21s %-21s %s\n", "ID", "ROLE", "TENANT", "CREATED",
-                  "REVOKED", "NOTE");
+      std::printf("%-13s %-7s %-16s %-21s %-21s %s\n", "ID", "ROLE", "TENANT", "CREATED", "REVOKED",
+                  "NOTE");
       nlohmann::json all = nlohmann::json::array();
       for (const auth::TokenRecord& t : file.tokens) {
         std::printf("%-13s %-7s %-16s %-21s %-21s %s\n", t.id.c_str(), auth::RoleName(t.role),

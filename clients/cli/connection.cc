@@ -13,8 +13,9 @@ void AddConnectionFlags(CLI::App* command, ConnectionFlags* flags) {
   command->add_option("--token-file", flags->token_file,
                       "File holding the bearer token (default: $INSTASCENE_TOKEN, "
                       "$INSTASCENE_TOKEN_FILE, then instascene-data/auth/admin.token)");
-  command->add_option("--tls-ca", flags->tls_ca,
-                      "TLS: the CA (PEM) that signed the server's certificate (default: plaintext)");
+  command->add_option(
+      "--tls-ca", flags->tls_ca,
+      "TLS: the CA (PEM) that signed the server's certificate (default: plaintext)");
   command->add_option("--tls-client-cert", flags->tls_cert,
                       "Mutual TLS: this client's certificate (PEM)");
   command->add_option("--tls-client-key", flags->tls_key, "Mutual TLS: this client's key (PEM)");

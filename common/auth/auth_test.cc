@@ -41,19 +41,21 @@ TEST(Tokens, BadRequestsAndFilesAreRefused) {
   const std::string path = dir.Sub("tokens.json");
   EXPECT_FALSE(CreateToken(path, Role::kClient, "", "").ok()) << "client tokens need a tenant";
   EXPECT_FALSE(CreateToken(path, Role::kClient, "Acme", "").ok()) << "upper case";
-  EXPECT_FALSE(CreateToken(path, Role::kClient, "a:b", "").ok()) << "':' separates tenant and scene";
+  EXPECT_FALSE(CreateToken(path, Role::kClient, "a:b", "").ok())
+      << "':' separates tenant and scene";
   EXPECT_FALSE(CreateToken(path, Role::kClient, std::string(33, 'a'), "").ok());
   EXPECT_FALSE(CreateToken(path, Role::kAdmin, "acme", "").ok()) << "admins span every tenant";
   EXPECT_FALSE(ParseRole("root").ok());
   EXPECT_TRUE(absl::IsNotFound(RevokeToken(path, "000000000000")));
-  for (const char* json :
-       {"[]", R"({"format":2,"tokens":[]})", R"({"format":1})",
-        R"({"format":1,"tokens":[{"id":"x","tenant":"","role":"admin","secret_sha256":"","note":""}]})",
-        R"({"format":1,"tokens":[{"id":"0123456789ab","tenant":"","role":"client","secret_sha256":"0000000000000000000000000000000000000000000000000000000000000000","note":""}]})"}) {
+  for (
+      const char* json :
+      {"[]", R"({"format":2,"tokens":[]})", R"({"format":1})",
+       R"({"format":1,"tokens":[{"id":"x","tenant":"","role":"admin","secret_sha256":"","note":""}]})",
+       R"({"format":1,"tokens":[{"id":"0123456789ab","tenant":"","role":"client","secret_sha256":"0000000000000000000000000000000000000000000000000000000000000000","note":""}]})"}) {
     EXPECT_TRUE(absl::IsInvalidArgument(TokenFile::Parse(json, "t").status())) << json;
   }
   std::string id, secret;
-  for (const char* bad : {"", "isk_", "isk_0123456789ab_zz", "Bearer isk_x", "isk_0123456789AB_" })
+  for (const char* bad : {"", "isk_", "isk_0123456789ab_zz", "Bearer isk_x", "isk_0123456789AB_"})
     EXPECT_FALSE(SplitToken(bad, &id, &secret).ok()) << bad;
 }
 
@@ -74,7 +76,8 @@ TEST(Authenticator, AcceptsValidTokensAndFollowsRevocations) {
   // A wrong secret, a missing scheme, garbage: all the same UNAUTHENTICATED.
   std::string wrong = admin;
   wrong.back() = wrong.back() == '0' ? '1' : '0';
-  for (const std::string& bad : {"Bearer " + wrong, admin, std::string("Bearer nope"), std::string()})
+  for (const std::string& bad :
+       {"Bearer " + wrong, admin, std::string("Bearer nope"), std::string()})
     EXPECT_TRUE(absl::IsUnauthenticated((*auth)->Authenticate(bad).status())) << bad;
   // Revocation is seen at the next call (the file changed); a new token too.
   ASSERT_TRUE(RevokeToken(path, admin_record.id).ok());

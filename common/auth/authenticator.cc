@@ -7,8 +7,8 @@
 
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
-#include "absl/strings/strip.h"
 #include "absl/strings/str_cat.h"
+#include "absl/strings/strip.h"
 #include "common/core/status.h"
 
 namespace instascene::auth {
@@ -19,7 +19,8 @@ const absl::Status kUnauthenticated = absl::UnauthenticatedError(
     "`instascene token create` makes one)");
 
 bool SameSecret(const std::string& a_hex, const std::string& b_hex) {
-  return a_hex.size() == b_hex.size() && CRYPTO_memcmp(a_hex.data(), b_hex.data(), a_hex.size()) == 0;
+  return a_hex.size() == b_hex.size() &&
+         CRYPTO_memcmp(a_hex.data(), b_hex.data(), a_hex.size()) == 0;
 }
 
 }  // namespace

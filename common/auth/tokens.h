@@ -24,8 +24,8 @@ absl::StatusOr<Role> ParseRole(absl::string_view name);
 absl::Status ValidateTenant(absl::string_view tenant);
 
 struct TokenRecord {
-  std::string id;             // 12 lower-case hex
-  std::string tenant;         // "" for worker and admin tokens
+  std::string id;      // 12 lower-case hex
+  std::string tenant;  // "" for worker and admin tokens
   Role role = Role::kClient;
   std::string secret_sha256;  // hex SHA-256 of the secret part
   std::string note;           // free text (who or what holds it), at most 200 bytes

@@ -11,7 +11,8 @@ constexpr size_t kMaxPemBytes = 1 << 20;
 
 absl::StatusOr<std::string> ReadPem(const std::string& path, const char* what) {
   absl::StatusOr<std::string> pem = ReadFileBounded(path, kMaxPemBytes);
-  if (!pem.ok()) return absl::InvalidArgumentError(absl::StrCat(what, ": ", pem.status().message()));
+  if (!pem.ok())
+    return absl::InvalidArgumentError(absl::StrCat(what, ": ", pem.status().message()));
   if (pem->find("-----BEGIN ") == std::string::npos)
     return absl::InvalidArgumentError(absl::StrCat(what, " ", path, ": not a PEM file"));
   return pem;
@@ -31,8 +32,7 @@ class TokenInterceptor final : public grpc::experimental::Interceptor {
   const std::string* header_;
 };
 
-class TokenInterceptorFactory final
-    : public grpc::experimental::ClientInterceptorFactoryInterface {
+class TokenInterceptorFactory final : public grpc::experimental::ClientInterceptorFactoryInterface {
  public:
   explicit TokenInterceptorFactory(std::string token) : header_("Bearer " + token) {}
   grpc::experimental::Interceptor* CreateClientInterceptor(
@@ -99,11 +99,10 @@ absl::StatusOr<std::shared_ptr<grpc::Channel>> Connect(const std::string& addres
       ASSIGN_OR_RETURN(ssl.pem_private_key, ReadPem(options.tls_key_file, "--tls-client-key"));
     }
     credentials = grpc::SslCredentials(ssl);
-    if (!options.tls_server_name.empty())
-      args.SetSslTargetNameOverride(options.tls_server_name);
+    if (!options.tls_server_name.empty()) args.SetSslTargetNameOverride(options.tls_server_name);
   }
-  return grpc::experimental::CreateCustomChannelWithInterceptors(
-      address, credentials, args, TokenInterceptors(options.token));
+  return grpc::experimental::CreateCustomChannelWithInterceptors(address, credentials, args,
+                                                                 TokenInterceptors(options.token));
 }
 
 }  // namespace instascene::rpc

@@ -1,9 +1,9 @@
 // common/rpc/server.h: runs a gRPC server with an explicit lifecycle
 // STARTING -> SERVING -> DRAINING -> STOPPED, reported through the standard grpc.health.v1 service
 // (per registered service name and overall ""), server reflection, message-size limits, optional
-// TLS (common/rpc/credentials.h), interceptors (the node's RPC metrics, common/metrics/rpc_metrics.h), and a
-// graceful drain against a deadline (stop accepting, let in-flight calls finish, then cancel).
-// Also: waiting for SIGTERM / SIGINT. Thread-safe.
+// TLS (common/rpc/credentials.h), interceptors (the node's RPC metrics,
+// common/metrics/rpc_metrics.h), and a graceful drain against a deadline (stop accepting, let
+// in-flight calls finish, then cancel). Also: waiting for SIGTERM / SIGINT. Thread-safe.
 #pragma once
 
 #include <grpcpp/grpcpp.h>

@@ -13,8 +13,8 @@ namespace instascene::rpc {
 
 // Converts a status for a client: the message passes through ScrubPaths.
 grpc::Status ToGrpcStatus(const absl::Status& status);
-// Server file system paths never reach clients: every absolute path in `text` (a '/' at the start or
-// after white space, a quote, '(' or '=') becomes "<server>/" and its last component, which is
+// Server file system paths never reach clients: every absolute path in `text` (a '/' at the start
+// or after white space, a quote, '(' or '=') becomes "<server>/" and its last component, which is
 // what a user can act on ("<server>/v003.png: cannot open").
 std::string ScrubPaths(absl::string_view text);
 absl::Status FromGrpcStatus(const grpc::Status& status);

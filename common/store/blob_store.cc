@@ -112,9 +112,7 @@ absl::Status BlobStore::GetFile(const Digest& digest, const std::string& path) {
 }
 
 namespace {
-absl::Status NoTenants() {
-  return absl::UnimplementedError("this store keeps no tenant grants");
-}
+absl::Status NoTenants() { return absl::UnimplementedError("this store keeps no tenant grants"); }
 }  // namespace
 
 absl::Status BlobStore::Grant(const std::string&, const std::vector<Digest>&) {
@@ -298,7 +296,8 @@ absl::StatusOr<int64_t> FilesystemBlobStore::AppendPart(const Digest& digest,
   std::ofstream out(part, std::ios::binary | std::ios::app);
   out.write(data.data(), static_cast<std::streamsize>(data.size()));
   out.flush();
-  if (!out) return absl::UnavailableError(absl::StrCat("upload of ", digest.ToString(), ": write failed"));
+  if (!out)
+    return absl::UnavailableError(absl::StrCat("upload of ", digest.ToString(), ": write failed"));
   return committed + static_cast<int64_t>(data.size());
 }
 
@@ -348,7 +347,8 @@ absl::Status FilesystemBlobStore::Grant(const std::string& tenant,
     fs::create_directories(path.parent_path(), ec);
     // Not fsynced: a grant lost in a crash costs the tenant an upload, never exposes a blob.
     std::ofstream touch(path, std::ios::binary);
-    if (!touch) return absl::UnavailableError(absl::StrCat("grant of ", d.ToString(), ": cannot write"));
+    if (!touch)
+      return absl::UnavailableError(absl::StrCat("grant of ", d.ToString(), ": cannot write"));
   }
   return absl::OkStatus();
 }

@@ -100,7 +100,8 @@ class BlobStore {
 
 // Blobs under <root>/cas/<hash[0:2]>/<hash>, interrupted uploads under <root>/uploads/ (a
 // tenant's own as <tenant>.<hash>-<size>.part), grants as empty files
-// <root>/grants/<tenant>/<hash[0:2]>/<hash>-<size>, temp files under <root>/tmp/ (cleared at open). Writes: temp file + fsync + rename + directory fsync.
+// <root>/grants/<tenant>/<hash[0:2]>/<hash>-<size>, temp files under <root>/tmp/ (cleared at open).
+// Writes: temp file + fsync + rename + directory fsync.
 class FilesystemBlobStore final : public BlobStore {
  public:
   static absl::StatusOr<std::unique_ptr<FilesystemBlobStore>> Open(const std::string& root,
@@ -133,8 +134,8 @@ class FilesystemBlobStore final : public BlobStore {
   // The upload's part file: the shared one (space "") or a tenant's own.
   std::string PartPath(const Digest& digest, const std::string& space = "") const;
   std::string GrantPath(const std::string& tenant, const Digest& digest) const;
-  absl::StatusOr<int64_t> AppendPart(const Digest& digest, const std::string& space,
-                                     int64_t offset, absl::string_view data);
+  absl::StatusOr<int64_t> AppendPart(const Digest& digest, const std::string& space, int64_t offset,
+                                     absl::string_view data);
   absl::Status FinishPart(const Digest& digest, const std::string& space);
   // Removes interrupted uploads older than the TTL; `force` = now, else at most once a minute.
   void ExpireUploads(bool force);

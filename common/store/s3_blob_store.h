@@ -91,8 +91,8 @@ class S3BlobStore final : public BlobStore {
   void Forget(const std::string& key);
   void NoteBuffered(const std::string& key);  // LRU of uploads holding a buffer
   absl::StatusOr<int64_t> PartSize(const Digest& digest, const std::string& space);
-  absl::StatusOr<int64_t> AppendPart(const Digest& digest, const std::string& space,
-                                     int64_t offset, absl::string_view data);
+  absl::StatusOr<int64_t> AppendPart(const Digest& digest, const std::string& space, int64_t offset,
+                                     absl::string_view data);
   absl::Status FinishPart(const Digest& digest, const std::string& space);
   absl::Status Load(const Digest& digest, Upload& upload);
   absl::Status SendFullParts(Upload& upload);

@@ -11,7 +11,8 @@ namespace instascene::decomposition {
 class DecompositionService final : public v1::Decomposition::Service {
  public:
   // auth null = authentication off. Both must outlive the service.
-  explicit DecompositionService(const worker::StageWorker* worker, auth::Authenticator* auth = nullptr)
+  explicit DecompositionService(const worker::StageWorker* worker,
+                                auth::Authenticator* auth = nullptr)
       : worker_(worker), auth_(auth) {}
   grpc::Status GetWorkerStatus(grpc::ServerContext*, const v1::GetWorkerStatusRequest*,
                                v1::WorkerStatus* response) override;

@@ -1,10 +1,10 @@
 #include "services/decomposition/stage.h"
 
 #include "common/core/status.h"
-#include "services/pipeline/memory.h"
 #include "common/scene/scene.h"
 #include "services/decomposition/decompose.h"
 #include "services/decomposition/stage_params.h"
+#include "services/pipeline/memory.h"
 
 namespace instascene::decomposition {
 namespace {
@@ -29,11 +29,12 @@ absl::StatusOr<pipeline::StageResult> RunDecompose(const pipeline::StageContext&
 }
 
 // The splat (~240 B per Gaussian with its SH), per Gaussian and view its mask votes, every view's
-// label map and the traces of the views rasterised at once (docs/RELIABILITY.md "Memory estimates").
+// label map and the traces of the views rasterised at once (docs/RELIABILITY.md "Memory
+// estimates").
 absl::StatusOr<int64_t> EstimateDecompose(const pipeline::StageContext& c) {
   ASSIGN_OR_RETURN(pipeline::SceneFootprint f, pipeline::ReadSceneFootprint(c.scene_dir));
-  return 64 * pipeline::kMiB + 320 * f.gaussians + 6 * f.gaussians * f.views +
-         12 * f.total_pixels + 256 * f.max_view_pixels;
+  return 64 * pipeline::kMiB + 320 * f.gaussians + 6 * f.gaussians * f.views + 12 * f.total_pixels +
+         256 * f.max_view_pixels;
 }
 
 }  // namespace

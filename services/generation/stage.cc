@@ -7,12 +7,12 @@
 #include "absl/strings/str_cat.h"
 #include "common/core/file_io.h"
 #include "common/core/status.h"
-#include "services/pipeline/memory.h"
 #include "common/eval/result.h"
 #include "common/scene/image_io.h"
 #include "common/scene/scene.h"
 #include "services/generation/completion.h"
 #include "services/generation/stage_params.h"
+#include "services/pipeline/memory.h"
 
 namespace instascene::generation {
 namespace {
@@ -94,15 +94,16 @@ absl::StatusOr<pipeline::StageResult> RunComplete(const pipeline::StageContext& 
 absl::StatusOr<int64_t> EstimateComplete(const pipeline::StageContext& c) {
   ASSIGN_OR_RETURN(CompleteStageOptions o, CompleteCodec().Decode(c.parameters));
   ASSIGN_OR_RETURN(pipeline::SceneFootprint f, pipeline::ReadSceneFootprint(c.scene_dir));
-  const int64_t grid = int64_t{o.free_space_resolution} * o.free_space_resolution *
-                       o.free_space_resolution;
+  const int64_t grid =
+      int64_t{o.free_space_resolution} * o.free_space_resolution * o.free_space_resolution;
   const int64_t ring = int64_t{o.ring_views} * o.ring_size * o.ring_size;
   const int64_t mesh = int64_t{o.ring_views} * o.mesh_size * o.mesh_size;
   int64_t bytes = 160 * pipeline::kMiB + 720 * f.gaussians + 16 * grid + 96 * ring + 64 * mesh +
                   12 * f.total_pixels;
   if (o.refine_iterations > 0)
     bytes += int64_t{o.top_training_views + o.ring_views} * o.refine_view_size *
-                 o.refine_view_size * 512 + 160 * f.gaussians;
+                 o.refine_view_size * 512 +
+             160 * f.gaussians;
   return bytes;
 }
 

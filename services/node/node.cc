@@ -226,9 +226,9 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
     w.lease_seconds = options.lease_seconds;
     w.cache_bytes = options.cache_bytes;
     if (!options.denoiser.empty()) w.stage_settings["denoiser"] = options.denoiser;
-    w.memory_budget_bytes = options.memory_budget_bytes == 0 ? pipeline::PhysicalMemoryBytes()
+    w.memory_budget_bytes = options.memory_budget_bytes == 0  ? pipeline::PhysicalMemoryBytes()
                             : options.memory_budget_bytes < 0 ? 0
-                                                               : options.memory_budget_bytes;
+                                                              : options.memory_budget_bytes;
     w.heartbeat_interval_ms = std::min(1000, options.lease_seconds * 1000 / 4);  // live progress
     RETURN_IF_ERROR(w.Validate(stages));
     workers.push_back(std::make_unique<worker::StageWorker>(w, blob_store, &stages));

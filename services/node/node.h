@@ -67,8 +67,8 @@ struct NodeOptions {
   // This node's own credential towards the store / scheduler it reaches by address (a worker or
   // admin token, `instascene token create --role worker`; "" = none).
   std::string token_file;
-  rpc::TlsServerOptions tls;        // TLS on the gRPC listener (none = plaintext)
-  rpc::ChannelOptions peer_tls;     // TLS towards --store / --scheduler (tls_* fields only)
+  rpc::TlsServerOptions tls;     // TLS on the gRPC listener (none = plaintext)
+  rpc::ChannelOptions peer_tls;  // TLS towards --store / --scheduler (tls_* fields only)
   store::StoreOptions store_options;
 
   absl::Status Validate() const;
@@ -83,7 +83,7 @@ struct StageServiceContext {
   // before. Services that ask the scheduler (the Objects service resolving scene names) call it
   // per request.
   std::function<std::shared_ptr<grpc::Channel>()> scheduler;
-  int64_t index_cache_bytes = 0;  // NodeOptions::index_cache_bytes
+  int64_t index_cache_bytes = 0;        // NodeOptions::index_cache_bytes
   auth::Authenticator* auth = nullptr;  // null = authentication off
 };
 

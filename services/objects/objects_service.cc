@@ -150,8 +150,9 @@ ObjectsService::CacheStats ObjectsService::cache_stats() const {
 grpc::Status ObjectsService::GetObject(grpc::ServerContext* context,
                                        const v1::GetObjectRequest* request, v1::Object* response) {
   auto answer = [&]() -> absl::Status {
-    ASSIGN_OR_RETURN(auth::Identity who, auth::Authorize(options_.auth, context,
-                                                         {auth::Role::kClient, auth::Role::kAdmin}));
+    ASSIGN_OR_RETURN(
+        auth::Identity who,
+        auth::Authorize(options_.auth, context, {auth::Role::kClient, auth::Role::kAdmin}));
     bool fresh = false;
     RETURN_IF_ERROR(CheckSceneName(request->scene()));
     ASSIGN_OR_RETURN(std::shared_ptr<const SceneObjects> index,
@@ -171,8 +172,9 @@ grpc::Status ObjectsService::ListObjects(grpc::ServerContext* context,
                                          const v1::ListObjectsRequest* request,
                                          v1::ListObjectsResponse* response) {
   auto answer = [&]() -> absl::Status {
-    ASSIGN_OR_RETURN(auth::Identity who, auth::Authorize(options_.auth, context,
-                                                         {auth::Role::kClient, auth::Role::kAdmin}));
+    ASSIGN_OR_RETURN(
+        auth::Identity who,
+        auth::Authorize(options_.auth, context, {auth::Role::kClient, auth::Role::kAdmin}));
     RETURN_IF_ERROR(CheckSceneName(request->scene()));
     const int limit = request->limit() == 0 ? 100 : request->limit();
     if (limit < 0 || limit > options_.max_page)

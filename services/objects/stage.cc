@@ -8,9 +8,9 @@
 #include "absl/strings/str_cat.h"
 #include "common/core/file_io.h"
 #include "common/core/status.h"
-#include "services/pipeline/memory.h"
 #include "common/scene/scene.h"
 #include "services/objects/export.h"
+#include "services/pipeline/memory.h"
 
 namespace instascene::objects {
 namespace {
@@ -62,8 +62,8 @@ absl::StatusOr<pipeline::StageResult> RunExport(const pipeline::StageContext& c)
 absl::StatusOr<int64_t> EstimateExport(const pipeline::StageContext& c) {
   ASSIGN_OR_RETURN(ExportStageOptions o, ExportCodec().Decode(c.parameters));
   ASSIGN_OR_RETURN(pipeline::SceneFootprint f, pipeline::ReadSceneFootprint(c.scene_dir));
-  const int64_t voxels = int64_t{o.collision_resolution} * o.collision_resolution *
-                         o.collision_resolution;
+  const int64_t voxels =
+      int64_t{o.collision_resolution} * o.collision_resolution * o.collision_resolution;
   return 96 * pipeline::kMiB + 400 * f.gaussians + 64 * voxels * (1 + o.collision_parts) +
          64 * int64_t{o.surface_points};
 }

@@ -80,7 +80,8 @@ TEST(MemoryEstimate, EveryStageStaysWithinItsEstimate) {
     std::printf("%-9s estimate %6.1f MiB, measured peak %6.1f MiB\n", kind.c_str(),
                 m.estimate / double(kMiB), m.peak / double(kMiB));
     EXPECT_GE(m.estimate, m.peak) << kind << " allocated more than it estimated";
-    EXPECT_LE(m.estimate, 8 * m.peak + 256 * kMiB) << kind << ": an estimate that refuses for nothing";
+    EXPECT_LE(m.estimate, 8 * m.peak + 256 * kMiB)
+        << kind << ": an estimate that refuses for nothing";
   }
 }
 

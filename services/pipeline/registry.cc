@@ -8,8 +8,8 @@
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
-#include "services/pipeline/memory.h"
 #include "common/core/status.h"
+#include "services/pipeline/memory.h"
 
 namespace instascene::pipeline {
 
@@ -152,10 +152,12 @@ absl::StatusOr<StageResult> StageRegistry::Run(const std::string& kind,
   if (context.memory_budget_bytes > 0 && stage->estimate) {
     ASSIGN_OR_RETURN(const int64_t need, stage->estimate(context));
     if (need > context.memory_budget_bytes)
-      return absl::ResourceExhaustedError(absl::StrCat(
-          "stage ", kind, " needs about ", need / kMiB, " MiB for this input and parameters, more "
-          "than this worker's budget of ", context.memory_budget_bytes / kMiB,
-          " MiB (--memory-budget-bytes); nothing was allocated"));
+      return absl::ResourceExhaustedError(
+          absl::StrCat("stage ", kind, " needs about ", need / kMiB,
+                       " MiB for this input and parameters, more "
+                       "than this worker's budget of ",
+                       context.memory_budget_bytes / kMiB,
+                       " MiB (--memory-budget-bytes); nothing was allocated"));
   }
   // The one exception boundary of every stage: whatever a stage throws fails its job, never the
   // process that hosts it (an allocation failure is RESOURCE_EXHAUSTED, and not retried).

@@ -94,7 +94,7 @@ StageSpec MakeStageSpec(std::string kind, std::string directory, std::string des
 
 struct StageDefinition {
   StageSpec spec;
-  RunFunction run;  // null: this binary validates the stage's parameters but cannot run it
+  RunFunction run;          // null: this binary validates the stage's parameters but cannot run it
   MemoryEstimate estimate;  // null: no estimate (the budget is not checked)
 };
 

@@ -117,8 +117,8 @@ absl::StatusOr<SubmitResult> JobQueue::SubmitOne(QueueTx& tx, const SubmitReques
                           (dep.state == JobState::kFailed || dep.state == JobState::kCancelled);
     pending += dep.state != JobState::kSucceeded && !left_out;
   }
-  const std::string key =
-      JobKey(request.scene_manifest, kind, parameters, keys, item, auth::SceneTenant(request.scene));
+  const std::string key = JobKey(request.scene_manifest, kind, parameters, keys, item,
+                                 auth::SceneTenant(request.scene));
   const std::string id = JobIdFromKey(key);
   ASSIGN_OR_RETURN(std::optional<Job> existing, tx.Get(id));
   if (existing) {

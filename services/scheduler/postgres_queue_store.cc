@@ -218,10 +218,11 @@ class PostgresTx final : public QueueTx {
     } else {
       const int state = filter.state ? Code(*filter.state) : 0;
       const pqxx::result r = tx_.exec_params(
-          absl::StrCat("SELECT ", kColumns,
-                       ", seq FROM jobs WHERE ($1 = '' OR scene = $1) AND ($2 = 0 OR state = $2) "
-                       "AND ($3 = 0 OR seq < $3) AND ($5 = '' OR substr(scene, 1, length($5)) = $5) "
-                       "ORDER BY seq DESC LIMIT $4"),
+          absl::StrCat(
+              "SELECT ", kColumns,
+              ", seq FROM jobs WHERE ($1 = '' OR scene = $1) AND ($2 = 0 OR state = $2) "
+              "AND ($3 = 0 OR seq < $3) AND ($5 = '' OR substr(scene, 1, length($5)) = $5) "
+              "ORDER BY seq DESC LIMIT $4"),
           filter.scene, state, filter.before_seq, int64_t{filter.limit > 0 ? filter.limit : 100},
           filter.scene_prefix);
       for (const pqxx::row& row : r) jobs.push_back(RowToJob(row));

@@ -315,7 +315,8 @@ grpc::Status SchedulerService::CancelScene(grpc::ServerContext* context,
 
 grpc::Status SchedulerService::GetScene(grpc::ServerContext* context,
                                         const v1::GetSceneRequest* request, v1::Scene* response) {
-  absl::StatusOr<auth::Identity> who = Caller(context, {Role::kClient, Role::kWorker, Role::kAdmin});
+  absl::StatusOr<auth::Identity> who =
+      Caller(context, {Role::kClient, Role::kWorker, Role::kAdmin});
   if (!who.ok()) return ToGrpcStatus(who.status());
   if (request->scene().empty())
     return ToGrpcStatus(absl::InvalidArgumentError("GetScene: no scene given"));
@@ -370,7 +371,8 @@ grpc::Status SchedulerService::ListStages(grpc::ServerContext* context,
 
 grpc::Status SchedulerService::GetJob(grpc::ServerContext* context,
                                       const v1::GetJobRequest* request, v1::Job* response) {
-  absl::StatusOr<auth::Identity> who = Caller(context, {Role::kClient, Role::kWorker, Role::kAdmin});
+  absl::StatusOr<auth::Identity> who =
+      Caller(context, {Role::kClient, Role::kWorker, Role::kAdmin});
   if (!who.ok()) return ToGrpcStatus(who.status());
   absl::StatusOr<Job> job = VisibleJob(*who, request->job_id());
   if (!job.ok()) return ToGrpcStatus(job.status());

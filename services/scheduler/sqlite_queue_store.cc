@@ -209,11 +209,11 @@ class SqliteTx final : public QueueTx {
       }
       return jobs;
     }
-    Statement s(db_,
-                absl::StrCat("SELECT ", kColumns,
-                             ", seq FROM jobs WHERE (? = '' OR scene = ?) AND (? = 0 OR state = ?) "
-                             "AND (? = 0 OR seq < ?) AND (? = '' OR substr(scene, 1, length(?)) = ?) "
-                             "ORDER BY seq DESC LIMIT ?"));
+    Statement s(
+        db_, absl::StrCat("SELECT ", kColumns,
+                          ", seq FROM jobs WHERE (? = '' OR scene = ?) AND (? = 0 OR state = ?) "
+                          "AND (? = 0 OR seq < ?) AND (? = '' OR substr(scene, 1, length(?)) = ?) "
+                          "ORDER BY seq DESC LIMIT ?"));
     const int64_t state = filter.state ? Code(*filter.state) : 0;
     s.Bind(1, filter.scene).Bind(2, filter.scene).Bind(3, state).Bind(4, state);
     s.Bind(5, filter.before_seq).Bind(6, filter.before_seq);

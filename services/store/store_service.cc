@@ -43,7 +43,8 @@ absl::StatusOr<auth::Identity> StoreService::Caller(grpc::ServerContext* context
 absl::Status StoreService::CheckReadable(const auth::Identity& who,
                                          const store::Digest& digest) const {
   if (!who.scoped()) return absl::OkStatus();
-  ASSIGN_OR_RETURN(std::vector<store::Digest> ungranted, store_->FindUngranted(who.tenant, {digest}));
+  ASSIGN_OR_RETURN(std::vector<store::Digest> ungranted,
+                   store_->FindUngranted(who.tenant, {digest}));
   if (!ungranted.empty())
     return absl::NotFoundError(absl::StrCat("blob ", digest.ToString(), " is not in the store"));
   return absl::OkStatus();
@@ -172,9 +173,8 @@ grpc::Status StoreService::QueryWriteStatus(grpc::ServerContext* context,
   if (!who.ok()) return ToGrpcStatus(who.status());
   absl::StatusOr<store::Digest> d = rpc::ParseProtoDigest(request->digest(), "digest");
   if (!d.ok()) return ToGrpcStatus(d.status());
-  absl::StatusOr<int64_t> committed = who->scoped()
-                                          ? store_->TenantCommittedSize(who->tenant, *d)
-                                          : store_->CommittedSize(*d);
+  absl::StatusOr<int64_t> committed =
+      who->scoped() ? store_->TenantCommittedSize(who->tenant, *d) : store_->CommittedSize(*d);
   if (!committed.ok()) return ToGrpcStatus(committed.status());
   absl::StatusOr<std::vector<store::Digest>> missing =
       who->scoped() ? store_->FindUngranted(who->tenant, {*d}) : store_->FindMissing({*d});
@@ -233,8 +233,10 @@ grpc::Status StoreService::GetStoreInfo(grpc::ServerContext* context,
 }
 
 grpc::Status StoreService::GrantBlobs(grpc::ServerContext* context,
-                                      const v1::GrantBlobsRequest* request, v1::GrantBlobsResponse*) {
-  absl::StatusOr<auth::Identity> who = auth::Authorize(auth_, context, {Role::kWorker, Role::kAdmin});
+                                      const v1::GrantBlobsRequest* request,
+                                      v1::GrantBlobsResponse*) {
+  absl::StatusOr<auth::Identity> who =
+      auth::Authorize(auth_, context, {Role::kWorker, Role::kAdmin});
   if (!who.ok()) return ToGrpcStatus(who.status());
   absl::StatusOr<std::vector<store::Digest>> digests = ParseDigests(request->digests());
   if (!digests.ok()) return ToGrpcStatus(digests.status());
@@ -244,7 +246,8 @@ grpc::Status StoreService::GrantBlobs(grpc::ServerContext* context,
 grpc::Status StoreService::FindUngrantedBlobs(grpc::ServerContext* context,
                                               const v1::FindUngrantedBlobsRequest* request,
                                               v1::FindUngrantedBlobsResponse* response) {
-  absl::StatusOr<auth::Identity> who = auth::Authorize(auth_, context, {Role::kWorker, Role::kAdmin});
+  absl::StatusOr<auth::Identity> who =
+      auth::Authorize(auth_, context, {Role::kWorker, Role::kAdmin});
   if (!who.ok()) return ToGrpcStatus(who.status());
   absl::StatusOr<std::vector<store::Digest>> digests = ParseDigests(request->digests());
   if (!digests.ok()) return ToGrpcStatus(digests.status());

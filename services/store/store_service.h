@@ -35,7 +35,8 @@ class StoreService final : public v1::ContentStore::Service {
                             v1::GetStoreInfoResponse* response) override;
   grpc::Status GrantBlobs(grpc::ServerContext*, const v1::GrantBlobsRequest* request,
                           v1::GrantBlobsResponse* response) override;
-  grpc::Status FindUngrantedBlobs(grpc::ServerContext*, const v1::FindUngrantedBlobsRequest* request,
+  grpc::Status FindUngrantedBlobs(grpc::ServerContext*,
+                                  const v1::FindUngrantedBlobsRequest* request,
                                   v1::FindUngrantedBlobsResponse* response) override;
 
  private:
@@ -43,7 +44,7 @@ class StoreService final : public v1::ContentStore::Service {
   // NotFound for a blob the caller may not read (the same answer as for a blob nobody stored).
   absl::Status CheckReadable(const auth::Identity& who, const store::Digest& digest) const;
 
-  store::BlobStore* store_;     // not owned
+  store::BlobStore* store_;    // not owned
   auth::Authenticator* auth_;  // not owned; null = off
 };
 

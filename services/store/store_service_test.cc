@@ -5,9 +5,9 @@
 #include <fstream>
 #include <random>
 
+#include "common/auth/tokens.h"
 #include "common/core/status.h"
 #include "common/core/testing/files.h"
-#include "common/auth/tokens.h"
 #include "common/core/testing/temp_dir.h"
 #include "common/rpc/server.h"
 #include "common/rpc/status.h"

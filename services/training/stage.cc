@@ -3,9 +3,9 @@
 #include <set>
 
 #include "common/core/status.h"
-#include "services/pipeline/memory.h"
 #include "common/eval/result.h"
 #include "common/scene/scene.h"
+#include "services/pipeline/memory.h"
 #include "services/training/feature_field.h"
 #include "services/training/segmentation.h"
 #include "services/training/stage_params.h"

@@ -18,8 +18,8 @@
 #include <thread>
 #include <vector>
 
-#include "common/core/cancel.h"
 #include "common/auth/authenticator.h"
+#include "common/core/cancel.h"
 #include "common/store/blob_store.h"
 #include "instascene/v1/scheduler.grpc.pb.h"
 #include "services/pipeline/registry.h"

@@ -2,7 +2,8 @@
 // scene on an InstaScene server, prints its pose, metric size and artefacts, and downloads them.
 //
 //   object_at_point SERVER SCENE X Y Z [OUT_DIR]
-//   INSTASCENE_TOKEN_FILE=robot.token object_at_point 127.0.0.1:50051 kitchen 0.42 -0.10 0.78 /tmp/cup
+//   INSTASCENE_TOKEN_FILE=robot.token object_at_point 127.0.0.1:50051 kitchen 0.42 -0.10 0.78
+//   /tmp/cup
 // The bearer token (`instascene token create --tenant ...` makes one for a robot fleet) comes from
 // the file named by $INSTASCENE_TOKEN_FILE, or $INSTASCENE_TOKEN itself.
 #include <cstdio>
