@@ -19,6 +19,7 @@
 #include "common/core/file_io.h"
 #include "common/core/file_lock.h"
 #include "common/core/status.h"
+#include "common/store/blob_store.h"
 #include "common/store/digest.h"
 
 namespace instascene::auth {
@@ -109,9 +110,8 @@ absl::StatusOr<Role> ParseRole(absl::string_view name) {
 }
 
 absl::Status ValidateTenant(absl::string_view tenant) {
-  bool ok = !tenant.empty() && tenant.size() <= 32 && tenant[0] != '-';
-  for (char c : tenant) ok &= (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '-';
-  if (!ok)
+  // One rule for the store's grant paths and for tokens (the store sits below auth).
+  if (!store::CheckTenantName(tenant).ok())
     return absl::InvalidArgumentError(
         absl::StrCat("tenant '", tenant.substr(0, 40),
                      "': 1-32 characters of a-z, 0-9 and '-', not starting with '-'"));
