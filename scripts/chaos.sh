@@ -67,7 +67,8 @@ kills=0
 end=$((SECONDS + DURATION))
 while [ $SECONDS -lt $end ]; do
   sleep "$KILL_EVERY"
-  victim=${names[$((RANDOM % ${#names[@]}))]}
+  if [ "$kills" -lt ${#names[@]} ]; then victim=${names[$kills]}  # each process at least once
+  else victim=${names[$((RANDOM % ${#names[@]}))]}; fi
   kill -9 "${PID[$victim]}" 2>/dev/null; wait "${PID[$victim]}" 2>/dev/null
   kills=$((kills + 1))
   echo "$(date +%T) killed $victim" >>"$WORK/kills.txt"
