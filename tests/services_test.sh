@@ -192,7 +192,7 @@ check_fails "beta cannot fetch acme's scene" "NOT_FOUND" "$BIN" fetch --scene a 
 check "the admin sees the stored name" test "$(json_get <("$BIN" jobs --server "$ADDR3" $TLS $ADMIN --json) "d['jobs'][0]['scene']")" = "acme:a"
 ACMEID=$(cut -c5-16 "$WORK/acme.token")
 check "revoke acme's token" "$BIN" token revoke "$ACMEID" --data "$WORK/data3"
-revoked() {  # servers re-read the token file at most once a second: poll for up to 5 s
+revoked() {  # servers re-read the changed token file at the next call (polled: a kubelet may lag)
   for _ in $(seq 50); do
     grep -q UNAUTHENTICATED <<<"$("$BIN" jobs --server "$ADDR3" $TLS $ACME 2>&1)" && return 0; sleep 0.1
   done; return 1

@@ -1,6 +1,6 @@
 // `instascene token create | revoke | list`: the admin command for bearer tokens. It edits the
 // token file a server checks calls against (default: the one `instascene serve --data DIR` uses,
-// DIR/auth/tokens.json); servers pick up the change within a second, without a restart.
+// DIR/auth/tokens.json); servers pick up the change at their next call, without a restart.
 #include <chrono>
 #include <cstdio>
 #include <ctime>

@@ -2,8 +2,9 @@
 // (common/auth/tokens.h) and the method's allowed roles. Each service method calls Authorize
 // first; a missing, malformed, unknown or revoked token is UNAUTHENTICATED, a role the method
 // does not allow PERMISSION_DENIED (neither says which tokens exist). The file is re-read when it
-// changes (checked at most once a second): revocations and new tokens need no restart; a file
-// that no longer parses keeps the last good set and logs why. Thread-safe.
+// changes (its modification time and size, one stat per call unless `reload_check` spaces the
+// checks): new and revoked tokens take effect at the next call, without a restart; a file that no
+// longer parses keeps the last good set and logs why. Thread-safe.
 #pragma once
 
 #include <grpcpp/grpcpp.h>
@@ -29,7 +30,7 @@ class Authenticator {
   static std::shared_ptr<Authenticator> Disabled();
   // Tokens from `path`; NotFound when the file does not exist.
   static absl::StatusOr<std::shared_ptr<Authenticator>> FromFile(
-      const std::string& path, std::chrono::milliseconds reload_check = std::chrono::seconds(1));
+      const std::string& path, std::chrono::milliseconds reload_check = std::chrono::milliseconds(0));
 
   bool enabled() const { return enabled_; }
   // A token valid in this process only, never written anywhere (a node's own workers reach its

@@ -3,7 +3,7 @@
 // the record, the secret (64 hex, 256 random bits from the OS) is checked against the stored hash
 // in constant time. Roles: client (its tenant's scenes), worker (leases and the store), admin
 // (everything, plus monitoring). `instascene token create|revoke|list` edits the file; servers
-// re-read it when it changes, so a revocation takes effect within a second, without a restart.
+// re-read it when it changes, so a revocation takes effect at the next call, without a restart.
 #pragma once
 
 #include <cstdint>

@@ -15,6 +15,7 @@
 #include "common/metrics/rpc_metrics.h"
 #include "common/rpc/server.h"
 #include "common/store/blob_store_uri.h"
+#include "services/gateway/gateway.h"
 #include "services/pipeline/memory.h"
 #include "services/scheduler/postgres_queue_store.h"
 #include "services/scheduler/scheduler_metrics.h"
@@ -280,12 +281,21 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
     }
     for (auto& w : workers) w->Start(channel);
   }
+  std::unique_ptr<gateway::Gateway> http_gateway;
+  if (!options.gateway_listen.empty()) {
+    gateway::GatewayOptions gateway_options;
+    gateway_options.listen = options.gateway_listen;
+    const std::shared_ptr<grpc::Channel> local = server->InProcessChannel();
+    ASSIGN_OR_RETURN(http_gateway, gateway::Gateway::Start(gateway_options, local, local, local));
+  }
   spdlog::info("instascene node serving on {} (data {}): {}", server->address(), options.data_dir,
                absl::StrJoin(names, ", "));
+  if (http_gateway) spdlog::info("HTTP gateway at http://{}/api/v1/", http_gateway->address());
   if (metrics_endpoint) spdlog::info("metrics at http://{}/metrics", metrics_endpoint->address());
   if (!options.ready_file.empty()) {
     std::string ready = server->address() + "\n";
     if (metrics_endpoint) absl::StrAppend(&ready, "metrics=", metrics_endpoint->address(), "\n");
+    if (http_gateway) absl::StrAppend(&ready, "gateway=", http_gateway->address(), "\n");
     RETURN_IF_ERROR(WriteFileAtomically(options.ready_file, ready));
   }
 
@@ -297,6 +307,7 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
   for (auto& w : workers) drains.emplace_back([w = w.get(), deadline] { w->Drain(deadline); });
   for (std::thread& t : drains) t.join();
   if (scheduler_svc) scheduler_svc->Stop();
+  http_gateway.reset();  // open event streams end
   server->Drain(std::chrono::seconds(5));
   metrics_endpoint.reset();
   if (!options.ready_file.empty()) fs::remove(options.ready_file, ec);

@@ -53,6 +53,9 @@ struct NodeOptions {
   // Prometheus /metrics on this host:port ("" = off): RPC latencies, the queue (with a
   // scheduler), the store (with a store), workers' jobs, the data directory's disk space.
   std::string metrics_listen;
+  // The HTTP/JSON gateway (services/gateway) on this host:port ("" = off), in front of this
+  // node's services (in-process channel).
+  std::string gateway_listen;
   // Generation workers: the diffusion prior's Denoiser service (grpc://HOST:PORT; "" = none, and
   // complete jobs asking for prior "diffusion" fail).
   std::string denoiser;

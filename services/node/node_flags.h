@@ -61,6 +61,9 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
   app.add_option("--denoiser", o->denoiser,
                  "Generation workers: the diffusion prior's Denoiser service, grpc://HOST:PORT "
                  "(default: none; complete jobs with prior diffusion then fail)");
+  app.add_option("--gateway", o->gateway_listen,
+                 "Serve the HTTP/JSON gateway (/api/v1, Server-Sent Events) at HOST:PORT in front "
+                 "of this node's services (port 0 = any free port; default: off)");
   app.add_option("--memory-budget-bytes", o->memory_budget_bytes,
                  "Workers: the most one job may allocate; a job whose stage estimates more fails "
                  "with RESOURCE_EXHAUSTED before it runs (0 = the machine's physical memory, -1 = "

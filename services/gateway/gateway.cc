@@ -1,0 +1,504 @@
+#include "services/gateway/gateway.h"
+
+#include <google/protobuf/util/json_util.h>
+#include <httplib.h>
+
+#include <functional>
+
+#include "absl/strings/ascii.h"
+#include "absl/strings/match.h"
+#include "absl/strings/numbers.h"
+#include "absl/strings/str_cat.h"
+#include "absl/strings/str_split.h"
+#include "common/rpc/status.h"
+#include "instascene/v1/objects.grpc.pb.h"
+#include "instascene/v1/scheduler.grpc.pb.h"
+#include "instascene/v1/store.grpc.pb.h"
+
+namespace instascene::gateway {
+namespace {
+
+constexpr int64_t kDownloadChunk = 1 << 20;
+constexpr auto kDeadline = std::chrono::seconds(60);
+
+// Google's HTTP mapping of the canonical codes.
+int HttpStatus(grpc::StatusCode code) {
+  switch (code) {
+    case grpc::StatusCode::OK: return 200;
+    case grpc::StatusCode::CANCELLED: return 499;
+    case grpc::StatusCode::INVALID_ARGUMENT:
+    case grpc::StatusCode::FAILED_PRECONDITION:
+    case grpc::StatusCode::OUT_OF_RANGE: return 400;
+    case grpc::StatusCode::DEADLINE_EXCEEDED: return 504;
+    case grpc::StatusCode::NOT_FOUND: return 404;
+    case grpc::StatusCode::ALREADY_EXISTS:
+    case grpc::StatusCode::ABORTED: return 409;
+    case grpc::StatusCode::PERMISSION_DENIED: return 403;
+    case grpc::StatusCode::UNAUTHENTICATED: return 401;
+    case grpc::StatusCode::RESOURCE_EXHAUSTED: return 429;
+    case grpc::StatusCode::UNIMPLEMENTED: return 501;
+    case grpc::StatusCode::UNAVAILABLE: return 503;
+    default: return 500;
+  }
+}
+
+const char* StatusName(grpc::StatusCode code) {
+  static const char* kNames[] = {"OK", "CANCELLED", "UNKNOWN", "INVALID_ARGUMENT",
+                                 "DEADLINE_EXCEEDED", "NOT_FOUND", "ALREADY_EXISTS",
+                                 "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
+                                 "ABORTED", "OUT_OF_RANGE", "UNIMPLEMENTED", "INTERNAL",
+                                 "UNAVAILABLE", "DATA_LOSS", "UNAUTHENTICATED"};
+  const int i = static_cast<int>(code);
+  return i >= 0 && i < 17 ? kNames[i] : "UNKNOWN";
+}
+
+std::string JsonQuote(const std::string& s) {
+  std::string out = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\') {
+      out.push_back('\\');
+      out.push_back(c);
+    } else if (static_cast<unsigned char>(c) < 0x20) {
+      absl::StrAppend(&out, "\\u00", absl::string_view("0123456789abcdef" + ((c >> 4) & 15), 1),
+                      absl::string_view("0123456789abcdef" + (c & 15), 1));
+    } else {
+      out.push_back(c);
+    }
+  }
+  return out + "\"";
+}
+
+// `http_status` 0 = the code's own mapping.
+void SendError(httplib::Response& res, const grpc::Status& s, int http_status = 0) {
+  res.status = http_status != 0 ? http_status : HttpStatus(s.error_code());
+  res.set_content(absl::StrCat("{\"error\": {\"code\": ", res.status, ", \"status\": \"",
+                               StatusName(s.error_code()), "\", \"message\": ",
+                               JsonQuote(s.error_message()), "}}\n"),
+                  "application/json");
+}
+
+void SendError(httplib::Response& res, grpc::StatusCode code, const std::string& message) {
+  SendError(res, grpc::Status(code, message));
+}
+
+std::string ToJson(const google::protobuf::Message& m) {
+  google::protobuf::util::JsonPrintOptions options;
+  options.preserve_proto_field_names = true;
+  options.always_print_primitive_fields = true;
+  std::string out;
+  (void)google::protobuf::util::MessageToJsonString(m, &out, options);
+  return out;
+}
+
+void SendMessage(httplib::Response& res, const google::protobuf::Message& m) {
+  res.set_content(ToJson(m) + "\n", "application/json");
+}
+
+// A gRPC call context carrying the caller's token and a deadline.
+void Prepare(const httplib::Request& req, grpc::ClientContext* context,
+             bool allow_query_token = false) {
+  std::string authorization = req.get_header_value("Authorization");
+  if (authorization.empty() && allow_query_token && req.has_param("access_token"))
+    authorization = "Bearer " + req.get_param_value("access_token");
+  if (!authorization.empty()) context->AddMetadata("authorization", authorization);
+  context->set_deadline(std::chrono::system_clock::now() + kDeadline);
+}
+
+bool ParseBody(const httplib::Request& req, httplib::Response& res,
+               google::protobuf::Message* message) {
+  google::protobuf::util::JsonParseOptions options;
+  options.ignore_unknown_fields = false;
+  const auto status = google::protobuf::util::JsonStringToMessage(req.body, message, options);
+  if (!status.ok()) {
+    SendError(res, grpc::StatusCode::INVALID_ARGUMENT,
+              absl::StrCat("request body: ", std::string(status.message())));
+    return false;
+  }
+  return true;
+}
+
+bool ParseDigest(const std::string& hash, const std::string& size, v1::Digest* out,
+                 httplib::Response& res) {
+  int64_t bytes = 0;
+  if (!absl::SimpleAtoi(size, &bytes) || bytes < 0) {
+    SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "blob size: not a non-negative integer");
+    return false;
+  }
+  out->set_hash(hash);
+  out->set_size_bytes(bytes);
+  return true;
+}
+
+bool ParseVector(const std::string& text, size_t n, std::vector<double>* out) {
+  out->clear();
+  for (absl::string_view p : absl::StrSplit(text, ',')) {
+    double v = 0;
+    if (!absl::SimpleAtod(p, &v)) return false;
+    out->push_back(v);
+  }
+  return out->size() == n;
+}
+
+// Content type of an artefact by its file name (what the viewer and robot tools expect).
+std::string MediaType(const std::string& name) {
+  static const std::pair<const char*, const char*> kTypes[] = {
+      {".json", "application/json"}, {".png", "image/png"},
+      {".jpg", "image/jpeg"},         {".glb", "model/gltf-binary"},
+      {".gltf", "model/gltf+json"},   {".stl", "model/stl"},
+      {".urdf", "application/xml"},   {".xml", "application/xml"},
+      {".ply", "application/ply"},    {".obj", "model/obj"}};
+  for (const auto& [ext, type] : kTypes)
+    if (absl::EndsWith(name, ext)) return type;
+  return "application/octet-stream";
+}
+
+struct Stubs {
+  std::unique_ptr<v1::Scheduler::Stub> scheduler;
+  std::unique_ptr<v1::ContentStore::Stub> store;
+  std::unique_ptr<v1::Objects::Stub> objects;
+};
+
+// Unary call helper: request built, stub method called with the caller's token, JSON answered.
+template <typename Request, typename Response, typename Call>
+void Unary(const httplib::Request& req, httplib::Response& res, const Request& request,
+           Call call) {
+  grpc::ClientContext context;
+  Prepare(req, &context);
+  Response response;
+  const grpc::Status s = call(&context, request, &response);
+  if (!s.ok()) return SendError(res, s);
+  SendMessage(res, response);
+}
+
+void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
+  http.Get("/api/v1/health", [](const httplib::Request&, httplib::Response& res) {
+    res.set_content("{\"status\": \"SERVING\"}\n", "application/json");
+  });
+  // --- the scheduler ---
+  http.Get("/api/v1/stages", [stubs](const httplib::Request& req, httplib::Response& res) {
+    Unary<v1::ListStagesRequest, v1::ListStagesResponse>(
+        req, res, v1::ListStagesRequest(), [&](auto* c, const auto& q, auto* r) {
+          return stubs->scheduler->ListStages(c, q, r);
+        });
+  });
+  http.Get("/api/v1/jobs", [stubs](const httplib::Request& req, httplib::Response& res) {
+    v1::ListJobsRequest request;
+    request.set_scene(req.get_param_value("scene"));
+    request.set_page_token(req.get_param_value("page_token"));
+    if (req.has_param("limit")) {
+      int limit = 0;
+      if (!absl::SimpleAtoi(req.get_param_value("limit"), &limit))
+        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "limit: not an integer");
+      request.set_limit(limit);
+    }
+    if (req.has_param("state")) {
+      v1::JobState state;
+      if (!v1::JobState_Parse("JOB_STATE_" + absl::AsciiStrToUpper(req.get_param_value("state")),
+                              &state))
+        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT,
+                         "state: queued, leased, running, succeeded, failed or cancelled");
+      request.set_state(state);
+    }
+    Unary<v1::ListJobsRequest, v1::ListJobsResponse>(
+        req, res, request,
+        [&](auto* c, const auto& q, auto* r) { return stubs->scheduler->ListJobs(c, q, r); });
+  });
+  http.Get(R"(/api/v1/jobs/([A-Za-z0-9_-]+))",
+           [stubs](const httplib::Request& req, httplib::Response& res) {
+             v1::GetJobRequest request;
+             request.set_job_id(req.matches[1]);
+             Unary<v1::GetJobRequest, v1::Job>(req, res, request, [&](auto* c, const auto& q,
+                                                                      auto* r) {
+               return stubs->scheduler->GetJob(c, q, r);
+             });
+           });
+  http.Post(R"(/api/v1/jobs/([A-Za-z0-9_-]+)/cancel)",
+            [stubs](const httplib::Request& req, httplib::Response& res) {
+              v1::CancelJobRequest request;
+              request.set_job_id(req.matches[1]);
+              Unary<v1::CancelJobRequest, v1::Job>(req, res, request, [&](auto* c, const auto& q,
+                                                                          auto* r) {
+                return stubs->scheduler->CancelJob(c, q, r);
+              });
+            });
+  http.Get(R"(/api/v1/scenes/([^/]+))", [stubs](const httplib::Request& req,
+                                               httplib::Response& res) {
+    v1::GetSceneRequest request;
+    request.set_scene(req.matches[1]);
+    Unary<v1::GetSceneRequest, v1::Scene>(
+        req, res, request,
+        [&](auto* c, const auto& q, auto* r) { return stubs->scheduler->GetScene(c, q, r); });
+  });
+  http.Post(R"(/api/v1/scenes/([^/]+)/cancel)", [stubs](const httplib::Request& req,
+                                                       httplib::Response& res) {
+    v1::CancelSceneRequest request;
+    request.set_scene(req.matches[1]);
+    Unary<v1::CancelSceneRequest, v1::CancelSceneResponse>(
+        req, res, request,
+        [&](auto* c, const auto& q, auto* r) { return stubs->scheduler->CancelScene(c, q, r); });
+  });
+  http.Post("/api/v1/pipelines", [stubs](const httplib::Request& req, httplib::Response& res) {
+    v1::SubmitPipelineRequest request;
+    if (!ParseBody(req, res, &request)) return;
+    Unary<v1::SubmitPipelineRequest, v1::SubmitPipelineResponse>(
+        req, res, request,
+        [&](auto* c, const auto& q, auto* r) { return stubs->scheduler->SubmitPipeline(c, q, r); });
+  });
+  http.Get("/api/v1/queue", [stubs](const httplib::Request& req, httplib::Response& res) {
+    Unary<v1::GetQueueStatsRequest, v1::QueueStats>(
+        req, res, v1::GetQueueStatsRequest(),
+        [&](auto* c, const auto& q, auto* r) { return stubs->scheduler->GetQueueStats(c, q, r); });
+  });
+  // Live job events as Server-Sent Events: one "job" event per change, "end" when all are final.
+  http.Get("/api/v1/events", [stubs](const httplib::Request& req, httplib::Response& res) {
+    auto request = std::make_shared<v1::WatchJobsRequest>();
+    request->set_scene(req.get_param_value("scene"));
+    for (absl::string_view id : absl::StrSplit(req.get_param_value("job_ids"), ',', absl::SkipEmpty()))
+      request->add_job_ids(std::string(id));
+    auto context = std::make_shared<grpc::ClientContext>();
+    Prepare(req, context.get(), /*allow_query_token=*/true);
+    context->set_deadline(std::chrono::system_clock::time_point::max());
+    auto reader = std::shared_ptr<grpc::ClientReader<v1::Job>>(
+        stubs->scheduler->WatchJobs(context.get(), *request));
+    // The first event decides the status: an error before any event is an HTTP error.
+    auto first = std::make_shared<v1::Job>();
+    if (!reader->Read(first.get())) return SendError(res, reader->Finish());
+    res.set_header("Cache-Control", "no-cache");
+    res.set_chunked_content_provider(
+        "text/event-stream",
+        [stubs, context, reader, first](size_t, httplib::DataSink& sink) {
+          auto send = [&](const std::string& event, const std::string& data) {
+            const std::string frame = absl::StrCat("event: ", event, "\ndata: ", data, "\n\n");
+            return sink.write(frame.data(), frame.size());
+          };
+          bool open = send("job", ToJson(*first));
+          v1::Job job;
+          while (open && reader->Read(&job)) open = send("job", ToJson(job));
+          if (!open) {  // the browser went away: end the watch
+            context->TryCancel();
+            (void)reader->Finish();
+            return false;
+          }
+          const grpc::Status s = reader->Finish();
+          send(s.ok() ? "end" : "error",
+               absl::StrCat("{\"status\": \"", StatusName(s.error_code()), "\", \"message\": ",
+                            JsonQuote(s.error_message()), "}"));
+          sink.done();
+          return true;
+        });
+  });
+  // --- the store ---
+  http.Post("/api/v1/blobs/missing", [stubs](const httplib::Request& req,
+                                             httplib::Response& res) {
+    v1::FindMissingBlobsRequest request;
+    if (!ParseBody(req, res, &request)) return;
+    Unary<v1::FindMissingBlobsRequest, v1::FindMissingBlobsResponse>(
+        req, res, request,
+        [&](auto* c, const auto& q, auto* r) { return stubs->store->FindMissingBlobs(c, q, r); });
+  });
+  http.Get(R"(/api/v1/blobs/([0-9a-f]{64})/([0-9]+)/status)",
+           [stubs](const httplib::Request& req, httplib::Response& res) {
+             v1::QueryWriteStatusRequest request;
+             if (!ParseDigest(req.matches[1], req.matches[2], request.mutable_digest(), res))
+               return;
+             Unary<v1::QueryWriteStatusRequest, v1::QueryWriteStatusResponse>(
+                 req, res, request, [&](auto* c, const auto& q, auto* r) {
+                   return stubs->store->QueryWriteStatus(c, q, r);
+                 });
+           });
+  // Resumable upload: each PUT appends its body at Upload-Offset (the committed size, from
+  // .../status); the chunk that reaches the size finishes the blob (verified by the store).
+  http.Put(R"(/api/v1/blobs/([0-9a-f]{64})/([0-9]+))", [stubs](const httplib::Request& req,
+                                                              httplib::Response& res) {
+    v1::WriteRequest chunk;
+    if (!ParseDigest(req.matches[1], req.matches[2], chunk.mutable_digest(), res)) return;
+    int64_t offset = 0;
+    const std::string offset_header =
+        req.has_header("Upload-Offset") ? req.get_header_value("Upload-Offset") : "0";
+    if (!absl::SimpleAtoi(offset_header, &offset) || offset < 0)
+      return SendError(res, grpc::StatusCode::INVALID_ARGUMENT,
+                       "Upload-Offset: not a non-negative integer");
+    chunk.set_write_offset(offset);
+    chunk.set_data(req.body);
+    chunk.set_finish_write(offset + static_cast<int64_t>(req.body.size()) ==
+                           chunk.digest().size_bytes());
+    grpc::ClientContext context;
+    Prepare(req, &context);
+    v1::WriteResponse response;
+    auto writer = stubs->store->Write(&context, &response);
+    writer->Write(chunk);
+    writer->WritesDone();
+    const grpc::Status s = writer->Finish();
+    if (!s.ok()) return SendError(res, s);
+    SendMessage(res, response);
+  });
+  // Downloads: the blob's bytes, with Range requests (one range) and the content type of `name`.
+  http.Get(R"(/api/v1/blobs/([0-9a-f]{64})/([0-9]+))", [stubs](const httplib::Request& req,
+                                                              httplib::Response& res) {
+    v1::Digest digest;
+    if (!ParseDigest(req.matches[1], req.matches[2], &digest, res)) return;
+    {  // exists and readable by this caller (an empty read answers NOT_FOUND / UNAUTHENTICATED)
+      grpc::ClientContext context;
+      Prepare(req, &context);
+      v1::ReadRequest read;
+      *read.mutable_digest() = digest;
+      read.set_read_limit(1);
+      auto reader = stubs->store->Read(&context, read);
+      v1::ReadResponse ignored;
+      while (reader->Read(&ignored)) {
+      }
+      if (const grpc::Status s = reader->Finish(); !s.ok()) return SendError(res, s);
+    }
+    const std::string name = req.get_param_value("name");
+    if (!name.empty())
+      res.set_header("Content-Disposition",
+                     absl::StrCat("attachment; filename=\"",
+                                  name.substr(name.find_last_of('/') + 1), "\""));
+    res.set_header("Cache-Control", "private, max-age=31536000, immutable");  // content-addressed
+    const std::string authorization = req.get_header_value("Authorization");
+    res.set_content_provider(
+        static_cast<size_t>(digest.size_bytes()), MediaType(name),
+        [stubs, digest, authorization](size_t offset, size_t length, httplib::DataSink& sink) {
+          grpc::ClientContext context;
+          if (!authorization.empty()) context.AddMetadata("authorization", authorization);
+          v1::ReadRequest read;
+          *read.mutable_digest() = digest;
+          read.set_read_offset(static_cast<int64_t>(offset));
+          read.set_read_limit(std::min<int64_t>(static_cast<int64_t>(length), kDownloadChunk));
+          auto reader = stubs->store->Read(&context, read);
+          v1::ReadResponse chunk;
+          while (reader->Read(&chunk))
+            if (!sink.write(chunk.data().data(), chunk.data().size())) context.TryCancel();
+          return reader->Finish().ok();
+        });
+  });
+  // --- objects ---
+  http.Get(R"(/api/v1/scenes/([^/]+)/objects)", [stubs](const httplib::Request& req,
+                                                       httplib::Response& res) {
+    v1::ListObjectsRequest request;
+    request.set_scene(req.matches[1]);
+    request.set_page_token(req.get_param_value("page_token"));
+    if (req.has_param("limit")) {
+      int limit = 0;
+      if (!absl::SimpleAtoi(req.get_param_value("limit"), &limit))
+        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "limit: not an integer");
+      request.set_limit(limit);
+    }
+    Unary<v1::ListObjectsRequest, v1::ListObjectsResponse>(
+        req, res, request,
+        [&](auto* c, const auto& q, auto* r) { return stubs->objects->ListObjects(c, q, r); });
+  });
+  // One object: by id (/objects/ID), or /object?point=X,Y,Z[&max_distance=D] |
+  // ?view=V&x=X&y=Y | ?ray=OX,OY,OZ,DX,DY,DZ.
+  auto get_object = [stubs](const httplib::Request& req, httplib::Response& res) {
+    v1::GetObjectRequest request;
+    request.set_scene(req.matches[1]);
+    v1::ObjectSelector* selector = request.mutable_selector();
+    std::vector<double> v;
+    if (req.matches.size() > 2) {
+      uint32_t id = 0;
+      if (!absl::SimpleAtoi(std::string(req.matches[2]), &id))
+        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "object id: not an integer");
+      selector->set_id(id);
+    } else if (req.has_param("point")) {
+      if (!ParseVector(req.get_param_value("point"), 3, &v))
+        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "point: X,Y,Z");
+      selector->mutable_point()->set_x(v[0]);
+      selector->mutable_point()->set_y(v[1]);
+      selector->mutable_point()->set_z(v[2]);
+      double d = 0;
+      if (req.has_param("max_distance") && !absl::SimpleAtod(req.get_param_value("max_distance"), &d))
+        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "max_distance: not a number");
+      selector->set_max_distance(d);
+    } else if (req.has_param("view")) {
+      int x = 0, y = 0;
+      if (!absl::SimpleAtoi(req.get_param_value("x"), &x) ||
+          !absl::SimpleAtoi(req.get_param_value("y"), &y))
+        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "a click needs integer x and y");
+      selector->mutable_click()->set_view(req.get_param_value("view"));
+      selector->mutable_click()->set_x(x);
+      selector->mutable_click()->set_y(y);
+    } else if (req.has_param("ray")) {
+      if (!ParseVector(req.get_param_value("ray"), 6, &v))
+        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "ray: OX,OY,OZ,DX,DY,DZ");
+      auto* ray = selector->mutable_ray();
+      ray->mutable_origin()->set_x(v[0]);
+      ray->mutable_origin()->set_y(v[1]);
+      ray->mutable_origin()->set_z(v[2]);
+      ray->mutable_direction()->set_x(v[3]);
+      ray->mutable_direction()->set_y(v[4]);
+      ray->mutable_direction()->set_z(v[5]);
+    } else {
+      return SendError(res, grpc::StatusCode::INVALID_ARGUMENT,
+                       "give point=X,Y,Z, view=V&x=X&y=Y or ray=OX,OY,OZ,DX,DY,DZ");
+    }
+    Unary<v1::GetObjectRequest, v1::Object>(
+        req, res, request,
+        [&](auto* c, const auto& q, auto* r) { return stubs->objects->GetObject(c, q, r); });
+  };
+  http.Get(R"(/api/v1/scenes/([^/]+)/objects/([0-9]+))", get_object);
+  http.Get(R"(/api/v1/scenes/([^/]+)/object)", get_object);
+}
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<Gateway>> Gateway::Start(const GatewayOptions& options,
+                                                        std::shared_ptr<grpc::Channel> scheduler,
+                                                        std::shared_ptr<grpc::Channel> store,
+                                                        std::shared_ptr<grpc::Channel> objects) {
+  const size_t colon = options.listen.rfind(':');
+  int port = -1;
+  if (colon == std::string::npos || !absl::SimpleAtoi(options.listen.substr(colon + 1), &port) ||
+      port < 0 || port > 65535)
+    return absl::InvalidArgumentError(
+        absl::StrCat("gateway address '", options.listen.substr(0, 80), "': expected HOST:PORT"));
+  if (options.max_body_bytes <= 0 || options.threads < 1)
+    return absl::InvalidArgumentError("gateway: max_body_bytes and threads must be positive");
+  const std::string host = options.listen.substr(0, colon);
+  auto stubs = std::make_shared<Stubs>();
+  stubs->scheduler = v1::Scheduler::NewStub(scheduler);
+  stubs->store = v1::ContentStore::NewStub(store);
+  stubs->objects = v1::Objects::NewStub(objects);
+  std::unique_ptr<Gateway> gateway(new Gateway());
+  gateway->server_ = std::make_unique<httplib::Server>();
+  httplib::Server& http = *gateway->server_;
+  const int threads = options.threads;
+  http.new_task_queue = [threads] { return new httplib::ThreadPool(threads); };
+  http.set_payload_max_length(static_cast<size_t>(options.max_body_bytes));
+  // SO_REUSEADDR only: a second gateway on a busy port fails instead of sharing it.
+  http.set_socket_options([](socket_t sock) {
+    int yes = 1;
+    setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, reinterpret_cast<const void*>(&yes), sizeof(yes));
+  });
+  // httplib's own refusals (no route, body over the limit, malformed request) in the same shape.
+  http.set_error_handler([](const httplib::Request&, httplib::Response& res) {
+    if (!res.body.empty()) return;
+    const int status = res.status;
+    if (status == 413)
+      SendError(res,
+                grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                             "request body over the gateway's limit (uploads: chunks with "
+                             "Content-Type application/octet-stream)"),
+                413);
+    else if (status == 404)
+      SendError(res, grpc::Status(grpc::StatusCode::NOT_FOUND, "no such endpoint (docs/SERVICES.md)"),
+                404);
+    else
+      SendError(res, grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "malformed HTTP request"),
+                status);
+  });
+  AddRoutes(http, stubs);
+  const int bound = port == 0 ? http.bind_to_any_port(host) : (http.bind_to_port(host, port) ? port : -1);
+  if (bound <= 0)
+    return absl::UnavailableError(absl::StrCat("gateway: cannot listen on ", options.listen));
+  gateway->address_ = absl::StrCat(host, ":", bound);
+  gateway->thread_ = std::thread([&http] { http.listen_after_bind(); });
+  return gateway;
+}
+
+Gateway::~Gateway() {
+  if (server_) server_->stop();
+  if (thread_.joinable()) thread_.join();
+}
+
+}  // namespace instascene::gateway
