@@ -30,7 +30,8 @@ class Authenticator {
   static std::shared_ptr<Authenticator> Disabled();
   // Tokens from `path`; NotFound when the file does not exist.
   static absl::StatusOr<std::shared_ptr<Authenticator>> FromFile(
-      const std::string& path, std::chrono::milliseconds reload_check = std::chrono::milliseconds(0));
+      const std::string& path,
+      std::chrono::milliseconds reload_check = std::chrono::milliseconds(0));
 
   bool enabled() const { return enabled_; }
   // A token valid in this process only, never written anywhere (a node's own workers reach its

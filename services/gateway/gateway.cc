@@ -24,30 +24,54 @@ constexpr auto kDeadline = std::chrono::seconds(60);
 // Google's HTTP mapping of the canonical codes.
 int HttpStatus(grpc::StatusCode code) {
   switch (code) {
-    case grpc::StatusCode::OK: return 200;
-    case grpc::StatusCode::CANCELLED: return 499;
+    case grpc::StatusCode::OK:
+      return 200;
+    case grpc::StatusCode::CANCELLED:
+      return 499;
     case grpc::StatusCode::INVALID_ARGUMENT:
     case grpc::StatusCode::FAILED_PRECONDITION:
-    case grpc::StatusCode::OUT_OF_RANGE: return 400;
-    case grpc::StatusCode::DEADLINE_EXCEEDED: return 504;
-    case grpc::StatusCode::NOT_FOUND: return 404;
+    case grpc::StatusCode::OUT_OF_RANGE:
+      return 400;
+    case grpc::StatusCode::DEADLINE_EXCEEDED:
+      return 504;
+    case grpc::StatusCode::NOT_FOUND:
+      return 404;
     case grpc::StatusCode::ALREADY_EXISTS:
-    case grpc::StatusCode::ABORTED: return 409;
-    case grpc::StatusCode::PERMISSION_DENIED: return 403;
-    case grpc::StatusCode::UNAUTHENTICATED: return 401;
-    case grpc::StatusCode::RESOURCE_EXHAUSTED: return 429;
-    case grpc::StatusCode::UNIMPLEMENTED: return 501;
-    case grpc::StatusCode::UNAVAILABLE: return 503;
-    default: return 500;
+    case grpc::StatusCode::ABORTED:
+      return 409;
+    case grpc::StatusCode::PERMISSION_DENIED:
+      return 403;
+    case grpc::StatusCode::UNAUTHENTICATED:
+      return 401;
+    case grpc::StatusCode::RESOURCE_EXHAUSTED:
+      return 429;
+    case grpc::StatusCode::UNIMPLEMENTED:
+      return 501;
+    case grpc::StatusCode::UNAVAILABLE:
+      return 503;
+    default:
+      return 500;
   }
 }
 
 const char* StatusName(grpc::StatusCode code) {
-  static const char* kNames[] = {"OK", "CANCELLED", "UNKNOWN", "INVALID_ARGUMENT",
-                                 "DEADLINE_EXCEEDED", "NOT_FOUND", "ALREADY_EXISTS",
-                                 "PERMISSION_DENIED", "RESOURCE_EXHAUSTED", "FAILED_PRECONDITION",
-                                 "ABORTED", "OUT_OF_RANGE", "UNIMPLEMENTED", "INTERNAL",
-                                 "UNAVAILABLE", "DATA_LOSS", "UNAUTHENTICATED"};
+  static const char* kNames[] = {"OK",
+                                 "CANCELLED",
+                                 "UNKNOWN",
+                                 "INVALID_ARGUMENT",
+                                 "DEADLINE_EXCEEDED",
+                                 "NOT_FOUND",
+                                 "ALREADY_EXISTS",
+                                 "PERMISSION_DENIED",
+                                 "RESOURCE_EXHAUSTED",
+                                 "FAILED_PRECONDITION",
+                                 "ABORTED",
+                                 "OUT_OF_RANGE",
+                                 "UNIMPLEMENTED",
+                                 "INTERNAL",
+                                 "UNAVAILABLE",
+                                 "DATA_LOSS",
+                                 "UNAUTHENTICATED"};
   const int i = static_cast<int>(code);
   return i >= 0 && i < 17 ? kNames[i] : "UNKNOWN";
 }
@@ -72,8 +96,8 @@ std::string JsonQuote(const std::string& s) {
 void SendError(httplib::Response& res, const grpc::Status& s, int http_status = 0) {
   res.status = http_status != 0 ? http_status : HttpStatus(s.error_code());
   res.set_content(absl::StrCat("{\"error\": {\"code\": ", res.status, ", \"status\": \"",
-                               StatusName(s.error_code()), "\", \"message\": ",
-                               JsonQuote(s.error_message()), "}}\n"),
+                               StatusName(s.error_code()),
+                               "\", \"message\": ", JsonQuote(s.error_message()), "}}\n"),
                   "application/json");
 }
 
@@ -142,11 +166,10 @@ bool ParseVector(const std::string& text, size_t n, std::vector<double>* out) {
 // Content type of an artefact by its file name (what the viewer and robot tools expect).
 std::string MediaType(const std::string& name) {
   static const std::pair<const char*, const char*> kTypes[] = {
-      {".json", "application/json"}, {".png", "image/png"},
-      {".jpg", "image/jpeg"},         {".glb", "model/gltf-binary"},
-      {".gltf", "model/gltf+json"},   {".stl", "model/stl"},
-      {".urdf", "application/xml"},   {".xml", "application/xml"},
-      {".ply", "application/ply"},    {".obj", "model/obj"}};
+      {".json", "application/json"}, {".png", "image/png"},        {".jpg", "image/jpeg"},
+      {".glb", "model/gltf-binary"}, {".gltf", "model/gltf+json"}, {".stl", "model/stl"},
+      {".urdf", "application/xml"},  {".xml", "application/xml"},  {".ply", "application/ply"},
+      {".obj", "model/obj"}};
   for (const auto& [ext, type] : kTypes)
     if (absl::EndsWith(name, ext)) return type;
   return "application/octet-stream";
@@ -160,8 +183,7 @@ struct Stubs {
 
 // Unary call helper: request built, stub method called with the caller's token, JSON answered.
 template <typename Request, typename Response, typename Call>
-void Unary(const httplib::Request& req, httplib::Response& res, const Request& request,
-           Call call) {
+void Unary(const httplib::Request& req, httplib::Response& res, const Request& request, Call call) {
   grpc::ClientContext context;
   Prepare(req, &context);
   Response response;
@@ -177,9 +199,8 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
   // --- the scheduler ---
   http.Get("/api/v1/stages", [stubs](const httplib::Request& req, httplib::Response& res) {
     Unary<v1::ListStagesRequest, v1::ListStagesResponse>(
-        req, res, v1::ListStagesRequest(), [&](auto* c, const auto& q, auto* r) {
-          return stubs->scheduler->ListStages(c, q, r);
-        });
+        req, res, v1::ListStagesRequest(),
+        [&](auto* c, const auto& q, auto* r) { return stubs->scheduler->ListStages(c, q, r); });
   });
   http.Get("/api/v1/jobs", [stubs](const httplib::Request& req, httplib::Response& res) {
     v1::ListJobsRequest request;
@@ -203,40 +224,39 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
         req, res, request,
         [&](auto* c, const auto& q, auto* r) { return stubs->scheduler->ListJobs(c, q, r); });
   });
-  http.Get(R"(/api/v1/jobs/([A-Za-z0-9_-]+))",
-           [stubs](const httplib::Request& req, httplib::Response& res) {
-             v1::GetJobRequest request;
-             request.set_job_id(req.matches[1]);
-             Unary<v1::GetJobRequest, v1::Job>(req, res, request, [&](auto* c, const auto& q,
-                                                                      auto* r) {
-               return stubs->scheduler->GetJob(c, q, r);
-             });
-           });
-  http.Post(R"(/api/v1/jobs/([A-Za-z0-9_-]+)/cancel)",
-            [stubs](const httplib::Request& req, httplib::Response& res) {
-              v1::CancelJobRequest request;
-              request.set_job_id(req.matches[1]);
-              Unary<v1::CancelJobRequest, v1::Job>(req, res, request, [&](auto* c, const auto& q,
-                                                                          auto* r) {
-                return stubs->scheduler->CancelJob(c, q, r);
-              });
-            });
+  http.Get(R"(/api/v1/jobs/([A-Za-z0-9_-]+))", [stubs](const httplib::Request& req,
+                                                       httplib::Response& res) {
+    v1::GetJobRequest request;
+    request.set_job_id(req.matches[1]);
+    Unary<v1::GetJobRequest, v1::Job>(req, res, request, [&](auto* c, const auto& q, auto* r) {
+      return stubs->scheduler->GetJob(c, q, r);
+    });
+  });
+  http.Post(R"(/api/v1/jobs/([A-Za-z0-9_-]+)/cancel)", [stubs](const httplib::Request& req,
+                                                               httplib::Response& res) {
+    v1::CancelJobRequest request;
+    request.set_job_id(req.matches[1]);
+    Unary<v1::CancelJobRequest, v1::Job>(req, res, request, [&](auto* c, const auto& q, auto* r) {
+      return stubs->scheduler->CancelJob(c, q, r);
+    });
+  });
   http.Get(R"(/api/v1/scenes/([^/]+))", [stubs](const httplib::Request& req,
-                                               httplib::Response& res) {
+                                                httplib::Response& res) {
     v1::GetSceneRequest request;
     request.set_scene(req.matches[1]);
-    Unary<v1::GetSceneRequest, v1::Scene>(
-        req, res, request,
-        [&](auto* c, const auto& q, auto* r) { return stubs->scheduler->GetScene(c, q, r); });
+    Unary<v1::GetSceneRequest, v1::Scene>(req, res, request, [&](auto* c, const auto& q, auto* r) {
+      return stubs->scheduler->GetScene(c, q, r);
+    });
   });
-  http.Post(R"(/api/v1/scenes/([^/]+)/cancel)", [stubs](const httplib::Request& req,
-                                                       httplib::Response& res) {
-    v1::CancelSceneRequest request;
-    request.set_scene(req.matches[1]);
-    Unary<v1::CancelSceneRequest, v1::CancelSceneResponse>(
-        req, res, request,
-        [&](auto* c, const auto& q, auto* r) { return stubs->scheduler->CancelScene(c, q, r); });
-  });
+  http.Post(R"(/api/v1/scenes/([^/]+)/cancel)",
+            [stubs](const httplib::Request& req, httplib::Response& res) {
+              v1::CancelSceneRequest request;
+              request.set_scene(req.matches[1]);
+              Unary<v1::CancelSceneRequest, v1::CancelSceneResponse>(
+                  req, res, request, [&](auto* c, const auto& q, auto* r) {
+                    return stubs->scheduler->CancelScene(c, q, r);
+                  });
+            });
   http.Post("/api/v1/pipelines", [stubs](const httplib::Request& req, httplib::Response& res) {
     v1::SubmitPipelineRequest request;
     if (!ParseBody(req, res, &request)) return;
@@ -253,7 +273,8 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
   http.Get("/api/v1/events", [stubs](const httplib::Request& req, httplib::Response& res) {
     auto request = std::make_shared<v1::WatchJobsRequest>();
     request->set_scene(req.get_param_value("scene"));
-    for (absl::string_view id : absl::StrSplit(req.get_param_value("job_ids"), ',', absl::SkipEmpty()))
+    for (absl::string_view id :
+         absl::StrSplit(req.get_param_value("job_ids"), ',', absl::SkipEmpty()))
       request->add_job_ids(std::string(id));
     auto context = std::make_shared<grpc::ClientContext>();
     Prepare(req, context.get(), /*allow_query_token=*/true);
@@ -265,8 +286,7 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
     if (!reader->Read(first.get())) return SendError(res, reader->Finish());
     res.set_header("Cache-Control", "no-cache");
     res.set_chunked_content_provider(
-        "text/event-stream",
-        [stubs, context, reader, first](size_t, httplib::DataSink& sink) {
+        "text/event-stream", [stubs, context, reader, first](size_t, httplib::DataSink& sink) {
           auto send = [&](const std::string& event, const std::string& data) {
             const std::string frame = absl::StrCat("event: ", event, "\ndata: ", data, "\n\n");
             return sink.write(frame.data(), frame.size());
@@ -281,15 +301,14 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
           }
           const grpc::Status s = reader->Finish();
           send(s.ok() ? "end" : "error",
-               absl::StrCat("{\"status\": \"", StatusName(s.error_code()), "\", \"message\": ",
-                            JsonQuote(s.error_message()), "}"));
+               absl::StrCat("{\"status\": \"", StatusName(s.error_code()),
+                            "\", \"message\": ", JsonQuote(s.error_message()), "}"));
           sink.done();
           return true;
         });
   });
   // --- the store ---
-  http.Post("/api/v1/blobs/missing", [stubs](const httplib::Request& req,
-                                             httplib::Response& res) {
+  http.Post("/api/v1/blobs/missing", [stubs](const httplib::Request& req, httplib::Response& res) {
     v1::FindMissingBlobsRequest request;
     if (!ParseBody(req, res, &request)) return;
     Unary<v1::FindMissingBlobsRequest, v1::FindMissingBlobsResponse>(
@@ -308,33 +327,33 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
            });
   // Resumable upload: each PUT appends its body at Upload-Offset (the committed size, from
   // .../status); the chunk that reaches the size finishes the blob (verified by the store).
-  http.Put(R"(/api/v1/blobs/([0-9a-f]{64})/([0-9]+))", [stubs](const httplib::Request& req,
-                                                              httplib::Response& res) {
-    v1::WriteRequest chunk;
-    if (!ParseDigest(req.matches[1], req.matches[2], chunk.mutable_digest(), res)) return;
-    int64_t offset = 0;
-    const std::string offset_header =
-        req.has_header("Upload-Offset") ? req.get_header_value("Upload-Offset") : "0";
-    if (!absl::SimpleAtoi(offset_header, &offset) || offset < 0)
-      return SendError(res, grpc::StatusCode::INVALID_ARGUMENT,
-                       "Upload-Offset: not a non-negative integer");
-    chunk.set_write_offset(offset);
-    chunk.set_data(req.body);
-    chunk.set_finish_write(offset + static_cast<int64_t>(req.body.size()) ==
-                           chunk.digest().size_bytes());
-    grpc::ClientContext context;
-    Prepare(req, &context);
-    v1::WriteResponse response;
-    auto writer = stubs->store->Write(&context, &response);
-    writer->Write(chunk);
-    writer->WritesDone();
-    const grpc::Status s = writer->Finish();
-    if (!s.ok()) return SendError(res, s);
-    SendMessage(res, response);
-  });
+  http.Put(R"(/api/v1/blobs/([0-9a-f]{64})/([0-9]+))",
+           [stubs](const httplib::Request& req, httplib::Response& res) {
+             v1::WriteRequest chunk;
+             if (!ParseDigest(req.matches[1], req.matches[2], chunk.mutable_digest(), res)) return;
+             int64_t offset = 0;
+             const std::string offset_header =
+                 req.has_header("Upload-Offset") ? req.get_header_value("Upload-Offset") : "0";
+             if (!absl::SimpleAtoi(offset_header, &offset) || offset < 0)
+               return SendError(res, grpc::StatusCode::INVALID_ARGUMENT,
+                                "Upload-Offset: not a non-negative integer");
+             chunk.set_write_offset(offset);
+             chunk.set_data(req.body);
+             chunk.set_finish_write(offset + static_cast<int64_t>(req.body.size()) ==
+                                    chunk.digest().size_bytes());
+             grpc::ClientContext context;
+             Prepare(req, &context);
+             v1::WriteResponse response;
+             auto writer = stubs->store->Write(&context, &response);
+             writer->Write(chunk);
+             writer->WritesDone();
+             const grpc::Status s = writer->Finish();
+             if (!s.ok()) return SendError(res, s);
+             SendMessage(res, response);
+           });
   // Downloads: the blob's bytes, with Range requests (one range) and the content type of `name`.
   http.Get(R"(/api/v1/blobs/([0-9a-f]{64})/([0-9]+))", [stubs](const httplib::Request& req,
-                                                              httplib::Response& res) {
+                                                               httplib::Response& res) {
     v1::Digest digest;
     if (!ParseDigest(req.matches[1], req.matches[2], &digest, res)) return;
     {  // exists and readable by this caller (an empty read answers NOT_FOUND / UNAUTHENTICATED)
@@ -351,9 +370,9 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
     }
     const std::string name = req.get_param_value("name");
     if (!name.empty())
-      res.set_header("Content-Disposition",
-                     absl::StrCat("attachment; filename=\"",
-                                  name.substr(name.find_last_of('/') + 1), "\""));
+      res.set_header(
+          "Content-Disposition",
+          absl::StrCat("attachment; filename=\"", name.substr(name.find_last_of('/') + 1), "\""));
     res.set_header("Cache-Control", "private, max-age=31536000, immutable");  // content-addressed
     const std::string authorization = req.get_header_value("Authorization");
     res.set_content_provider(
@@ -373,21 +392,22 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
         });
   });
   // --- objects ---
-  http.Get(R"(/api/v1/scenes/([^/]+)/objects)", [stubs](const httplib::Request& req,
-                                                       httplib::Response& res) {
-    v1::ListObjectsRequest request;
-    request.set_scene(req.matches[1]);
-    request.set_page_token(req.get_param_value("page_token"));
-    if (req.has_param("limit")) {
-      int limit = 0;
-      if (!absl::SimpleAtoi(req.get_param_value("limit"), &limit))
-        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "limit: not an integer");
-      request.set_limit(limit);
-    }
-    Unary<v1::ListObjectsRequest, v1::ListObjectsResponse>(
-        req, res, request,
-        [&](auto* c, const auto& q, auto* r) { return stubs->objects->ListObjects(c, q, r); });
-  });
+  http.Get(R"(/api/v1/scenes/([^/]+)/objects)",
+           [stubs](const httplib::Request& req, httplib::Response& res) {
+             v1::ListObjectsRequest request;
+             request.set_scene(req.matches[1]);
+             request.set_page_token(req.get_param_value("page_token"));
+             if (req.has_param("limit")) {
+               int limit = 0;
+               if (!absl::SimpleAtoi(req.get_param_value("limit"), &limit))
+                 return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "limit: not an integer");
+               request.set_limit(limit);
+             }
+             Unary<v1::ListObjectsRequest, v1::ListObjectsResponse>(
+                 req, res, request, [&](auto* c, const auto& q, auto* r) {
+                   return stubs->objects->ListObjects(c, q, r);
+                 });
+           });
   // One object: by id (/objects/ID), or /object?point=X,Y,Z[&max_distance=D] |
   // ?view=V&x=X&y=Y | ?ray=OX,OY,OZ,DX,DY,DZ.
   auto get_object = [stubs](const httplib::Request& req, httplib::Response& res) {
@@ -407,7 +427,8 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
       selector->mutable_point()->set_y(v[1]);
       selector->mutable_point()->set_z(v[2]);
       double d = 0;
-      if (req.has_param("max_distance") && !absl::SimpleAtod(req.get_param_value("max_distance"), &d))
+      if (req.has_param("max_distance") &&
+          !absl::SimpleAtod(req.get_param_value("max_distance"), &d))
         return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "max_distance: not a number");
       selector->set_max_distance(d);
     } else if (req.has_param("view")) {
@@ -481,14 +502,16 @@ absl::StatusOr<std::unique_ptr<Gateway>> Gateway::Start(const GatewayOptions& op
                              "Content-Type application/octet-stream)"),
                 413);
     else if (status == 404)
-      SendError(res, grpc::Status(grpc::StatusCode::NOT_FOUND, "no such endpoint (docs/SERVICES.md)"),
+      SendError(res,
+                grpc::Status(grpc::StatusCode::NOT_FOUND, "no such endpoint (docs/SERVICES.md)"),
                 404);
     else
       SendError(res, grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "malformed HTTP request"),
                 status);
   });
   AddRoutes(http, stubs);
-  const int bound = port == 0 ? http.bind_to_any_port(host) : (http.bind_to_port(host, port) ? port : -1);
+  const int bound =
+      port == 0 ? http.bind_to_any_port(host) : (http.bind_to_port(host, port) ? port : -1);
   if (bound <= 0)
     return absl::UnavailableError(absl::StrCat("gateway: cannot listen on ", options.listen));
   gateway->address_ = absl::StrCat(host, ":", bound);

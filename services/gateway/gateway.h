@@ -24,17 +24,18 @@ class Server;
 namespace instascene::gateway {
 
 struct GatewayOptions {
-  std::string listen = "127.0.0.1:8080";  // host:port (port 0 = any free port)
+  std::string listen = "127.0.0.1:8080";      // host:port (port 0 = any free port)
   int64_t max_body_bytes = int64_t{8} << 20;  // request bodies (upload chunks: 4 MiB by default)
-  int threads = 16;                           // concurrent requests (an open event stream holds one)
+  int threads = 16;  // concurrent requests (an open event stream holds one)
 };
 
 class Gateway {
  public:
   // The channels must reach the scheduler, the store and the Objects service (they may be one).
-  static absl::StatusOr<std::unique_ptr<Gateway>> Start(
-      const GatewayOptions& options, std::shared_ptr<grpc::Channel> scheduler,
-      std::shared_ptr<grpc::Channel> store, std::shared_ptr<grpc::Channel> objects);
+  static absl::StatusOr<std::unique_ptr<Gateway>> Start(const GatewayOptions& options,
+                                                        std::shared_ptr<grpc::Channel> scheduler,
+                                                        std::shared_ptr<grpc::Channel> store,
+                                                        std::shared_ptr<grpc::Channel> objects);
   ~Gateway();  // stops serving: open event streams end
   std::string address() const { return address_; }
 

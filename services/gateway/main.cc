@@ -26,7 +26,8 @@ int main(int argc, char** argv) {
   app.add_option("--threads", options.threads, "Concurrent requests (an event stream holds one)")
       ->capture_default_str();
   app.add_option("--tls-ca", channel.tls_ca_file, "TLS towards the services: their CA (PEM)");
-  app.add_option("--tls-client-cert", channel.tls_cert_file, "Mutual TLS: this gateway's certificate");
+  app.add_option("--tls-client-cert", channel.tls_cert_file,
+                 "Mutual TLS: this gateway's certificate");
   app.add_option("--tls-client-key", channel.tls_key_file, "Mutual TLS: this gateway's key");
   app.add_option("--ready-file", ready_file, "Write the bound address here once serving");
   CLI11_PARSE(app, argc, argv);
