@@ -413,6 +413,10 @@ absl::StatusOr<int64_t> S3BlobStore::TenantCommittedSize(const std::string& tena
 absl::StatusOr<int64_t> S3BlobStore::TenantAppend(const std::string& tenant, const Digest& digest,
                                                   int64_t offset, absl::string_view data) {
   RETURN_IF_ERROR(CheckTenantName(tenant));
+  if (offset == 0) {  // a new upload of a blob already the tenant's stages nothing
+    ASSIGN_OR_RETURN(std::vector<Digest> ungranted, FindUngranted(tenant, {digest}));
+    if (ungranted.empty()) return digest.size_bytes;
+  }
   return AppendPart(digest, tenant, offset, data);
 }
 

@@ -253,6 +253,9 @@ TEST_P(BlobStoreConformanceTest, TenantUploadsRevealNothingAndProvePossession) {
   EXPECT_TRUE(store->FindMissing({d})->empty());
   EXPECT_TRUE(store->FindUngranted("acme", {d})->empty());
   EXPECT_EQ(*store->TenantCommittedSize("acme", d), d.size_bytes);
+  // Sending it again once granted stages nothing (no part left to expire).
+  EXPECT_EQ(*store->TenantAppend("acme", d, 0, data), d.size_bytes);
+  EXPECT_TRUE(store->TenantFinishUpload("acme", d).ok());
   // beta must send every byte of a blob the store already holds to be granted it.
   EXPECT_EQ(*store->TenantCommittedSize("beta", d), 0);
   std::string forged = data;
