@@ -5,6 +5,8 @@
 
 #include <functional>
 
+#include <nlohmann/json.hpp>
+
 #include "absl/strings/ascii.h"
 #include "absl/strings/match.h"
 #include "absl/strings/numbers.h"
@@ -54,51 +56,22 @@ int HttpStatus(grpc::StatusCode code) {
   }
 }
 
-const char* StatusName(grpc::StatusCode code) {
-  static const char* kNames[] = {"OK",
-                                 "CANCELLED",
-                                 "UNKNOWN",
-                                 "INVALID_ARGUMENT",
-                                 "DEADLINE_EXCEEDED",
-                                 "NOT_FOUND",
-                                 "ALREADY_EXISTS",
-                                 "PERMISSION_DENIED",
-                                 "RESOURCE_EXHAUSTED",
-                                 "FAILED_PRECONDITION",
-                                 "ABORTED",
-                                 "OUT_OF_RANGE",
-                                 "UNIMPLEMENTED",
-                                 "INTERNAL",
-                                 "UNAVAILABLE",
-                                 "DATA_LOSS",
-                                 "UNAUTHENTICATED"};
-  const int i = static_cast<int>(code);
-  return i >= 0 && i < 17 ? kNames[i] : "UNKNOWN";
+std::string StatusName(grpc::StatusCode code) {  // "NOT_FOUND": absl and gRPC share the codes
+  return absl::StatusCodeToString(static_cast<absl::StatusCode>(code));
 }
 
-std::string JsonQuote(const std::string& s) {
-  std::string out = "\"";
-  for (char c : s) {
-    if (c == '"' || c == '\\') {
-      out.push_back('\\');
-      out.push_back(c);
-    } else if (static_cast<unsigned char>(c) < 0x20) {
-      absl::StrAppend(&out, "\\u00", absl::string_view("0123456789abcdef" + ((c >> 4) & 15), 1),
-                      absl::string_view("0123456789abcdef" + (c & 15), 1));
-    } else {
-      out.push_back(c);
-    }
-  }
-  return out + "\"";
+// {"error": {"code": HTTP, "status": "NOT_FOUND", "message": "..."}} (nlohmann quotes the message).
+std::string ErrorJson(int http_status, grpc::StatusCode code, const std::string& message) {
+  return nlohmann::json{
+             {"error", {{"code", http_status}, {"status", StatusName(code)}, {"message", message}}}}
+             .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
+         "\n";
 }
 
 // `http_status` 0 = the code's own mapping.
 void SendError(httplib::Response& res, const grpc::Status& s, int http_status = 0) {
   res.status = http_status != 0 ? http_status : HttpStatus(s.error_code());
-  res.set_content(absl::StrCat("{\"error\": {\"code\": ", res.status, ", \"status\": \"",
-                               StatusName(s.error_code()),
-                               "\", \"message\": ", JsonQuote(s.error_message()), "}}\n"),
-                  "application/json");
+  res.set_content(ErrorJson(res.status, s.error_code(), s.error_message()), "application/json");
 }
 
 void SendError(httplib::Response& res, grpc::StatusCode code, const std::string& message) {
@@ -285,27 +258,27 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
     auto first = std::make_shared<v1::Job>();
     if (!reader->Read(first.get())) return SendError(res, reader->Finish());
     res.set_header("Cache-Control", "no-cache");
-    res.set_chunked_content_provider(
-        "text/event-stream", [stubs, context, reader, first](size_t, httplib::DataSink& sink) {
-          auto send = [&](const std::string& event, const std::string& data) {
-            const std::string frame = absl::StrCat("event: ", event, "\ndata: ", data, "\n\n");
-            return sink.write(frame.data(), frame.size());
-          };
-          bool open = send("job", ToJson(*first));
-          v1::Job job;
-          while (open && reader->Read(&job)) open = send("job", ToJson(job));
-          if (!open) {  // the browser went away: end the watch
-            context->TryCancel();
-            (void)reader->Finish();
-            return false;
-          }
-          const grpc::Status s = reader->Finish();
-          send(s.ok() ? "end" : "error",
-               absl::StrCat("{\"status\": \"", StatusName(s.error_code()),
-                            "\", \"message\": ", JsonQuote(s.error_message()), "}"));
-          sink.done();
-          return true;
-        });
+    res.set_chunked_content_provider("text/event-stream", [stubs, context, reader, first](
+                                                              size_t, httplib::DataSink& sink) {
+      auto send = [&](const std::string& event, const std::string& data) {
+        const std::string frame = absl::StrCat("event: ", event, "\ndata: ", data, "\n\n");
+        return sink.write(frame.data(), frame.size());
+      };
+      bool open = send("job", ToJson(*first));
+      v1::Job job;
+      while (open && reader->Read(&job)) open = send("job", ToJson(job));
+      if (!open) {  // the browser went away: end the watch
+        context->TryCancel();
+        (void)reader->Finish();
+        return false;
+      }
+      const grpc::Status s = reader->Finish();
+      send(s.ok() ? "end" : "error",
+           nlohmann::json{{"status", StatusName(s.error_code())}, {"message", s.error_message()}}
+               .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+      sink.done();
+      return true;
+    });
   });
   // --- the store ---
   http.Post("/api/v1/blobs/missing", [stubs](const httplib::Request& req, httplib::Response& res) {
