@@ -24,12 +24,12 @@ PACKAGES=(
   libbenchmark-dev
   libssl-dev libcurl4-openssl-dev openssl
   libnanoflann-dev
-  libcpp-httplib-dev
+  libcpp-httplib-dev libpugixml-dev
   prometheus-cpp-dev prometheus
   libqhull-dev liburdfdom-tools libmujoco-dev
   libpqxx-dev postgresql-15
-  yamllint nodejs
-  zlib1g-dev libpng-dev
+  yamllint nodejs chromium
+  zlib1g-dev libzstd-dev libpng-dev
 )
 
 missing=()

@@ -21,6 +21,7 @@ void AddInfoCommand(CLI::App& app, Action* action);
 void AddRenderCommand(CLI::App& app, Action* action);
 void AddBenchCommand(CLI::App& app, Action* action);
 void AddImportCommand(CLI::App& app, Action* action);
+void AddConvertCommand(CLI::App& app, Action* action);
 void AddSynthCommand(CLI::App& app, Action* action);
 void AddEvalCommand(CLI::App& app, Action* action);
 void AddDecomposeCommand(CLI::App& app, Action* action);

@@ -9,6 +9,7 @@
 #include "common/scene/image_io.h"
 #include "common/scene/importers.h"
 #include "common/splat/gaussian_ply.h"
+#include "common/splat/splat_formats.h"
 
 namespace instascene::cli {
 
@@ -26,7 +27,7 @@ void AddImportCommand(CLI::App& app, Action* action) {
   auto* transforms =
       cmd->add_option("--transforms", args->transforms, "instant-ngp / nerfstudio transforms.json");
   colmap->excludes(transforms);
-  cmd->add_option("--ply", args->ply, "Trained 2DGS/3DGS .ply")->required();
+  cmd->add_option("--ply", args->ply, "The trained splat: Inria/2DGS or compressed .ply, .splat or .spz (converted to the internal PLY)")->required();
   cmd->add_option(
       "--images", args->images,
       "Image folder (default: <model>/../../images for COLMAP, the JSON's folder otherwise)");
@@ -58,7 +59,7 @@ void AddImportCommand(CLI::App& app, Action* action) {
       for (const std::string& w : cams.warnings)
         std::fprintf(stderr, "import: warning: %s\n", w.c_str());
       ASSIGN_OR_RETURN(GaussianCloud cloud,
-                       ReadGaussianPly(args->ply));  // validates before copying
+                       ReadSplatFile(args->ply));  // validates before copying
       Scene scene;
       scene.directory = args->out;
       if (args->meters_per_unit > 0) scene.meters_per_unit = args->meters_per_unit;

@@ -17,6 +17,7 @@
 #include "common/scene/image_io.h"
 #include "common/scene/scene.h"
 #include "common/splat/gaussian_ply.h"
+#include "common/splat/splat_formats.h"
 
 namespace instascene::cli {
 namespace {
@@ -62,7 +63,7 @@ void AddRenderCommand(CLI::App& app, Action* action) {
   auto* scene_opt = cmd->add_option("--scene", args->scene, "Scene directory");
   cmd->add_option("--view", args->view, "View name or index (with --scene)");
   auto* ply_opt =
-      cmd->add_option("--ply", args->ply, "Render this .ply without a scene (orbit camera)");
+      cmd->add_option("--ply", args->ply, "Render this splat file (.ply, compressed .ply, .splat, .spz) without a scene (orbit camera)");
   scene_opt->excludes(ply_opt);
   cmd->add_option("--out", args->out, "Output PNG")->required();
   cmd->add_option("--mode", args->mode,
@@ -97,7 +98,7 @@ void AddRenderCommand(CLI::App& app, Action* action) {
         ASSIGN_OR_RETURN(cloud, ReadSceneGaussians(scene));
         camera = scene.views[view].camera;
       } else {
-        ASSIGN_OR_RETURN(cloud, ReadGaussianPly(args->ply));
+        ASSIGN_OR_RETURN(cloud, ReadSplatFile(args->ply));
         if (cloud.size() == 0)
           return absl::InvalidArgumentError(absl::StrCat(args->ply, ": no Gaussians"));
         std::vector<std::string> parts = absl::StrSplit(args->orbit, ',');
@@ -166,7 +167,7 @@ void AddInfoCommand(CLI::App& app, Action* action) {
   auto args = std::make_shared<Args>();
   CLI::App* cmd = app.add_subcommand("info", "Describe a scene directory or a .ply");
   cmd->add_option("--scene", args->scene, "Scene directory");
-  cmd->add_option("--ply", args->ply, "A Gaussian .ply");
+  cmd->add_option("--ply", args->ply, "A splat file: Inria/2DGS or compressed .ply, .splat, .spz");
   cmd->add_flag("--json", args->json, "Print the description as one JSON line");
   cmd->callback([args, action] {
     *action = [args]() -> absl::Status {
@@ -192,7 +193,7 @@ void AddInfoCommand(CLI::App& app, Action* action) {
         }
         j["ground_truth"] = scene.metadata.contains("gt");
       } else {
-        ASSIGN_OR_RETURN(cloud, ReadGaussianPly(args->ply));
+        ASSIGN_OR_RETURN(cloud, ReadSplatFile(args->ply));
         j["ply"] = args->ply;
       }
       j["gaussians"] = cloud.size();

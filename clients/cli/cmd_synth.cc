@@ -10,6 +10,7 @@
 #include "common/core/timer.h"
 #include "common/scene/image_io.h"
 #include "common/splat/gaussian_ply.h"
+#include "common/splat/splat_formats.h"
 #include "common/synth/cluttered_scene.h"
 #include "common/synth/observed_surfels.h"
 #include "common/synth/scene_writer.h"
@@ -82,7 +83,7 @@ void AddSynthCommand(CLI::App& app, Action* action) {
         std::vector<GaussianCloud> clouds;
         std::vector<std::string> names;
         for (const std::string& path : args->from_splats) {
-          ASSIGN_OR_RETURN(GaussianCloud cloud, ReadGaussianPly(path));
+          ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSplatFile(path));
           clouds.push_back(std::move(cloud));
           names.push_back(std::filesystem::path(path).stem().string());
         }

@@ -41,6 +41,7 @@ int Run(int argc, char** argv) {
   Action action;
   AddSynthCommand(app, &action);
   AddImportCommand(app, &action);
+  AddConvertCommand(app, &action);
   AddInfoCommand(app, &action);
   AddRenderCommand(app, &action);
   AddDecomposeCommand(app, &action);

@@ -9,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
 #include "common/splat/gaussian_ply.h"
+#include "common/splat/splat_formats.h"
 #include "common/splat/ply.h"
 
 namespace instascene {
@@ -192,7 +193,7 @@ absl::StatusOr<int> ResolveView(const Scene& scene, absl::string_view name_or_in
 }
 
 absl::StatusOr<GaussianCloud> ReadSceneGaussians(const Scene& scene) {
-  return ReadGaussianPly(scene.Path(scene.gaussians));
+  return ReadSplatFile(scene.Path(scene.gaussians));  // any splat format users' tools export
 }
 
 }  // namespace instascene

@@ -2,6 +2,7 @@
 
 #include <charconv>
 #include <cmath>
+#include <limits>
 #include <set>
 
 #include "absl/strings/match.h"
@@ -35,14 +36,20 @@ bool IsCoreProperty(absl::string_view name) {
 
 }  // namespace
 
+float OpacityLogit(float logit) {
+  if (logit == std::numeric_limits<float>::infinity()) return kOpaqueLogit;
+  if (logit == -std::numeric_limits<float>::infinity()) return -kOpaqueLogit;
+  return logit;  // NaN stays NaN: Validate refuses it
+}
+
 absl::StatusOr<GaussianCloud> ParseGaussianPly(absl::string_view data, absl::string_view source) {
   ASSIGN_OR_RETURN(PlyHeader header, ParsePlyHeader(data, source));
   for (const PlyElement& e : header.elements) {
     if (e.name == "chunk") {
       return absl::InvalidArgumentError(absl::StrCat(
           source,
-          ": SuperSplat compressed PLY (element 'chunk') is not supported; decompress it "
-          "to the standard 3DGS layout first"));
+          ": a SuperSplat compressed PLY (element 'chunk'); ReadSplatFile (splat_formats.h) "
+          "reads it"));
     }
   }
   ASSIGN_OR_RETURN(PlyColumns cols, ReadPlyElement(data, header, "vertex", source));
@@ -137,7 +144,7 @@ absl::StatusOr<GaussianCloud> ParseGaussianPly(absl::string_view data, absl::str
     for (int a = 0; a < num_scales; ++a)
       cloud.log_scales[num_scales * i + a] = cols.columns[scale[a]][i];
     for (int a = 0; a < 4; ++a) cloud.rotations[4 * i + a] = cols.columns[rot[a]][i];
-    cloud.opacity_logits[i] = cols.columns[opacity][i];
+    cloud.opacity_logits[i] = OpacityLogit(cols.columns[opacity][i]);
     float* sh = &cloud.sh[static_cast<size_t>(cloud.sh_stride()) * i];
     for (int c = 0; c < 3; ++c) {
       sh[c] = cols.columns[dc[c]][i];

@@ -4,8 +4,9 @@
 // endianness. Required: x y z, f_dc_0..2, opacity, scale_0 scale_1 [scale_2], rot_0..3. The SH
 // degree follows from the count of f_rest_* (0, 9, 24 or 45, channel-major on disk). nx ny nz are
 // dropped (always zero in 3DGS/2DGS files); every other property is kept as an extra channel and
-// written back. A 3-scale file whose scale_2 is the 2DGS export's constant log(1e-6) on every
-// Gaussian loads as a 2-scale surfel cloud. Stateless, thread-safe.
+// written back. Opacity logits of +-inf load as OpacityLogit says. A 3-scale file whose scale_2 is
+// the 2DGS export's constant log(1e-6) on every Gaussian loads as a 2-scale surfel cloud. Other
+// splat formats (compressed PLY, .splat, .spz): splat_formats.h. Stateless, thread-safe.
 #pragma once
 
 #include <string>
@@ -15,6 +16,12 @@
 #include "common/splat/gaussian_cloud.h"
 
 namespace instascene {
+
+// Opacity logits of +inf / -inf, as splat-transform writes them for fully opaque / fully
+// transparent splats (its decompressed alpha of exactly 1 or 0), load as what they mean: the logit
+// kOpaqueLogit (sigmoid = 1 in float arithmetic) or its negative (opacity 2e-9). NaN stays an error.
+inline constexpr float kOpaqueLogit = 20.0f;
+float OpacityLogit(float logit);
 
 struct GaussianPlyOptions {
   size_t max_file_bytes = size_t{8} << 30;  // refuse larger files, bytes

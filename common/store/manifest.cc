@@ -10,6 +10,7 @@
 #include "common/core/status.h"
 #include "common/scene/scene.h"
 #include "common/splat/ply.h"
+#include "common/splat/splat_formats.h"
 
 namespace instascene::store {
 namespace fs = std::filesystem;
@@ -130,6 +131,25 @@ absl::StatusOr<Manifest> SceneManifestFromDirectory(const std::string& scene_dir
   return m;
 }
 
+absl::StatusOr<Manifest> SceneManifestFromFiles(absl::string_view scene_json,
+                                                const std::map<std::string, Digest>& files) {
+  ASSIGN_OR_RETURN(Scene scene, ParseSceneJson(scene_json, "scene.json"));
+  Manifest m;
+  m.kind = "scene";
+  for (const std::string& rel : SceneReferences(scene)) {
+    RETURN_IF_ERROR(ValidateRelativePath(rel));
+    auto it = files.find(rel);
+    if (it == files.end())
+      return absl::InvalidArgumentError(
+          absl::StrCat("scene.json refers to '", rel, "', which is not among the ", files.size(),
+                       " files given (paths relative to the scene folder)"));
+    RETURN_IF_ERROR(ValidateDigest(it->second));
+    m.files[rel] = it->second;
+  }
+  m.metadata["views"] = scene.views.size();
+  return m;
+}
+
 absl::Status ValidateSceneManifest(BlobStore& store, const Manifest& manifest,
                                    const SceneLimits& limits) {
   auto bad = [](absl::string_view why) {
@@ -170,12 +190,10 @@ absl::Status ValidateSceneManifest(BlobStore& store, const Manifest& manifest,
   const Digest splat = manifest.files.at(scene->gaussians);
   ASSIGN_OR_RETURN(std::string head,
                    store.Read(splat, 0, std::min<int64_t>(splat.size_bytes, 1 << 20)));
-  absl::StatusOr<PlyHeader> header = ParsePlyHeader(head, scene->gaussians);
-  if (!header.ok()) return bad(header.status().message());
-  for (const PlyElement& e : header->elements) {
-    if (e.name == "vertex" && e.count > limits.max_gaussians)
-      return too_large(absl::StrCat(e.count, " Gaussians (at most ", limits.max_gaussians, ")"));
-  }
+  absl::StatusOr<int64_t> count = SplatCount(head, splat.size_bytes, scene->gaussians);
+  if (!count.ok()) return bad(count.status().message());
+  if (*count > limits.max_gaussians)
+    return too_large(absl::StrCat(*count, " Gaussians (at most ", limits.max_gaussians, ")"));
   return absl::OkStatus();
 }
 

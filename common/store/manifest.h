@@ -42,6 +42,11 @@ absl::StatusOr<Manifest> ManifestFromDirectory(const std::string& directory,
 // The upload form of a scene directory: scene.json and exactly the files it references (the splat,
 // images, masks); ground truth and anything else stay local.
 absl::StatusOr<Manifest> SceneManifestFromDirectory(const std::string& scene_directory);
+// The same upload form from a client's list of files (path -> digest, e.g. a browser's folder) and
+// the text of its scene.json: exactly the files scene.json references; a reference not among
+// `files` is INVALID_ARGUMENT naming it.
+absl::StatusOr<Manifest> SceneManifestFromFiles(absl::string_view scene_json,
+                                                const std::map<std::string, Digest>& files);
 // What one submitted scene may hold; over a limit is RESOURCE_EXHAUSTED naming it.
 struct SceneLimits {
   int64_t max_views = 4096;

@@ -3,12 +3,13 @@
 #include <unistd.h>
 
 #include <algorithm>
+#include <filesystem>
 #include <fstream>
 
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
 #include "common/scene/scene.h"
-#include "common/splat/ply.h"
+#include "common/splat/splat_formats.h"
 
 namespace instascene::pipeline {
 
@@ -18,10 +19,10 @@ absl::StatusOr<int64_t> ReadGaussianCount(const std::string& ply_path) {
   std::string head(1 << 20, '\0');  // any sane header fits in the first MiB
   in.read(head.data(), static_cast<std::streamsize>(head.size()));
   head.resize(static_cast<size_t>(in.gcount()));
-  ASSIGN_OR_RETURN(PlyHeader header, ParsePlyHeader(head, ply_path));
-  for (const PlyElement& e : header.elements)
-    if (e.name == "vertex") return e.count;
-  return absl::InvalidArgumentError(absl::StrCat(ply_path, ": no vertex element"));
+  std::error_code ec;
+  const auto size = std::filesystem::file_size(ply_path, ec);
+  if (ec) return absl::NotFoundError(absl::StrCat("cannot stat the splat ", ply_path));
+  return SplatCount(head, static_cast<int64_t>(size), ply_path);
 }
 
 absl::StatusOr<SceneFootprint> ReadSceneFootprint(const std::string& scene_dir) {
