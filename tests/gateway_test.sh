@@ -11,8 +11,9 @@ BINDIR=$2  # folder with instascene-gateway
 source "$(dirname "$0")/test_lib.sh"
 
 check "synth" "$BIN" synth --out "$WORK/a" --preset tiny --seed 5
+# No worker in the server: the first job waits queued until the stream is open (below).
 start serve "$WORK/ready" "$BIN" serve --data "$WORK/data" --listen 127.0.0.1:0 --ready-file "$WORK/ready" \
-  --gateway 127.0.0.1:0 --workers decomposition
+  --gateway 127.0.0.1:0 --workers none
 ADDR=$(head -n 1 "$WORK/ready")
 GW=http://$(sed -n 's/^gateway=//p' "$WORK/ready")
 export INSTASCENE_TOKEN_FILE="$WORK/data/auth/admin.token"
@@ -47,7 +48,15 @@ check "a body over the limit: 413" test "$(code)/$(body "d['error']['code']")" =
 # A pipeline submitted through gRPC, followed through the gateway.
 check "submit" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --stages decompose --json
 JOB=$(json_get "$WORK/out.txt" "d['jobs'][0]['id']")
-curl -s -N --max-time 120 "$GW/api/v1/events?job_ids=$JOB&access_token=$ADMIN" >"$WORK/events.txt"
+curl -s -N --max-time 120 "$GW/api/v1/events?job_ids=$JOB&access_token=$ADMIN" >"$WORK/events.txt" &
+CURL=$!
+for _ in $(seq 100); do grep -q "^event: job" "$WORK/events.txt" && break; sleep 0.05; done
+check "the stream shows the job queued" grep -q '"state":"JOB_STATE_QUEUED"' "$WORK/events.txt"
+# A decomposition worker as its own process now takes the job: its changes arrive live.
+check "a worker token" "$BIN" token create --data "$WORK/data" --role worker --out "$WORK/worker.token"
+start worker "$WORK/ready-worker" "$BINDIR/instascene-decomposition" --data "$WORK/worker" --scheduler "$ADDR" \
+  --store "$ADDR" --token-file "$WORK/worker.token" --ready-file "$WORK/ready-worker"
+wait $CURL
 check "events end with an end event" grep -q "^event: end" "$WORK/events.txt"
 check "the last job event says succeeded" test "$(grep '^data: {"id"' "$WORK/events.txt" | tail -n 1 | cut -c7- | python3 -c "import json,sys; print(json.load(sys.stdin)['state'])")" = JOB_STATE_SUCCEEDED
 check "more than one event (live progress)" test "$(grep -c '^event: job' "$WORK/events.txt")" -ge 2
@@ -91,6 +100,50 @@ http GET "/api/v1/blobs/$BH/3000000" -H "Authorization: Bearer $BETA"
 check "the tenant reads it back" cmp -s "$WORK/body" "$WORK/blob"
 http GET "/api/v1/blobs/$BH/3000000" -H "Authorization: Bearer $ADMIN"
 check "admins see every blob" test "$(code)" = 200
+# A scene folder uploaded as a browser does: digests of every file, scene.json first, then the
+# scene manifest (only the files scene.json references), the missing blobs, the pipeline.
+python3 - "$WORK/a" >"$WORK/files.json" <<'PY'
+import hashlib, json, os, sys
+root = sys.argv[1]
+files = {}
+for d, _, names in os.walk(root):
+    for n in names:
+        p = os.path.join(d, n)
+        files[os.path.relpath(p, root)] = {"hash": hashlib.sha256(open(p, "rb").read()).hexdigest(), "size_bytes": os.path.getsize(p)}
+print(json.dumps({"files": files}))
+PY
+BT="Authorization: Bearer $BETA"
+SJ=$(sha256sum <"$WORK/a/scene.json" | cut -c1-64); SJS=$(stat -c %s "$WORK/a/scene.json")
+http POST /api/v1/scene-manifests -H "$BT" --data @"$WORK/files.json"
+check "scene manifest before scene.json is uploaded: 400 saying so" test "$(code)/$(body "d['error']['status']")" = 400/FAILED_PRECONDITION -a -n "$(grep 'upload it first' "$WORK/body")"
+http PUT "/api/v1/blobs/$SJ/$SJS" -H "$BT" -H "$OCTET" --data-binary @"$WORK/a/scene.json"
+check "scene.json uploaded" test "$(code)" = 200
+http POST /api/v1/scene-manifests -H "$BT" --data @"$WORK/files.json"
+check "the scene manifest: 200" test "$(code)" = 200
+check "it keeps only what scene.json references (no ground truth)" test "$(body "sum(1 for p in d['files'] if p.startswith('gt/'))")/$(body "'scene.json' in d['files']")" = 0/True
+check "everything but scene.json is missing" test "$(body "len(d['missing'])")" = "$(body "len(d['files']) - 1")"
+cp "$WORK/body" "$WORK/plan.json"
+python3 - "$WORK/plan.json" "$WORK/a" "$GW" "$BETA" <<'PY' >"$WORK/sent.txt"
+import json, sys, urllib.request
+plan, root, gw, token = json.load(open(sys.argv[1])), sys.argv[2], sys.argv[3], sys.argv[4]
+for path in plan["missing"]:
+    d = plan["files"][path]
+    req = urllib.request.Request(f"{gw}/api/v1/blobs/{d['hash']}/{d['size_bytes']}", data=open(f"{root}/{path}", "rb").read(), method="PUT",
+                                 headers={"Authorization": f"Bearer {token}", "Content-Type": "application/octet-stream", "Upload-Offset": "0"})
+    urllib.request.urlopen(req).read()
+print(len(plan["missing"]))
+PY
+check "the missing files uploaded" test "$(cat "$WORK/sent.txt")" -ge 2
+http POST /api/v1/pipelines -H "$BT" --data "{\"scene\": \"browser\", \"stages\": [\"decompose\"], \"scene_manifest\": $(python3 -c "import json; print(json.dumps(json.load(open('$WORK/plan.json'))['scene_manifest']))")}"
+check "the pipeline submitted with the manifest" test "$(code)/$(body "d['jobs'][0]['scene']")" = 200/browser
+python3 -c "import json; d=json.load(open('$WORK/files.json')); del d['files']['images/' + sorted(p for p in d['files'] if p.startswith('images/'))[0].split('/',1)[1]]; print(json.dumps(d))" >"$WORK/less.json"
+http POST /api/v1/scene-manifests -H "$BT" --data @"$WORK/less.json"
+check "a referenced file left out: 400 naming it" test "$(code)" = 400 -a -n "$(grep "scene.json refers to 'images/" "$WORK/body")"
+http POST /api/v1/scene-manifests -H "$BT" --data '{"files": {"../scene.json": {"hash": "'"$SJ"'", "size_bytes": 1}}}'
+check "an unsafe path: 400" test "$(code)/$(body "d['error']['status']")" = 400/INVALID_ARGUMENT
+http POST /api/v1/scene-manifests -H "$BT" --data '{"files": []}'
+check "a malformed body: 400" test "$(code)/$(body "d['error']['status']")" = 400/INVALID_ARGUMENT
+
 # A browser that goes away mid-stream does not hold anything up.
 check "submit a longer job" "$BIN" submit --scene "$WORK/a" --server "$ADDR" --stages decompose --params '{"decompose":{"min_tracker_gaussians":2}}' --json
 JOB2=$(json_get "$WORK/out.txt" "d['jobs'][0]['id']")

@@ -3,7 +3,9 @@
 #include <google/protobuf/util/json_util.h>
 #include <httplib.h>
 
+#include <filesystem>
 #include <functional>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -16,155 +18,12 @@
 #include "instascene/v1/objects.grpc.pb.h"
 #include "instascene/v1/scheduler.grpc.pb.h"
 #include "instascene/v1/store.grpc.pb.h"
+#include "services/gateway/http_util.h"
 
 namespace instascene::gateway {
 namespace {
 
 constexpr int64_t kDownloadChunk = 1 << 20;
-constexpr auto kDeadline = std::chrono::seconds(60);
-
-// Google's HTTP mapping of the canonical codes.
-int HttpStatus(grpc::StatusCode code) {
-  switch (code) {
-    case grpc::StatusCode::OK:
-      return 200;
-    case grpc::StatusCode::CANCELLED:
-      return 499;
-    case grpc::StatusCode::INVALID_ARGUMENT:
-    case grpc::StatusCode::FAILED_PRECONDITION:
-    case grpc::StatusCode::OUT_OF_RANGE:
-      return 400;
-    case grpc::StatusCode::DEADLINE_EXCEEDED:
-      return 504;
-    case grpc::StatusCode::NOT_FOUND:
-      return 404;
-    case grpc::StatusCode::ALREADY_EXISTS:
-    case grpc::StatusCode::ABORTED:
-      return 409;
-    case grpc::StatusCode::PERMISSION_DENIED:
-      return 403;
-    case grpc::StatusCode::UNAUTHENTICATED:
-      return 401;
-    case grpc::StatusCode::RESOURCE_EXHAUSTED:
-      return 429;
-    case grpc::StatusCode::UNIMPLEMENTED:
-      return 501;
-    case grpc::StatusCode::UNAVAILABLE:
-      return 503;
-    default:
-      return 500;
-  }
-}
-
-std::string StatusName(grpc::StatusCode code) {  // "NOT_FOUND": absl and gRPC share the codes
-  return absl::StatusCodeToString(static_cast<absl::StatusCode>(code));
-}
-
-// {"error": {"code": HTTP, "status": "NOT_FOUND", "message": "..."}} (nlohmann quotes the message).
-std::string ErrorJson(int http_status, grpc::StatusCode code, const std::string& message) {
-  return nlohmann::json{
-             {"error", {{"code", http_status}, {"status", StatusName(code)}, {"message", message}}}}
-             .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) +
-         "\n";
-}
-
-// `http_status` 0 = the code's own mapping.
-void SendError(httplib::Response& res, const grpc::Status& s, int http_status = 0) {
-  res.status = http_status != 0 ? http_status : HttpStatus(s.error_code());
-  res.set_content(ErrorJson(res.status, s.error_code(), s.error_message()), "application/json");
-}
-
-void SendError(httplib::Response& res, grpc::StatusCode code, const std::string& message) {
-  SendError(res, grpc::Status(code, message));
-}
-
-std::string ToJson(const google::protobuf::Message& m) {
-  google::protobuf::util::JsonPrintOptions options;
-  options.preserve_proto_field_names = true;
-  options.always_print_primitive_fields = true;
-  std::string out;
-  (void)google::protobuf::util::MessageToJsonString(m, &out, options);
-  return out;
-}
-
-void SendMessage(httplib::Response& res, const google::protobuf::Message& m) {
-  res.set_content(ToJson(m) + "\n", "application/json");
-}
-
-// A gRPC call context carrying the caller's token and a deadline.
-void Prepare(const httplib::Request& req, grpc::ClientContext* context,
-             bool allow_query_token = false) {
-  std::string authorization = req.get_header_value("Authorization");
-  if (authorization.empty() && allow_query_token && req.has_param("access_token"))
-    authorization = "Bearer " + req.get_param_value("access_token");
-  if (!authorization.empty()) context->AddMetadata("authorization", authorization);
-  context->set_deadline(std::chrono::system_clock::now() + kDeadline);
-}
-
-bool ParseBody(const httplib::Request& req, httplib::Response& res,
-               google::protobuf::Message* message) {
-  google::protobuf::util::JsonParseOptions options;
-  options.ignore_unknown_fields = false;
-  const auto status = google::protobuf::util::JsonStringToMessage(req.body, message, options);
-  if (!status.ok()) {
-    SendError(res, grpc::StatusCode::INVALID_ARGUMENT,
-              absl::StrCat("request body: ", std::string(status.message())));
-    return false;
-  }
-  return true;
-}
-
-bool ParseDigest(const std::string& hash, const std::string& size, v1::Digest* out,
-                 httplib::Response& res) {
-  int64_t bytes = 0;
-  if (!absl::SimpleAtoi(size, &bytes) || bytes < 0) {
-    SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "blob size: not a non-negative integer");
-    return false;
-  }
-  out->set_hash(hash);
-  out->set_size_bytes(bytes);
-  return true;
-}
-
-bool ParseVector(const std::string& text, size_t n, std::vector<double>* out) {
-  out->clear();
-  for (absl::string_view p : absl::StrSplit(text, ',')) {
-    double v = 0;
-    if (!absl::SimpleAtod(p, &v)) return false;
-    out->push_back(v);
-  }
-  return out->size() == n;
-}
-
-// Content type of an artefact by its file name (what the viewer and robot tools expect).
-std::string MediaType(const std::string& name) {
-  static const std::pair<const char*, const char*> kTypes[] = {
-      {".json", "application/json"}, {".png", "image/png"},        {".jpg", "image/jpeg"},
-      {".glb", "model/gltf-binary"}, {".gltf", "model/gltf+json"}, {".stl", "model/stl"},
-      {".urdf", "application/xml"},  {".xml", "application/xml"},  {".ply", "application/ply"},
-      {".obj", "model/obj"}};
-  for (const auto& [ext, type] : kTypes)
-    if (absl::EndsWith(name, ext)) return type;
-  return "application/octet-stream";
-}
-
-struct Stubs {
-  std::unique_ptr<v1::Scheduler::Stub> scheduler;
-  std::unique_ptr<v1::ContentStore::Stub> store;
-  std::unique_ptr<v1::Objects::Stub> objects;
-};
-
-// Unary call helper: request built, stub method called with the caller's token, JSON answered.
-template <typename Request, typename Response, typename Call>
-void Unary(const httplib::Request& req, httplib::Response& res, const Request& request, Call call) {
-  grpc::ClientContext context;
-  Prepare(req, &context);
-  Response response;
-  const grpc::Status s = call(&context, request, &response);
-  if (!s.ok()) return SendError(res, s);
-  SendMessage(res, response);
-}
-
 void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
   http.Get("/api/v1/health", [](const httplib::Request&, httplib::Response& res) {
     res.set_content("{\"status\": \"SERVING\"}\n", "application/json");
@@ -436,6 +295,18 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
 
 }  // namespace
 
+std::string DefaultWebRoot() {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  const fs::path exe = fs::read_symlink("/proc/self/exe", ec);
+  std::vector<fs::path> candidates;
+  if (!ec) candidates.push_back(exe.parent_path().parent_path() / "web");  // installed images
+  candidates.push_back(INSTASCENE_WEB_BUILD_DIR);                          // this build's bundle
+  for (const fs::path& web : candidates)
+    if (fs::is_regular_file(web / "index.html", ec)) return web.string();
+  return "";
+}
+
 absl::StatusOr<std::unique_ptr<Gateway>> Gateway::Start(const GatewayOptions& options,
                                                         std::shared_ptr<grpc::Channel> scheduler,
                                                         std::shared_ptr<grpc::Channel> store,
@@ -483,6 +354,15 @@ absl::StatusOr<std::unique_ptr<Gateway>> Gateway::Start(const GatewayOptions& op
                 status);
   });
   AddRoutes(http, stubs);
+  AddSceneUploadRoutes(http, stubs);
+  if (!options.web_root.empty()) {
+    http.set_file_extension_and_mimetype_mapping("wasm", "application/wasm");
+    http.set_file_extension_and_mimetype_mapping("mjs", "text/javascript");
+    if (!http.set_mount_point("/", options.web_root))
+      return absl::NotFoundError(
+          absl::StrCat("gateway: web UI folder '", options.web_root, "' does not exist"));
+    gateway->serves_ui_ = true;
+  }
   const int bound =
       port == 0 ? http.bind_to_any_port(host) : (http.bind_to_port(host, port) ? port : -1);
   if (bound <= 0)

@@ -27,7 +27,13 @@ struct GatewayOptions {
   std::string listen = "127.0.0.1:8080";      // host:port (port 0 = any free port)
   int64_t max_body_bytes = int64_t{8} << 20;  // request bodies (upload chunks: 4 MiB by default)
   int threads = 16;  // concurrent requests (an open event stream holds one)
+  // The web UI's bundle (clients/web, built into BUILD/web), served at "/"; empty = API only.
+  std::string web_root;
 };
+
+// The web UI bundle: BIN/../web beside the running binary (as the container images lay it out),
+// else this build's BUILD/web; "" when neither exists.
+std::string DefaultWebRoot();
 
 class Gateway {
  public:
@@ -38,12 +44,14 @@ class Gateway {
                                                         std::shared_ptr<grpc::Channel> objects);
   ~Gateway();  // stops serving: open event streams end
   std::string address() const { return address_; }
+  bool serves_ui() const { return serves_ui_; }
 
  private:
   Gateway() = default;
   std::unique_ptr<httplib::Server> server_;
   std::thread thread_;
   std::string address_;
+  bool serves_ui_ = false;
 };
 
 }  // namespace instascene::gateway

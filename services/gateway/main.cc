@@ -29,8 +29,14 @@ int main(int argc, char** argv) {
   app.add_option("--tls-client-cert", channel.tls_cert_file,
                  "Mutual TLS: this gateway's certificate");
   app.add_option("--tls-client-key", channel.tls_key_file, "Mutual TLS: this gateway's key");
+  std::string web_root;
+  app.add_option("--web-root", web_root,
+                 "The web UI's bundle to serve at / (default: BIN/../web when present; 'none' = "
+                 "the API only)");
   app.add_option("--ready-file", ready_file, "Write the bound address here once serving");
   CLI11_PARSE(app, argc, argv);
+  options.web_root = web_root.empty() ? gateway::DefaultWebRoot() : web_root;
+  if (options.web_root == "none") options.web_root.clear();
   rpc::BlockShutdownSignals();
   auto connect = [&](const std::string& address) { return rpc::Connect(address, channel); };
   auto fail = [](const absl::Status& s) {
@@ -46,6 +52,7 @@ int main(int argc, char** argv) {
   auto server = gateway::Gateway::Start(options, *to_scheduler, *to_store, *to_objects);
   if (!server.ok()) return fail(server.status());
   std::printf("instascene-gateway at http://%s/api/v1/\n", (*server)->address().c_str());
+  if ((*server)->serves_ui()) std::printf("web UI at http://%s/\n", (*server)->address().c_str());
   std::fflush(stdout);
   if (!ready_file.empty()) {
     if (absl::Status s = WriteFileAtomically(ready_file, (*server)->address() + "\n"); !s.ok())

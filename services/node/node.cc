@@ -285,12 +285,17 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
   if (!options.gateway_listen.empty()) {
     gateway::GatewayOptions gateway_options;
     gateway_options.listen = options.gateway_listen;
+    gateway_options.web_root =
+        options.web_root.empty() ? gateway::DefaultWebRoot() : options.web_root;
+    if (gateway_options.web_root == "none") gateway_options.web_root.clear();
     const std::shared_ptr<grpc::Channel> local = server->InProcessChannel();
     ASSIGN_OR_RETURN(http_gateway, gateway::Gateway::Start(gateway_options, local, local, local));
   }
   spdlog::info("instascene node serving on {} (data {}): {}", server->address(), options.data_dir,
                absl::StrJoin(names, ", "));
   if (http_gateway) spdlog::info("HTTP gateway at http://{}/api/v1/", http_gateway->address());
+  if (http_gateway && http_gateway->serves_ui())
+    spdlog::info("web UI at http://{}/", http_gateway->address());
   if (metrics_endpoint) spdlog::info("metrics at http://{}/metrics", metrics_endpoint->address());
   if (!options.ready_file.empty()) {
     std::string ready = server->address() + "\n";

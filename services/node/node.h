@@ -56,6 +56,7 @@ struct NodeOptions {
   // The HTTP/JSON gateway (services/gateway) on this host:port ("" = off), in front of this
   // node's services (in-process channel).
   std::string gateway_listen;
+  std::string web_root;  // the gateway's web UI bundle ("" = beside the binary, "none" = no UI)
   // Generation workers: the diffusion prior's Denoiser service (grpc://HOST:PORT; "" = none, and
   // complete jobs asking for prior "diffusion" fail).
   std::string denoiser;

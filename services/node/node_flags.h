@@ -64,6 +64,9 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
   app.add_option("--gateway", o->gateway_listen,
                  "Serve the HTTP/JSON gateway (/api/v1, Server-Sent Events) at HOST:PORT in front "
                  "of this node's services (port 0 = any free port; default: off)");
+  app.add_option("--web-root", o->web_root,
+                 "With --gateway: the web UI's bundle to serve at / (default: BIN/../web, else "
+                 "this build's bundle; 'none' = the API only)");
   app.add_option("--memory-budget-bytes", o->memory_budget_bytes,
                  "Workers: the most one job may allocate; a job whose stage estimates more fails "
                  "with RESOURCE_EXHAUSTED before it runs (0 = the machine's physical memory, -1 = "

@@ -1,5 +1,6 @@
 #include "services/objects/scene_objects.h"
 
+#include <algorithm>
 #include <filesystem>
 
 #include <Eigen/Geometry>
@@ -140,6 +141,7 @@ absl::StatusOr<std::unique_ptr<SceneObjects>> SceneObjects::Load(store::BlobStor
     RETURN_IF_ERROR(s.LoadCompleted(store, outputs.complete));
   }
   s.AddSegmentOnly(segment);  // instances neither exported nor completed
+  RETURN_IF_ERROR(s.AddSplats(store, segment, outputs.complete));
 
   // What the index holds: the cloud, label maps, labels + members + k-d tree, the answers.
   const GaussianCloud& c = s.cloud_;
@@ -276,6 +278,36 @@ void SceneObjects::AddSegmentOnly(const store::Manifest& segment) {
     }
     objects_[id] = std::move(o);
   }
+}
+
+absl::Status SceneObjects::AddSplats(store::BlobStore& store, const store::Manifest& segment,
+                                     const std::map<int64_t, store::Digest>& complete) {
+  auto has = [](const v1::Object& o, const std::string& path) {
+    return std::any_of(o.artefacts().begin(), o.artefacts().end(),
+                       [&](const v1::Artefact& a) { return a.path() == path; });
+  };
+  auto add = [&](v1::Object& o, const std::string& path, const store::Digest& digest) {
+    if (has(o, path)) return;
+    v1::Artefact* a = o.add_artefacts();
+    a->set_path(path);
+    rpc::ToProto(digest, a->mutable_digest());
+    a->set_media_type(MediaType(path));
+  };
+  for (auto& [id, o] : objects_) {
+    auto it = segment.files.find(absl::StrCat("instances/", id, ".ply"));
+    if (it != segment.files.end()) add(o, "splat.ply", it->second);
+  }
+  for (const auto& [item, digest] : complete) {
+    ASSIGN_OR_RETURN(store::Manifest completed, store::ReadManifest(store, digest));
+    auto splat = completed.files.find("object.ply");
+    if (splat == completed.files.end()) continue;
+    ASSIGN_OR_RETURN(json m, ReadJsonBlob(store, completed, "manifest.json",
+                                          absl::StrCat("complete output ", item)));
+    if (!m.contains("id") || !m["id"].is_number_unsigned()) continue;
+    auto o = objects_.find(m["id"].get<uint32_t>());
+    if (o != objects_.end()) add(o->second, "object.ply", splat->second);
+  }
+  return absl::OkStatus();
 }
 
 absl::StatusOr<uint32_t> SceneObjects::Resolve(const v1::ObjectSelector& selector) const {

@@ -64,6 +64,10 @@ class SceneObjects {
   absl::Status LoadExport(store::BlobStore& store, const store::Digest& digest);
   absl::Status LoadCompleted(store::BlobStore& store,
                              const std::map<int64_t, store::Digest>& items);
+  // The splats a viewer shows, on every object: "splat.ply" (the raw crop of the segmentation)
+  // and, where the object was completed, "object.ply" (the completed splat).
+  absl::Status AddSplats(store::BlobStore& store, const store::Manifest& segment,
+                         const std::map<int64_t, store::Digest>& complete);
   void AddSegmentOnly(const store::Manifest& segment);
   // An answer's common fields: scene, id, source, units, observed Gaussians, segment digest.
   v1::Object NewObject(uint32_t id, const std::string& source) const;

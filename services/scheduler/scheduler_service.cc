@@ -1,6 +1,7 @@
 #include "services/scheduler/scheduler_service.h"
 
 #include <algorithm>
+#include <map>
 #include <set>
 
 #include <spdlog/spdlog.h>
@@ -416,6 +417,16 @@ grpc::Status SchedulerService::GetQueueStats(grpc::ServerContext* context,
     (*response->mutable_jobs_by_state())[state] = n;
   response->set_scenes(stats->scenes);
   response->set_oldest_queued_age_ms(stats->oldest_queued_age_ms);
+  std::map<std::string, v1::StageQueueStats> stages;
+  for (const QueueStats::StageState& s : stats->jobs_by_stage) {
+    stages[s.stage].set_stage(s.stage);
+    (*stages[s.stage].mutable_jobs_by_state())[s.state] = s.jobs;
+  }
+  for (const auto& [stage, age] : stats->oldest_queued_age_ms_by_stage) {
+    stages[stage].set_stage(stage);
+    stages[stage].set_oldest_queued_age_ms(age);
+  }
+  for (auto& [stage, s] : stages) *response->add_stages() = std::move(s);
   return grpc::Status::OK;
 }
 

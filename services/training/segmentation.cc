@@ -132,6 +132,15 @@ absl::Status ExportInstances(const std::string& directory, const GaussianCloud& 
                         {"bounds_max", {box.max().x(), box.max().y(), box.max().z()}},
                         {"centroid", {centroid.x(), centroid.y(), centroid.z()}}});
   }
+  // The rest of the scene (label 0) as its own splat, so that a viewer can show the background and
+  // every object as separate splats.
+  std::vector<uint32_t> background;
+  for (uint32_t g = 0; g < labels.size(); ++g) {
+    if (labels[g] == 0) background.push_back(g);
+  }
+  if (!background.empty())
+    RETURN_IF_ERROR(WriteGaussianPly(
+        (fs::path(directory) / "instances" / "background.ply").string(), cloud.Subset(background)));
   GaussianCloud labelled = cloud;
   labelled.SetExtra("instance_id", ScalarType::kUint32,
                     std::vector<float>(labels.begin(), labels.end()));

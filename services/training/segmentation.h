@@ -44,7 +44,8 @@ absl::StatusOr<std::vector<uint32_t>> FinalLabels(const SegmentationResult& trai
                                                   const SegmentStageOptions& options,
                                                   int num_threads, nlohmann::json* metadata);
 
-// instances/<id>.ply (every original property), scene_labelled.ply (+ instance_id), instances.json.
+// instances/<id>.ply (every original property), instances/background.ply (label 0, when any),
+// scene_labelled.ply (+ instance_id), instances.json.
 absl::Status ExportInstances(const std::string& directory, const GaussianCloud& cloud,
                              const std::vector<uint32_t>& labels);
 

@@ -1,0 +1,133 @@
+// scenes.js: the scenes list and one scene's jobs (the DAG: each job with the jobs it depends on),
+// kept live by the gateway's Server-Sent Events: state, phase, step, loss and ETA per job.
+import * as api from "./api.js";
+import { el, formatSeconds, formatTime, showError } from "./ui.js";
+
+const MAX_LISTED_JOBS = 2000;
+
+async function allJobs(query) {
+  const jobs = [];
+  let page = "";
+  do {
+    const params = new URLSearchParams({ ...query, limit: "500" });
+    if (page) params.set("page_token", page);
+    const answer = await api.get(`/jobs?${params}`);
+    jobs.push(...(answer.jobs || []));
+    page = answer.next_page_token || "";
+  } while (page && jobs.length < MAX_LISTED_JOBS);
+  return jobs;
+}
+
+export function renderList(main) {
+  const body = el("tbody");
+  const note = el("p", {}, "Loading…");
+  main.replaceChildren(el("section", { class: "card" },
+    el("h1", {}, "Scenes"),
+    note,
+    el("table", { id: "scenes" },
+      el("caption", { class: "sr-only" }, "Scenes and their jobs by state"),
+      el("thead", {}, el("tr", {}, ["Scene", "Jobs", "Succeeded", "Running", "Failed", "Updated", ""].map((h) => el("th", { scope: "col" }, h)))),
+      body)));
+  allJobs({}).then((jobs) => {
+    const scenes = new Map();
+    for (const job of jobs) {
+      const s = scenes.get(job.scene) || { name: job.scene, jobs: 0, states: {}, updated: 0 };
+      s.jobs += 1;
+      const state = api.stateName(job.state);
+      s.states[state] = (s.states[state] || 0) + 1;
+      s.updated = Math.max(s.updated, Number(job.updated_unix_ms));
+      scenes.set(job.scene, s);
+    }
+    const sorted = [...scenes.values()].sort((a, b) => b.updated - a.updated);
+    note.textContent = sorted.length ? `${sorted.length} scenes.` : "No scenes yet: upload one.";
+    body.replaceChildren(...sorted.map((s) => el("tr", {},
+      el("td", {}, el("a", { href: `#/scenes/${encodeURIComponent(s.name)}` }, s.name)),
+      el("td", {}, String(s.jobs)),
+      el("td", {}, String(s.states.succeeded || 0)),
+      el("td", {}, String((s.states.running || 0) + (s.states.leased || 0))),
+      el("td", {}, String(s.states.failed || 0)),
+      el("td", {}, formatTime(s.updated)),
+      el("td", {}, el("a", { href: `#/viewer/${encodeURIComponent(s.name)}` }, "View")))));
+  }).catch((e) => showError(note, e));
+  return null;
+}
+
+function progressCell(job) {
+  const p = job.progress || {};
+  const state = api.stateName(job.state);
+  if (state === "succeeded") return el("span", {}, "done");
+  if (!p.phase) return el("span", {}, state === "failed" ? "" : "waiting");
+  const total = Number(p.total);
+  const step = Number(p.step);
+  const parts = [p.phase];
+  if (total > 0) parts.push(`${step}/${total}`);
+  if (p.loss) parts.push(`loss ${Number(p.loss).toPrecision(3)}`);
+  if (Number(p.eta_seconds) >= 0 && state === "running") parts.push(`ETA ${formatSeconds(Number(p.eta_seconds))}`);
+  return el("span", {},
+    total > 0 ? el("progress", { max: total, value: step, "aria-label": `${job.kind} progress` }) : null,
+    ` ${parts.join(" · ")}`);
+}
+
+function jobLabel(job) {
+  return Number(job.item) >= 0 ? `${job.kind} #${job.item}` : job.kind;
+}
+
+export function renderScene(main, scene) {
+  const rows = new Map(); // job id -> {job, row}
+  const body = el("tbody");
+  const summary = el("p", { id: "scene-summary" }, "Loading…");
+  const viewerLink = el("a", { href: `#/viewer/${encodeURIComponent(scene)}`, class: "button" }, "Open the viewer");
+  const cancel = el("button", { type: "button" }, "Cancel the scene's jobs");
+  main.replaceChildren(el("section", { class: "card" },
+    el("h1", {}, `Scene ${scene}`),
+    summary,
+    el("div", { class: "actions" }, viewerLink, cancel),
+    el("table", { id: "jobs" },
+      el("caption", { class: "sr-only" }, "The scene's jobs"),
+      el("thead", {}, el("tr", {}, ["Stage", "State", "Progress", "Inputs", "Attempts", "Worker", "Error", ""].map((h) => el("th", { scope: "col" }, h)))),
+      body)));
+  const byId = () => new Map([...rows.values()].map((r) => [r.job.id, r.job]));
+
+  function update(job) {
+    const entry = rows.get(job.id) || {};
+    const jobs = byId();
+    jobs.set(job.id, job);
+    const inputs = (job.dependencies || []).map((d) => jobs.get(d.job_id)).filter(Boolean).map(jobLabel).join(", ");
+    const state = api.stateName(job.state);
+    const cancelJob = el("button", {
+      type: "button",
+      "aria-label": `Cancel ${jobLabel(job)}`,
+      onclick: () => api.post(`/jobs/${job.id}/cancel`).then(update).catch((e) => showError(summary, e)),
+    }, "Cancel");
+    const row = el("tr", { "data-job": job.id, "data-state": state },
+      el("td", {}, jobLabel(job)),
+      el("td", { class: `state ${state}` }, state),
+      el("td", {}, progressCell(job)),
+      el("td", {}, inputs),
+      el("td", {}, `${job.attempts}/${job.max_attempts}`),
+      el("td", {}, job.worker_id || ""),
+      el("td", { class: "error-text" }, job.error || ""),
+      el("td", {}, ["succeeded", "failed", "cancelled"].includes(state) ? "" : cancelJob));
+    if (entry.row) entry.row.replaceWith(row);
+    else body.append(row);
+    rows.set(job.id, { job, row });
+    const counts = {};
+    for (const { job: j } of rows.values()) {
+      const s = api.stateName(j.state);
+      counts[s] = (counts[s] || 0) + 1;
+    }
+    summary.textContent = `${rows.size} jobs: ${Object.entries(counts).map(([s, n]) => `${n} ${s}`).join(", ")}`;
+    summary.dataset.done = String(rows.size > 0 && [...rows.values()].every(({ job: j }) => ["succeeded", "failed", "cancelled"].includes(api.stateName(j.state))));
+  }
+
+  let source = null;
+  cancel.addEventListener("click", () =>
+    api.post(`/scenes/${encodeURIComponent(scene)}/cancel`).catch((e) => showError(summary, e)));
+  allJobs({ scene }).then((jobs) => {
+    jobs.sort((a, b) => Number(a.created_unix_ms) - Number(b.created_unix_ms));
+    for (const job of jobs) update(job);
+    if (!jobs.length) summary.textContent = "No jobs for this scene.";
+    source = api.watch({ scene }, update, null, (e) => showError(summary, e));
+  }).catch((e) => showError(summary, e));
+  return () => source?.close();
+}
