@@ -2,8 +2,8 @@
 # The web UI end to end in Debian's Chromium (clients/web/tests/ui_test.mjs, playwright-core from
 # the UI's committed lockfile, installed into BUILD/web-build by the build): `instascene serve`
 # with the gateway serving the bundle; a tiny synthetic scene uploaded as a folder through the page,
-# run through decompose, train, segment, complete and export; the viewer, a click, a download and
-# the dashboard. Screenshots in BUILD/web-screenshots/. Usage: web_ui_test.sh INSTASCENE BUILD_DIR
+# run through decompose, train, segment, complete and export (one chunk cut off and resumed); the
+# viewer, a click, a download, the same capture as a zip, and the dashboard. Screenshots in BUILD/web-screenshots/. Usage: web_ui_test.sh INSTASCENE BUILD_DIR
 set -uo pipefail
 BIN=$1
 BUILD=$2
@@ -20,8 +20,16 @@ GW=http://$(sed -n 's/^gateway=//p' "$WORK/ready")
 check "the gateway serves the UI" curl -sf "$GW/" -o "$WORK/index.html"
 check "index.html loads the bundle" grep -q 'assets/index-' "$WORK/index.html"
 # The browser keeps its profile and downloads under WORK (TMPDIR), removed at exit.
+check "the capture as a zip (one folder inside)" python3 -c "
+import os, zipfile
+with zipfile.ZipFile('$WORK/capture.zip', 'w') as z:
+    for d, _, names in os.walk('$WORK/capture'):
+        for n in names:
+            p = os.path.join(d, n)
+            z.write(p, os.path.join('capture', os.path.relpath(p, '$WORK/capture')))
+"
 HOME="$WORK" TMPDIR="$WORK" node "$BUILD/web-build/tests/ui_test.mjs" "$GW" "$(cat "$WORK/data/auth/admin.token")" \
-  "$WORK/capture" tiny-capture "$SHOTS" >"$WORK/ui.txt" 2>&1
+  "$WORK/capture" "$WORK/capture.zip" tiny-capture "$SHOTS" >"$WORK/ui.txt" 2>&1
 cat "$WORK/ui.txt"
 ui=$(tail -n 1 "$WORK/ui.txt")
 if [[ $ui =~ ^([0-9]+)\ passed,\ ([0-9]+)\ failed$ ]]; then

@@ -7,10 +7,10 @@ import { sha256 } from "@noble/hashes/sha2.js";
 import { bytesToHex } from "@noble/hashes/utils.js";
 import { unzipSync } from "fflate";
 import * as api from "./api.js";
-import { el, field, showError } from "./ui.js";
+import { announce, el, field, showError } from "./ui.js";
 
 const CHUNK = 4 << 20; // bytes per PUT (the gateway's body limit is 8 MiB)
-const MAX_ZIP_BYTES = 2 << 30; // unzipped in memory: a capture larger than this goes as a folder
+const MAX_ZIP_BYTES = 2 * 1024 ** 3; // unzipped in memory: a capture larger than this goes as a folder
 
 // Files as {path, size, read(start, end) -> Promise<Uint8Array>}, paths relative to the folder
 // holding scene.json.
@@ -133,8 +133,14 @@ export function render(main, navigate) {
       const wanted = stages.value.split(",").map((s) => s.trim()).filter(Boolean);
       if (wanted.length) request.stages = wanted;
       const submitted = await api.post("/pipelines", request);
-      label.textContent = `Submitted ${submitted.jobs.length} jobs.`;
-      navigate(`#/scenes/${encodeURIComponent(request.scene)}`);
+      // Jobs are keyed by the capture's content: the same capture under another name gets the
+      // jobs it already has (nothing is computed twice), filed under the first name.
+      const scene = submitted.jobs[0]?.scene || request.scene;
+      const created = (submitted.created || []).filter(Boolean).length;
+      announce(scene === request.scene
+        ? `Submitted ${submitted.jobs.length} jobs (${created} new).`
+        : `This capture was already submitted as scene ${scene}: showing its jobs (${created} new).`);
+      navigate(`#/scenes/${encodeURIComponent(scene)}`);
     } catch (e) {
       showError(label, e);
     } finally {
