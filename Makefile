@@ -7,7 +7,7 @@ SANITIZE_DIR ?= build-sanitize
 JOBS         ?= $(shell nproc)
 CMAKE_FLAGS  ?=
 
-.PHONY: all deps configure build test test-sanitize fuzz load chaos bench demo format tidy clean
+.PHONY: all deps configure build test test-sanitize fuzz load chaos bench bench-web demo format tidy clean
 
 all: build
 
@@ -49,6 +49,10 @@ chaos: build
 
 bench: build
 	scripts/bench.sh $(BUILD_DIR)
+
+# The web UI's measurements in Chromium (viewer first frame, event latency); docs/PERFORMANCE.md.
+bench-web: build
+	scripts/bench_web.sh $(BUILD_DIR)
 
 demo: build
 	scripts/demo.sh $(BUILD_DIR)

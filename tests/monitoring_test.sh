@@ -76,6 +76,18 @@ for svc in store sched decomposition training generation objects; do
   check "scrape instascene-$svc" scrape "$M" "$WORK/m-$svc.txt"
   check "promtool check metrics (instascene-$svc)" bash -c "promtool check metrics < '$WORK/m-$svc.txt'"
 done
+# The gateway: HTTP requests by route and code.
+start gateway "$WORK/r-gateway" "$BINDIR/instascene-gateway" --listen 127.0.0.1:0 --scheduler "$SCHED" --store "$STORE" \
+  --objects "$(head -n 1 "$WORK/r-objects")" --ready-file "$WORK/r-gateway" --metrics 127.0.0.1:0
+GW=$(head -n 1 "$WORK/r-gateway")
+check "gateway health" curl -sf "http://$GW/api/v1/health"
+check "gateway health again" curl -sf "http://$GW/api/v1/health"
+curl -s "http://$GW/api/v1/jobs" >/dev/null
+check "scrape instascene-gateway" scrape "$(sed -n 's/^metrics=//p' "$WORK/r-gateway")" "$WORK/m-gateway.txt"
+check "promtool check metrics (instascene-gateway)" bash -c "promtool check metrics < '$WORK/m-gateway.txt'"
+check "HTTP requests by route and code" test "$(metric "$WORK/m-gateway.txt" '^instascene_http_requests_total\{code="200",route="health"\}')" = 2.0
+check "refusals counted with their code" test "$(metric "$WORK/m-gateway.txt" '^instascene_http_requests_total\{code="401",route="jobs"\}')" = 1.0
+check "request durations" positive "$(metric "$WORK/m-gateway.txt" '^instascene_http_request_duration_seconds_count\{route="health"\}')"
 check "the scheduler reports the queue" grep -q '^# TYPE instascene_jobs gauge' "$WORK/m-sched.txt"
 check "the store reports its blobs" grep -q '^instascene_store_blobs ' "$WORK/m-store.txt"
 check "a worker reports no store of its own" test "$(metric "$WORK/m-training.txt" '^instascene_store_blobs ')" = absent

@@ -355,6 +355,7 @@ absl::StatusOr<std::unique_ptr<Gateway>> Gateway::Start(const GatewayOptions& op
   });
   AddRoutes(http, stubs);
   AddSceneUploadRoutes(http, stubs);
+  AddHttpMetrics(http);
   if (!options.web_root.empty()) {
     http.set_file_extension_and_mimetype_mapping("wasm", "application/wasm");
     http.set_file_extension_and_mimetype_mapping("mjs", "text/javascript");

@@ -59,5 +59,7 @@ void Unary(const httplib::Request& req, httplib::Response& res, const Request& r
 
 // Routes of the scene-folder upload (scene_upload.cc).
 void AddSceneUploadRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs);
+// Request counts and durations per route on the process's metrics registry (http_metrics.cc).
+void AddHttpMetrics(httplib::Server& http);
 
 }  // namespace instascene::gateway

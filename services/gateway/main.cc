@@ -6,6 +6,7 @@
 #include <cstdio>
 
 #include "common/core/file_io.h"
+#include "common/metrics/metrics.h"
 #include "common/rpc/credentials.h"
 #include "common/rpc/server.h"
 #include "services/gateway/gateway.h"
@@ -29,11 +30,16 @@ int main(int argc, char** argv) {
   app.add_option("--tls-client-cert", channel.tls_cert_file,
                  "Mutual TLS: this gateway's certificate");
   app.add_option("--tls-client-key", channel.tls_key_file, "Mutual TLS: this gateway's key");
-  std::string web_root;
+  std::string web_root, metrics_listen;
+  app.add_option("--metrics", metrics_listen,
+                 "Serve Prometheus /metrics (HTTP requests by route and code, durations) at "
+                 "HOST:PORT (default: off)");
   app.add_option("--web-root", web_root,
                  "The web UI's bundle to serve at / (default: BIN/../web when present; 'none' = "
                  "the API only)");
-  app.add_option("--ready-file", ready_file, "Write the bound address here once serving");
+  app.add_option("--ready-file", ready_file,
+                 "Write the bound address here once serving (with --metrics, a second line "
+                 "metrics=HOST:PORT)");
   CLI11_PARSE(app, argc, argv);
   options.web_root = web_root.empty() ? gateway::DefaultWebRoot() : web_root;
   if (options.web_root == "none") options.web_root.clear();
@@ -49,13 +55,21 @@ int main(int argc, char** argv) {
   auto to_objects = objects.empty() ? to_scheduler : connect(objects);
   if (!to_store.ok()) return fail(to_store.status());
   if (!to_objects.ok()) return fail(to_objects.status());
+  std::unique_ptr<metrics::Endpoint> metrics_endpoint;
+  if (!metrics_listen.empty()) {
+    auto endpoint = metrics::Endpoint::Start(metrics_listen);
+    if (!endpoint.ok()) return fail(endpoint.status());
+    metrics_endpoint = std::move(*endpoint);
+  }
   auto server = gateway::Gateway::Start(options, *to_scheduler, *to_store, *to_objects);
   if (!server.ok()) return fail(server.status());
   std::printf("instascene-gateway at http://%s/api/v1/\n", (*server)->address().c_str());
   if ((*server)->serves_ui()) std::printf("web UI at http://%s/\n", (*server)->address().c_str());
   std::fflush(stdout);
   if (!ready_file.empty()) {
-    if (absl::Status s = WriteFileAtomically(ready_file, (*server)->address() + "\n"); !s.ok())
+    std::string ready = (*server)->address() + "\n";
+    if (metrics_endpoint) ready += "metrics=" + metrics_endpoint->address() + "\n";
+    if (absl::Status s = WriteFileAtomically(ready_file, ready); !s.ok())
       return fail(s);
   }
   rpc::WaitForShutdownSignal();

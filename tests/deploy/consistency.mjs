@@ -2,7 +2,8 @@
 // binary the build produced (in BIN_DIR) and an ENTRYPOINT of docker/Dockerfile, and every
 // container port is the port its --listen argument binds (the port named "metrics": its --metrics
 // argument, which the pod's prometheus.io/port annotation names too); every container checks
-// tokens from the instascene-auth Secret, and one that reaches other services has its own token. Usage: node consistency.mjs BIN_DIR
+// tokens from the instascene-auth Secret, and one that reaches other services has its own token
+// (the gateway: none at all, callers' tokens pass through; HTTP probes on its --listen port). Usage: node consistency.mjs BIN_DIR
 // DOCKERFILE FILE.yaml... Prints "N passed, N failed"; exits 1 on any mismatch.
 import { existsSync, readFileSync } from "node:fs";
 import { basename, join } from "node:path";
@@ -41,6 +42,15 @@ for (const file of files) {
         } else {
           check(p.containerPort === port, `${what}: containerPort ${p.containerPort} but --listen ${listen}`);
         }
+      }
+      if (command.endsWith("instascene-gateway")) {
+        // The gateway holds no token (callers' tokens pass through) and answers HTTP probes.
+        check(flag("auth-tokens") === undefined && flag("token-file") === undefined,
+          `${what}: the gateway must not hold tokens`);
+        for (const probe of [c.readinessProbe, c.livenessProbe])
+          check(probe?.httpGet?.port === port && probe?.httpGet?.path === "/api/v1/health",
+            `${what}: an HTTP probe is not /api/v1/health on port ${port}`);
+        continue;
       }
       // Authentication: the token file (and this process's own token) come from the auth Secret.
       const authDir = (flag("auth-tokens") ?? "").replace(/\/[^/]*$/, "");

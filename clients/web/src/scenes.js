@@ -127,7 +127,16 @@ export function renderScene(main, scene) {
     jobs.sort((a, b) => Number(a.created_unix_ms) - Number(b.created_unix_ms));
     for (const job of jobs) update(job);
     if (!jobs.length) summary.textContent = "No jobs for this scene.";
-    source = api.watch({ scene }, update, null, (e) => showError(summary, e));
+    // Event latency (the job's update time on the scheduler to its arrival here; one clock on a
+    // single machine), for the measurements in docs/PERFORMANCE.md: each job's first event on
+    // the stream is its current state, not a change, and is not counted.
+    const seen = new Set();
+    window.instasceneEventLatencies = [];
+    source = api.watch({ scene }, (job) => {
+      if (seen.has(job.id)) window.instasceneEventLatencies.push(Date.now() - Number(job.updated_unix_ms));
+      seen.add(job.id);
+      update(job);
+    }, null, (e) => showError(summary, e));
   }).catch((e) => showError(summary, e));
   return () => source?.close();
 }

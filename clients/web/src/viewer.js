@@ -222,6 +222,7 @@ export function render(main, sceneName) {
     }
     await Promise.all(loads);
     if (stopped) return;
+    stats.loadedMs = performance.now() - started; // downloaded, parsed and handed to Spark
     const all = [state.background, ...[...state.objects.values()].flatMap((e) => [e.raw, e.completed])].filter(Boolean);
     for (const mesh of all) scene3.add(mesh);
     stats.gaussians = [state.background, ...[...state.objects.values()].map((e) => e.raw)].filter(Boolean).reduce((n, m) => n + m.userData.count, 0);
