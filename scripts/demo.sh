@@ -54,14 +54,17 @@ if [ -d "$SPLATS" ]; then
 fi
 
 echo "== 3. The main job through the services (embedded default: store + scheduler + workers in one process) =="
-"$BIN" serve --data "$OUT/server" --listen 127.0.0.1:0 --ready-file "$OUT/server.addr" >"$OUT/server.log" 2>&1 &
+"$BIN" serve --data "$OUT/server" --listen 127.0.0.1:0 --gateway 127.0.0.1:0 --ready-file "$OUT/server.addr" \
+  >"$OUT/server.log" 2>&1 &
 SERVER_PID=$!
 trap 'kill -TERM $SERVER_PID 2>/dev/null || true' EXIT
 for _ in $(seq 200); do [ -s "$OUT/server.addr" ] && break; sleep 0.05; done
-ADDR=$(cat "$OUT/server.addr")
+ADDR=$(head -n 1 "$OUT/server.addr")
+GATEWAY=$(sed -n 's/^gateway=//p' "$OUT/server.addr")
 # On first start the server wrote an admin token beside its data; the clients below use it.
 export INSTASCENE_TOKEN_FILE="$OUT/server/auth/admin.token"
 echo "server: $ADDR (log: $OUT/server.log, data: $OUT/server/, admin token: $INSTASCENE_TOKEN_FILE)"
+echo "web UI (while the demo runs; the link carries the admin token): http://$GATEWAY/#token=$(cat "$INSTASCENE_TOKEN_FILE")"
 scenes=(synthetic)
 [ -d "$OUT/composite" ] && scenes+=(composite)
 # The synthetic scene (metric: meters_per_unit 1) also gets the robot-ready export of every object.
@@ -116,6 +119,15 @@ print('%.4f %.4f %.4f' % ((o['bounds_min'][0] + o['bounds_max'][0]) / 2, (o['bou
 echo "-- clients/cpp/examples/object_at_point $ADDR synthetic $POINT $OUT/robot"
 # shellcheck disable=SC2086
 "$BUILD_DIR/clients/cpp/object_at_point" "$ADDR" synthetic $POINT "$OUT/robot" | sed 's/^/  /'
+echo "== 6. The web UI's viewer with the objects of the synthetic scene (Chromium, headless) =="
+if [ -f "$BUILD_DIR/web-build/node_modules/playwright-core/package.json" ] && command -v chromium >/dev/null; then
+  HOME="$PWD/$OUT/.browser" node "$BUILD_DIR/web-build/tests/screenshot.mjs" "http://$GATEWAY" \
+    "$(cat "$INSTASCENE_TOKEN_FILE")" synthetic "$OUT/viewer.png" | sed 's/^/  /' ||
+    echo "  (the screenshot failed; the UI itself is at http://$GATEWAY/)"
+  rm -rf "$OUT/.browser"
+else
+  echo "  (no web UI bundle or Chromium here: skipped)"
+fi
 kill -TERM $SERVER_PID
 wait $SERVER_PID || true
 trap - EXIT
@@ -133,6 +145,7 @@ echo "  demo-out/synthetic/stages/complete/    each completed object: object.ply
 [ -d "$OUT/composite" ] && echo "  demo-out/composite/                    the real captures composed into one scene, and its result/"
 echo "  demo-out/synthetic/stages/export/      each object robot-ready: visual.glb (Draco), object.urdf, object.xml (MJCF), collision/, points.ply, manifest.json"
 echo "  demo-out/robot/                        the object a robot fetched by a 3D point (artefacts, digests verified)"
+echo "  demo-out/viewer.png                    the web UI's viewer with the synthetic scene's objects (one selected)"
 echo "  demo-out/server/                       the server's data: store/ (content-addressed blobs), jobs.db (SQLite queue)"
 echo "  ($(find "$OUT" -name '*.png' | wc -l) PNG and $(find "$OUT" -name '*.ply' | wc -l) PLY files in all)"
 elapsed_ms=$(( (end_ns - start_ns) / 1000000 ))
