@@ -27,7 +27,10 @@ void AddImportCommand(CLI::App& app, Action* action) {
   auto* transforms =
       cmd->add_option("--transforms", args->transforms, "instant-ngp / nerfstudio transforms.json");
   colmap->excludes(transforms);
-  cmd->add_option("--ply", args->ply, "The trained splat: Inria/2DGS or compressed .ply, .splat or .spz (converted to the internal PLY)")->required();
+  cmd->add_option("--ply", args->ply,
+                  "The trained splat: Inria/2DGS or compressed .ply, .splat or .spz (converted to "
+                  "the internal PLY)")
+      ->required();
   cmd->add_option(
       "--images", args->images,
       "Image folder (default: <model>/../../images for COLMAP, the JSON's folder otherwise)");

@@ -62,8 +62,9 @@ void AddRenderCommand(CLI::App& app, Action* action) {
       "render", "Render a scene view, or a bare .ply from an orbit camera, to PNG");
   auto* scene_opt = cmd->add_option("--scene", args->scene, "Scene directory");
   cmd->add_option("--view", args->view, "View name or index (with --scene)");
-  auto* ply_opt =
-      cmd->add_option("--ply", args->ply, "Render this splat file (.ply, compressed .ply, .splat, .spz) without a scene (orbit camera)");
+  auto* ply_opt = cmd->add_option("--ply", args->ply,
+                                  "Render this splat file (.ply, compressed .ply, .splat, .spz) "
+                                  "without a scene (orbit camera)");
   scene_opt->excludes(ply_opt);
   cmd->add_option("--out", args->out, "Output PNG")->required();
   cmd->add_option("--mode", args->mode,

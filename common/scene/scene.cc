@@ -9,8 +9,8 @@
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
 #include "common/splat/gaussian_ply.h"
-#include "common/splat/splat_formats.h"
 #include "common/splat/ply.h"
+#include "common/splat/splat_formats.h"
 
 namespace instascene {
 namespace {

@@ -19,7 +19,8 @@ namespace instascene {
 
 // Opacity logits of +inf / -inf, as splat-transform writes them for fully opaque / fully
 // transparent splats (its decompressed alpha of exactly 1 or 0), load as what they mean: the logit
-// kOpaqueLogit (sigmoid = 1 in float arithmetic) or its negative (opacity 2e-9). NaN stays an error.
+// kOpaqueLogit (sigmoid = 1 in float arithmetic) or its negative (opacity 2e-9). NaN stays an
+// error.
 inline constexpr float kOpaqueLogit = 20.0f;
 float OpacityLogit(float logit);
 

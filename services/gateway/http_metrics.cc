@@ -17,9 +17,9 @@ namespace {
 thread_local std::chrono::steady_clock::time_point request_start;
 
 std::string Route(const std::string& path) {
-  static const std::set<std::string> kRoutes = {"health", "stages", "jobs", "scenes",
-                                                "pipelines", "queue", "events", "blobs",
-                                                "scene-manifests"};
+  static const std::set<std::string> kRoutes = {"health", "stages",    "jobs",
+                                                "scenes", "pipelines", "queue",
+                                                "events", "blobs",     "scene-manifests"};
   if (!absl::StartsWith(path, "/api/")) return "ui";
   std::vector<std::string> parts = absl::StrSplit(path, '/', absl::SkipEmpty());
   if (parts.size() >= 3 && parts[1] == "v1" && kRoutes.count(parts[2])) return parts[2];
@@ -35,21 +35,22 @@ void AddHttpMetrics(httplib::Server& http) {
                        .Register(metrics::Registry());
   auto& durations = prometheus::BuildHistogram()
                         .Name("instascene_http_request_duration_seconds")
-                        .Help("Time from a request's routing to its last byte (event streams: "
-                              "their whole life), by route")
+                        .Help(
+                            "Time from a request's routing to its last byte (event streams: "
+                            "their whole life), by route")
                         .Register(metrics::Registry());
   http.set_pre_routing_handler([](const httplib::Request&, httplib::Response&) {
     request_start = std::chrono::steady_clock::now();
     return httplib::Server::HandlerResponse::Unhandled;
   });
-  http.set_logger([&requests, &durations](const httplib::Request& req,
-                                          const httplib::Response& res) {
-    const std::string route = Route(req.path);
-    requests.Add({{"route", route}, {"code", std::to_string(res.status)}}).Increment();
-    const double seconds =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - request_start).count();
-    durations.Add({{"route", route}}, metrics::RpcBuckets()).Observe(seconds);
-  });
+  http.set_logger(
+      [&requests, &durations](const httplib::Request& req, const httplib::Response& res) {
+        const std::string route = Route(req.path);
+        requests.Add({{"route", route}, {"code", std::to_string(res.status)}}).Increment();
+        const double seconds =
+            std::chrono::duration<double>(std::chrono::steady_clock::now() - request_start).count();
+        durations.Add({{"route", route}}, metrics::RpcBuckets()).Observe(seconds);
+      });
 }
 
 }  // namespace instascene::gateway

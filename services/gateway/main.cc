@@ -69,8 +69,7 @@ int main(int argc, char** argv) {
   if (!ready_file.empty()) {
     std::string ready = (*server)->address() + "\n";
     if (metrics_endpoint) ready += "metrics=" + metrics_endpoint->address() + "\n";
-    if (absl::Status s = WriteFileAtomically(ready_file, ready); !s.ok())
-      return fail(s);
+    if (absl::Status s = WriteFileAtomically(ready_file, ready); !s.ok()) return fail(s);
   }
   rpc::WaitForShutdownSignal();
   server->reset();
