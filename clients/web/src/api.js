@@ -124,3 +124,34 @@ export const STATES = ["queued", "leased", "running", "succeeded", "failed", "ca
 export function stateName(state) {
   return String(state || "").replace(/^JOB_STATE_/, "").toLowerCase();
 }
+
+// Re-queues a scene's failed and cancelled jobs: the scene's pipeline submitted again with the
+// stages and parameters its jobs (and the jobs they depend on, fetched when another scene owns
+// them) have, in the registry's order. Jobs are keyed by content, so succeeded ones are returned
+// as they are and only failed / cancelled ones run again (as `instascene submit` again would).
+export async function resubmitScene(scene, jobs) {
+  const byId = new Map(jobs.map((j) => [j.id, j]));
+  for (let pending = [...jobs]; pending.length;) {
+    const next = [];
+    for (const j of pending)
+      for (const d of j.dependencies || [])
+        if (!byId.has(d.job_id)) {
+          const dep = await get(`/jobs/${encodeURIComponent(d.job_id)}`);
+          byId.set(dep.id, dep);
+          next.push(dep);
+        }
+    pending = next;
+  }
+  const submitted = [...byId.values()].filter((j) => !j.parent); // items come from their parent
+  if (!submitted.length) throw new Error(`scene ${scene}: no jobs to resubmit`);
+  const order = (await get("/stages")).stages.map((s) => s.kind);
+  const stages = [...new Set(submitted.map((j) => j.kind))].sort((a, b) => order.indexOf(a) - order.indexOf(b));
+  const parameters = {};
+  for (const j of submitted) parameters[j.kind] = JSON.parse(j.parameters_json || "{}");
+  return post("/pipelines", {
+    scene,
+    scene_manifest: submitted[0].scene_manifest,
+    stages,
+    parameters_json: JSON.stringify(parameters),
+  });
+}

@@ -35,7 +35,7 @@ export function render(main) {
     el("h2", {}, "Recent failures"),
     el("table", { id: "failures" },
       el("caption", { class: "sr-only" }, "Failed jobs and their reasons"),
-      el("thead", {}, el("tr", {}, ["Job", "Scene", "Attempts", "When", "Reason"].map((h) => el("th", { scope: "col" }, h)))),
+      el("thead", {}, el("tr", {}, ["Job", "Scene", "Attempts", "When", "Reason", ""].map((h) => el("th", { scope: "col" }, h)))),
       failures)));
 
   let timer = null;
@@ -97,7 +97,15 @@ export function render(main) {
         el("td", {}, el("a", { href: `#/scenes/${encodeURIComponent(job.scene)}` }, job.scene)),
         el("td", {}, `${job.attempts}/${job.max_attempts}`),
         el("td", {}, formatTime(job.updated_unix_ms)),
-        el("td", { class: "error-text" }, job.error))));
+        el("td", { class: "error-text" }, job.error),
+        el("td", {}, el("button", {
+          type: "button",
+          "aria-label": `Retry the failed jobs of scene ${job.scene}`,
+          onclick: () => api.get(`/jobs?scene=${encodeURIComponent(job.scene)}&limit=1000`)
+            .then((answer) => api.resubmitScene(job.scene, answer.jobs || []))
+            .then(poll)
+            .catch((e) => showError(note, e)),
+        }, "Retry")))));
       note.textContent = `Updated ${new Date(now).toLocaleTimeString()}.`;
       note.classList.remove("error");
     } catch (e) {

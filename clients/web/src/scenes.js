@@ -78,10 +78,11 @@ export function renderScene(main, scene) {
   const summary = el("p", { id: "scene-summary" }, "Loading…");
   const viewerLink = el("a", { href: `#/viewer/${encodeURIComponent(scene)}`, class: "button" }, "Open the viewer");
   const cancel = el("button", { type: "button" }, "Cancel the scene's jobs");
+  const retry = el("button", { type: "button", id: "retry-scene" }, "Retry failed and cancelled jobs");
   main.replaceChildren(el("section", { class: "card" },
     el("h1", {}, `Scene ${scene}`),
     summary,
-    el("div", { class: "actions" }, viewerLink, cancel),
+    el("div", { class: "actions" }, viewerLink, cancel, retry),
     el("table", { id: "jobs" },
       el("caption", { class: "sr-only" }, "The scene's jobs"),
       el("thead", {}, el("tr", {}, ["Stage", "State", "Progress", "Inputs", "Attempts", "Worker", "Error", ""].map((h) => el("th", { scope: "col" }, h)))),
@@ -123,6 +124,17 @@ export function renderScene(main, scene) {
   let source = null;
   cancel.addEventListener("click", () =>
     api.post(`/scenes/${encodeURIComponent(scene)}/cancel`).catch((e) => showError(summary, e)));
+  retry.addEventListener("click", async () => {
+    try {
+      await api.resubmitScene(scene, [...rows.values()].map((r) => r.job));
+      source?.close();
+      const jobs = await allJobs({ scene });
+      for (const job of jobs) update(job);
+      source = api.watch({ scene }, update, null, (e) => showError(summary, e));
+    } catch (e) {
+      showError(summary, e);
+    }
+  });
   allJobs({ scene }).then((jobs) => {
     jobs.sort((a, b) => Number(a.created_unix_ms) - Number(b.created_unix_ms));
     for (const job of jobs) update(job);

@@ -157,6 +157,7 @@ export function render(main, sceneName) {
 
   function select(id) {
     state.selected = id;
+    stats.picks = (stats.picks || 0) + 1;
     applyHighlight();
     showPanel(id ? state.objects.get(id)?.object : null);
     stats.selected = id;
