@@ -212,7 +212,7 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
   }
   if (surfels.num_scales != 2) return absl::InvalidArgumentError("completion needs 2DGS surfels");
   ASSIGN_OR_RETURN(std::unique_ptr<CompletionPrior> prior,
-                   MakePrior(options.prior, options.denoiser));
+                   MakePrior(options.prior, options.denoiser, options.diffusion));
   report("framing", 0, 7);
   ASSIGN_OR_RETURN(InstanceSplit split, SplitInstance(labels, id, options.min_gaussians));
   RemoveStrayGaussians(surfels, &split);

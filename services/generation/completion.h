@@ -39,6 +39,7 @@ using ViewImageLoader = std::function<absl::StatusOr<Image>(int view)>;
 struct CompletionOptions {
   std::string prior = "geometric";  // geometric | none | diffusion
   std::string denoiser;             // the diffusion prior's Denoiser service: grpc://HOST:PORT
+  DiffusionSettings diffusion;      // the diffusion prior's replacement schedule and warp space
   RingOptions ring;
   VisibilityOptions visibility;
   FreeSpaceOptions free_space;

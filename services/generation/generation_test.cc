@@ -295,6 +295,54 @@ TEST(Completion, DiffusionPriorThroughADenoiserService) {
   (*wrong_server)->Drain(std::chrono::milliseconds(100));
 }
 
+// The replacement schedule and the warp space (ALGORITHM.md 7.7's open choices) as settings:
+// replacing to the last step leaves the known cells exactly the warped known content; never
+// replacing lets them drift; a pixel-space warp finds known cells too.
+TEST(Completion, DiffusionReplacementScheduleAndWarpSpace) {
+  const diffusion::NoiseSchedule schedule = diffusion::NoiseSchedule::ScaledLinear();
+  std::vector<double> means(16, 0.2);
+  diffusion::AnalyticDenoiser analytic(schedule, means, 0.0, 0.4);
+  diffusion::DenoiserService service(&analytic, "analytic-gaussian", {3, 32, 32}, 1000);
+  rpc::ServerOptions server_options;
+  server_options.listen = "127.0.0.1:0";
+  auto server = rpc::Server::Start(server_options, {&service}, {"instascene.v1.Denoiser"});
+  ASSERT_TRUE(server.ok());
+  PartialObject scene = MakePartialObject(Bottle(), 2500, 19);
+  TriangleMesh wall = MakeRectangle(0.6f, 0.5f, 6, 5);
+  for (auto& v : wall.vertices) v = Eigen::Vector3f(-0.12f, v.x(), v.y() + 0.25f);
+  std::mt19937_64 rng(3);
+  AppendSurfels(wall, 3000, Appearance{}, SurfelSampling{}, rng, &scene.cloud);
+  scene.labels.resize(scene.cloud.size(), 0);
+  CompletionOptions options;
+  options.meshing.size_px = 64;
+  options.prior = "diffusion";
+  options.denoiser = "grpc://" + (*server)->address();
+  auto run = [&](double fraction, const std::string& warp) {
+    options.diffusion.replace_fraction = fraction;
+    options.diffusion.warp = warp;
+    return CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
+  };
+  auto every = run(1.0, "latent");
+  ASSERT_TRUE(every.ok()) << every.status();
+  ASSERT_GT(every->prior.report["warped_latent_pixels"].get<int64_t>(), 0);
+  EXPECT_EQ(every->prior.report["known_cells_drift"].get<double>(), 0.0);
+  auto never = run(0.0, "latent");
+  ASSERT_TRUE(never.ok()) << never.status();
+  EXPECT_GT(never->prior.report["known_cells_drift"].get<double>(), 0.05);
+  auto half = run(0.5, "latent");
+  ASSERT_TRUE(half.ok()) << half.status();
+  EXPECT_GT(half->prior.report["known_cells_drift"].get<double>(), 0.0);
+  EXPECT_EQ(half->prior.report["replace_fraction"].get<double>(), 0.5);
+  auto pixel = run(1.0, "pixel");
+  ASSERT_TRUE(pixel.ok()) << pixel.status();
+  EXPECT_EQ(pixel->prior.report["warp"], "pixel");
+  EXPECT_GT(pixel->prior.report["warped_latent_pixels"].get<int64_t>(), 0);
+  EXPECT_EQ(pixel->prior.report["known_cells_drift"].get<double>(), 0.0);
+  EXPECT_EQ(run(1.0, "voxel").status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(run(1.5, "latent").status().code(), absl::StatusCode::kInvalidArgument);
+  (*server)->Drain(std::chrono::milliseconds(100));
+}
+
 // The complete stage takes the denoiser from the worker's settings, never from the job.
 TEST(CompleteStage, DiffusionNeedsAWorkerWithADenoiser) {
   const pipeline::StageDefinition stage = CompleteStage();

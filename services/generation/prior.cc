@@ -7,10 +7,11 @@
 namespace instascene::generation {
 
 absl::StatusOr<std::unique_ptr<CompletionPrior>> MakePrior(const std::string& name,
-                                                           const std::string& denoiser) {
+                                                           const std::string& denoiser,
+                                                           const DiffusionSettings& diffusion) {
   if (name == "geometric") return std::make_unique<GeometricPrior>();
   if (name == "none") return std::make_unique<NoPrior>();
-  if (name == "diffusion") return diffusion::MakeDiffusionPrior(denoiser);
+  if (name == "diffusion") return diffusion::MakeDiffusionPrior(denoiser, diffusion);
   return absl::InvalidArgumentError(
       absl::StrCat("unknown completion prior '", name, "' (known: geometric, none, diffusion)"));
 }

@@ -55,10 +55,19 @@ class CompletionPrior {
   virtual absl::StatusOr<PriorOutput> Complete(const PriorInput& input) const = 0;
 };
 
+// The diffusion prior's two open choices of ALGORITHM.md 7.7, as settings (defaults and why:
+// diffusion/diffusion_prior.h).
+struct DiffusionSettings {
+  double replace_fraction = 1.0;  // replace known pixels during this share of the steps (from t=T)
+  std::string warp = "latent";    // "latent": warp on the latent grid; "pixel": at the ring's
+                                  // resolution, then encode (a cell is known by majority)
+};
+
 // The prior named `name`: "geometric", "none", or "diffusion" (which needs `denoiser`, a
 // Denoiser service as grpc://HOST:PORT; diffusion/diffusion_prior.h). InvalidArgument for an
 // unknown name or a missing / malformed denoiser.
 absl::StatusOr<std::unique_ptr<CompletionPrior>> MakePrior(const std::string& name,
-                                                           const std::string& denoiser = "");
+                                                           const std::string& denoiser = "",
+                                                           const DiffusionSettings& diffusion = {});
 
 }  // namespace instascene::generation

@@ -51,6 +51,8 @@ CompletionOptions ToCompletionOptions(const CompleteStageOptions& o) {
   options.seed = o.seed;
   options.refinement.iterations = o.refine_iterations;
   options.refine_view_max_side = o.refine_view_size;
+  options.diffusion.replace_fraction = o.diffusion_replace_fraction;
+  options.diffusion.warp = o.diffusion_warp;
   return options;
 }
 

@@ -31,6 +31,12 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
         .Int("refine_view_size", &O::refine_view_size, 32, 1024,
              "Joint refinement: real views are cropped to the object and binned to at most this, "
              "px")
+        .Real("diffusion_replace_fraction", &O::diffusion_replace_fraction, 0.0, 1.0,
+              "Diffusion prior: known pixels replace the sampler's during this share of the "
+              "steps, from the noisiest (1 = every step, RePaint; 0 = never)")
+        .Choice("diffusion_warp", &O::diffusion_warp, {"latent", "pixel"},
+                "Diffusion prior: warp known views on the latent grid, or at the ring's "
+                "resolution and then encode (a latent cell is known where most of its pixels are)")
         .Int<uint64_t>("prior_seed", &O::seed, 0, int64_t{1} << 53,
                        "Random seed of the completion prior");
     return c;

@@ -41,6 +41,34 @@ PinholeCamera LatentCamera(const PinholeCamera& c, int n) {
   return c.Scaled(static_cast<double>(n) / c.width);
 }
 
+// A warp at image resolution brought to the n x n latent grid: a cell is known where more than
+// half of its pixels are, and takes the mean of those pixels (mapped to [-1, 1]).
+WarpResult EncodeWarp(const WarpResult& pixels, int width, int height, int n) {
+  WarpResult cells;
+  cells.values.assign(static_cast<size_t>(3) * n * n, 0.0f);
+  cells.known.assign(static_cast<size_t>(n) * n, 0);
+  std::vector<int> total(static_cast<size_t>(n) * n, 0), known(total.size(), 0);
+  std::vector<double> sum(cells.values.size(), 0.0);
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      const size_t cell = static_cast<size_t>(y * n / height) * n + x * n / width;
+      const size_t i = static_cast<size_t>(y) * width + x;
+      ++total[cell];
+      if (!pixels.known[i]) continue;
+      ++known[cell];
+      for (int c = 0; c < 3; ++c) sum[cell * 3 + c] += pixels.values[i * 3 + c];
+    }
+  }
+  for (size_t cell = 0; cell < total.size(); ++cell) {
+    if (2 * known[cell] <= total[cell]) continue;
+    cells.known[cell] = 1;
+    ++cells.written;
+    for (int c = 0; c < 3; ++c)
+      cells.values[cell * 3 + c] = static_cast<float>(2.0 * sum[cell * 3 + c] / known[cell] - 1.0);
+  }
+  return cells;
+}
+
 }  // namespace
 
 DiffusionPrior::DiffusionPrior(std::shared_ptr<const Denoiser> denoiser, std::string where,
@@ -60,9 +88,15 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   }
   const int n = options_.latent_size;
   // Known views on the latent grid, and the mesh the warping casts against.
+  const bool pixel_warp = options_.warp == "pixel";
   std::vector<KnownView> known;
   std::vector<std::vector<float>> condition_latents;
   for (const ViewImages& v : input.conditions) {
+    if (pixel_warp) {  // the image itself, [0, 1], HxWx3
+      known.push_back(KnownView{v.camera, v.rgb});
+      condition_latents.push_back(Encode(v.rgb, v.camera.width, v.camera.height, n));
+      continue;
+    }
     condition_latents.push_back(Encode(v.rgb, v.camera.width, v.camera.height, n));
     // Warping copies latent values: store them HxWxC for the warper.
     KnownView k{LatentCamera(v.camera, n), std::vector<float>(static_cast<size_t>(3) * n * n)};
@@ -84,8 +118,10 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
       return a.camera.camera_from_world.rotation.row(2).dot(dir_t.transpose()) >
              b.camera.camera_from_world.rotation.row(2).dot(dir_t.transpose());
     });
-    ASSIGN_OR_RETURN(WarpResult w,
-                     WarpIntoTarget(*mesh, order, LatentCamera(target, n), WarpOptions{}));
+    ASSIGN_OR_RETURN(WarpResult w, WarpIntoTarget(*mesh, order,
+                                                  pixel_warp ? target : LatentCamera(target, n),
+                                                  WarpOptions{}));
+    if (pixel_warp) w = EncodeWarp(w, target.width, target.height, n);
     warped_pixels += w.written;
     warped.push_back(std::move(w));
   }
@@ -100,9 +136,13 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   std::normal_distribution<double> normal(0.0, 1.0);
   // RePaint: after each step, pixels a known view sees take the known latent noised to the
   // level the latents are now at (clean after the last step).
-  StepHook hook = [&](int, int timestep, std::vector<std::vector<float>>* latents) -> absl::Status {
+  // Replacement during the first replace_fraction of the steps (from the noisiest).
+  const int replace_steps =
+      static_cast<int>(std::ceil(options_.replace_fraction * ddim.steps - 1e-9));
+  StepHook hook = [&](int step, int timestep,
+                      std::vector<std::vector<float>>* latents) -> absl::Status {
     RETURN_IF_ERROR(CheckCancelled(input.cancel, "diffusion prior"));
-    if (!options_.replace_known) return absl::OkStatus();
+    if (!options_.replace_known || step >= replace_steps) return absl::OkStatus();
     const double a = timestep < 0 ? 1.0 : schedule.alphas_cumprod[timestep];
     for (size_t t = 0; t < latents->size(); ++t) {
       for (int cell = 0; cell < n * n; ++cell) {
@@ -122,6 +162,18 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   if (!latents.ok()) {
     return absl::Status(latents.status().code(), absl::StrCat("diffusion prior (denoiser ", where_,
                                                               "): ", latents.status().message()));
+  }
+  // How far the samples ended from the warped known content in the cells a known view sees (0
+  // when replacement runs to the last step).
+  double drift = 0;
+  int64_t known_cells = 0;
+  for (size_t t = 0; t < warped.size(); ++t) {
+    for (int cell = 0; cell < n * n; ++cell) {
+      if (!warped[t].known[cell]) continue;
+      ++known_cells;
+      for (int c = 0; c < 3; ++c)
+        drift += std::abs((*latents)[t][c * n * n + cell] - warped[t].values[cell * 3 + c]) / 3;
+    }
   }
   // Decode (identity VAE): nearest upsampling to the ring size, [-1, 1] -> [0, 1].
   for (size_t t = 0; t < input.targets.size(); ++t) {
@@ -158,12 +210,24 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
                 {"eta", ddim.eta},
                 {"guidance", ddim.guidance},
                 {"replace_known", options_.replace_known},
-                {"warped_latent_pixels", warped_pixels},
+                {"replace_fraction", options_.replace_fraction},
+                {"warp", options_.warp},
+                {"warped_latent_pixels", warped_pixels},  // latent cells known, all targets
+                {"known_cells_drift", known_cells ? drift / known_cells : 0.0},
                 {"vae", "identity (area average to the latent grid)"}};
   return out;
 }
 
-absl::StatusOr<std::unique_ptr<CompletionPrior>> MakeDiffusionPrior(const std::string& denoiser) {
+absl::StatusOr<std::unique_ptr<CompletionPrior>> MakeDiffusionPrior(
+    const std::string& denoiser, const DiffusionSettings& settings) {
+  DiffusionPriorOptions prior_options;
+  if (!(settings.replace_fraction >= 0 && settings.replace_fraction <= 1))
+    return absl::InvalidArgumentError("diffusion replace_fraction must be in [0, 1]");
+  if (settings.warp != "latent" && settings.warp != "pixel")
+    return absl::InvalidArgumentError(
+        absl::StrCat("diffusion warp '", settings.warp.substr(0, 40), "': latent or pixel"));
+  prior_options.replace_fraction = settings.replace_fraction;
+  prior_options.warp = settings.warp;
   if (absl::StartsWith(denoiser, "grpc://")) {
     const std::string address = denoiser.substr(7);
     if (address.empty())
@@ -172,7 +236,7 @@ absl::StatusOr<std::unique_ptr<CompletionPrior>> MakeDiffusionPrior(const std::s
     options.latent_shape = {3, DiffusionPriorOptions{}.latent_size,
                             DiffusionPriorOptions{}.latent_size};
     auto client = std::make_shared<GrpcDenoiser>(rpc::Connect(address), address, options);
-    return std::make_unique<DiffusionPrior>(client, denoiser);
+    return std::make_unique<DiffusionPrior>(client, denoiser, prior_options);
   }
   if (absl::StartsWith(denoiser, "onnx:"))
     return absl::UnimplementedError(

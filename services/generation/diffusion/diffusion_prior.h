@@ -20,11 +20,23 @@
 
 namespace instascene::generation::diffusion {
 
+// The two choices ALGORITHM.md 7.7 leaves open, as parameters:
+// - replace_fraction: the share of the steps, from the noisiest, at which known pixels replace the
+//   sampler's. Default 1 (every step, RePaint): the paper keeps the warped known content in the
+//   visible target pixels, and with it the generated views agree with the known ones to the last
+//   step; a smaller share lets the denoiser harmonise the seams at the end at the price of drift
+//   in the known pixels (diffusion_test measures both).
+// - warp: "latent" warps the known latents on the latent grid (one ray per latent cell: cheap, the
+//   paper's wording "move the known-view latents"); "pixel" warps the known images at the ring's
+//   resolution and encodes the result (a latent cell is known where most of its pixels are, and
+//   takes the mean of those): finer visibility and culling at 64x the rays. Default "latent".
 struct DiffusionPriorOptions {
-  int latent_size = 32;       // latent grid per side (MVD-Fusion: 32 for 256² views)
-  DdimOptions ddim;           // 50 steps, eta 1
-  double guidance = 2.5;      // classifier-free guidance (MVD-Fusion's scale)
-  bool replace_known = true;  // RePaint-style replacement of warped known pixels at every step
+  int latent_size = 32;           // latent grid per side (MVD-Fusion: 32 for 256² views)
+  DdimOptions ddim;               // 50 steps, eta 1
+  double guidance = 2.5;          // classifier-free guidance (MVD-Fusion's scale)
+  bool replace_known = true;      // RePaint-style replacement of warped known pixels
+  double replace_fraction = 1.0;  // ... during this share of the steps (from t = T)
+  std::string warp = "latent";    // latent | pixel
 };
 
 class DiffusionPrior : public CompletionPrior {
@@ -42,7 +54,9 @@ class DiffusionPrior : public CompletionPrior {
 };
 
 // The prior for a denoiser URI: "grpc://HOST:PORT" (the Denoiser service). "onnx:FILE.json" is
-// refused with Unimplemented (see docs/GENERATION.md); anything else with InvalidArgument.
-absl::StatusOr<std::unique_ptr<CompletionPrior>> MakeDiffusionPrior(const std::string& denoiser);
+// refused with Unimplemented (see docs/GENERATION.md); anything else with InvalidArgument, as are
+// settings out of range.
+absl::StatusOr<std::unique_ptr<CompletionPrior>> MakeDiffusionPrior(
+    const std::string& denoiser, const DiffusionSettings& settings = {});
 
 }  // namespace instascene::generation::diffusion
