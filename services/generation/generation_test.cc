@@ -3,6 +3,8 @@
 
 #include <gtest/gtest.h>
 
+#include <atomic>
+
 #include "common/geometry/camera.h"
 #include "common/mesh/mesh_volume.h"
 #include "common/mesh/ray_caster.h"
@@ -17,6 +19,7 @@
 #include "services/generation/completion.h"
 #include "services/generation/diffusion/analytic_denoiser.h"
 #include "services/generation/diffusion/grpc_denoiser.h"
+#include "services/generation/diffusion/latent_codec.h"
 #include "services/generation/stage.h"
 #include "services/generation/symmetry.h"
 
@@ -338,6 +341,34 @@ TEST(Completion, DiffusionReplacementScheduleAndWarpSpace) {
   EXPECT_EQ(pixel->prior.report["warp"], "pixel");
   EXPECT_GT(pixel->prior.report["warped_latent_pixels"].get<int64_t>(), 0);
   EXPECT_EQ(pixel->prior.report["known_cells_drift"].get<double>(), 0.0);
+  // The codec (VAE) interface: every known view encoded once, every generated one decoded once.
+  struct Counting : diffusion::LatentCodec {
+    diffusion::IdentityCodec identity{32};
+    mutable std::atomic<int> encoded{0}, decoded{0};
+    std::string name() const override { return "counting identity"; }
+    int latent_values() const override { return identity.latent_values(); }
+    absl::StatusOr<std::vector<float>> Encode(const std::vector<float>& rgb, int w,
+                                              int h) const override {
+      ++encoded;
+      return identity.Encode(rgb, w, h);
+    }
+    absl::StatusOr<std::vector<float>> Decode(const std::vector<float>& latent, int w,
+                                              int h) const override {
+      ++decoded;
+      return identity.Decode(latent, w, h);
+    }
+  };
+  auto counting = std::make_shared<Counting>();
+  options.diffusion.codec = counting;
+  auto coded = run(1.0, "latent");
+  ASSERT_TRUE(coded.ok()) << coded.status();
+  EXPECT_EQ(coded->prior.report["vae"], "counting identity");
+  EXPECT_EQ(counting->encoded.load(),
+            static_cast<int>(coded->ring.size()) - coded->manifest["unknown_views"].get<int>());
+  EXPECT_EQ(counting->decoded.load(), coded->manifest["unknown_views"].get<int>());
+  options.diffusion.codec = std::make_shared<diffusion::IdentityCodec>(16);  // 3 x 16²: refused
+  EXPECT_EQ(run(1.0, "latent").status().code(), absl::StatusCode::kInvalidArgument);
+  options.diffusion.codec = nullptr;
   EXPECT_EQ(run(1.0, "voxel").status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(run(1.5, "latent").status().code(), absl::StatusCode::kInvalidArgument);
   (*server)->Drain(std::chrono::milliseconds(100));

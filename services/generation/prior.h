@@ -20,6 +20,9 @@
 #include "services/generation/object_frame.h"
 
 namespace instascene::generation {
+namespace diffusion {
+class LatentCodec;  // diffusion/latent_codec.h
+}
 
 // One rendered view of the instance alone (white background), ALGORITHM.md 7.4.
 struct ViewImages {
@@ -61,6 +64,8 @@ struct DiffusionSettings {
   double replace_fraction = 1.0;  // replace known pixels during this share of the steps (from t=T)
   std::string warp = "latent";    // "latent": warp on the latent grid; "pixel": at the ring's
                                   // resolution, then encode (a cell is known by majority)
+  // The image encoder / decoder around the denoiser (a site's VAE); null = the identity.
+  std::shared_ptr<const diffusion::LatentCodec> codec;
 };
 
 // The prior named `name`: "geometric", "none", or "diffusion" (which needs `denoiser`, a

@@ -25,7 +25,7 @@ struct CompleteStageOptions {
   // measured no gain at the 2DGS learning rates (docs/RESULTS.md "Joint refinement"); the
   // prototype's setting is 2000.
   int refine_iterations = 0;
-  int refine_view_size = 256;  // real views cropped and binned to at most this, px
+  int refine_view_size = 256;               // real views cropped and binned to at most this, px
   double diffusion_replace_fraction = 1.0;  // diffusion prior: steps that replace known pixels
   std::string diffusion_warp = "latent";    // diffusion prior: latent | pixel
   uint64_t seed = 1;

@@ -11,30 +11,11 @@
 #include "common/mesh/surfel_mesh.h"
 #include "common/rpc/server.h"
 #include "services/generation/diffusion/grpc_denoiser.h"
+#include "services/generation/diffusion/latent_codec.h"
 #include "services/generation/diffusion/warping.h"
 
 namespace instascene::generation::diffusion {
 namespace {
-
-// Identity VAE: area-average an HxWx3 [0, 1] image to n x n, map to [-1, 1], channel-major.
-std::vector<float> Encode(const std::vector<float>& rgb, int width, int height, int n) {
-  std::vector<float> latent(static_cast<size_t>(3) * n * n, 0.0f);
-  std::vector<int> count(static_cast<size_t>(n) * n, 0);
-  for (int y = 0; y < height; ++y) {
-    for (int x = 0; x < width; ++x) {
-      const int ly = y * n / height, lx = x * n / width;
-      const size_t cell = static_cast<size_t>(ly) * n + lx;
-      ++count[cell];
-      for (int c = 0; c < 3; ++c)
-        latent[c * n * n + cell] += rgb[(static_cast<size_t>(y) * width + x) * 3 + c];
-    }
-  }
-  for (int c = 0; c < 3; ++c) {
-    for (size_t cell = 0; cell < count.size(); ++cell)
-      latent[c * n * n + cell] = 2.0f * latent[c * n * n + cell] / std::max(1, count[cell]) - 1.0f;
-  }
-  return latent;
-}
 
 // The camera of the latent grid: the view scaled to n x n.
 PinholeCamera LatentCamera(const PinholeCamera& c, int n) {
@@ -87,17 +68,24 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
     return out;
   }
   const int n = options_.latent_size;
+  const std::shared_ptr<const LatentCodec> codec =
+      options_.codec ? options_.codec : std::make_shared<IdentityCodec>(n);
+  if (codec->latent_values() != 3 * n * n)
+    return absl::InvalidArgumentError(absl::StrCat("diffusion prior: the codec ", codec->name(),
+                                                   " makes latents of ", codec->latent_values(),
+                                                   " values; the warping needs 3 x ", n, " x ", n));
   // Known views on the latent grid, and the mesh the warping casts against.
   const bool pixel_warp = options_.warp == "pixel";
   std::vector<KnownView> known;
   std::vector<std::vector<float>> condition_latents;
   for (const ViewImages& v : input.conditions) {
+    ASSIGN_OR_RETURN(std::vector<float> latent,
+                     codec->Encode(v.rgb, v.camera.width, v.camera.height));
+    condition_latents.push_back(std::move(latent));
     if (pixel_warp) {  // the image itself, [0, 1], HxWx3
       known.push_back(KnownView{v.camera, v.rgb});
-      condition_latents.push_back(Encode(v.rgb, v.camera.width, v.camera.height, n));
       continue;
     }
-    condition_latents.push_back(Encode(v.rgb, v.camera.width, v.camera.height, n));
     // Warping copies latent values: store them HxWxC for the warper.
     KnownView k{LatentCamera(v.camera, n), std::vector<float>(static_cast<size_t>(3) * n * n)};
     for (int c = 0; c < 3; ++c) {
@@ -118,9 +106,9 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
       return a.camera.camera_from_world.rotation.row(2).dot(dir_t.transpose()) >
              b.camera.camera_from_world.rotation.row(2).dot(dir_t.transpose());
     });
-    ASSIGN_OR_RETURN(WarpResult w, WarpIntoTarget(*mesh, order,
-                                                  pixel_warp ? target : LatentCamera(target, n),
-                                                  WarpOptions{}));
+    ASSIGN_OR_RETURN(
+        WarpResult w,
+        WarpIntoTarget(*mesh, order, pixel_warp ? target : LatentCamera(target, n), WarpOptions{}));
     if (pixel_warp) w = EncodeWarp(w, target.width, target.height, n);
     warped_pixels += w.written;
     warped.push_back(std::move(w));
@@ -175,30 +163,25 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
         drift += std::abs((*latents)[t][c * n * n + cell] - warped[t].values[cell * 3 + c]) / 3;
     }
   }
-  // Decode (identity VAE): nearest upsampling to the ring size, [-1, 1] -> [0, 1].
+  // Decode each target; the mask is where the image is not the ring's white background.
   for (size_t t = 0; t < input.targets.size(); ++t) {
     const PinholeCamera& cam = input.targets[t];
     ViewImages v;
     v.camera = cam;
     const size_t pixels = static_cast<size_t>(cam.width) * cam.height;
-    v.rgb.resize(3 * pixels);
+    ASSIGN_OR_RETURN(v.rgb, codec->Decode((*latents)[t], cam.width, cam.height));
+    if (v.rgb.size() != 3 * pixels)
+      return absl::InternalError(absl::StrCat("diffusion prior: the codec ", codec->name(),
+                                              " decoded ", v.rgb.size(), " values for ", cam.width,
+                                              "x", cam.height, "x3"));
     v.alpha.assign(pixels, 0.0f);
     v.mask.assign(pixels, 0);
     v.depth.assign(pixels, 0.0f);
-    for (int y = 0; y < cam.height; ++y) {
-      for (int x = 0; x < cam.width; ++x) {
-        const int cell = (y * n / cam.height) * n + x * n / cam.width;
-        const size_t i = static_cast<size_t>(y) * cam.width + x;
-        bool white = true;
-        for (int c = 0; c < 3; ++c) {
-          const float value =
-              std::clamp(0.5f * ((*latents)[t][c * n * n + cell] + 1.0f), 0.0f, 1.0f);
-          v.rgb[3 * i + c] = value;
-          white = white && value > 0.98f;
-        }
-        v.mask[i] = !white;  // the ring's background is white
-        v.alpha[i] = v.mask[i] ? 1.0f : 0.0f;
-      }
+    for (size_t i = 0; i < pixels; ++i) {
+      const bool white =
+          v.rgb[3 * i] > 0.98f && v.rgb[3 * i + 1] > 0.98f && v.rgb[3 * i + 2] > 0.98f;
+      v.mask[i] = !white;
+      v.alpha[i] = v.mask[i] ? 1.0f : 0.0f;
     }
     out.generated.push_back(std::move(v));
   }
@@ -214,7 +197,7 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
                 {"warp", options_.warp},
                 {"warped_latent_pixels", warped_pixels},  // latent cells known, all targets
                 {"known_cells_drift", known_cells ? drift / known_cells : 0.0},
-                {"vae", "identity (area average to the latent grid)"}};
+                {"vae", codec->name()}};
   return out;
 }
 
@@ -228,6 +211,7 @@ absl::StatusOr<std::unique_ptr<CompletionPrior>> MakeDiffusionPrior(
         absl::StrCat("diffusion warp '", settings.warp.substr(0, 40), "': latent or pixel"));
   prior_options.replace_fraction = settings.replace_fraction;
   prior_options.warp = settings.warp;
+  prior_options.codec = settings.codec;
   if (absl::StartsWith(denoiser, "grpc://")) {
     const std::string address = denoiser.substr(7);
     if (address.empty())

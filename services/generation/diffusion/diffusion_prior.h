@@ -3,9 +3,9 @@
 // views the targets; each target starts from noise, its latent's pixels that a known view sees
 // (geometry-aware warping through a mesh of the observed surfels, nearest azimuth first) are
 // replaced at every step by the known latent noised to the step's level (RePaint-style); the
-// DDIM sampler averages the denoiser's noise over the conditions (Eq. 9). The VAE is the identity
-// here: a latent is the RGB image area-averaged to latent_size² and mapped to [-1, 1] (a site's
-// model with a real VAE encodes/decodes around its own Denoiser service). The output is one
+// DDIM sampler averages the denoiser's noise over the conditions (Eq. 9). The VAE is an interface
+// (latent_codec.h), the identity by default: a latent is the RGB image area-averaged to
+// latent_size² and mapped to [-1, 1]. The output is one
 // generated RGB image per target (and its mask: where the warped known latents or the sampled
 // ones say the object is not background white), which the joint refinement fits. No weights ship
 // with the project: the denoiser is a gRPC service (grpc://HOST:PORT). Thread-compatible.
@@ -16,6 +16,7 @@
 
 #include "services/generation/diffusion/ddim.h"
 #include "services/generation/diffusion/denoiser.h"
+#include "services/generation/diffusion/latent_codec.h"
 #include "services/generation/prior.h"
 
 namespace instascene::generation::diffusion {
@@ -37,6 +38,9 @@ struct DiffusionPriorOptions {
   bool replace_known = true;      // RePaint-style replacement of warped known pixels
   double replace_fraction = 1.0;  // ... during this share of the steps (from t = T)
   std::string warp = "latent";    // latent | pixel
+  // The image encoder / decoder around the denoiser; null = IdentityCodec(latent_size). Its
+  // latents must be 3 x latent_size² (the warping moves them spatially).
+  std::shared_ptr<const LatentCodec> codec;
 };
 
 class DiffusionPrior : public CompletionPrior {
