@@ -98,13 +98,6 @@ absl::StatusOr<std::map<std::string, store::Digest>> ParseFiles(const std::strin
   return files;
 }
 
-v1::Digest ToProto(const store::Digest& d) {
-  v1::Digest p;
-  p.set_hash(d.hash);
-  p.set_size_bytes(d.size_bytes);
-  return p;
-}
-
 void CreateSceneManifest(const httplib::Request& req, httplib::Response& res, Stubs& stubs) {
   absl::StatusOr<std::map<std::string, store::Digest>> files = ParseFiles(req.body);
   if (!files.ok()) return SendError(res, rpc::ToGrpcStatus(files.status()));
@@ -117,7 +110,7 @@ void CreateSceneManifest(const httplib::Request& req, httplib::Response& res, St
                      absl::StrCat("scene.json: ", scene_json->second.size_bytes, " bytes, at most ",
                                   kMaxSceneJsonBytes));
   std::string text;
-  if (grpc::Status s = ReadBlob(req, stubs, ToProto(scene_json->second), &text); !s.ok()) {
+  if (grpc::Status s = ReadBlob(req, stubs, rpc::ToProto(scene_json->second), &text); !s.ok()) {
     if (s.error_code() == grpc::StatusCode::NOT_FOUND)
       return SendError(res, grpc::StatusCode::FAILED_PRECONDITION,
                        absl::StrCat("scene.json (", scene_json->second.ToString(),
@@ -128,10 +121,10 @@ void CreateSceneManifest(const httplib::Request& req, httplib::Response& res, St
   if (!manifest.ok()) return SendError(res, rpc::ToGrpcStatus(manifest.status()));
   const std::string bytes = store::SerializeManifest(*manifest);
   const store::Digest digest = store::ComputeDigest(bytes);
-  if (grpc::Status s = WriteBlob(req, stubs, bytes, ToProto(digest)); !s.ok())
+  if (grpc::Status s = WriteBlob(req, stubs, bytes, rpc::ToProto(digest)); !s.ok())
     return SendError(res, s);
   v1::FindMissingBlobsRequest find;
-  for (const store::Digest& d : manifest->Digests()) *find.add_digests() = ToProto(d);
+  for (const store::Digest& d : manifest->Digests()) *find.add_digests() = rpc::ToProto(d);
   v1::FindMissingBlobsResponse found;
   {
     grpc::ClientContext context;
