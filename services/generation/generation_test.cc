@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -240,6 +241,18 @@ TEST(Completion, RefinesWithRealAndGeneratedViews) {
   EXPECT_EQ(off->manifest["refinement"]["status"], "not run");
 }
 
+// A partly seen bottle with a wall behind it (x = -0.12): the ring views from that side see it
+// occluded, so they are unknown and become the diffusion sampler's targets.
+PartialObject BottleBeforeAWall() {
+  PartialObject scene = MakePartialObject(Bottle(), 2500, 19);
+  TriangleMesh wall = MakeRectangle(0.6f, 0.5f, 6, 5);
+  for (auto& v : wall.vertices) v = Eigen::Vector3f(-0.12f, v.x(), v.y() + 0.25f);
+  std::mt19937_64 rng(3);
+  AppendSurfels(wall, 3000, Appearance{}, SurfelSampling{}, rng, &scene.cloud);
+  scene.labels.resize(scene.cloud.size(), 0);
+  return scene;
+}
+
 // The diffusion prior through a loopback Denoiser service (the analytic denoiser: it proves the
 // plumbing, not the images): it generates one image per unknown ring view, which the refinement
 // then fits; an unreachable or misbehaving denoiser fails the object with a message naming it.
@@ -252,16 +265,8 @@ TEST(Completion, DiffusionPriorThroughADenoiserService) {
   server_options.listen = "127.0.0.1:0";
   auto server = rpc::Server::Start(server_options, {&service}, {"instascene.v1.Denoiser"});
   ASSERT_TRUE(server.ok());
-  PartialObject scene = MakePartialObject(Bottle(), 2500, 19);
-  // A wall behind the bottle (x = -0.12): the ring views from that side see it occluded, so they
-  // are unknown and become the sampler's targets.
-  TriangleMesh wall = MakeRectangle(0.6f, 0.5f, 6, 5);
-  for (auto& v : wall.vertices) v = Eigen::Vector3f(-0.12f, v.x(), v.y() + 0.25f);
-  std::mt19937_64 rng(3);
-  const size_t before = scene.cloud.size();
-  AppendSurfels(wall, 3000, Appearance{}, SurfelSampling{}, rng, &scene.cloud);
-  scene.labels.resize(scene.cloud.size(), 0);
-  ASSERT_GT(scene.cloud.size(), before);
+  const PartialObject scene = BottleBeforeAWall();
+  ASSERT_GT(std::count(scene.labels.begin(), scene.labels.end(), 0), 0);  // the wall is there
   CompletionOptions options;
   options.meshing.size_px = 64;
   options.prior = "diffusion";
@@ -310,12 +315,7 @@ TEST(Completion, DiffusionReplacementScheduleAndWarpSpace) {
   server_options.listen = "127.0.0.1:0";
   auto server = rpc::Server::Start(server_options, {&service}, {"instascene.v1.Denoiser"});
   ASSERT_TRUE(server.ok());
-  PartialObject scene = MakePartialObject(Bottle(), 2500, 19);
-  TriangleMesh wall = MakeRectangle(0.6f, 0.5f, 6, 5);
-  for (auto& v : wall.vertices) v = Eigen::Vector3f(-0.12f, v.x(), v.y() + 0.25f);
-  std::mt19937_64 rng(3);
-  AppendSurfels(wall, 3000, Appearance{}, SurfelSampling{}, rng, &scene.cloud);
-  scene.labels.resize(scene.cloud.size(), 0);
+  const PartialObject scene = BottleBeforeAWall();
   CompletionOptions options;
   options.meshing.size_px = 64;
   options.prior = "diffusion";
