@@ -30,6 +30,7 @@ PACKAGES=(
   libpqxx-dev postgresql-15
   yamllint nodejs chromium
   zlib1g-dev libzstd-dev libpng-dev
+  python3-onnx
 )
 
 missing=()

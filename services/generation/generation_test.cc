@@ -296,9 +296,10 @@ TEST(Completion, DiffusionPriorThroughADenoiserService) {
   auto refused = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
   EXPECT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(refused.status().message().find("timestep"), std::string::npos) << refused.status();
-  options.denoiser = "onnx:model.json";
-  EXPECT_EQ(CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options).status().code(),
-            absl::StatusCode::kUnimplemented);
+  options.denoiser = "onnx:absent/model.json";
+  auto no_config = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
+  EXPECT_EQ(no_config.status().code(), absl::StatusCode::kNotFound);
+  EXPECT_NE(no_config.status().message().find("absent/model.json"), std::string::npos);
   (*server)->Drain(std::chrono::milliseconds(100));
   (*wrong_server)->Drain(std::chrono::milliseconds(100));
 }

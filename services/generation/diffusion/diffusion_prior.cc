@@ -12,6 +12,7 @@
 #include "common/rpc/server.h"
 #include "services/generation/diffusion/grpc_denoiser.h"
 #include "services/generation/diffusion/latent_codec.h"
+#include "services/generation/diffusion/onnx_denoiser.h"
 #include "services/generation/diffusion/warping.h"
 
 namespace instascene::generation::diffusion {
@@ -49,6 +50,43 @@ WarpResult EncodeWarp(const WarpResult& pixels, int width, int height, int n) {
   }
   return cells;
 }
+
+// The prior's denoiser with what a real model conditions on filled into each conditional query:
+// the condition view's clean latent and the target camera relative to the condition camera.
+class ConditionedDenoiser : public Denoiser {
+ public:
+  ConditionedDenoiser(const Denoiser& inner, const std::vector<std::vector<float>>& latents,
+                      const std::vector<PinholeCamera>& conditions,
+                      const std::vector<PinholeCamera>& targets)
+      : inner_(inner), latents_(latents), poses_(targets.size()) {
+    for (size_t t = 0; t < targets.size(); ++t) {
+      for (const PinholeCamera& c : conditions) {
+        const Rigid3d rel = targets[t].camera_from_world * c.camera_from_world.Inverse();
+        std::array<double, 16> m{};
+        for (int r = 0; r < 3; ++r) {
+          for (int k = 0; k < 3; ++k) m[4 * r + k] = rel.rotation(r, k);
+          m[4 * r + 3] = rel.translation[r];
+        }
+        m[15] = 1.0;
+        poses_[t].push_back(m);
+      }
+    }
+  }
+  absl::StatusOr<std::vector<float>> PredictNoise(const NoiseQuery& query) const override {
+    NoiseQuery q = query;
+    if (q.condition >= 0 && q.condition < static_cast<int>(latents_.size()) && q.target >= 0 &&
+        q.target < static_cast<int>(poses_.size())) {
+      q.condition_latent = &latents_[q.condition];
+      q.target_from_condition = &poses_[q.target][q.condition];
+    }
+    return inner_.PredictNoise(q);
+  }
+
+ private:
+  const Denoiser& inner_;
+  const std::vector<std::vector<float>>& latents_;
+  std::vector<std::vector<std::array<double, 16>>> poses_;
+};
 
 }  // namespace
 
@@ -144,8 +182,12 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
     }
     return absl::OkStatus();
   };
+  std::vector<PinholeCamera> condition_cameras;
+  for (const ViewImages& v : input.conditions) condition_cameras.push_back(v.camera);
+  const ConditionedDenoiser conditioned(*denoiser_, condition_latents, condition_cameras,
+                                        input.targets);
   absl::StatusOr<std::vector<std::vector<float>>> latents =
-      SampleDdim(*denoiser_, schedule, static_cast<int>(input.targets.size()), 3 * n * n,
+      SampleDdim(conditioned, schedule, static_cast<int>(input.targets.size()), 3 * n * n,
                  conditions, ddim, hook);
   if (!latents.ok()) {
     return absl::Status(latents.status().code(), absl::StrCat("diffusion prior (denoiser ", where_,
@@ -222,13 +264,25 @@ absl::StatusOr<std::unique_ptr<CompletionPrior>> MakeDiffusionPrior(
     auto client = std::make_shared<GrpcDenoiser>(rpc::Connect(address), address, options);
     return std::make_unique<DiffusionPrior>(client, denoiser, prior_options);
   }
-  if (absl::StartsWith(denoiser, "onnx:"))
-    return absl::UnimplementedError(
-        "--denoiser onnx:FILE.json: the ONNX runner is not built (OpenCV 4.6's ONNX importer "
-        "cannot run a timestep-indexed model; docs/GENERATION.md)");
-  return absl::InvalidArgumentError(absl::StrCat(
-      "the diffusion prior needs --denoiser grpc://HOST:PORT (a Denoiser service), not '",
-      denoiser.substr(0, 80), "'"));
+  if (absl::StartsWith(denoiser, "onnx:")) {
+    ASSIGN_OR_RETURN(OnnxDenoiserConfig config, ReadOnnxDenoiserConfig(denoiser.substr(5)));
+    const std::vector<int>& shape = config.latent_shape;
+    if (shape[0] != 3 || shape[1] != shape[2])
+      return absl::InvalidArgumentError(
+          absl::StrCat("ONNX denoiser ", config.name, ": latent_shape [", shape[0], ", ", shape[1],
+                       ", ", shape[2],
+                       "]; the diffusion prior's latents are [3, n, n] (the codec's channels on a "
+                       "square grid)"));
+    prior_options.latent_size = shape[1];
+    ASSIGN_OR_RETURN(std::unique_ptr<OnnxDenoiser> model,
+                     OnnxDenoiser::Load(std::move(config), NoiseSchedule::ScaledLinear()));
+    return std::make_unique<DiffusionPrior>(std::shared_ptr<const Denoiser>(std::move(model)),
+                                            denoiser, prior_options);
+  }
+  return absl::InvalidArgumentError(
+      absl::StrCat("the diffusion prior needs --denoiser grpc://HOST:PORT (a Denoiser service) or "
+                   "onnx:FILE.json (an ONNX model), not '",
+                   denoiser.substr(0, 80), "'"));
 }
 
 }  // namespace instascene::generation::diffusion

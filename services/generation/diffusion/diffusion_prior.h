@@ -8,7 +8,8 @@
 // latent_size² and mapped to [-1, 1]. The output is one
 // generated RGB image per target (and its mask: where the warped known latents or the sampled
 // ones say the object is not background white), which the joint refinement fits. No weights ship
-// with the project: the denoiser is a gRPC service (grpc://HOST:PORT). Thread-compatible.
+// with the project: the denoiser is a gRPC service (grpc://HOST:PORT) or an ONNX file a site
+// supplies (onnx:FILE.json). Thread-compatible.
 #pragma once
 
 #include <memory>
@@ -57,9 +58,10 @@ class DiffusionPrior : public CompletionPrior {
   DiffusionPriorOptions options_;
 };
 
-// The prior for a denoiser URI: "grpc://HOST:PORT" (the Denoiser service). "onnx:FILE.json" is
-// refused with Unimplemented (see docs/GENERATION.md); anything else with InvalidArgument, as are
-// settings out of range.
+// The prior for a denoiser URI: "grpc://HOST:PORT" (the Denoiser service) or "onnx:FILE.json"
+// (an ONNX model run by OpenCV, onnx_denoiser.h; its latent_shape [3, n, n] sets the latent grid;
+// loaded and probed here, so a broken model fails before any work). Anything else is
+// InvalidArgument, as are settings out of range.
 absl::StatusOr<std::unique_ptr<CompletionPrior>> MakeDiffusionPrior(
     const std::string& denoiser, const DiffusionSettings& settings = {});
 

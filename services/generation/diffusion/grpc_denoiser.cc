@@ -1,5 +1,6 @@
 #include "services/generation/diffusion/grpc_denoiser.h"
 
+#include <algorithm>
 #include <thread>
 
 #include "absl/strings/str_cat.h"
@@ -63,8 +64,17 @@ grpc::Status DenoiserService::PredictNoise(grpc::ServerContext*,
           absl::StrCat(where, ": timestep in [0, ", timesteps_,
                        "), condition >= -1, target_from_condition empty or 16 values")));
     const std::vector<float> latent(item.latent().values().begin(), item.latent().values().end());
-    absl::StatusOr<std::vector<float>> eps =
-        impl_->PredictNoise(NoiseQuery{&latent, item.timestep(), item.target(), item.condition()});
+    NoiseQuery query{&latent, item.timestep(), item.target(), item.condition()};
+    const std::vector<float> condition_latent(item.condition_latent().values().begin(),
+                                              item.condition_latent().values().end());
+    if (item.has_condition_latent()) query.condition_latent = &condition_latent;
+    std::array<double, 16> pose{};
+    if (item.target_from_condition_size() == 16) {
+      std::copy(item.target_from_condition().begin(), item.target_from_condition().end(),
+                pose.begin());
+      query.target_from_condition = &pose;
+    }
+    absl::StatusOr<std::vector<float>> eps = impl_->PredictNoise(query);
     if (!eps.ok()) return rpc::ToGrpcStatus(eps.status());
     v1::Latent* out = response->add_noise();
     *out->mutable_shape() = item.latent().shape();
@@ -101,16 +111,18 @@ absl::StatusOr<std::vector<float>> GrpcDenoiser::PredictNoise(const NoiseQuery& 
   item->set_timestep(q.timestep);
   item->set_target(q.target);
   item->set_condition(q.condition);
-  if (q.condition >= 0) {
-    if (q.condition < static_cast<int>(options_.condition_latents.size())) {
-      const std::vector<float>& c = options_.condition_latents[q.condition];
-      for (int d : options_.latent_shape) item->mutable_condition_latent()->add_shape(d);
-      item->mutable_condition_latent()->mutable_values()->Add(c.begin(), c.end());
-    }
-    if (options_.target_from_condition) {
-      const std::array<double, 16> pose = options_.target_from_condition(q.target, q.condition);
-      item->mutable_target_from_condition()->Add(pose.begin(), pose.end());
-    }
+  if (q.condition_latent != nullptr) {
+    if (static_cast<int64_t>(q.condition_latent->size()) != size)
+      return absl::InvalidArgumentError(
+          absl::StrCat("denoiser ", address_, ": a condition latent of ",
+                       q.condition_latent->size(), " values for a shape of ", size));
+    for (int d : options_.latent_shape) item->mutable_condition_latent()->add_shape(d);
+    item->mutable_condition_latent()->mutable_values()->Add(q.condition_latent->begin(),
+                                                            q.condition_latent->end());
+  }
+  if (q.target_from_condition != nullptr) {
+    item->mutable_target_from_condition()->Add(q.target_from_condition->begin(),
+                                               q.target_from_condition->end());
   }
   grpc::Status last;
   std::chrono::milliseconds backoff = options_.backoff;

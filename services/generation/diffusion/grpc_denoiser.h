@@ -3,12 +3,11 @@
 // analytic one); GrpcDenoiser is the client the sampler uses, with a deadline per call and retries
 // of UNAVAILABLE / DEADLINE_EXCEEDED with doubling backoff; an unreachable denoiser ends as
 // UNAVAILABLE naming its address (retryable: the job is tried again later). Sizes are bounded as
-// the proto says. Thread-safe.
+// the proto says. A query's condition latent and relative pose travel with it (the server hands
+// them to its model in the NoiseQuery). Thread-safe.
 #pragma once
 
-#include <array>
 #include <chrono>
-#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -20,7 +19,6 @@
 
 namespace instascene::generation::diffusion {
 
-inline constexpr int kMaxValuesPerLatent = 65536;
 inline constexpr int kMaxDenoiserItems = 64;
 
 class DenoiserService final : public v1::Denoiser::Service {
@@ -45,10 +43,6 @@ struct GrpcDenoiserOptions {
   std::chrono::milliseconds deadline{30000};  // per call
   int attempts = 3;                           // tries of a retryable failure
   std::chrono::milliseconds backoff{200};     // before the 2nd try, doubled after
-  // What the remote model needs besides the noisy latent (empty = nothing): the clean latent of
-  // each condition view, and the target camera relative to the condition camera (4x4 row-major).
-  std::vector<std::vector<float>> condition_latents;
-  std::function<std::array<double, 16>(int target, int condition)> target_from_condition;
 };
 
 class GrpcDenoiser : public Denoiser {

@@ -37,15 +37,7 @@ class LoopbackDenoiser : public ::testing::Test {
 };
 
 TEST_F(LoopbackDenoiser, GivesTheSamplesOfTheInProcessDenoiserBitForBit) {
-  GrpcDenoiserOptions o = ClientOptions();
-  o.condition_latents = {std::vector<float>(32, 0.5f), std::vector<float>(32, -0.5f)};
-  o.target_from_condition = [](int target, int condition) {
-    std::array<double, 16> m{};
-    for (int k = 0; k < 4; ++k) m[5 * k] = 1.0;
-    m[3] = target - condition;
-    return m;
-  };
-  GrpcDenoiser remote(channel_, server_->address(), o);
+  GrpcDenoiser remote(channel_, server_->address(), ClientOptions());
   DdimOptions options;
   options.steps = 10;
   options.guidance = 2.0;  // the unconditional prediction travels too
@@ -53,6 +45,45 @@ TEST_F(LoopbackDenoiser, GivesTheSamplesOfTheInProcessDenoiserBitForBit) {
   auto over_grpc = SampleDdim(remote, schedule_, 2, 32, {0, 1}, options);
   ASSERT_TRUE(local.ok() && over_grpc.ok()) << over_grpc.status();
   EXPECT_EQ(*local, *over_grpc);
+}
+
+// Records what reaches the model behind the service.
+class RecordingDenoiser : public Denoiser {
+ public:
+  absl::StatusOr<std::vector<float>> PredictNoise(const NoiseQuery& q) const override {
+    condition_latent = q.condition_latent ? *q.condition_latent : std::vector<float>{};
+    pose = q.target_from_condition ? std::vector<double>(q.target_from_condition->begin(),
+                                                         q.target_from_condition->end())
+                                   : std::vector<double>{};
+    return std::vector<float>(q.latent->size(), 0.0f);
+  }
+  mutable std::vector<float> condition_latent;
+  mutable std::vector<double> pose;
+};
+
+TEST(GrpcDenoiser, TheConditionLatentAndRelativePoseReachTheModel) {
+  RecordingDenoiser model;
+  DenoiserService service(&model, "recording", {2, 2}, 1000);
+  rpc::ServerOptions server_options;
+  server_options.listen = "127.0.0.1:0";
+  auto server = rpc::Server::Start(server_options, {&service}, {"instascene.v1.Denoiser"});
+  ASSERT_TRUE(server.ok()) << server.status();
+  GrpcDenoiserOptions o;
+  o.latent_shape = {2, 2};
+  GrpcDenoiser remote(rpc::Connect((*server)->address()), (*server)->address(), o);
+  const std::vector<float> latent(4, 0.0f), condition = {1, 2, 3, 4};
+  std::array<double, 16> pose{};
+  for (int k = 0; k < 16; ++k) pose[k] = k * 0.5;
+  NoiseQuery q{&latent, 10, 3, 1, &condition, &pose};
+  ASSERT_TRUE(remote.PredictNoise(q).ok());
+  EXPECT_EQ(model.condition_latent, condition);
+  EXPECT_EQ(model.pose, std::vector<double>(pose.begin(), pose.end()));
+  ASSERT_TRUE(remote.PredictNoise(NoiseQuery{&latent, 10, 3, -1}).ok());  // unconditional
+  EXPECT_TRUE(model.condition_latent.empty() && model.pose.empty());
+  const std::vector<float> short_condition(3, 0.0f);
+  q.condition_latent = &short_condition;
+  EXPECT_EQ(remote.PredictNoise(q).status().code(), absl::StatusCode::kInvalidArgument);
+  (*server)->Drain(std::chrono::milliseconds(100));
 }
 
 TEST_F(LoopbackDenoiser, RefusesOversizedAndMalformedRequests) {
