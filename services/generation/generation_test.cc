@@ -260,7 +260,7 @@ TEST(Completion, DiffusionPriorThroughADenoiserService) {
   const diffusion::NoiseSchedule schedule = diffusion::NoiseSchedule::ScaledLinear();
   std::vector<double> means(16, 0.2);  // one data mean per possible condition view
   diffusion::AnalyticDenoiser analytic(schedule, means, 0.0, 0.4);
-  diffusion::DenoiserService service(&analytic, "analytic-gaussian", {3, 32, 32}, 1000);
+  diffusion::DenoiserService service(&analytic, "analytic-gaussian", {4, 32, 32}, 1000);
   rpc::ServerOptions server_options;
   server_options.listen = "127.0.0.1:0";
   auto server = rpc::Server::Start(server_options, {&service}, {"instascene.v1.Denoiser"});
@@ -281,7 +281,43 @@ TEST(Completion, DiffusionPriorThroughADenoiserService) {
   for (const ViewImages& v : done->prior.generated) {
     EXPECT_EQ(v.rgb.size(), static_cast<size_t>(3) * v.camera.width * v.camera.height);
   }
-  EXPECT_GT(done->prior.report["warped_latent_pixels"].get<int64_t>(), 0);
+  const int64_t warped = done->prior.report["warped_latent_pixels"].get<int64_t>();
+  EXPECT_GT(warped, 0);
+  // Depth and mask come from the latent's depth channel: in every warped cell the decoded depth
+  // is the instance hit's along the latent grid's ray through the cell, exactly
+  // (replacement runs to the last step); masked pixels have a depth, others none.
+  auto mesh = RayCaster::Create(SurfelDiscs(done->raw, {}, SurfelDiscOptions{}));
+  ASSERT_TRUE(mesh.ok());
+  int64_t exact = 0, object_pixels = 0;
+  for (const ViewImages& v : done->prior.generated) {
+    const size_t pixels = static_cast<size_t>(v.camera.width) * v.camera.height;
+    ASSERT_EQ(v.depth.size(), pixels);
+    ASSERT_EQ(v.mask.size(), pixels);
+    for (size_t i = 0; i < pixels; ++i) {
+      EXPECT_EQ(v.mask[i] != 0, v.depth[i] > 0) << i;
+      object_pixels += v.mask[i];
+    }
+    const int n = 32, step = v.camera.width / n;
+    const PinholeCamera grid = v.camera.Scaled(static_cast<double>(n) / v.camera.width);
+    const Eigen::Vector3f eye = v.camera.CenterInWorld().cast<float>();
+    const Eigen::Vector3d axis = v.camera.camera_from_world.rotation.row(2).transpose();
+    for (int cy = 0; cy < n; ++cy) {
+      for (int cx = 0; cx < n; ++cx) {
+        const int x = cx * step + step / 2, y = cy * step + step / 2;
+        const Eigen::Vector3d dir = grid.PixelRayInWorld(cx, cy);
+        const RayHit hit = (*mesh)->Cast(eye, dir.cast<float>());
+        const size_t i = static_cast<size_t>(y) * v.camera.width + x;
+        exact += hit.hit && v.mask[i] && std::abs(v.depth[i] - hit.distance * dir.dot(axis)) < 1e-4;
+      }
+    }
+  }
+  EXPECT_GE(exact, warped);
+  EXPECT_EQ(done->prior.report["generated_object_pixels"].get<int64_t>(), object_pixels);
+  // The unseen-region estimate (7.8) pins what the real views saw empty to the background and
+  // leaves the rest (space behind the wall, the bottle's unseen side) to the sampler.
+  EXPECT_EQ(done->prior.report["unseen_mask"], true);
+  EXPECT_GT(done->prior.report["background_cells"].get<int64_t>(), 0);
+  EXPECT_GT(done->prior.report["generated_cells"].get<int64_t>(), 0);
   EXPECT_EQ(done->manifest["refinement"]["generated_from"], "the prior's images");
   EXPECT_EQ(done->object.size(), done->raw.size());  // this prior adds images, not surfels
 
@@ -289,7 +325,7 @@ TEST(Completion, DiffusionPriorThroughADenoiserService) {
   auto unreachable = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
   EXPECT_EQ(unreachable.status().code(), absl::StatusCode::kUnavailable);
   EXPECT_NE(unreachable.status().message().find("denoiser"), std::string::npos);
-  diffusion::DenoiserService wrong(&analytic, "analytic-gaussian", {3, 32, 32}, 10);
+  diffusion::DenoiserService wrong(&analytic, "analytic-gaussian", {4, 32, 32}, 10);
   auto wrong_server = rpc::Server::Start(server_options, {&wrong}, {"instascene.v1.Denoiser"});
   ASSERT_TRUE(wrong_server.ok());
   options.denoiser = "grpc://" + (*wrong_server)->address();  // refuses timesteps >= 10
@@ -311,7 +347,7 @@ TEST(Completion, DiffusionReplacementScheduleAndWarpSpace) {
   const diffusion::NoiseSchedule schedule = diffusion::NoiseSchedule::ScaledLinear();
   std::vector<double> means(16, 0.2);
   diffusion::AnalyticDenoiser analytic(schedule, means, 0.0, 0.4);
-  diffusion::DenoiserService service(&analytic, "analytic-gaussian", {3, 32, 32}, 1000);
+  diffusion::DenoiserService service(&analytic, "analytic-gaussian", {4, 32, 32}, 1000);
   rpc::ServerOptions server_options;
   server_options.listen = "127.0.0.1:0";
   auto server = rpc::Server::Start(server_options, {&service}, {"instascene.v1.Denoiser"});
@@ -342,7 +378,16 @@ TEST(Completion, DiffusionReplacementScheduleAndWarpSpace) {
   EXPECT_EQ(pixel->prior.report["warp"], "pixel");
   EXPECT_GT(pixel->prior.report["warped_latent_pixels"].get<int64_t>(), 0);
   EXPECT_EQ(pixel->prior.report["known_cells_drift"].get<double>(), 0.0);
-  // The codec (VAE) interface: every known view encoded once, every generated one decoded once.
+  options.diffusion.unseen_mask = false;  // every cell not known is generated
+  auto unmasked = run(1.0, "latent");
+  ASSERT_TRUE(unmasked.ok()) << unmasked.status();
+  EXPECT_EQ(unmasked->prior.report["unseen_mask"], false);
+  EXPECT_EQ(unmasked->prior.report["background_cells"].get<int64_t>(), 0);
+  EXPECT_GT(unmasked->prior.report["generated_cells"].get<int64_t>(),
+            every->prior.report["generated_cells"].get<int64_t>());
+  options.diffusion.unseen_mask = true;
+  // The codec (VAE) interface: every known view encoded once (and the white background once),
+  // every generated one decoded once.
   struct Counting : diffusion::LatentCodec {
     diffusion::IdentityCodec identity{32};
     mutable std::atomic<int> encoded{0}, decoded{0};
@@ -364,8 +409,8 @@ TEST(Completion, DiffusionReplacementScheduleAndWarpSpace) {
   auto coded = run(1.0, "latent");
   ASSERT_TRUE(coded.ok()) << coded.status();
   EXPECT_EQ(coded->prior.report["vae"], "counting identity");
-  EXPECT_EQ(counting->encoded.load(),
-            static_cast<int>(coded->ring.size()) - coded->manifest["unknown_views"].get<int>());
+  EXPECT_EQ(counting->encoded.load(), static_cast<int>(coded->ring.size()) + 1 -
+                                          coded->manifest["unknown_views"].get<int>());
   EXPECT_EQ(counting->decoded.load(), coded->manifest["unknown_views"].get<int>());
   options.diffusion.codec = std::make_shared<diffusion::IdentityCodec>(16);  // 3 x 16²: refused
   EXPECT_EQ(run(1.0, "latent").status().code(), absl::StatusCode::kInvalidArgument);

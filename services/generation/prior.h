@@ -64,6 +64,9 @@ struct DiffusionSettings {
   double replace_fraction = 1.0;  // replace known pixels during this share of the steps (from t=T)
   std::string warp = "latent";    // "latent": warp on the latent grid; "pixel": at the ring's
                                   // resolution, then encode (a cell is known by majority)
+  // Generate only inside the unseen-region estimate (ALGORITHM.md 7.8) or on the object; pixels
+  // that look through space real views saw empty are pinned to the background.
+  bool unseen_mask = true;
   // The image encoder / decoder around the denoiser (a site's VAE); null = the identity.
   std::shared_ptr<const diffusion::LatentCodec> codec;
 };

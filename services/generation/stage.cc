@@ -53,6 +53,7 @@ CompletionOptions ToCompletionOptions(const CompleteStageOptions& o) {
   options.refine_view_max_side = o.refine_view_size;
   options.diffusion.replace_fraction = o.diffusion_replace_fraction;
   options.diffusion.warp = o.diffusion_warp;
+  options.diffusion.unseen_mask = o.diffusion_unseen_mask;
   return options;
 }
 

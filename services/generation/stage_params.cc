@@ -37,6 +37,9 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
         .Choice("diffusion_warp", &O::diffusion_warp, {"latent", "pixel"},
                 "Diffusion prior: warp known views on the latent grid, or at the ring's "
                 "resolution and then encode (a latent cell is known where most of its pixels are)")
+        .Bool("diffusion_unseen_mask", &O::diffusion_unseen_mask,
+              "Diffusion prior: generate only where a target pixel looks at space no real view "
+              "saw (ALGORITHM.md 7.8) or at the object itself; elsewhere the view is background")
         .Int<uint64_t>("prior_seed", &O::seed, 0, int64_t{1} << 53,
                        "Random seed of the completion prior");
     return c;

@@ -28,6 +28,7 @@ struct CompleteStageOptions {
   int refine_view_size = 256;               // real views cropped and binned to at most this, px
   double diffusion_replace_fraction = 1.0;  // diffusion prior: steps that replace known pixels
   std::string diffusion_warp = "latent";    // diffusion prior: latent | pixel
+  bool diffusion_unseen_mask = true;        // diffusion prior: the 7.8 generation mask
   uint64_t seed = 1;
 };
 

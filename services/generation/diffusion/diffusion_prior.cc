@@ -13,6 +13,7 @@
 #include "services/generation/diffusion/grpc_denoiser.h"
 #include "services/generation/diffusion/latent_codec.h"
 #include "services/generation/diffusion/onnx_denoiser.h"
+#include "services/generation/diffusion/unseen_region.h"
 #include "services/generation/diffusion/warping.h"
 
 namespace instascene::generation::diffusion {
@@ -24,13 +25,15 @@ PinholeCamera LatentCamera(const PinholeCamera& c, int n) {
 }
 
 // A warp at image resolution brought to the n x n latent grid: a cell is known where more than
-// half of its pixels are, and takes the mean of those pixels (mapped to [-1, 1]).
+// half of its pixels are, and takes the mean of those pixels (colours mapped to [-1, 1]; depths
+// as they are).
 WarpResult EncodeWarp(const WarpResult& pixels, int width, int height, int n) {
   WarpResult cells;
   cells.values.assign(static_cast<size_t>(3) * n * n, 0.0f);
   cells.known.assign(static_cast<size_t>(n) * n, 0);
+  cells.depth.assign(static_cast<size_t>(n) * n, 0.0f);
   std::vector<int> total(static_cast<size_t>(n) * n, 0), known(total.size(), 0);
-  std::vector<double> sum(cells.values.size(), 0.0);
+  std::vector<double> sum(cells.values.size(), 0.0), depth(total.size(), 0.0);
   for (int y = 0; y < height; ++y) {
     for (int x = 0; x < width; ++x) {
       const size_t cell = static_cast<size_t>(y * n / height) * n + x * n / width;
@@ -38,6 +41,7 @@ WarpResult EncodeWarp(const WarpResult& pixels, int width, int height, int n) {
       ++total[cell];
       if (!pixels.known[i]) continue;
       ++known[cell];
+      depth[cell] += pixels.depth[i];
       for (int c = 0; c < 3; ++c) sum[cell * 3 + c] += pixels.values[i * 3 + c];
     }
   }
@@ -45,11 +49,72 @@ WarpResult EncodeWarp(const WarpResult& pixels, int width, int height, int n) {
     if (2 * known[cell] <= total[cell]) continue;
     cells.known[cell] = 1;
     ++cells.written;
+    cells.depth[cell] = static_cast<float>(depth[cell] / known[cell]);
     for (int c = 0; c < 3; ++c)
       cells.values[cell * 3 + c] = static_cast<float>(2.0 * sum[cell * 3 + c] / known[cell] - 1.0);
   }
   return cells;
 }
+
+// The depth channel's code (DiffusionPriorOptions): z relative to the object centre's depth in
+// units of the object's diameter, clamped to [-1, 1]; +1 is also the background.
+struct DepthCode {
+  double centre_z = 0, diameter = 1;
+  DepthCode(const PinholeCamera& camera, const ObjectFrame& frame)
+      : centre_z((camera.camera_from_world * frame.center.cast<double>()).z()),
+        diameter(std::max(2.0 * frame.radius, 1e-9)) {}
+  float Encode(double z) const {
+    return static_cast<float>(std::clamp((z - centre_z) / diameter, -1.0, 1.0));
+  }
+  double Decode(float code) const { return centre_z + diameter * code; }
+};
+
+// The depth channel of a known view: per cell, the mean code of its masked pixels where most are
+// masked, else the background.
+std::vector<float> DepthChannel(const ViewImages& v, const ObjectFrame& frame, int n) {
+  const DepthCode code(v.camera, frame);
+  const int w = v.camera.width, h = v.camera.height;
+  std::vector<double> sum(static_cast<size_t>(n) * n, 0.0);
+  std::vector<int> total(sum.size(), 0), masked(sum.size(), 0);
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const size_t cell = static_cast<size_t>(y * n / h) * n + x * n / w;
+      const size_t i = static_cast<size_t>(y) * w + x;
+      ++total[cell];
+      if (i >= v.mask.size() || !v.mask[i] || i >= v.depth.size() || !(v.depth[i] > 0)) continue;
+      ++masked[cell];
+      sum[cell] += code.Encode(v.depth[i]);
+    }
+  }
+  std::vector<float> out(sum.size(), kBackgroundDepthCode);
+  for (size_t cell = 0; cell < out.size(); ++cell) {
+    if (2 * masked[cell] > total[cell]) out[cell] = static_cast<float>(sum[cell] / masked[cell]);
+  }
+  return out;
+}
+
+// z of the first instance hit of every pixel of `camera` (0 = miss).
+std::vector<float> InstanceDepth(const RayCaster& mesh, const PinholeCamera& camera) {
+  std::vector<float> depth(static_cast<size_t>(camera.width) * camera.height, 0.0f);
+  const Eigen::Vector3f eye = camera.CenterInWorld().cast<float>();
+  const Eigen::Vector3f axis = camera.camera_from_world.rotation.row(2).transpose().cast<float>();
+  for (int row = 0; row < camera.height; ++row) {
+    for (int col = 0; col < camera.width; ++col) {
+      const Eigen::Vector3f dir = camera.PixelRayInWorld(col, row).cast<float>();
+      const RayHit hit = mesh.Cast(eye, dir);
+      if (hit.hit) depth[static_cast<size_t>(row) * camera.width + col] = hit.distance * dir.dot(axis);
+    }
+  }
+  return depth;
+}
+
+// What the sampler is told about one target's latent cells: the warped known content (colour
+// latent and depth code) and the cells pinned to the background.
+struct TargetPlan {
+  WarpResult warp;                  // on the latent grid
+  std::vector<uint8_t> background;  // n x n
+  int64_t generated = 0;            // cells neither known nor background
+};
 
 // The prior's denoiser with what a real model conditions on filled into each conditional query:
 // the condition view's clean latent and the target camera relative to the condition camera.
@@ -105,37 +170,45 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
     out.report = {{"denoiser", where_}};
     return out;
   }
-  const int n = options_.latent_size;
+  const int n = options_.latent_size, cells = n * n;
   const std::shared_ptr<const LatentCodec> codec =
       options_.codec ? options_.codec : std::make_shared<IdentityCodec>(n);
-  if (codec->latent_values() != 3 * n * n)
+  if (codec->latent_values() != 3 * cells)
     return absl::InvalidArgumentError(absl::StrCat("diffusion prior: the codec ", codec->name(),
                                                    " makes latents of ", codec->latent_values(),
                                                    " values; the warping needs 3 x ", n, " x ", n));
-  // Known views on the latent grid, and the mesh the warping casts against.
+  const int latent_values = 4 * cells;  // colour latent + depth channel
+  // Known views: their latents (colour + depth, what the denoiser conditions on), and what the
+  // warper copies (the colour latent on the latent grid, or the image itself).
   const bool pixel_warp = options_.warp == "pixel";
   std::vector<KnownView> known;
   std::vector<std::vector<float>> condition_latents;
   for (const ViewImages& v : input.conditions) {
     ASSIGN_OR_RETURN(std::vector<float> latent,
                      codec->Encode(v.rgb, v.camera.width, v.camera.height));
+    if (pixel_warp) {
+      known.push_back(KnownView{v.camera, v.rgb});  // [0, 1], HxWx3
+    } else {
+      KnownView k{LatentCamera(v.camera, n), std::vector<float>(static_cast<size_t>(3) * cells)};
+      for (int c = 0; c < 3; ++c) {
+        for (int cell = 0; cell < cells; ++cell) k.values[cell * 3 + c] = latent[c * cells + cell];
+      }
+      known.push_back(std::move(k));
+    }
+    const std::vector<float> depth = DepthChannel(v, input.frame, n);
+    latent.insert(latent.end(), depth.begin(), depth.end());
     condition_latents.push_back(std::move(latent));
-    if (pixel_warp) {  // the image itself, [0, 1], HxWx3
-      known.push_back(KnownView{v.camera, v.rgb});
-      continue;
-    }
-    // Warping copies latent values: store them HxWxC for the warper.
-    KnownView k{LatentCamera(v.camera, n), std::vector<float>(static_cast<size_t>(3) * n * n)};
-    for (int c = 0; c < 3; ++c) {
-      for (int cell = 0; cell < n * n; ++cell)
-        k.values[cell * 3 + c] = condition_latents.back()[c * n * n + cell];
-    }
-    known.push_back(std::move(k));
   }
+  ASSIGN_OR_RETURN(const std::vector<float> background_latent,
+                   codec->Encode(std::vector<float>(static_cast<size_t>(3) * input.targets[0].width *
+                                                        input.targets[0].height,
+                                                    1.0f),
+                                 input.targets[0].width, input.targets[0].height));
   ASSIGN_OR_RETURN(std::unique_ptr<RayCaster> mesh,
                    RayCaster::Create(SurfelDiscs(*input.instance, {}, SurfelDiscOptions{})));
-  std::vector<WarpResult> warped;
-  int64_t warped_pixels = 0;
+  const bool unseen_mask = options_.unseen_mask && input.free_space != nullptr;
+  std::vector<TargetPlan> plans;
+  int64_t warped_cells = 0, background_cells = 0, generated_cells = 0;
   for (const PinholeCamera& target : input.targets) {
     // Nearest known views first (by the angle between viewing directions).
     std::vector<KnownView> order = known;
@@ -144,12 +217,26 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
       return a.camera.camera_from_world.rotation.row(2).dot(dir_t.transpose()) >
              b.camera.camera_from_world.rotation.row(2).dot(dir_t.transpose());
     });
-    ASSIGN_OR_RETURN(
-        WarpResult w,
-        WarpIntoTarget(*mesh, order, pixel_warp ? target : LatentCamera(target, n), WarpOptions{}));
-    if (pixel_warp) w = EncodeWarp(w, target.width, target.height, n);
-    warped_pixels += w.written;
-    warped.push_back(std::move(w));
+    const PinholeCamera grid = LatentCamera(target, n);
+    TargetPlan plan;
+    ASSIGN_OR_RETURN(plan.warp,
+                     WarpIntoTarget(*mesh, order, pixel_warp ? target : grid, WarpOptions{}));
+    if (pixel_warp) plan.warp = EncodeWarp(plan.warp, target.width, target.height, n);
+    const std::vector<float> hits = InstanceDepth(*mesh, grid);
+    plan.background.assign(cells, 0);
+    if (unseen_mask) {
+      const std::vector<uint8_t> unseen =
+          UnseenRegion(*input.free_space, input.frame, grid, hits, target.width);
+      for (int cell = 0; cell < cells; ++cell)
+        plan.background[cell] = !plan.warp.known[cell] && !unseen[cell] && !(hits[cell] > 0);
+    }
+    for (int cell = 0; cell < cells; ++cell) {
+      background_cells += plan.background[cell];
+      plan.generated += !plan.warp.known[cell] && !plan.background[cell];
+    }
+    warped_cells += plan.warp.written;
+    generated_cells += plan.generated;
+    plans.push_back(std::move(plan));
   }
   RETURN_IF_ERROR(CheckCancelled(input.cancel, "diffusion prior"));
   const NoiseSchedule schedule = NoiseSchedule::ScaledLinear();
@@ -158,11 +245,26 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   ddim.seed = input.seed;
   std::vector<int> conditions(input.conditions.size());
   for (size_t k = 0; k < conditions.size(); ++k) conditions[k] = static_cast<int>(k);
+  // The clean value of every pinned channel of a cell (colour latent, then depth code), or false
+  // when the sampler generates the cell.
+  auto pinned = [&](size_t t, int cell, float* x0) {
+    const TargetPlan& plan = plans[t];
+    if (plan.warp.known[cell]) {
+      for (int c = 0; c < 3; ++c) x0[c] = plan.warp.values[cell * 3 + c];
+      x0[3] = DepthCode(LatentCamera(input.targets[t], n), input.frame)
+                  .Encode(plan.warp.depth[cell]);
+      return true;
+    }
+    if (!plan.background[cell]) return false;
+    for (int c = 0; c < 3; ++c) x0[c] = background_latent[c * cells + cell];
+    x0[3] = kBackgroundDepthCode;
+    return true;
+  };
   std::mt19937_64 replace_rng(input.seed ^ 0x5eedULL);
   std::normal_distribution<double> normal(0.0, 1.0);
-  // RePaint: after each step, pixels a known view sees take the known latent noised to the
-  // level the latents are now at (clean after the last step).
-  // Replacement during the first replace_fraction of the steps (from the noisiest).
+  // RePaint: after each step of the first replace_fraction of the steps (from the noisiest),
+  // pinned cells take their clean value noised to the level the latents are now at (clean after
+  // the last step).
   const int replace_steps =
       static_cast<int>(std::ceil(options_.replace_fraction * ddim.steps - 1e-9));
   StepHook hook = [&](int step, int timestep,
@@ -171,12 +273,12 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
     if (!options_.replace_known || step >= replace_steps) return absl::OkStatus();
     const double a = timestep < 0 ? 1.0 : schedule.alphas_cumprod[timestep];
     for (size_t t = 0; t < latents->size(); ++t) {
-      for (int cell = 0; cell < n * n; ++cell) {
-        if (!warped[t].known[cell]) continue;
-        for (int c = 0; c < 3; ++c) {
-          const double x0 = warped[t].values[cell * 3 + c];
-          (*latents)[t][c * n * n + cell] =
-              static_cast<float>(std::sqrt(a) * x0 + std::sqrt(1.0 - a) * normal(replace_rng));
+      for (int cell = 0; cell < cells; ++cell) {
+        float x0[4];
+        if (!pinned(t, cell, x0)) continue;
+        for (int c = 0; c < 4; ++c) {
+          (*latents)[t][c * cells + cell] =
+              static_cast<float>(std::sqrt(a) * x0[c] + std::sqrt(1.0 - a) * normal(replace_rng));
         }
       }
     }
@@ -187,43 +289,51 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   const ConditionedDenoiser conditioned(*denoiser_, condition_latents, condition_cameras,
                                         input.targets);
   absl::StatusOr<std::vector<std::vector<float>>> latents =
-      SampleDdim(conditioned, schedule, static_cast<int>(input.targets.size()), 3 * n * n,
+      SampleDdim(conditioned, schedule, static_cast<int>(input.targets.size()), latent_values,
                  conditions, ddim, hook);
   if (!latents.ok()) {
     return absl::Status(latents.status().code(), absl::StrCat("diffusion prior (denoiser ", where_,
                                                               "): ", latents.status().message()));
   }
   // How far the samples ended from the warped known content in the cells a known view sees (0
-  // when replacement runs to the last step).
+  // when replacement runs to the last step), over the colour and depth channels.
   double drift = 0;
   int64_t known_cells = 0;
-  for (size_t t = 0; t < warped.size(); ++t) {
-    for (int cell = 0; cell < n * n; ++cell) {
-      if (!warped[t].known[cell]) continue;
+  for (size_t t = 0; t < plans.size(); ++t) {
+    for (int cell = 0; cell < cells; ++cell) {
+      float x0[4];
+      if (!plans[t].warp.known[cell] || !pinned(t, cell, x0)) continue;
       ++known_cells;
-      for (int c = 0; c < 3; ++c)
-        drift += std::abs((*latents)[t][c * n * n + cell] - warped[t].values[cell * 3 + c]) / 3;
+      for (int c = 0; c < 4; ++c) drift += std::abs((*latents)[t][c * cells + cell] - x0[c]) / 4;
     }
   }
-  // Decode each target; the mask is where the image is not the ring's white background.
+  // Decode each target: colour through the codec; depth and mask from the depth channel.
+  int64_t object_pixels = 0;
   for (size_t t = 0; t < input.targets.size(); ++t) {
     const PinholeCamera& cam = input.targets[t];
     ViewImages v;
     v.camera = cam;
     const size_t pixels = static_cast<size_t>(cam.width) * cam.height;
-    ASSIGN_OR_RETURN(v.rgb, codec->Decode((*latents)[t], cam.width, cam.height));
+    const std::vector<float> colour((*latents)[t].begin(), (*latents)[t].begin() + 3 * cells);
+    ASSIGN_OR_RETURN(v.rgb, codec->Decode(colour, cam.width, cam.height));
     if (v.rgb.size() != 3 * pixels)
       return absl::InternalError(absl::StrCat("diffusion prior: the codec ", codec->name(),
                                               " decoded ", v.rgb.size(), " values for ", cam.width,
                                               "x", cam.height, "x3"));
+    const DepthCode code(cam, input.frame);
     v.alpha.assign(pixels, 0.0f);
     v.mask.assign(pixels, 0);
     v.depth.assign(pixels, 0.0f);
-    for (size_t i = 0; i < pixels; ++i) {
-      const bool white =
-          v.rgb[3 * i] > 0.98f && v.rgb[3 * i + 1] > 0.98f && v.rgb[3 * i + 2] > 0.98f;
-      v.mask[i] = !white;
-      v.alpha[i] = v.mask[i] ? 1.0f : 0.0f;
+    for (int y = 0; y < cam.height; ++y) {
+      for (int x = 0; x < cam.width; ++x) {
+        const size_t i = static_cast<size_t>(y) * cam.width + x;
+        const float d = (*latents)[t][3 * cells + (y * n / cam.height) * n + x * n / cam.width];
+        if (!(d < kSurfaceDepthCode)) continue;
+        v.mask[i] = 1;
+        v.alpha[i] = 1.0f;
+        v.depth[i] = static_cast<float>(std::max(code.Decode(d), 1e-6));
+        ++object_pixels;
+      }
     }
     out.generated.push_back(std::move(v));
   }
@@ -231,13 +341,18 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
                             input.conditions.size(), " known ones");
   out.report = {{"denoiser", where_},
                 {"latent_size", n},
+                {"latent_shape", {4, n, n}},
                 {"steps", ddim.steps},
                 {"eta", ddim.eta},
                 {"guidance", ddim.guidance},
                 {"replace_known", options_.replace_known},
                 {"replace_fraction", options_.replace_fraction},
                 {"warp", options_.warp},
-                {"warped_latent_pixels", warped_pixels},  // latent cells known, all targets
+                {"unseen_mask", unseen_mask},
+                {"warped_latent_pixels", warped_cells},  // latent cells known, all targets
+                {"background_cells", background_cells},  // pinned to the background
+                {"generated_cells", generated_cells},     // left to the sampler
+                {"generated_object_pixels", object_pixels},
                 {"known_cells_drift", known_cells ? drift / known_cells : 0.0},
                 {"vae", codec->name()}};
   return out;
@@ -254,12 +369,13 @@ absl::StatusOr<std::unique_ptr<CompletionPrior>> MakeDiffusionPrior(
   prior_options.replace_fraction = settings.replace_fraction;
   prior_options.warp = settings.warp;
   prior_options.codec = settings.codec;
+  prior_options.unseen_mask = settings.unseen_mask;
   if (absl::StartsWith(denoiser, "grpc://")) {
     const std::string address = denoiser.substr(7);
     if (address.empty())
       return absl::InvalidArgumentError("--denoiser grpc://HOST:PORT: no address");
     GrpcDenoiserOptions options;
-    options.latent_shape = {3, DiffusionPriorOptions{}.latent_size,
+    options.latent_shape = {4, DiffusionPriorOptions{}.latent_size,
                             DiffusionPriorOptions{}.latent_size};
     auto client = std::make_shared<GrpcDenoiser>(rpc::Connect(address), address, options);
     return std::make_unique<DiffusionPrior>(client, denoiser, prior_options);

@@ -5,9 +5,9 @@
 // replaced at every step by the known latent noised to the step's level (RePaint-style); the
 // DDIM sampler averages the denoiser's noise over the conditions (Eq. 9). The VAE is an interface
 // (latent_codec.h), the identity by default: a latent is the RGB image area-averaged to
-// latent_size² and mapped to [-1, 1]. The output is one
-// generated RGB image per target (and its mask: where the warped known latents or the sampled
-// ones say the object is not background white), which the joint refinement fits. No weights ship
+// latent_size² and mapped to [-1, 1]; a depth channel travels with it (below). The output is
+// one generated view per target: RGB, depth and mask (from the depth channel), which the joint
+// refinement fits. No weights ship
 // with the project: the denoiser is a gRPC service (grpc://HOST:PORT) or an ONNX file a site
 // supplies (onnx:FILE.json). Thread-compatible.
 #pragma once
@@ -32,6 +32,15 @@ namespace instascene::generation::diffusion {
 //   paper's wording "move the known-view latents"); "pixel" warps the known images at the ring's
 //   resolution and encodes the result (a latent cell is known where most of its pixels are, and
 //   takes the mean of those): finer visibility and culling at 64x the rays. Default "latent".
+// The denoiser's latent is the codec's 3 x n x n colour latent followed by one n x n depth
+// channel (MVD-Fusion's latent is likewise 4 VAE channels + depth): z in the view's camera
+// relative to the object centre's depth, in object diameters, clamped to [-1, 1]; background
+// cells are +1. Known views give it from their rendered depth, warped cells from the instance hit
+// in the target, generated cells from the sampler. A decoded pixel whose code is below
+// kSurfaceDepthCode is the object: mask 1, depth decoded; else background (mask 0, depth 0).
+inline constexpr float kBackgroundDepthCode = 1.0f;
+inline constexpr float kSurfaceDepthCode = 0.75f;
+
 struct DiffusionPriorOptions {
   int latent_size = 32;           // latent grid per side (MVD-Fusion: 32 for 256² views)
   DdimOptions ddim;               // 50 steps, eta 1
@@ -39,6 +48,10 @@ struct DiffusionPriorOptions {
   bool replace_known = true;      // RePaint-style replacement of warped known pixels
   double replace_fraction = 1.0;  // ... during this share of the steps (from t = T)
   std::string warp = "latent";    // latent | pixel
+  // ALGORITHM.md 7.8 as the generation mask (unseen_region.h): cells whose ray meets neither the
+  // object nor space no real view saw are pinned to the background like known cells are pinned
+  // to their content. Needs PriorInput::free_space (off without it).
+  bool unseen_mask = true;
   // The image encoder / decoder around the denoiser; null = IdentityCodec(latent_size). Its
   // latents must be 3 x latent_size² (the warping moves them spatially).
   std::shared_ptr<const LatentCodec> codec;

@@ -44,6 +44,8 @@ absl::StatusOr<WarpResult> WarpIntoTarget(const RayCaster& mesh,
   WarpResult out;
   out.values.assign(static_cast<size_t>(w) * h * channels, 0.0f);
   out.known.assign(static_cast<size_t>(w) * h, 0);
+  out.depth.assign(static_cast<size_t>(w) * h, 0.0f);
+  const Eigen::Vector3f axis = target.camera_from_world.rotation.row(2).transpose().cast<float>();
   std::vector<uint8_t> fate(static_cast<size_t>(w) * h, 0);  // 0 missed, 1 back, 2 unseen, 3 ok
   const Eigen::Vector3f eye = target.CenterInWorld().cast<float>();
   tbb::parallel_for(0, h, [&](int row) {
@@ -52,6 +54,7 @@ absl::StatusOr<WarpResult> WarpIntoTarget(const RayCaster& mesh,
       const Eigen::Vector3f dir = target.PixelRayInWorld(col, row).cast<float>();
       const RayHit hit = mesh.Cast(eye, dir);
       if (!hit.hit) continue;
+      out.depth[i] = hit.distance * dir.dot(axis);
       if (!(hit.normal.dot(-dir) > 0.0f)) {
         fate[i] = 1;
         continue;

@@ -37,6 +37,9 @@ struct WarpOptions {
 struct WarpResult {
   std::vector<float> values;   // HxWxC of the target, 0 where unwritten
   std::vector<uint8_t> known;  // HxW: 1 where a known view wrote the pixel
+  // HxW: depth (z in the target camera) of the ray's first hit on the instance mesh, front- or
+  // back-facing, written or not; 0 where the ray misses the mesh.
+  std::vector<float> depth;
   int64_t written = 0, missed = 0, back_facing = 0, unseen = 0;  // pixel counts
 };
 

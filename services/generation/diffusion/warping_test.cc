@@ -54,7 +54,7 @@ TEST(Warping, AKnownViewWarpedIntoATargetReproducesItsDirectRender) {
   int64_t n = 0;
   const Eigen::Vector3f known_eye = known.CenterInWorld().cast<float>();
   const Eigen::Vector3f target_eye = target.CenterInWorld().cast<float>();
-  int64_t written_facing_away = 0;
+  int64_t written_facing_away = 0, off_sphere = 0;
   for (int row = 0; row < target.height; ++row) {
     for (int col = 0; col < target.width; ++col) {
       const size_t i = static_cast<size_t>(row) * target.width + col;
@@ -68,6 +68,11 @@ TEST(Warping, AKnownViewWarpedIntoATargetReproducesItsDirectRender) {
       const Eigen::Vector3f dir = target.PixelRayInWorld(col, row).cast<float>();
       const Eigen::Vector3f x = target_eye + (*mesh)->Cast(target_eye, dir).distance * dir;
       written_facing_away += (x - centre.cast<float>()).dot(known_eye - x) < -1e-3f;
+      // The hit depth (z in the target camera) puts the point on the sphere.
+      const Eigen::Vector3f axis =
+          target.camera_from_world.rotation.row(2).transpose().cast<float>();
+      const Eigen::Vector3f from_depth = target_eye + warped->depth[i] / dir.dot(axis) * dir;
+      off_sphere += std::abs((from_depth - centre.cast<float>()).norm() - 0.3f) > 2e-3f;
     }
   }
   const double psnr = 10 * std::log10(1.0 / (se / n));
@@ -79,6 +84,7 @@ TEST(Warping, AKnownViewWarpedIntoATargetReproducesItsDirectRender) {
   EXPECT_GT(warped->written, 2000);
   EXPECT_GT(warped->unseen, 200);  // the part of the sphere only the target sees
   EXPECT_EQ(written_facing_away, 0);
+  EXPECT_EQ(off_sphere, 0);
 }
 
 TEST(Warping, WritesNothingOnBackFacesOrWhereTheKnownViewIsBlocked) {
