@@ -42,10 +42,9 @@ void AddCompleteCommand(CLI::App& app, Action* action) {
   cmd->add_option("--out", args->out, "Output directory (one <id>/ folder per object)")->required();
   cmd->add_option("--object", args->objects, "Instance ids to complete (default: all)");
   args->flags.Add(cmd, generation::CompleteSpec());
-  cmd->add_option(
-      "--denoiser", args->denoiser,
-      "--prior diffusion: the Denoiser service, grpc://HOST:PORT (no model weights ship "
-      "with InstaScene; docs/GENERATION.md)");
+  cmd->add_option("--denoiser", args->denoiser,
+                  "--prior diffusion: the Denoiser service, grpc://HOST:PORT, or an ONNX model, "
+                  "onnx:FILE.json (no model weights ship with InstaScene; docs/GENERATION.md)");
   cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");
   cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
   cmd->callback([args, action] {

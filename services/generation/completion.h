@@ -38,8 +38,8 @@ using ViewImageLoader = std::function<absl::StatusOr<Image>(int view)>;
 
 struct CompletionOptions {
   std::string prior = "geometric";  // geometric | none | diffusion
-  std::string denoiser;             // the diffusion prior's Denoiser service: grpc://HOST:PORT
-  DiffusionSettings diffusion;      // the diffusion prior's replacement schedule and warp space
+  std::string denoiser;  // the diffusion prior's denoiser: grpc://HOST:PORT or onnx:FILE.json
+  DiffusionSettings diffusion;  // the diffusion prior's replacement schedule and warp space
   RingOptions ring;
   VisibilityOptions visibility;
   FreeSpaceOptions free_space;

@@ -409,8 +409,8 @@ TEST(Completion, DiffusionReplacementScheduleAndWarpSpace) {
   auto coded = run(1.0, "latent");
   ASSERT_TRUE(coded.ok()) << coded.status();
   EXPECT_EQ(coded->prior.report["vae"], "counting identity");
-  EXPECT_EQ(counting->encoded.load(), static_cast<int>(coded->ring.size()) + 1 -
-                                          coded->manifest["unknown_views"].get<int>());
+  EXPECT_EQ(counting->encoded.load(),
+            static_cast<int>(coded->ring.size()) + 1 - coded->manifest["unknown_views"].get<int>());
   EXPECT_EQ(counting->decoded.load(), coded->manifest["unknown_views"].get<int>());
   options.diffusion.codec = std::make_shared<diffusion::IdentityCodec>(16);  // 3 x 16²: refused
   EXPECT_EQ(run(1.0, "latent").status().code(), absl::StatusCode::kInvalidArgument);

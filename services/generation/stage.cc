@@ -64,8 +64,8 @@ absl::StatusOr<pipeline::StageResult> RunComplete(const pipeline::StageContext& 
   auto denoiser = c.settings.find("denoiser");
   if (o.prior == "diffusion" && denoiser == c.settings.end()) {
     return absl::FailedPreconditionError(
-        "prior diffusion: this worker has no Denoiser service (start it with --denoiser "
-        "grpc://HOST:PORT)");
+        "prior diffusion: this worker has no denoiser (start it with --denoiser "
+        "grpc://HOST:PORT or onnx:FILE.json)");
   }
   ASSIGN_OR_RETURN(std::string segment, c.Input("segment"));
   ASSIGN_OR_RETURN(uint32_t id, InstanceOfItem(segment, c.item));

@@ -57,8 +57,8 @@ struct NodeOptions {
   // node's services (in-process channel).
   std::string gateway_listen;
   std::string web_root;  // the gateway's web UI bundle ("" = beside the binary, "none" = no UI)
-  // Generation workers: the diffusion prior's Denoiser service (grpc://HOST:PORT; "" = none, and
-  // complete jobs asking for prior "diffusion" fail).
+  // Generation workers: the diffusion prior's denoiser (grpc://HOST:PORT or onnx:FILE.json; "" =
+  // none, and complete jobs asking for prior "diffusion" fail).
   std::string denoiser;
   // Workers: the most one job may allocate; a larger estimate fails the job before it runs
   // (RESOURCE_EXHAUSTED). 0 = the machine's physical memory; -1 = no limit.

@@ -59,7 +59,8 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
                  "Write the bound address here once serving (removed at exit); with --metrics a "
                  "second line metrics=HOST:PORT");
   app.add_option("--denoiser", o->denoiser,
-                 "Generation workers: the diffusion prior's Denoiser service, grpc://HOST:PORT "
+                 "Generation workers: the diffusion prior's denoiser, grpc://HOST:PORT (a "
+                 "Denoiser service) or onnx:FILE.json (a model file run in the worker) "
                  "(default: none; complete jobs with prior diffusion then fail)");
   app.add_option("--gateway", o->gateway_listen,
                  "Serve the HTTP/JSON gateway (/api/v1, Server-Sent Events) at HOST:PORT in front "

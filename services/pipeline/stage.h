@@ -38,7 +38,8 @@ struct StageContext {
   std::function<void(const StageProgress&)> progress;    // may be null
   const CancelFlag* cancel = nullptr;                    // not owned
   // The worker's deployment settings a stage may need (not job parameters: a client cannot set
-  // them). Keys in use: "denoiser" (complete: the diffusion prior's Denoiser, grpc://HOST:PORT).
+  // them). Keys in use: "denoiser" (complete: the diffusion prior's denoiser, grpc://HOST:PORT or
+  // onnx:FILE.json).
   std::map<std::string, std::string> settings;
   // The most this job may allocate (bytes; 0 = no limit): a stage whose estimate is larger is
   // refused with RESOURCE_EXHAUSTED before it runs (services/pipeline/memory.h).

@@ -102,7 +102,8 @@ std::vector<float> InstanceDepth(const RayCaster& mesh, const PinholeCamera& cam
     for (int col = 0; col < camera.width; ++col) {
       const Eigen::Vector3f dir = camera.PixelRayInWorld(col, row).cast<float>();
       const RayHit hit = mesh.Cast(eye, dir);
-      if (hit.hit) depth[static_cast<size_t>(row) * camera.width + col] = hit.distance * dir.dot(axis);
+      if (hit.hit)
+        depth[static_cast<size_t>(row) * camera.width + col] = hit.distance * dir.dot(axis);
     }
   }
   return depth;
@@ -199,11 +200,12 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
     latent.insert(latent.end(), depth.begin(), depth.end());
     condition_latents.push_back(std::move(latent));
   }
-  ASSIGN_OR_RETURN(const std::vector<float> background_latent,
-                   codec->Encode(std::vector<float>(static_cast<size_t>(3) * input.targets[0].width *
-                                                        input.targets[0].height,
-                                                    1.0f),
-                                 input.targets[0].width, input.targets[0].height));
+  ASSIGN_OR_RETURN(
+      const std::vector<float> background_latent,
+      codec->Encode(
+          std::vector<float>(
+              static_cast<size_t>(3) * input.targets[0].width * input.targets[0].height, 1.0f),
+          input.targets[0].width, input.targets[0].height));
   ASSIGN_OR_RETURN(std::unique_ptr<RayCaster> mesh,
                    RayCaster::Create(SurfelDiscs(*input.instance, {}, SurfelDiscOptions{})));
   const bool unseen_mask = options_.unseen_mask && input.free_space != nullptr;
@@ -251,8 +253,8 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
     const TargetPlan& plan = plans[t];
     if (plan.warp.known[cell]) {
       for (int c = 0; c < 3; ++c) x0[c] = plan.warp.values[cell * 3 + c];
-      x0[3] = DepthCode(LatentCamera(input.targets[t], n), input.frame)
-                  .Encode(plan.warp.depth[cell]);
+      x0[3] =
+          DepthCode(LatentCamera(input.targets[t], n), input.frame).Encode(plan.warp.depth[cell]);
       return true;
     }
     if (!plan.background[cell]) return false;
@@ -351,7 +353,7 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
                 {"unseen_mask", unseen_mask},
                 {"warped_latent_pixels", warped_cells},  // latent cells known, all targets
                 {"background_cells", background_cells},  // pinned to the background
-                {"generated_cells", generated_cells},     // left to the sampler
+                {"generated_cells", generated_cells},    // left to the sampler
                 {"generated_object_pixels", object_pixels},
                 {"known_cells_drift", known_cells ? drift / known_cells : 0.0},
                 {"vae", codec->name()}};
@@ -383,12 +385,12 @@ absl::StatusOr<std::unique_ptr<CompletionPrior>> MakeDiffusionPrior(
   if (absl::StartsWith(denoiser, "onnx:")) {
     ASSIGN_OR_RETURN(OnnxDenoiserConfig config, ReadOnnxDenoiserConfig(denoiser.substr(5)));
     const std::vector<int>& shape = config.latent_shape;
-    if (shape[0] != 3 || shape[1] != shape[2])
+    if (shape[0] != 4 || shape[1] != shape[2])
       return absl::InvalidArgumentError(
           absl::StrCat("ONNX denoiser ", config.name, ": latent_shape [", shape[0], ", ", shape[1],
                        ", ", shape[2],
-                       "]; the diffusion prior's latents are [3, n, n] (the codec's channels on a "
-                       "square grid)"));
+                       "]; the diffusion prior's latents are [4, n, n] (3 colour channels and a "
+                       "depth channel on a square grid)"));
     prior_options.latent_size = shape[1];
     ASSIGN_OR_RETURN(std::unique_ptr<OnnxDenoiser> model,
                      OnnxDenoiser::Load(std::move(config), NoiseSchedule::ScaledLinear()));

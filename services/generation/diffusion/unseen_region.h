@@ -19,8 +19,8 @@
 namespace instascene::generation::diffusion {
 
 struct UnseenOptions {
-  int min_seen_views = 3;             // 7.8: voxels seen fewer times are unseen
-  float surface_margin_voxels = 2.5f;  // the carving stops 1.5 voxels in front of surfaces
+  int min_seen_views = 3;                // 7.8: voxels seen fewer times are unseen
+  float surface_margin_voxels = 2.5f;    // the carving stops 1.5 voxels in front of surfaces
   double erode_px = 10, dilate_px = 15;  // at the view's full width
 };
 
