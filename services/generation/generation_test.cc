@@ -412,6 +412,34 @@ TEST(Completion, DiffusionReplacementScheduleAndWarpSpace) {
   EXPECT_EQ(counting->encoded.load(),
             static_cast<int>(coded->ring.size()) + 1 - coded->manifest["unknown_views"].get<int>());
   EXPECT_EQ(counting->decoded.load(), coded->manifest["unknown_views"].get<int>());
+  // A four-channel codec (a Stable Diffusion VAE's latent depth): the denoiser sees [5, 32, 32]
+  // (MVD-Fusion's layout), both warps move all four channels.
+  struct FourChannels : diffusion::LatentCodec {
+    diffusion::IdentityCodec identity{32};
+    std::string name() const override { return "identity + luminance"; }
+    int latent_values() const override { return 4 * 32 * 32; }
+    absl::StatusOr<std::vector<float>> Encode(const std::vector<float>& rgb, int w,
+                                              int h) const override {
+      absl::StatusOr<std::vector<float>> encoded = identity.Encode(rgb, w, h);
+      if (!encoded.ok()) return encoded.status();
+      std::vector<float> latent = std::move(*encoded);
+      for (int cell = 0; cell < 32 * 32; ++cell)
+        latent.push_back((latent[cell] + latent[1024 + cell] + latent[2048 + cell]) / 3);
+      return latent;
+    }
+    absl::StatusOr<std::vector<float>> Decode(const std::vector<float>& latent, int w,
+                                              int h) const override {
+      return identity.Decode(std::vector<float>(latent.begin(), latent.begin() + 3 * 1024), w, h);
+    }
+  };
+  options.diffusion.codec = std::make_shared<FourChannels>();
+  for (const char* warp : {"latent", "pixel"}) {
+    auto four = run(1.0, warp);
+    ASSERT_TRUE(four.ok()) << four.status();
+    EXPECT_EQ(four->prior.report["latent_shape"], nlohmann::json({5, 32, 32})) << warp;
+    EXPECT_EQ(four->prior.report["known_cells_drift"].get<double>(), 0.0) << warp;
+    EXPECT_GT(four->prior.report["warped_latent_pixels"].get<int64_t>(), 0) << warp;
+  }
   options.diffusion.codec = std::make_shared<diffusion::IdentityCodec>(16);  // 3 x 16²: refused
   EXPECT_EQ(run(1.0, "latent").status().code(), absl::StatusCode::kInvalidArgument);
   options.diffusion.codec = nullptr;

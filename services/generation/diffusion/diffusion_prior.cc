@@ -25,19 +25,24 @@ PinholeCamera LatentCamera(const PinholeCamera& c, int n) {
 }
 
 // A warp at image resolution brought to the n x n latent grid: a cell is known where more than
-// half of its pixels are, and takes the mean of those pixels (colours mapped to [-1, 1]; depths
-// as they are).
-WarpResult EncodeWarp(const WarpResult& pixels, int width, int height, int n) {
-  WarpResult cells;
-  cells.values.assign(static_cast<size_t>(3) * n * n, 0.0f);
-  cells.known.assign(static_cast<size_t>(n) * n, 0);
-  cells.depth.assign(static_cast<size_t>(n) * n, 0.0f);
-  std::vector<int> total(static_cast<size_t>(n) * n, 0), known(total.size(), 0);
-  std::vector<double> sum(cells.values.size(), 0.0), depth(total.size(), 0.0);
+// half of its pixels are, with the mean depth of those pixels; its latent is the codec's encoding
+// of the warped image in which each unknown pixel takes its cell's known mean (white in cells
+// with none), so that for the identity codec a known cell is exactly the mean of its known
+// pixels.
+absl::StatusOr<WarpResult> EncodeWarp(const WarpResult& pixels, const LatentCodec& codec, int width,
+                                      int height, int n) {
+  const int cells = n * n;
+  WarpResult out;
+  out.known.assign(cells, 0);
+  out.depth.assign(cells, 0.0f);
+  std::vector<int> total(cells, 0), known(cells, 0);
+  std::vector<double> sum(static_cast<size_t>(3) * cells, 0.0), depth(cells, 0.0);
+  auto cell_of = [&](int x, int y) {
+    return static_cast<size_t>(y * n / height) * n + x * n / width;
+  };
   for (int y = 0; y < height; ++y) {
     for (int x = 0; x < width; ++x) {
-      const size_t cell = static_cast<size_t>(y * n / height) * n + x * n / width;
-      const size_t i = static_cast<size_t>(y) * width + x;
+      const size_t cell = cell_of(x, y), i = static_cast<size_t>(y) * width + x;
       ++total[cell];
       if (!pixels.known[i]) continue;
       ++known[cell];
@@ -45,15 +50,31 @@ WarpResult EncodeWarp(const WarpResult& pixels, int width, int height, int n) {
       for (int c = 0; c < 3; ++c) sum[cell * 3 + c] += pixels.values[i * 3 + c];
     }
   }
-  for (size_t cell = 0; cell < total.size(); ++cell) {
-    if (2 * known[cell] <= total[cell]) continue;
-    cells.known[cell] = 1;
-    ++cells.written;
-    cells.depth[cell] = static_cast<float>(depth[cell] / known[cell]);
-    for (int c = 0; c < 3; ++c)
-      cells.values[cell * 3 + c] = static_cast<float>(2.0 * sum[cell * 3 + c] / known[cell] - 1.0);
+  std::vector<float> image(static_cast<size_t>(3) * width * height, 1.0f);
+  for (int y = 0; y < height; ++y) {
+    for (int x = 0; x < width; ++x) {
+      const size_t cell = cell_of(x, y), i = static_cast<size_t>(y) * width + x;
+      for (int c = 0; c < 3; ++c) {
+        image[i * 3 + c] = pixels.known[i]   ? pixels.values[i * 3 + c]
+                           : known[cell] > 0 ? static_cast<float>(sum[cell * 3 + c] / known[cell])
+                                             : 1.0f;
+      }
+    }
   }
-  return cells;
+  ASSIGN_OR_RETURN(const std::vector<float> latent, codec.Encode(image, width, height));
+  const int channels = static_cast<int>(latent.size()) / cells;
+  out.values.assign(latent.size(), 0.0f);
+  for (int c = 0; c < channels; ++c) {
+    for (int cell = 0; cell < cells; ++cell)
+      out.values[cell * channels + c] = latent[c * cells + cell];
+  }
+  for (int cell = 0; cell < cells; ++cell) {
+    if (2 * known[cell] <= total[cell]) continue;
+    out.known[cell] = 1;
+    ++out.written;
+    out.depth[cell] = static_cast<float>(depth[cell] / known[cell]);
+  }
+  return out;
 }
 
 // The depth channel's code (DiffusionPriorOptions): z relative to the object centre's depth in
@@ -154,6 +175,11 @@ class ConditionedDenoiser : public Denoiser {
   std::vector<std::vector<std::array<double, 16>>> poses_;
 };
 
+// The codec's channels on an n x n grid (the identity's 3 when there is none).
+int CodecChannels(const std::shared_ptr<const LatentCodec>& codec, int n) {
+  return codec ? codec->latent_values() / (n * n) : 3;
+}
+
 }  // namespace
 
 DiffusionPrior::DiffusionPrior(std::shared_ptr<const Denoiser> denoiser, std::string where,
@@ -174,11 +200,12 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   const int n = options_.latent_size, cells = n * n;
   const std::shared_ptr<const LatentCodec> codec =
       options_.codec ? options_.codec : std::make_shared<IdentityCodec>(n);
-  if (codec->latent_values() != 3 * cells)
-    return absl::InvalidArgumentError(absl::StrCat("diffusion prior: the codec ", codec->name(),
-                                                   " makes latents of ", codec->latent_values(),
-                                                   " values; the warping needs 3 x ", n, " x ", n));
-  const int latent_values = 4 * cells;  // colour latent + depth channel
+  const int channels = codec->latent_values() / cells;  // the codec's (VAE's) channels
+  if (channels < 1 || channels > kMaxCodecChannels || codec->latent_values() != channels * cells)
+    return absl::InvalidArgumentError(absl::StrCat(
+        "diffusion prior: the codec ", codec->name(), " makes latents of ", codec->latent_values(),
+        " values; the warping needs C x ", n, " x ", n, " with C in [1, ", kMaxCodecChannels, "]"));
+  const int latent_values = (channels + 1) * cells;  // colour latent + depth channel
   // Known views: their latents (colour + depth, what the denoiser conditions on), and what the
   // warper copies (the colour latent on the latent grid, or the image itself).
   const bool pixel_warp = options_.warp == "pixel";
@@ -190,9 +217,11 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
     if (pixel_warp) {
       known.push_back(KnownView{v.camera, v.rgb});  // [0, 1], HxWx3
     } else {
-      KnownView k{LatentCamera(v.camera, n), std::vector<float>(static_cast<size_t>(3) * cells)};
-      for (int c = 0; c < 3; ++c) {
-        for (int cell = 0; cell < cells; ++cell) k.values[cell * 3 + c] = latent[c * cells + cell];
+      KnownView k{LatentCamera(v.camera, n),
+                  std::vector<float>(static_cast<size_t>(channels) * cells)};
+      for (int c = 0; c < channels; ++c) {
+        for (int cell = 0; cell < cells; ++cell)
+          k.values[cell * channels + c] = latent[c * cells + cell];
       }
       known.push_back(std::move(k));
     }
@@ -221,9 +250,13 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
     });
     const PinholeCamera grid = LatentCamera(target, n);
     TargetPlan plan;
+    WarpOptions warp_options;
+    warp_options.channels = pixel_warp ? 3 : channels;
     ASSIGN_OR_RETURN(plan.warp,
-                     WarpIntoTarget(*mesh, order, pixel_warp ? target : grid, WarpOptions{}));
-    if (pixel_warp) plan.warp = EncodeWarp(plan.warp, target.width, target.height, n);
+                     WarpIntoTarget(*mesh, order, pixel_warp ? target : grid, warp_options));
+    if (pixel_warp) {
+      ASSIGN_OR_RETURN(plan.warp, EncodeWarp(plan.warp, *codec, target.width, target.height, n));
+    }
     const std::vector<float> hits = InstanceDepth(*mesh, grid);
     plan.background.assign(cells, 0);
     if (unseen_mask) {
@@ -252,14 +285,14 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   auto pinned = [&](size_t t, int cell, float* x0) {
     const TargetPlan& plan = plans[t];
     if (plan.warp.known[cell]) {
-      for (int c = 0; c < 3; ++c) x0[c] = plan.warp.values[cell * 3 + c];
-      x0[3] =
+      for (int c = 0; c < channels; ++c) x0[c] = plan.warp.values[cell * channels + c];
+      x0[channels] =
           DepthCode(LatentCamera(input.targets[t], n), input.frame).Encode(plan.warp.depth[cell]);
       return true;
     }
     if (!plan.background[cell]) return false;
-    for (int c = 0; c < 3; ++c) x0[c] = background_latent[c * cells + cell];
-    x0[3] = kBackgroundDepthCode;
+    for (int c = 0; c < channels; ++c) x0[c] = background_latent[c * cells + cell];
+    x0[channels] = kBackgroundDepthCode;
     return true;
   };
   std::mt19937_64 replace_rng(input.seed ^ 0x5eedULL);
@@ -276,9 +309,9 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
     const double a = timestep < 0 ? 1.0 : schedule.alphas_cumprod[timestep];
     for (size_t t = 0; t < latents->size(); ++t) {
       for (int cell = 0; cell < cells; ++cell) {
-        float x0[4];
+        float x0[kMaxCodecChannels + 1];
         if (!pinned(t, cell, x0)) continue;
-        for (int c = 0; c < 4; ++c) {
+        for (int c = 0; c <= channels; ++c) {
           (*latents)[t][c * cells + cell] =
               static_cast<float>(std::sqrt(a) * x0[c] + std::sqrt(1.0 - a) * normal(replace_rng));
         }
@@ -303,10 +336,11 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   int64_t known_cells = 0;
   for (size_t t = 0; t < plans.size(); ++t) {
     for (int cell = 0; cell < cells; ++cell) {
-      float x0[4];
+      float x0[kMaxCodecChannels + 1];
       if (!plans[t].warp.known[cell] || !pinned(t, cell, x0)) continue;
       ++known_cells;
-      for (int c = 0; c < 4; ++c) drift += std::abs((*latents)[t][c * cells + cell] - x0[c]) / 4;
+      for (int c = 0; c <= channels; ++c)
+        drift += std::abs((*latents)[t][c * cells + cell] - x0[c]) / (channels + 1);
     }
   }
   // Decode each target: colour through the codec; depth and mask from the depth channel.
@@ -316,7 +350,8 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
     ViewImages v;
     v.camera = cam;
     const size_t pixels = static_cast<size_t>(cam.width) * cam.height;
-    const std::vector<float> colour((*latents)[t].begin(), (*latents)[t].begin() + 3 * cells);
+    const std::vector<float> colour((*latents)[t].begin(),
+                                    (*latents)[t].begin() + channels * cells);
     ASSIGN_OR_RETURN(v.rgb, codec->Decode(colour, cam.width, cam.height));
     if (v.rgb.size() != 3 * pixels)
       return absl::InternalError(absl::StrCat("diffusion prior: the codec ", codec->name(),
@@ -329,7 +364,8 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
     for (int y = 0; y < cam.height; ++y) {
       for (int x = 0; x < cam.width; ++x) {
         const size_t i = static_cast<size_t>(y) * cam.width + x;
-        const float d = (*latents)[t][3 * cells + (y * n / cam.height) * n + x * n / cam.width];
+        const float d =
+            (*latents)[t][channels * cells + (y * n / cam.height) * n + x * n / cam.width];
         if (!(d < kSurfaceDepthCode)) continue;
         v.mask[i] = 1;
         v.alpha[i] = 1.0f;
@@ -343,7 +379,7 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
                             input.conditions.size(), " known ones");
   out.report = {{"denoiser", where_},
                 {"latent_size", n},
-                {"latent_shape", {4, n, n}},
+                {"latent_shape", {channels + 1, n, n}},
                 {"steps", ddim.steps},
                 {"eta", ddim.eta},
                 {"guidance", ddim.guidance},
@@ -377,20 +413,20 @@ absl::StatusOr<std::unique_ptr<CompletionPrior>> MakeDiffusionPrior(
     if (address.empty())
       return absl::InvalidArgumentError("--denoiser grpc://HOST:PORT: no address");
     GrpcDenoiserOptions options;
-    options.latent_shape = {4, DiffusionPriorOptions{}.latent_size,
-                            DiffusionPriorOptions{}.latent_size};
+    const int n = prior_options.latent_size;
+    options.latent_shape = {CodecChannels(settings.codec, n) + 1, n, n};
     auto client = std::make_shared<GrpcDenoiser>(rpc::Connect(address), address, options);
     return std::make_unique<DiffusionPrior>(client, denoiser, prior_options);
   }
   if (absl::StartsWith(denoiser, "onnx:")) {
     ASSIGN_OR_RETURN(OnnxDenoiserConfig config, ReadOnnxDenoiserConfig(denoiser.substr(5)));
     const std::vector<int>& shape = config.latent_shape;
-    if (shape[0] != 4 || shape[1] != shape[2])
-      return absl::InvalidArgumentError(
-          absl::StrCat("ONNX denoiser ", config.name, ": latent_shape [", shape[0], ", ", shape[1],
-                       ", ", shape[2],
-                       "]; the diffusion prior's latents are [4, n, n] (3 colour channels and a "
-                       "depth channel on a square grid)"));
+    const int channels = CodecChannels(settings.codec, shape[1]);
+    if (shape[0] != channels + 1 || shape[1] != shape[2])
+      return absl::InvalidArgumentError(absl::StrCat(
+          "ONNX denoiser ", config.name, ": latent_shape [", shape[0], ", ", shape[1], ", ",
+          shape[2], "]; the diffusion prior's latents are [", channels + 1, ", n, n] (the codec's ",
+          channels, " channels and a depth channel on a square grid)"));
     prior_options.latent_size = shape[1];
     ASSIGN_OR_RETURN(std::unique_ptr<OnnxDenoiser> model,
                      OnnxDenoiser::Load(std::move(config), NoiseSchedule::ScaledLinear()));

@@ -32,13 +32,14 @@ namespace instascene::generation::diffusion {
 //   paper's wording "move the known-view latents"); "pixel" warps the known images at the ring's
 //   resolution and encodes the result (a latent cell is known where most of its pixels are, and
 //   takes the mean of those): finer visibility and culling at 64x the rays. Default "latent".
-// The denoiser's latent is the codec's 3 x n x n colour latent followed by one n x n depth
-// channel (MVD-Fusion's latent is likewise 4 VAE channels + depth): z in the view's camera
-// relative to the object centre's depth, in object diameters, clamped to [-1, 1]; background
-// cells are +1. Known views give it from their rendered depth, warped cells from the instance hit
-// in the target, generated cells from the sampler. A decoded pixel whose code is below
+// The denoiser's latent is the codec's C x n x n colour latent (the identity's C = 3; a Stable
+// Diffusion VAE's C = 4) followed by one n x n depth channel (MVD-Fusion's [5, 32, 32]): z in the
+// view's camera relative to the object centre's depth, in object diameters, clamped to [-1, 1];
+// background cells are +1. Known views give it from their rendered depth, warped cells from the
+// instance hit in the target, generated cells from the sampler. A decoded pixel whose code is below
 // kSurfaceDepthCode is the object: mask 1, depth decoded; else background (mask 0, depth 0).
 inline constexpr float kBackgroundDepthCode = 1.0f;
+inline constexpr int kMaxCodecChannels = 16;
 inline constexpr float kSurfaceDepthCode = 0.75f;
 
 struct DiffusionPriorOptions {
@@ -53,7 +54,8 @@ struct DiffusionPriorOptions {
   // to their content. Needs PriorInput::free_space (off without it).
   bool unseen_mask = true;
   // The image encoder / decoder around the denoiser; null = IdentityCodec(latent_size). Its
-  // latents must be 3 x latent_size² (the warping moves them spatially).
+  // latents must be C x latent_size², C <= kMaxCodecChannels (the warping moves them
+  // spatially).
   std::shared_ptr<const LatentCodec> codec;
 };
 
