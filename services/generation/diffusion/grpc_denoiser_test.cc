@@ -2,6 +2,7 @@
 
 #include <gtest/gtest.h>
 
+#include "absl/synchronization/notification.h"
 #include "common/rpc/server.h"
 #include "services/generation/diffusion/analytic_denoiser.h"
 #include "services/generation/diffusion/ddim.h"
@@ -137,6 +138,41 @@ TEST_F(LoopbackDenoiser, PassesTheModelsErrorsOnNamingTheDenoiser) {
   const std::vector<float> wrong(7, 0.0f);
   EXPECT_EQ(remote.PredictNoise(NoiseQuery{&wrong, 10, 0, 0}).status().code(),
             absl::StatusCode::kInvalidArgument);
+}
+
+// A model that does not answer until released (at the end of the test).
+class StuckDenoiser : public Denoiser {
+ public:
+  absl::StatusOr<std::vector<float>> PredictNoise(const NoiseQuery& q) const override {
+    release_.WaitForNotification();
+    return std::vector<float>(q.latent->size(), 0.0f);
+  }
+  void Release() { release_.Notify(); }
+
+ private:
+  mutable absl::Notification release_;
+};
+
+TEST(GrpcDenoiser, ADenoiserPastItsDeadlineIsUnavailableAfterItsRetries) {
+  StuckDenoiser model;
+  DenoiserService service(&model, "stuck", {4}, 1000);
+  rpc::ServerOptions server_options;
+  server_options.listen = "127.0.0.1:0";
+  auto server = rpc::Server::Start(server_options, {&service}, {"instascene.v1.Denoiser"});
+  ASSERT_TRUE(server.ok()) << server.status();
+  GrpcDenoiserOptions o;
+  o.latent_shape = {4};
+  o.attempts = 2;
+  o.backoff = std::chrono::milliseconds(1);
+  o.deadline = std::chrono::milliseconds(200);
+  GrpcDenoiser remote(rpc::Connect((*server)->address()), (*server)->address(), o);
+  const std::vector<float> latent(4, 0.0f);
+  auto eps = remote.PredictNoise(NoiseQuery{&latent, 0, 0, 0});
+  EXPECT_EQ(eps.status().code(), absl::StatusCode::kUnavailable);
+  EXPECT_NE(eps.status().message().find("after 2 attempts"), std::string::npos) << eps.status();
+  EXPECT_NE(eps.status().message().find("Deadline Exceeded"), std::string::npos) << eps.status();
+  model.Release();
+  (*server)->Drain(std::chrono::milliseconds(100));
 }
 
 TEST(GrpcDenoiser, AnUnreachableDenoiserIsUnavailableAfterItsRetries) {
