@@ -122,20 +122,56 @@ absl::StatusOr<FreeSpaceGrid> FreeSpaceGrid::Carve(const std::vector<PinholeCame
     const Eigen::Matrix3d camera_to_world = camera.camera_from_world.rotation.transpose();
     std::vector<uint8_t> seen(voxels, 0);
     const float step = 0.5f * grid.voxel_;
-    for (double y = y0 + 0.5 * stride; y < y1; y += stride) {
-      for (double x = x0 + 0.5 * stride; x < x1; x += stride) {
-        const Eigen::Vector3f dir =
-            (camera_to_world *
-             Eigen::Vector3d((x - camera.cx) / camera.fx, (y - camera.cy) / camera.fy, 1.0))
-                .normalized()
-                .cast<float>();
+    // Cast every ray of the grid first, so that each ray can end at the nearest hit among its
+    // neighbours: a ray slipping through a hole between surfel discs must not carve the inside.
+    const int cols = std::max(0, static_cast<int>(std::ceil((x1 - x0) / stride - 0.5)));
+    const int rows = std::max(0, static_cast<int>(std::ceil((y1 - y0) / stride - 0.5)));
+    const float kFar = std::numeric_limits<float>::infinity();
+    std::vector<Eigen::Vector3f> dirs(static_cast<size_t>(rows) * cols);
+    std::vector<float> hits(dirs.size(), kFar);
+    for (int r = 0; r < rows; ++r) {
+      for (int q = 0; q < cols; ++q) {
+        const double x = x0 + (q + 0.5) * stride, y = y0 + (r + 0.5) * stride;
+        const size_t i = static_cast<size_t>(r) * cols + q;
+        dirs[i] = (camera_to_world *
+                   Eigen::Vector3d((x - camera.cx) / camera.fx, (y - camera.cy) / camera.fy, 1.0))
+                      .normalized()
+                      .cast<float>();
+        const RayHit hit = surfaces.Cast(eye, dirs[i]);
+        if (hit.hit) hits[i] = hit.distance;
+      }
+    }
+    const int reach = options.hole_rays;
+    for (int r = 0; r < rows; ++r) {
+      for (int q = 0; q < cols; ++q) {
+        const size_t i = static_cast<size_t>(r) * cols + q;
         float t0, t1;
-        if (!ClipToBox(eye, dir, lo, hi, &t0, &t1)) continue;
-        const RayHit hit = surfaces.Cast(eye, dir);
+        if (!ClipToBox(eye, dirs[i], lo, hi, &t0, &t1)) continue;
+        // A hole: all neighbours but hole_slack stop more than the margin before this ray; it then
+        // ends where the farthest of those does. (A silhouette has far fewer such neighbours.)
+        float nearest = hits[i];
+        if (reach > 0) {
+          int nearer = 0, neighbours = 0;
+          float farthest_nearer = 0;
+          for (int dr = -reach; dr <= reach; ++dr) {
+            for (int dq = -reach; dq <= reach; ++dq) {
+              const int rr = r + dr, qq = q + dq;
+              if ((dr == 0 && dq == 0) || rr < 0 || rr >= rows || qq < 0 || qq >= cols) continue;
+              ++neighbours;
+              const float h = hits[static_cast<size_t>(rr) * cols + qq];
+              if (h < hits[i] - options.margin_voxels * grid.voxel_) {
+                ++nearer;
+                farthest_nearer = std::max(farthest_nearer, h);
+              }
+            }
+          }
+          if (neighbours > 0 && nearer >= neighbours - options.hole_slack)
+            nearest = farthest_nearer;
+        }
         const float end =
-            std::min(t1, hit.hit ? hit.distance - options.margin_voxels * grid.voxel_ : t1);
+            std::min(t1, nearest < kFar ? nearest - options.margin_voxels * grid.voxel_ : t1);
         for (float t = t0 + 0.5f * step; t < end; t += step) {
-          const int64_t v = grid.VoxelOf(eye + t * dir);
+          const int64_t v = grid.VoxelOf(eye + t * dirs[i]);
           if (v >= 0) seen[v] = 1;
         }
       }

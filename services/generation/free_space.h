@@ -22,6 +22,12 @@ struct FreeSpaceOptions {
   int min_views = 2;           // views that must see through a voxel for it to be free
   float margin_voxels = 1.5f;  // stop this far in front of the first surface
   int max_rays_per_view = 40000;
+  // Holes between surfel discs: a ray is a hole when all but hole_slack of its neighbours (within
+  // hole_rays rays) stop more than the margin before it; it then stops where the farthest of
+  // those does, so that a ray slipping through the model does not carve its inside (0 = off).
+  // Measured in RESULTS.md ("Free-space violations").
+  int hole_rays = 1;
+  int hole_slack = 3;
 };
 
 class FreeSpaceGrid {

@@ -114,7 +114,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
       ++rejected_below;
       return;
     }
-    if (input.free_space->IsFree(c.position)) {
+    if (input.free_space->FreeViews(c.position) >= options_.candidate_free_views) {
       ++rejected_free;
       return;
     }

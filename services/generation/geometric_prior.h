@@ -18,6 +18,10 @@ struct GeometricPriorOptions {
   float cover_spacings = 1.5f;    // a candidate within this many spacings of a surfel is redundant
   bool support_cap = true;        // close the underside on the support plane
   bool exact_free_space = false;  // also test each candidate against every view's depth map
+  // A candidate is refused in a voxel this many real views saw empty (one view suffices: space a
+  // single view saw through is free; symmetry scoring keeps the grid's min_views). Measured in
+  // RESULTS.md ("Free-space violations").
+  int candidate_free_views = 1;
   float max_support_gap_radii = 1.0f;  // no support completion when it is farther below
 };
 
