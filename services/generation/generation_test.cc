@@ -129,8 +129,8 @@ Detected Detect(const PartialObject& scene) {
   return d;
 }
 
-// A wall with a small hole (about two rays wide), seen from the front: with hole closing the rays that
-// slip through do not carve the space behind it; past the wall's edge (a silhouette) they do.
+// A wall with a small hole (about two rays wide), seen from the front: with hole closing the rays
+// that slip through do not carve the space behind it; past the wall's edge (a silhouette) they do.
 TEST(FreeSpace, RaysThroughSmallHolesDoNotCarve) {
   const TriangleMesh grid = MakeRectangle(0.12f, 0.12f, 80, 80);  // z = 0, cells of 1.5 mm
   TriangleMesh wall = grid;
@@ -288,24 +288,43 @@ PartialObject BottleBeforeAWall() {
   return scene;
 }
 
+// The analytic denoiser (data mean 0.2 under every condition view, 0 unconditional, stddev 0.4)
+// behind a loopback Denoiser service that takes timesteps below `timesteps`.
+class LoopbackAnalyticDenoiser {
+ public:
+  explicit LoopbackAnalyticDenoiser(int timesteps = 1000)
+      : service_(&analytic_, "analytic-gaussian", {4, 32, 32}, timesteps) {
+    rpc::ServerOptions options;
+    options.listen = "127.0.0.1:0";
+    auto server = rpc::Server::Start(options, {&service_}, {"instascene.v1.Denoiser"});
+    EXPECT_TRUE(server.ok()) << server.status();
+    if (server.ok()) server_ = std::move(*server);
+  }
+  ~LoopbackAnalyticDenoiser() {
+    if (server_) server_->Drain(std::chrono::milliseconds(100));
+  }
+  bool ok() const { return server_ != nullptr; }
+  std::string uri() const { return "grpc://" + server_->address(); }
+
+ private:
+  diffusion::AnalyticDenoiser analytic_{diffusion::NoiseSchedule::ScaledLinear(),
+                                        std::vector<double>(16, 0.2), 0.0, 0.4};
+  diffusion::DenoiserService service_;
+  std::unique_ptr<rpc::Server> server_;
+};
+
 // The diffusion prior through a loopback Denoiser service (the analytic denoiser: it proves the
 // plumbing, not the images): it generates one image per unknown ring view, which the refinement
 // then fits; an unreachable or misbehaving denoiser fails the object with a message naming it.
 TEST(Completion, DiffusionPriorThroughADenoiserService) {
-  const diffusion::NoiseSchedule schedule = diffusion::NoiseSchedule::ScaledLinear();
-  std::vector<double> means(16, 0.2);  // one data mean per possible condition view
-  diffusion::AnalyticDenoiser analytic(schedule, means, 0.0, 0.4);
-  diffusion::DenoiserService service(&analytic, "analytic-gaussian", {4, 32, 32}, 1000);
-  rpc::ServerOptions server_options;
-  server_options.listen = "127.0.0.1:0";
-  auto server = rpc::Server::Start(server_options, {&service}, {"instascene.v1.Denoiser"});
-  ASSERT_TRUE(server.ok());
+  const LoopbackAnalyticDenoiser denoiser;
+  ASSERT_TRUE(denoiser.ok());
   const PartialObject scene = BottleBeforeAWall();
   ASSERT_GT(std::count(scene.labels.begin(), scene.labels.end(), 0), 0);  // the wall is there
   CompletionOptions options;
   options.meshing.size_px = 64;
   options.prior = "diffusion";
-  options.denoiser = "grpc://" + (*server)->address();
+  options.denoiser = denoiser.uri();
   options.refinement.iterations = 5;
   auto done = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
   ASSERT_TRUE(done.ok()) << done.status();
@@ -360,10 +379,9 @@ TEST(Completion, DiffusionPriorThroughADenoiserService) {
   auto unreachable = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
   EXPECT_EQ(unreachable.status().code(), absl::StatusCode::kUnavailable);
   EXPECT_NE(unreachable.status().message().find("denoiser"), std::string::npos);
-  diffusion::DenoiserService wrong(&analytic, "analytic-gaussian", {4, 32, 32}, 10);
-  auto wrong_server = rpc::Server::Start(server_options, {&wrong}, {"instascene.v1.Denoiser"});
-  ASSERT_TRUE(wrong_server.ok());
-  options.denoiser = "grpc://" + (*wrong_server)->address();  // refuses timesteps >= 10
+  const LoopbackAnalyticDenoiser wrong(10);  // refuses timesteps >= 10
+  ASSERT_TRUE(wrong.ok());
+  options.denoiser = wrong.uri();
   auto refused = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
   EXPECT_EQ(refused.status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_NE(refused.status().message().find("timestep"), std::string::npos) << refused.status();
@@ -371,27 +389,19 @@ TEST(Completion, DiffusionPriorThroughADenoiserService) {
   auto no_config = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, options);
   EXPECT_EQ(no_config.status().code(), absl::StatusCode::kNotFound);
   EXPECT_NE(no_config.status().message().find("absent/model.json"), std::string::npos);
-  (*server)->Drain(std::chrono::milliseconds(100));
-  (*wrong_server)->Drain(std::chrono::milliseconds(100));
 }
 
 // The replacement schedule and the warp space (ALGORITHM.md 7.7's open choices) as settings:
 // replacing to the last step leaves the known cells exactly the warped known content; never
 // replacing lets them drift; a pixel-space warp finds known cells too.
 TEST(Completion, DiffusionReplacementScheduleAndWarpSpace) {
-  const diffusion::NoiseSchedule schedule = diffusion::NoiseSchedule::ScaledLinear();
-  std::vector<double> means(16, 0.2);
-  diffusion::AnalyticDenoiser analytic(schedule, means, 0.0, 0.4);
-  diffusion::DenoiserService service(&analytic, "analytic-gaussian", {4, 32, 32}, 1000);
-  rpc::ServerOptions server_options;
-  server_options.listen = "127.0.0.1:0";
-  auto server = rpc::Server::Start(server_options, {&service}, {"instascene.v1.Denoiser"});
-  ASSERT_TRUE(server.ok());
+  const LoopbackAnalyticDenoiser denoiser;
+  ASSERT_TRUE(denoiser.ok());
   const PartialObject scene = BottleBeforeAWall();
   CompletionOptions options;
   options.meshing.size_px = 64;
   options.prior = "diffusion";
-  options.denoiser = "grpc://" + (*server)->address();
+  options.denoiser = denoiser.uri();
   auto run = [&](double fraction, const std::string& warp) {
     options.diffusion.replace_fraction = fraction;
     options.diffusion.warp = warp;
@@ -480,7 +490,6 @@ TEST(Completion, DiffusionReplacementScheduleAndWarpSpace) {
   options.diffusion.codec = nullptr;
   EXPECT_EQ(run(1.0, "voxel").status().code(), absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(run(1.5, "latent").status().code(), absl::StatusCode::kInvalidArgument);
-  (*server)->Drain(std::chrono::milliseconds(100));
 }
 
 // The complete stage takes the denoiser from the worker's settings, never from the job.
