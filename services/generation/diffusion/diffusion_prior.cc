@@ -134,6 +134,7 @@ std::vector<float> InstanceDepth(const RayCaster& mesh, const PinholeCamera& cam
 // latent and depth code) and the cells pinned to the background.
 struct TargetPlan {
   WarpResult warp;                  // on the latent grid
+  std::vector<float> depth_code;    // n x n: the known cells' depth code (DepthCode)
   std::vector<uint8_t> background;  // n x n
   int64_t generated = 0;            // cells neither known nor background
 };
@@ -258,6 +259,11 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
       ASSIGN_OR_RETURN(plan.warp, EncodeWarp(plan.warp, *codec, target.width, target.height, n));
     }
     const std::vector<float> hits = InstanceDepth(*mesh, grid);
+    const DepthCode code(target, input.frame);
+    plan.depth_code.assign(cells, kBackgroundDepthCode);
+    for (int cell = 0; cell < cells; ++cell) {
+      if (plan.warp.known[cell]) plan.depth_code[cell] = code.Encode(plan.warp.depth[cell]);
+    }
     plan.background.assign(cells, 0);
     if (unseen_mask) {
       const std::vector<uint8_t> unseen =
@@ -286,8 +292,7 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
     const TargetPlan& plan = plans[t];
     if (plan.warp.known[cell]) {
       for (int c = 0; c < channels; ++c) x0[c] = plan.warp.values[cell * channels + c];
-      x0[channels] =
-          DepthCode(LatentCamera(input.targets[t], n), input.frame).Encode(plan.warp.depth[cell]);
+      x0[channels] = plan.depth_code[cell];
       return true;
     }
     if (!plan.background[cell]) return false;
