@@ -21,6 +21,8 @@
 #include "services/generation/diffusion/analytic_denoiser.h"
 #include "services/generation/diffusion/grpc_denoiser.h"
 #include "services/generation/diffusion/latent_codec.h"
+#include "services/generation/free_space.h"
+#include "services/generation/geometric_prior.h"
 #include "services/generation/stage.h"
 #include "services/generation/symmetry.h"
 
@@ -233,6 +235,57 @@ TEST(Completion, CompletesAPartlySeenBottleWithinTheFreeSpace) {
   EXPECT_LT(far, completed / 10);
   EXPECT_TRUE(done->manifest["mesh"]["closed"].get<bool>());
   EXPECT_EQ(done->manifest["format"], kObjectFormat);
+}
+
+// A sphere seen from above and in front: the rotation axis is accepted, and the axis cap closes
+// the open lower ring of its revolved surface (a ray from the centre straight down meets a
+// surfel), inside the true sphere; without the cap the ray escapes through the underside.
+TEST(GeometricPrior, TheAxisCapClosesTheLowerRingOfARevolvedSurface) {
+  ShapeSpec spec;
+  spec.kind = ShapeKind::kSphere;
+  spec.size = {0.08f, 0, 0};  // centred at (0, 0, 0.08), resting on the table
+  const PartialObject scene = MakePartialObject(MakeShapeMesh(spec, 48), 3000, 5);
+  auto split = SplitInstance(scene.labels, 1, 50);
+  ASSERT_TRUE(split.ok());
+  PriorInput input;
+  input.frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
+  std::vector<uint32_t> all(scene.cloud.size());
+  for (uint32_t g = 0; g < all.size(); ++g) all[g] = g;
+  auto scene_caster = RayCaster::Create(SurfelDiscs(scene.cloud, all, SurfelDiscOptions{}));
+  ASSERT_TRUE(scene_caster.ok());
+  auto grid = FreeSpaceGrid::Carve(scene.cameras, **scene_caster, input.frame, FreeSpaceOptions{});
+  ASSERT_TRUE(grid.ok());
+  const GaussianCloud instance = scene.cloud.Subset(split->instance);
+  input.instance = &instance;
+  input.free_space = &*grid;
+  const Eigen::Vector3f centre(0, 0, 0.08f);
+  auto closed_below = [&](const PriorOutput& out) {
+    auto discs = [](const GaussianCloud& cloud) {
+      std::vector<uint32_t> ids(cloud.size());
+      for (uint32_t g = 0; g < ids.size(); ++g) ids[g] = g;
+      return SurfelDiscs(cloud, ids, SurfelDiscOptions{});
+    };
+    TriangleMesh object = discs(instance);
+    object.Append(discs(out.added));
+    auto caster = RayCaster::Create(object);
+    EXPECT_TRUE(caster.ok());
+    return (*caster)->Cast(centre, -Eigen::Vector3f::UnitZ()).hit;
+  };
+  GeometricPriorOptions with_cap;
+  with_cap.support_cap = false;  // the axis cap alone (support walls would make a skirt)
+  auto capped = GeometricPrior(with_cap).Complete(input);
+  ASSERT_TRUE(capped.ok()) << capped.status();
+  ASSERT_GT(capped->report["added_by"].value("axis_cap", 0), 0) << capped->report.dump();
+  EXPECT_TRUE(closed_below(*capped));
+  for (size_t g = 0; g < capped->added.size(); ++g) {
+    const Eigen::Vector3f p(&capped->added.positions[3 * g]);
+    EXPECT_LT((p - centre).norm(), 0.08f + 0.005f) << g;
+  }
+  GeometricPriorOptions without_cap = with_cap;
+  without_cap.axis_cap = false;
+  auto open = GeometricPrior(without_cap).Complete(input);
+  ASSERT_TRUE(open.ok()) << open.status();
+  EXPECT_FALSE(closed_below(*open));
 }
 
 // The joint refinement inside the completion: real views cropped and rendered in situ (their

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <unordered_map>
 
 #include "absl/strings/str_cat.h"
@@ -76,6 +77,51 @@ GaussianCloud BuildSurfels(const GaussianCloud& instance, const std::vector<Cand
     // View-dependent SH terms would have to be mirrored / rotated with the surfel; completed
     // surfels keep the view-independent colour (DC) only.
     for (int k = 0; k < 3; ++k) out.sh[stride * i + k] = instance.sh[stride * c.source + k];
+  }
+  return out;
+}
+
+// The open lower end of a revolved surface (a sphere's unseen underside): a disc of candidates
+// `step` apart across the lowest ring of an accepted axis, facing down the axis, appearance from
+// the nearest ring surfel. Nothing when that ring is already (nearly) closed.
+std::vector<Candidate> AxisCap(const SymmetryHypothesis& h, const ObjectFrame& frame,
+                               const std::vector<Eigen::Vector3f>& positions,
+                               const std::vector<uint32_t>& sources, float step) {
+  const Eigen::Vector3f up = h.direction.dot(frame.up) >= 0 ? h.direction : -h.direction;
+  float lowest = std::numeric_limits<float>::max();
+  for (const Eigen::Vector3f& p : positions) lowest = std::min(lowest, up.dot(p - h.point));
+  std::vector<size_t> band;
+  std::vector<float> radii;
+  for (size_t i = 0; i < positions.size(); ++i) {
+    const Eigen::Vector3f rel = positions[i] - h.point;
+    if (up.dot(rel) > lowest + step) continue;
+    band.push_back(i);
+    radii.push_back((rel - up.dot(rel) * up).norm());
+  }
+  std::vector<Candidate> out;
+  if (radii.empty()) return out;
+  std::nth_element(radii.begin(), radii.begin() + radii.size() / 2, radii.end());
+  const float radius = radii[radii.size() / 2];
+  if (radius < 2 * step) return out;
+  const Eigen::Vector3f e1 = up.unitOrthogonal(), e2 = up.cross(e1);
+  const Eigen::Vector3f centre = h.point + lowest * up;
+  for (float rho = 0; rho < radius - 0.5f * step; rho += step) {
+    const int n = rho == 0 ? 1 : std::max(1, static_cast<int>(std::round(2 * M_PI * rho / step)));
+    for (int k = 0; k < n; ++k) {
+      const float angle = 2 * static_cast<float>(M_PI) * k / n;
+      Candidate c;
+      c.position = centre + rho * (std::cos(angle) * e1 + std::sin(angle) * e2);
+      c.rotation << e1, -e2, -up;  // normal down the axis
+      float best = std::numeric_limits<float>::max();
+      for (size_t i : band) {
+        const float d = (positions[i] - c.position).squaredNorm();
+        if (d < best) {
+          best = d;
+          c.source = sources[i];
+        }
+      }
+      out.push_back(c);
+    }
   }
   return out;
 }
@@ -169,6 +215,22 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     }
     added_by[h.kind == SymmetryKind::kPlane ? "mirrored" : "revolved"] +=
         static_cast<int>(added.size() - before);
+  }
+  // The lower end of each accepted axis, closed across its lowest ring.
+  if (options_.axis_cap) {
+    for (const SymmetryHypothesis& h : hypotheses) {
+      if (!h.accepted || h.kind != SymmetryKind::kAxis) continue;
+      std::vector<Eigen::Vector3f> positions = points;
+      std::vector<uint32_t> sources(points.size());
+      for (uint32_t g = 0; g < sources.size(); ++g) sources[g] = g;
+      for (const Candidate& c : added) {
+        positions.push_back(c.position);
+        sources.push_back(c.source);
+      }
+      const size_t before = added.size();
+      for (const Candidate& c : AxisCap(h, frame, positions, sources, 1.01f * cover)) consider(c);
+      added_by["axis_cap"] += static_cast<int>(added.size() - before);
+    }
   }
   PriorOutput out;
   out.report["hypotheses"] = tried;

@@ -15,8 +15,10 @@ namespace instascene::generation {
 
 struct GeometricPriorOptions {
   SymmetryOptions symmetry;
-  float cover_spacings = 1.5f;    // a candidate within this many spacings of a surfel is redundant
-  bool support_cap = true;        // close the underside on the support plane
+  float cover_spacings = 1.5f;  // a candidate within this many spacings of a surfel is redundant
+  bool support_cap = true;      // close the underside on the support plane
+  bool axis_cap =
+      true;  // close the lowest ring of an accepted rotation axis (a sphere's underside)
   bool exact_free_space = false;  // also test each candidate against every view's depth map
   // A candidate is refused in a voxel this many real views saw empty (one view suffices: space a
   // single view saw through is free; symmetry scoring keeps the grid's min_views). Measured in
