@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <atomic>
+#include <optional>
 
 #include "common/geometry/camera.h"
 #include "common/mesh/mesh_volume.h"
@@ -110,24 +111,40 @@ struct Detected {
   std::vector<SymmetryHypothesis> hypotheses;
 };
 
+// The free space of a test scene around `frame`, carved against all its surfels (the caster is
+// kept beside the grid, which points at it).
+struct SceneFreeSpace {
+  std::unique_ptr<RayCaster> caster;
+  std::optional<FreeSpaceGrid> grid;
+};
+
+SceneFreeSpace CarveScene(const PartialObject& scene, const ObjectFrame& frame) {
+  SceneFreeSpace out;
+  std::vector<uint32_t> all(scene.cloud.size());
+  for (uint32_t g = 0; g < all.size(); ++g) all[g] = g;
+  auto caster = RayCaster::Create(SurfelDiscs(scene.cloud, all, SurfelDiscOptions{}));
+  EXPECT_TRUE(caster.ok());
+  if (!caster.ok()) return out;
+  out.caster = std::move(*caster);
+  auto grid = FreeSpaceGrid::Carve(scene.cameras, *out.caster, frame, FreeSpaceOptions{});
+  EXPECT_TRUE(grid.ok());
+  if (grid.ok()) out.grid = std::move(*grid);
+  return out;
+}
+
 Detected Detect(const PartialObject& scene) {
   auto split = SplitInstance(scene.labels, 1, 50);
   EXPECT_TRUE(split.ok());
   Detected d;
   d.frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
-  std::vector<uint32_t> all(scene.cloud.size());
-  for (uint32_t g = 0; g < all.size(); ++g) all[g] = g;
-  auto caster = RayCaster::Create(SurfelDiscs(scene.cloud, all, SurfelDiscOptions{}));
-  EXPECT_TRUE(caster.ok());
-  auto grid = FreeSpaceGrid::Carve(scene.cameras, **caster, d.frame, FreeSpaceOptions{});
-  EXPECT_TRUE(grid.ok());
+  const SceneFreeSpace space = CarveScene(scene, d.frame);
   std::vector<Eigen::Vector3f> points, normals;
   for (uint32_t g : split->instance) {
     points.emplace_back(&scene.cloud.positions[3 * g]);
     const float* q = &scene.cloud.rotations[4 * g];
     normals.push_back(RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).col(2).cast<float>());
   }
-  d.hypotheses = DetectSymmetries(points, normals, d.frame, *grid, SymmetryOptions{});
+  d.hypotheses = DetectSymmetries(points, normals, d.frame, *space.grid, SymmetryOptions{});
   return d;
 }
 
@@ -249,15 +266,11 @@ TEST(GeometricPrior, TheAxisCapClosesTheLowerRingOfARevolvedSurface) {
   ASSERT_TRUE(split.ok());
   PriorInput input;
   input.frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
-  std::vector<uint32_t> all(scene.cloud.size());
-  for (uint32_t g = 0; g < all.size(); ++g) all[g] = g;
-  auto scene_caster = RayCaster::Create(SurfelDiscs(scene.cloud, all, SurfelDiscOptions{}));
-  ASSERT_TRUE(scene_caster.ok());
-  auto grid = FreeSpaceGrid::Carve(scene.cameras, **scene_caster, input.frame, FreeSpaceOptions{});
-  ASSERT_TRUE(grid.ok());
+  const SceneFreeSpace space = CarveScene(scene, input.frame);
+  ASSERT_TRUE(space.grid.has_value());
   const GaussianCloud instance = scene.cloud.Subset(split->instance);
   input.instance = &instance;
-  input.free_space = &*grid;
+  input.free_space = &*space.grid;
   const Eigen::Vector3f centre(0, 0, 0.08f);
   auto closed_below = [&](const PriorOutput& out) {
     auto discs = [](const GaussianCloud& cloud) {
