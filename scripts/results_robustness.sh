@@ -1,11 +1,12 @@
 #!/usr/bin/env bash
 # Decomposition robustness on scenes nobody tuned on (docs/RESULTS.md, "Robustness"): for each
-# scene, the full offline pipeline (`instascene run`) with the released code's tracker minimum and
-# no re-judgement (min_tracker_gaussians 50, rejudge_passes 0; everything else at today's defaults,
-# the instance merge included) and with today's defaults, scored by the
-# click protocol on labels (`eval --labels-only`). Scenes: the `small` preset at 320x240 (32 views)
-# and 640x480 (48 views) under both segmenter-noise families, and real-capture composites with the
-# two statues pressed together. Prints a markdown table and mean ± std per group and configuration.
+# scene, the offline pipeline up to the final labels (`instascene run --stages
+# decompose,train,segment`) with the previous session's defaults (`previous`: no labelling of
+# untraced Gaussians, no growth limit on the tau rule) and with today's defaults (`default`),
+# scored by the click protocol on labels (`eval --labels-only`). Scenes: the `small` preset at
+# 320x240 (32 views) and 640x480 (48 views) under both segmenter-noise families, and real-capture
+# composites with the two statues pressed together. Prints a markdown table and mean ± std per
+# group and configuration.
 # Usage: scripts/results_robustness.sh [BUILD_DIR] [WORK_DIR] [SEEDS] [COMPOSITE_SEEDS] [HIRES_SEEDS]
 set -euo pipefail
 BUILD_DIR=${1:-build}
@@ -19,16 +20,16 @@ mkdir -p "$WORK"
 rows="$WORK/rows.jsonl"
 : > "$rows"
 declare -A CONFIG=(
-  [release]="--min-tracker-gaussians 50 --rejudge-passes 0"
+  [previous]="--untraced-radius 0 --max-growth 0"
   [default]=""
 )
 run_scene() {  # run_scene GROUP LABEL DIR
-  for config in release default; do
+  for config in previous default; do
     local out="$3/run_$config" t0 t1
     rm -rf "$out"
     t0=$(date +%s.%N)
     # shellcheck disable=SC2086
-    "$BIN" run --scene "$3" --out "$out" ${CONFIG[$config]} >/dev/null 2>&1
+    "$BIN" run --scene "$3" --out "$out" --stages decompose,train,segment ${CONFIG[$config]} >/dev/null 2>&1
     t1=$(date +%s.%N)
     "$BIN" eval --scene "$3" --result "$out/segmentation" --json --labels-only 2>/dev/null |
       tail -n 1 > "$out/eval.json"
@@ -89,7 +90,7 @@ def failed(sel):
 def ms(v):
     return f"{statistics.mean(v):.3f} ± {statistics.stdev(v) if len(v) > 1 else 0:.3f}"
 for g in groups:
-    for config in ("release", "default"):
+    for config in ("previous", "default"):
         sel = [r for r in rows if r["group"] == g and r["config"] == config]
         if sel:
             print(f"| {g} | {config} | {len(sel)} | {ms([r['miou'] for r in sel])} | "

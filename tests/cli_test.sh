@@ -60,6 +60,14 @@ check_fails "the diffusion prior without a denoiser" "needs --denoiser grpc://HO
 check_fails "complete an absent object" "no object could be completed" "$BIN" complete --scene "$WORK/u" --result "$WORK/u/gt" --out "$WORK/u/y" --object 999
 check_fails "eval needs exactly one of --result and --completion" "exactly one" "$BIN" eval --scene "$WORK/u" --result "$WORK/u/gt" --completion "$WORK/u/objects"
 check "segment again" "$BIN" segment --scene "$WORK/s" --features "$WORK/run/segmentation" --out "$WORK/seg2" --threshold 0.8
+check "run with HDBSCAN labelling" "$BIN" run --scene "$WORK/s" --out "$WORK/runh" --stages decompose,train,segment --iterations 30 --samples 256 --pixel-pool 512 --labelling hdbscan
+check "the segment stage labelled by HDBSCAN" python3 -c "
+import json
+r = json.load(open('$WORK/runh/segmentation/result.json'))
+assert r['labelling'] == 'hdbscan' and 'hdbscan' in r and 'max_growth' not in r, r"
+check "the decomposition labelled untraced Gaussians" python3 -c "
+import json
+assert json.load(open('$WORK/runh/decomposition/decomposition.json'))['untraced_labelled'] > 0"
 check "train on the decomposition" "$BIN" train --scene "$WORK/s" --decomposition "$WORK/run/decomposition" --out "$WORK/tr" --iterations 30 --samples 256 --pixel-pool 512 --supervision 3d
 check_fails "bad supervision" "supervision" "$BIN" train --scene "$WORK/s" --decomposition "$WORK/run/decomposition" --out "$WORK/tr" --supervision bogus
 check_fails "segment without features" "no features" "$BIN" segment --scene "$WORK/s" --features "$WORK/s/gt" --out "$WORK/seg3"

@@ -78,6 +78,10 @@ absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const Gaussian
   result.merged_instances = MergeUnseparatedInstances(result.trackers, options, &result.instances);
   result.undersegmented =
       RemedyUndersegmented(result.trackers, result.judgement, options, &result.instances);
+  result.untraced_labelled = LabelUntracedGaussians(
+      result.trackers, cloud,
+      static_cast<float>(options.untraced_radius * RobustSceneDiagonal(cloud)), options.num_threads,
+      &result.instances);
   result.post_seconds = post_seconds + watch.ElapsedSeconds();
   if (progress) progress("post-processing", 1, 1);
   return result;
@@ -173,6 +177,7 @@ absl::Status WriteDecomposition(const std::string& directory, const Scene& scene
                             {"trackers", set.trackers.size()},
                             {"observer_schedule", result.schedule},
                             {"merged_instances", result.merged_instances},
+                            {"untraced_labelled", result.untraced_labelled},
                             {"seconds",
                              {{"tracking", result.tracking_seconds},
                               {"clustering", result.clustering_seconds},

@@ -34,7 +34,8 @@ struct DecompositionResult {
   // Per tracker: the mask cluster it ended in (-1: judged under-segmented, never a node); written
   // to decomposition.json so a user can see why a mask was lost.
   std::vector<int32_t> cluster_of;
-  int merged_instances = 0;  // merges of unseparated instances
+  int merged_instances = 0;      // merges of unseparated instances
+  size_t untraced_labelled = 0;  // untraced Gaussians that joined an instance
   double tracking_seconds = 0, clustering_seconds = 0, post_seconds = 0;
 
   // One label per Gaussian: instance index + 1 (0 = none; overlaps: the later instance wins).

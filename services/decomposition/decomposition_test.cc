@@ -179,6 +179,32 @@ TEST(MergeUnseparated, TwoSidesOfOneObjectMergeNeighboursDoNot) {
   EXPECT_EQ(MergeUnseparatedInstances(set, options, &strict), 0);
 }
 
+TEST(PostProcess, UntracedGaussiansJoinTheInstanceOfTheNearestTracedOne) {
+  // Gaussians 0-4 traced and in the instance (x = 0 .. 0.4), 5-9 traced and in none (x = 2 ..
+  // 2.4); 10-14 untraced: 10-12 beside the instance, 13 beside the unclaimed ones, 14 beyond the
+  // radius from everything.
+  TrackerSet set = MakeSet(1, 15, {{0, 1, 0, 5}});
+  set.frames.clear();
+  set.frame_offsets.assign(1, 0);
+  for (uint32_t g = 0; g < 15; ++g) {
+    if (g < 10) set.frames.push_back(0);
+    set.frame_offsets.push_back(set.frames.size());
+  }
+  GaussianCloud cloud;
+  cloud.Resize(15);
+  const float x[15] = {0,    0.1f, 0.2f,  0.3f,  0.4f,  2,     2.1f, 2.2f,
+                       2.3f, 2.4f, 0.05f, 0.15f, 0.42f, 2.05f, 5};
+  for (int g = 0; g < 15; ++g) cloud.positions[3 * g] = x[g];
+  std::vector<Instance> instances(1);
+  instances[0].gaussians = {0, 1, 2, 3, 4};
+  EXPECT_EQ(LabelUntracedGaussians(set, cloud, 0.5f, 1, &instances), 3u);
+  EXPECT_EQ(instances[0].gaussians, (std::vector<uint32_t>{0, 1, 2, 3, 4, 10, 11, 12}));
+  // Radius 0 is off.
+  instances[0].gaussians = {0, 1, 2, 3, 4};
+  EXPECT_EQ(LabelUntracedGaussians(set, cloud, 0.0f, 1, &instances), 0u);
+  EXPECT_EQ(instances[0].gaussians.size(), 5u);
+}
+
 TEST(MaskGraph, ObserverScheduleFollowsNumpyPercentiles) {
   // Three trackers visible in {0,1,2}, {0,1}, {3}: the non-zero entries of V V^T (both triangles
   // and the diagonal) are 1, 2, 2, 2, 3 -> numpy percentiles 95, 90, ..., 5 by linear

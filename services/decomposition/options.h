@@ -41,6 +41,10 @@ struct DecompositionOptions {
   // object seen from two sides. 0 joins = off.
   int merge_min_joins = 2;
   double merge_max_separation = 0.25;
+  // Labelling of untraced Gaussians (not in the released code; docs/DECOMPOSITION.md): a
+  // Gaussian that no view traces joins the instance of the nearest traced Gaussian within this
+  // share of the robust scene diagonal. 0 = off.
+  double untraced_radius = 0.01;
   int num_threads = 0;                 // 0 = all cores; results never depend on it
   const CancelFlag* cancel = nullptr;  // polled per view; not owned (common/core/cancel.h)
 

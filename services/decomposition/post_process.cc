@@ -7,6 +7,7 @@
 #include <unordered_map>
 
 #include "common/core/parallel.h"
+#include "common/geometry/point_index.h"
 #include "services/decomposition/union_find.h"
 
 namespace instascene::decomposition {
@@ -357,6 +358,53 @@ int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions&
   }
   instances->swap(merged);
   return merges;
+}
+
+size_t LabelUntracedGaussians(const TrackerSet& set, const GaussianCloud& cloud, float radius,
+                              int num_threads, std::vector<Instance>* instances) {
+  if (!(radius > 0) || instances->empty()) return 0;
+  std::vector<uint32_t> instance_of(set.num_gaussians, 0);  // overlaps: the later instance
+  for (size_t k = 0; k < instances->size(); ++k) {
+    for (uint32_t g : (*instances)[k].gaussians) instance_of[g] = static_cast<uint32_t>(k + 1);
+  }
+  std::vector<uint32_t> traced, untraced;
+  std::vector<Eigen::Vector3f> traced_points;
+  for (uint32_t g = 0; g < set.num_gaussians; ++g) {
+    const uint16_t* frames = nullptr;
+    if (set.FramesOf(g, &frames) > 0) {
+      traced.push_back(g);
+      traced_points.emplace_back(&cloud.positions[3 * g]);
+    } else if (instance_of[g] == 0) {
+      untraced.push_back(g);
+    }
+  }
+  if (traced.empty() || untraced.empty()) return 0;
+  const PointIndex3 index(std::move(traced_points));
+  std::vector<uint32_t> joins(untraced.size(), 0);
+  const float radius2 = radius * radius;
+  RunWithThreads(num_threads, [&] {
+    tbb::parallel_for(size_t{0}, untraced.size(), [&](size_t i) {
+      const auto [nearest, d2] = index.Nearest(Eigen::Vector3f(&cloud.positions[3 * untraced[i]]));
+      if (d2 <= radius2) joins[i] = instance_of[traced[nearest]];
+    });
+  });
+  size_t joined = 0;
+  std::vector<std::vector<uint32_t>> added(instances->size());
+  for (size_t i = 0; i < untraced.size(); ++i) {
+    if (joins[i] == 0) continue;
+    added[joins[i] - 1].push_back(untraced[i]);
+    ++joined;
+  }
+  for (size_t k = 0; k < instances->size(); ++k) {
+    if (added[k].empty()) continue;
+    std::vector<uint32_t>& members = (*instances)[k].gaussians;
+    std::vector<uint32_t> merged;
+    merged.reserve(members.size() + added[k].size());
+    std::merge(members.begin(), members.end(), added[k].begin(), added[k].end(),
+               std::back_inserter(merged));  // both sorted and disjoint
+    members.swap(merged);
+  }
+  return joined;
 }
 
 std::vector<uint32_t> RemedyUndersegmented(const TrackerSet& set, const MaskJudgement& judgement,

@@ -49,6 +49,13 @@ int MergeUnseparatedInstances(const TrackerSet& trackers, const DecompositionOpt
 
 // 4.8: under-segmented masks whose tracker lies > remedy_ratio inside one instance join that
 // instance's 2D cluster; returns the masks that remain under-segmented.
+// Gaussians that no view traces (weight above the tracker threshold at no pixel: the surfels
+// between and behind the ones carrying a view's weight) join the instance of the nearest traced
+// Gaussian within `radius` (scene units), if that one is in an instance (see
+// DecompositionOptions::untraced_radius). Returns how many joined an instance.
+size_t LabelUntracedGaussians(const TrackerSet& trackers, const GaussianCloud& cloud, float radius,
+                              int num_threads, std::vector<Instance>* instances);
+
 std::vector<uint32_t> RemedyUndersegmented(const TrackerSet& trackers,
                                            const MaskJudgement& judgement,
                                            const DecompositionOptions& options,

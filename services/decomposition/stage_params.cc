@@ -62,6 +62,9 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
               "Largest share of frames holding two instances apart that still allows the merge")
         .Real("rejudge_min_coverage", &O::rejudge_min_coverage, 0.0, 1.0,
               "Share of a mask's tracker that must lie in instances before it is re-judged")
+        .Real("untraced_radius", &O::untraced_radius, 0.0, 1.0,
+              "A Gaussian no view traces joins the instance of the nearest traced Gaussian "
+              "within this share of the robust scene diagonal (0 = off, the released code)")
         .Check([](const O& o) { return o.Validate(); });
     return c;
   }();

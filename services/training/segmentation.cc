@@ -59,9 +59,12 @@ std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int 
   // Instances that select (almost) nothing keep their coarse mask.
   std::map<uint32_t, bool> fallback;
   for (const auto& [id, c] : count) {
-    fallback[id] = selected[id] == 0 || selected[id] < options.min_kept_share * c;
+    fallback[id] = selected[id] == 0 || selected[id] < options.min_kept_share * c ||
+                   (options.max_growth > 0 && selected[id] > options.max_growth * c);
   }
+  // What a fallen-back instance selected outside its coarse mask returns to its own coarse label.
   for (size_t g = 0; g < n; ++g) {
+    if (labels[g] != 0 && fallback[labels[g]] && labels[g] != coarse[g]) labels[g] = coarse[g];
     if (coarse[g] != 0 && fallback[coarse[g]]) labels[g] = coarse[g];
   }
   return labels;
@@ -85,8 +88,9 @@ absl::StatusOr<std::vector<uint32_t>> FinalLabels(const SegmentationResult& trai
   if (trained.feature_dim == 0) return trained.labels;  // e.g. the vote baseline: nothing to do
   if (options.labelling == "tau") {
     (*metadata)["threshold"] = options.threshold;
-    return SegmentByFeatures(trained.features, trained.feature_dim, trained.labels,
-                             SegmentOptions{options.threshold, options.min_kept_share});
+    return SegmentByFeatures(
+        trained.features, trained.feature_dim, trained.labels,
+        SegmentOptions{options.threshold, options.min_kept_share, options.max_growth});
   }
   DensityLabelOptions o;
   o.hdbscan.min_samples = options.min_samples;

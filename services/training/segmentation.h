@@ -24,6 +24,10 @@ struct SegmentOptions {
   // apart by the feature field (under-trained, or a look-alike neighbour took it over): it keeps
   // its coarse mask instead of vanishing into a sliver.
   double min_kept_share = 0.25;
+  // An instance whose features select more than this many times its coarse Gaussians has a mean
+  // that drifted towards the background's (a small or spurious coarse instance whose features
+  // were not held apart): it keeps its coarse mask instead of spreading over the scene. 0 = off.
+  double max_growth = 3.0;
 };
 
 // labels: per Gaussian, the coarse instance id (0 = none) used to define the instances; returns

@@ -62,12 +62,11 @@ absl::StatusOr<pipeline::StageResult> RunSegment(const pipeline::StageContext& c
   ASSIGN_OR_RETURN(SegmentationResult in, ReadResult(trained, cloud.size()));
   SegmentationResult out = in;
   out.stage = "segment";
-  if (in.feature_dim > 0) {
-    out.labels = SegmentByFeatures(in.features, in.feature_dim, in.labels,
-                                   SegmentOptions{o.threshold, o.min_kept_share});
+  ASSIGN_OR_RETURN(out.labels, FinalLabels(in, cloud, o, c.num_threads, &out.metadata));
+  if (o.labelling == "tau") {
+    out.metadata["min_kept_share"] = o.min_kept_share;
+    out.metadata["max_growth"] = o.max_growth;
   }
-  out.metadata["threshold"] = o.threshold;
-  out.metadata["min_kept_share"] = o.min_kept_share;
   c.Report("exporting", 0, 1);
   RETURN_IF_ERROR(WriteResult(c.out_dir, out, cloud));
   RETURN_IF_ERROR(ExportInstances(c.out_dir, cloud, out.labels));

@@ -66,6 +66,10 @@ const pipeline::ParamCodec<SegmentStageOptions>& SegmentCodec() {
         .Real("min_kept_share", &O::min_kept_share, 0.0, 1.0,
               "tau: an instance whose features select less than this share of its coarse "
               "Gaussians keeps its coarse mask")
+        .Real("max_growth", &O::max_growth, 0.0, 1000.0,
+              "tau: an instance whose features select more than this many times its coarse "
+              "Gaussians (its mean drifted towards the background's) keeps its coarse mask; 0 = "
+              "off")
         .Int("min_samples", &O::min_samples, 1, 1000, "hdbscan: neighbours of a core point")
         .Int("min_cluster_size", &O::min_cluster_size, 2, 100000, "hdbscan: smallest cluster")
         .Real("cluster_selection_epsilon", &O::cluster_selection_epsilon, 0.0, 2.0,

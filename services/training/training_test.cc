@@ -140,6 +140,31 @@ TEST(Segmentation, AnInstanceItsFeaturesCannotHoldKeepsItsCoarseMask) {
             (std::vector<uint32_t>{1, 1, 1, 1, 1, 1, 1, 2}));
 }
 
+TEST(Segmentation, AnInstanceWhoseMeanDriftedToTheBackgroundKeepsItsCoarseMask) {
+  // Instance 2 (two Gaussians) shares its feature with eight unlabelled background Gaussians and
+  // with one of instance 1's twenty: its features select 11 > 3 x 2 Gaussians, so it keeps its
+  // coarse mask and what it took returns to its coarse label (0 for the background, 1 for instance
+  // 1's).
+  std::vector<float> f;
+  std::vector<uint32_t> coarse;
+  auto add = [&](float x, float y, uint32_t label, int count) {
+    for (int i = 0; i < count; ++i) {
+      f.insert(f.end(), {x, y});
+      coarse.push_back(label);
+    }
+  };
+  add(1, 0, 1, 19);
+  add(0, 1, 1, 1);
+  add(0, 1, 2, 2);
+  add(0.1f, 1, 0, 8);
+  SegmentOptions options;
+  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, options), coarse);
+  options.max_growth = 0;  // the plain tau rule: instance 2 spreads over the background
+  std::vector<uint32_t> expected(19, 1);
+  expected.resize(coarse.size(), 2);
+  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, options), expected);
+}
+
 TEST(FeatureField, TrainingOnASyntheticSceneSeparatesInstances) {
   const instascene::testing::ScopedTempDir temp("training_scene");
   const std::string dir = temp.Sub("scene");
