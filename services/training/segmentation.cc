@@ -56,7 +56,7 @@ std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int 
       ++selected[best_id];
     }
   }
-  // Instances that select (almost) nothing keep their coarse mask.
+  // Instances that select (almost) nothing, or far more than their coarse mask, keep that mask.
   std::map<uint32_t, bool> fallback;
   for (const auto& [id, c] : count) {
     fallback[id] = selected[id] == 0 || selected[id] < options.min_kept_share * c ||
@@ -88,6 +88,8 @@ absl::StatusOr<std::vector<uint32_t>> FinalLabels(const SegmentationResult& trai
   if (trained.feature_dim == 0) return trained.labels;  // e.g. the vote baseline: nothing to do
   if (options.labelling == "tau") {
     (*metadata)["threshold"] = options.threshold;
+    (*metadata)["min_kept_share"] = options.min_kept_share;
+    (*metadata)["max_growth"] = options.max_growth;
     return SegmentByFeatures(
         trained.features, trained.feature_dim, trained.labels,
         SegmentOptions{options.threshold, options.min_kept_share, options.max_growth});

@@ -63,10 +63,6 @@ absl::StatusOr<pipeline::StageResult> RunSegment(const pipeline::StageContext& c
   SegmentationResult out = in;
   out.stage = "segment";
   ASSIGN_OR_RETURN(out.labels, FinalLabels(in, cloud, o, c.num_threads, &out.metadata));
-  if (o.labelling == "tau") {
-    out.metadata["min_kept_share"] = o.min_kept_share;
-    out.metadata["max_growth"] = o.max_growth;
-  }
   c.Report("exporting", 0, 1);
   RETURN_IF_ERROR(WriteResult(c.out_dir, out, cloud));
   RETURN_IF_ERROR(ExportInstances(c.out_dir, cloud, out.labels));
