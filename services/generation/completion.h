@@ -43,6 +43,7 @@ struct CompletionOptions {
   RingOptions ring;
   VisibilityOptions visibility;
   FreeSpaceOptions free_space;
+  SeenThroughOptions seen_through;  // the exact free-space test of completion candidates
   MeshingOptions meshing;
   int top_training_views = 10;  // real views kept for refinement (ALGORITHM.md 7.3)
   size_t min_gaussians = 50;    // fewer: a degenerate object, failed permanently

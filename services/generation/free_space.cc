@@ -49,17 +49,6 @@ int FreeSpaceGrid::FreeViews(const Eigen::Vector3f& p) const {
 
 bool FreeSpaceGrid::IsFree(const Eigen::Vector3f& p) const { return FreeViews(p) >= min_views_; }
 
-bool FreeSpaceGrid::SeenThrough(const Eigen::Vector3f& p, float tolerance) const {
-  if (cameras_ == nullptr || surfaces_ == nullptr) return false;
-  for (const PinholeCamera& c : *cameras_) {
-    if (!c.SeesPoint(p.cast<double>())) continue;
-    const Eigen::Vector3f o = c.CenterInWorld().cast<float>();
-    const float line = (p - o).norm();
-    if (!surfaces_->Cast(o, (p - o) / line, 0.0f, line + tolerance).hit) return true;
-  }
-  return false;
-}
-
 double FreeSpaceGrid::FreeFraction() const {
   if (free_views_.empty()) return 0;
   size_t free = 0;
@@ -86,8 +75,6 @@ absl::StatusOr<FreeSpaceGrid> FreeSpaceGrid::Carve(const std::vector<PinholeCame
   const size_t voxels =
       static_cast<size_t>(options.resolution) * options.resolution * options.resolution;
   grid.free_views_.assign(voxels, 0);
-  grid.cameras_ = &cameras;
-  grid.surfaces_ = &surfaces;
   const Eigen::Vector3f lo = grid.origin_, hi = grid.origin_ + Eigen::Vector3f::Constant(2 * half);
   std::mutex merge;
   tbb::parallel_for(size_t{0}, cameras.size(), [&](size_t c) {

@@ -39,10 +39,6 @@ class FreeSpaceGrid {
 
   // True when `p` is inside the grid and was seen empty by at least min_views views.
   bool IsFree(const Eigen::Vector3f& p) const;
-  // The exact test: some view sees p (in its image) and its ray reaches more than `tolerance`
-  // beyond p before the first surface. Uses the cameras and surfaces Carve was given, which must
-  // outlive the grid.
-  bool SeenThrough(const Eigen::Vector3f& p, float tolerance) const;
   // Views that saw the voxel containing p empty (0 outside the grid).
   int FreeViews(const Eigen::Vector3f& p) const;
   float voxel() const { return voxel_; }
@@ -56,8 +52,6 @@ class FreeSpaceGrid {
   int resolution_ = 0;
   int min_views_ = 1;
   std::vector<uint16_t> free_views_;
-  const std::vector<PinholeCamera>* cameras_ = nullptr;  // not owned
-  const RayCaster* surfaces_ = nullptr;                  // not owned
 };
 
 }  // namespace instascene::generation

@@ -151,7 +151,6 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   const PointIndex3 observed(points);
   const float cover = options_.cover_spacings * std::max(frame.spacing, 1e-6f);
   CoverSet added_set(cover);
-  const float exact_tolerance = 1.5f * frame.spacing;
   std::vector<Candidate> added;
   int rejected_free = 0, rejected_covered = 0, rejected_below = 0;
   auto consider = [&](const Candidate& c) {
@@ -168,8 +167,10 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
       ++rejected_covered;
       return;
     }
-    // The exact test last (it costs one ray per real view): the grid is coarse.
-    if (options_.exact_free_space && input.free_space->SeenThrough(c.position, exact_tolerance)) {
+    // The exact test last (a few rays per real view): the grid is coarse and its margin keeps
+    // 1.5 voxels in front of every surface uncarved.
+    if (options_.exact_free_space && input.seen_through != nullptr &&
+        input.seen_through->SeenThrough(c.position)) {
       ++rejected_free;
       return;
     }

@@ -19,7 +19,9 @@ struct GeometricPriorOptions {
   bool support_cap = true;      // close the underside on the support plane
   bool axis_cap =
       true;  // close the lowest ring of an accepted rotation axis (a sphere's underside)
-  bool exact_free_space = false;  // also test each candidate against every view's depth map
+  // Also refuse a candidate some real view saw through at its pixel resolution
+  // (PriorInput::seen_through, seen_through.h). Measured in RESULTS.md ("Free-space violations").
+  bool exact_free_space = true;
   // A candidate is refused in a voxel this many real views saw empty (one view suffices: space a
   // single view saw through is free; symmetry scoring keeps the grid's min_views). Measured in
   // RESULTS.md ("Free-space violations").

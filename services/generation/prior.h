@@ -18,6 +18,7 @@
 #include "common/splat/gaussian_cloud.h"
 #include "services/generation/free_space.h"
 #include "services/generation/object_frame.h"
+#include "services/generation/seen_through.h"
 
 namespace instascene::generation {
 namespace diffusion {
@@ -37,6 +38,8 @@ struct PriorInput {
   const GaussianCloud* instance = nullptr;  // observed surfels, scene frame (not owned)
   ObjectFrame frame;
   const FreeSpaceGrid* free_space = nullptr;  // not owned
+  // The exact free-space test (did a real view see through a point?); may be null.
+  const SeenThroughTest* seen_through = nullptr;  // not owned
   std::vector<ViewImages> conditions;         // known ring views
   std::vector<PinholeCamera> targets;         // unknown ring views
   uint64_t seed = 1;

@@ -1,0 +1,107 @@
+#include "services/generation/seen_through.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/geometry/rigid.h"
+#include "common/mesh/surfel_mesh.h"
+
+namespace instascene::generation {
+
+absl::Status SeenThroughOptions::Validate() const {
+  if (!(min_opacity > 0) || !(min_opacity < 1) || !(blocked_below > 0) || !(blocked_below < 1) ||
+      !(tolerance_radii >= 0) || !(extent_sigma > 0) || !(extent_sigma <= 4) || max_crossings < 1 || max_crossings > 4096) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "seen-through test: bad options (min_opacity ", min_opacity, ", blocked_below ",
+        blocked_below, ", tolerance ", tolerance_radii, ", max_crossings ", max_crossings, ")"));
+  }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<SeenThroughTest> SeenThroughTest::Create(const std::vector<PinholeCamera>& cameras,
+                                                        const GaussianCloud& scene, float radius,
+                                                        const SeenThroughOptions& options) {
+  RETURN_IF_ERROR(options.Validate());
+  if (scene.num_scales != 2) return absl::InvalidArgumentError("seen-through test: needs surfels");
+  if (!(radius > 0)) return absl::InvalidArgumentError("seen-through test: radius is not > 0");
+  SeenThroughTest out;
+  out.cameras_ = cameras;
+  out.options_ = options;
+  out.tolerance_ = options.tolerance_radii * radius;
+  SurfelDiscOptions discs;
+  discs.min_opacity = options.min_opacity;
+  discs.extent_sigma = options.extent_sigma;
+  std::vector<uint32_t> source;
+  const TriangleMesh mesh = SurfelDiscs(scene, {}, discs, &source);
+  ASSIGN_OR_RETURN(out.discs_, RayCaster::Create(mesh));
+  // Compact the surfels that made discs; triangles map to them.
+  std::vector<int64_t> compact(scene.size(), -1);
+  out.triangle_surfel_.reserve(source.size());
+  for (uint32_t g : source) {
+    if (compact[g] < 0) {
+      compact[g] = static_cast<int64_t>(out.surfels_.size());
+      const float* q = &scene.rotations[4 * g];
+      const Eigen::Matrix3f r = RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).cast<float>();
+      const float* ls = &scene.log_scales[2 * g];
+      Surfel s;
+      s.center = Eigen::Vector3f(&scene.positions[3 * g]);
+      s.u = r.col(0) / std::max(std::exp(ls[0]), 1e-12f);
+      s.v = r.col(1) / std::max(std::exp(ls[1]), 1e-12f);
+      s.opacity = 1.0f / (1.0f + std::exp(-scene.opacity_logits[g]));
+      out.surfels_.push_back(s);
+    }
+    out.triangle_surfel_.push_back(static_cast<uint32_t>(compact[g]));
+  }
+  return out;
+}
+
+float SeenThroughTest::Transmittance(const Eigen::Vector3f& origin,
+                                     const Eigen::Vector3f& direction, float t_far) const {
+  float transmittance = 1.0f;
+  float t = 0.0f;
+  // Each crossing attenuates by the surfel's alpha there (2DGS's clamp at 0.99); the next cast
+  // starts just past it (a disc is planar: it is crossed once).
+  const float step = 1e-6f * std::max(1.0f, t_far);
+  for (int crossing = 0; crossing < options_.max_crossings; ++crossing) {
+    const RayHit hit = discs_->Cast(origin, direction, t, t_far);
+    if (!hit.hit) return transmittance;
+    const Surfel& s = surfels_[triangle_surfel_[hit.triangle]];
+    const Eigen::Vector3f d = origin + hit.distance * direction - s.center;
+    const float a = d.dot(s.u), b = d.dot(s.v);
+    const float alpha = std::min(0.99f, s.opacity * std::exp(-0.5f * (a * a + b * b)));
+    transmittance *= 1.0f - alpha;
+    if (transmittance < options_.blocked_below) return transmittance;
+    t = hit.distance + step;
+  }
+  return 0.0f;
+}
+
+bool SeenThroughTest::ViewSeesThrough(const PinholeCamera& c, const Eigen::Vector3f& p) const {
+  Eigen::Vector3d in_camera;
+  if (!c.SeesPoint(p.cast<double>(), &in_camera)) return false;
+  const Eigen::Vector3f eye = c.CenterInWorld().cast<float>();
+  const Eigen::Matrix3d to_world = c.camera_from_world.rotation.transpose();
+  const double half_x = 0.5 * in_camera.z() / c.fx, half_y = 0.5 * in_camera.z() / c.fy;
+  for (const Eigen::Vector3d& offset :
+       {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(half_x, 0, 0), Eigen::Vector3d(-half_x, 0, 0),
+        Eigen::Vector3d(0, half_y, 0), Eigen::Vector3d(0, -half_y, 0)}) {
+    const Eigen::Vector3f q = p + (to_world * offset).cast<float>();
+    const float line = (q - eye).norm();
+    if (Transmittance(eye, (q - eye) / line, line + tolerance_) < options_.blocked_below) {
+      return false;  // this ray of the footprint stopped at or before p (or just behind it)
+    }
+  }
+  return true;
+}
+
+int SeenThroughTest::ViewsSeeingThrough(const Eigen::Vector3f& p, int enough) const {
+  int count = 0;
+  for (const PinholeCamera& c : cameras_) {
+    if (ViewSeesThrough(c, p) && ++count >= enough) break;
+  }
+  return count;
+}
+
+}  // namespace instascene::generation
