@@ -301,6 +301,36 @@ TEST(GeometricPrior, TheAxisCapClosesTheLowerRingOfARevolvedSurface) {
   EXPECT_FALSE(closed_below(*open));
 }
 
+// A torus lying on the table, its hole seen through from the cameras: the axis is accepted, but
+// the axis cap does not close the hole (no surface of the torus lies above it).
+TEST(GeometricPrior, TheAxisCapLeavesATorusHoleOpen) {
+  ShapeSpec spec;
+  spec.kind = ShapeKind::kTorus;
+  spec.size = {0.08f, 0.025f, 0};
+  const PartialObject scene = MakePartialObject(MakeShapeMesh(spec, 48), 4000, 7);
+  auto split = SplitInstance(scene.labels, 1, 50);
+  ASSERT_TRUE(split.ok());
+  PriorInput input;
+  input.frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
+  const SceneFreeSpace space = CarveScene(scene, input.frame);
+  ASSERT_TRUE(space.grid.has_value());
+  const GaussianCloud instance = scene.cloud.Subset(split->instance);
+  input.instance = &instance;
+  input.free_space = &*space.grid;
+  GeometricPriorOptions options;
+  options.support_cap = false;
+  auto out = GeometricPrior(options).Complete(input);
+  ASSERT_TRUE(out.ok()) << out.status();
+  ASSERT_GT(out->report["added_by"].value("revolved", 0), 0) << out->report.dump();
+  size_t in_hole = 0;
+  for (size_t g = 0; g < out->added.size(); ++g) {
+    const Eigen::Vector3f p(&out->added.positions[3 * g]);
+    in_hole += Eigen::Vector2f(p.x(), p.y()).norm() < 0.08f - 0.025f - 0.01f;
+  }
+  EXPECT_EQ(in_hole, 0u) << out->report.dump();
+  EXPECT_GT(out->report["rejected"].value("axis_cap_open_above", 0), 0);
+}
+
 // The joint refinement inside the completion: real views cropped and rendered in situ (their
 // images here are renders of the scene itself), the ring's generated views; the object keeps its
 // surfel count and provenance, and views without an image are skipped and counted.

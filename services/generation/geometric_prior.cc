@@ -9,6 +9,8 @@
 #include "common/core/status.h"
 #include "common/geometry/point_index.h"
 #include "common/geometry/rigid.h"
+#include "common/mesh/ray_caster.h"
+#include "common/mesh/surfel_mesh.h"
 
 namespace instascene::generation {
 namespace {
@@ -152,7 +154,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   const float cover = options_.cover_spacings * std::max(frame.spacing, 1e-6f);
   CoverSet added_set(cover);
   std::vector<Candidate> added;
-  int rejected_free = 0, rejected_covered = 0, rejected_below = 0;
+  int rejected_free = 0, rejected_covered = 0, rejected_below = 0, rejected_open = 0;
   auto consider = [&](const Candidate& c) {
     if (frame.has_support &&
         frame.up.dot(c.position) < frame.support_height - 0.5f * frame.spacing) {
@@ -229,7 +231,19 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
         sources.push_back(c.source);
       }
       const size_t before = added.size();
-      for (const Candidate& c : AxisCap(h, frame, positions, sources, 1.01f * cover)) consider(c);
+      // The cap closes an underside: straight up from each disc point the object's own surface
+      // must lie within 2 radii. Where the column is open (a torus' hole, seen through from
+      // above), the disc would close a hole instead.
+      ASSIGN_OR_RETURN(std::unique_ptr<RayCaster> own_surface,
+                       RayCaster::Create(SurfelDiscs(instance, {}, SurfelDiscOptions{})));
+      const Eigen::Vector3f up = h.direction.dot(frame.up) >= 0 ? h.direction : -h.direction;
+      for (const Candidate& c : AxisCap(h, frame, positions, sources, 1.01f * cover)) {
+        if (!own_surface->Cast(c.position, up, 0.0f, 2.0f * frame.radius).hit) {
+          ++rejected_open;
+          continue;
+        }
+        consider(c);
+      }
       added_by["axis_cap"] += static_cast<int>(added.size() - before);
     }
   }
@@ -280,7 +294,8 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   out.report["asymmetric_sources"] = skipped_sources;
   out.report["rejected"] = {{"observed_free", rejected_free},
                             {"already_covered", rejected_covered},
-                            {"below_support", rejected_below}};
+                            {"below_support", rejected_below},
+                            {"axis_cap_open_above", rejected_open}};
   return out;
 }
 
