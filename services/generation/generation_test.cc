@@ -132,6 +132,27 @@ SceneFreeSpace CarveScene(const PartialObject& scene, const ObjectFrame& frame) 
   return out;
 }
 
+// The prior's input for instance 1 of a test scene: its frame, surfels and carved free space
+// (no seen-through test: the grid alone).
+struct PriorFixture {
+  explicit PriorFixture(const PartialObject& scene) {
+    auto split = SplitInstance(scene.labels, 1, 50);
+    EXPECT_TRUE(split.ok());
+    if (!split.ok()) return;
+    input.frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
+    space = CarveScene(scene, input.frame);
+    instance = scene.cloud.Subset(split->instance);
+    input.instance = &instance;
+    if (space.grid.has_value()) input.free_space = &*space.grid;
+  }
+  PriorFixture(const PriorFixture&) = delete;
+  PriorFixture& operator=(const PriorFixture&) = delete;
+  bool ok() const { return input.free_space != nullptr; }
+  SceneFreeSpace space;
+  GaussianCloud instance;
+  PriorInput input;
+};
+
 Detected Detect(const PartialObject& scene) {
   auto split = SplitInstance(scene.labels, 1, 50);
   EXPECT_TRUE(split.ok());
@@ -262,15 +283,10 @@ TEST(GeometricPrior, TheAxisCapClosesTheLowerRingOfARevolvedSurface) {
   spec.kind = ShapeKind::kSphere;
   spec.size = {0.08f, 0, 0};  // centred at (0, 0, 0.08), resting on the table
   const PartialObject scene = MakePartialObject(MakeShapeMesh(spec, 48), 3000, 5);
-  auto split = SplitInstance(scene.labels, 1, 50);
-  ASSERT_TRUE(split.ok());
-  PriorInput input;
-  input.frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
-  const SceneFreeSpace space = CarveScene(scene, input.frame);
-  ASSERT_TRUE(space.grid.has_value());
-  const GaussianCloud instance = scene.cloud.Subset(split->instance);
-  input.instance = &instance;
-  input.free_space = &*space.grid;
+  const PriorFixture fixture(scene);
+  ASSERT_TRUE(fixture.ok());
+  const PriorInput& input = fixture.input;
+  const GaussianCloud& instance = fixture.instance;
   const Eigen::Vector3f centre(0, 0, 0.08f);
   auto closed_below = [&](const PriorOutput& out) {
     auto discs = [](const GaussianCloud& cloud) {
@@ -308,15 +324,9 @@ TEST(GeometricPrior, TheAxisCapLeavesATorusHoleOpen) {
   spec.kind = ShapeKind::kTorus;
   spec.size = {0.08f, 0.025f, 0};
   const PartialObject scene = MakePartialObject(MakeShapeMesh(spec, 48), 4000, 7);
-  auto split = SplitInstance(scene.labels, 1, 50);
-  ASSERT_TRUE(split.ok());
-  PriorInput input;
-  input.frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
-  const SceneFreeSpace space = CarveScene(scene, input.frame);
-  ASSERT_TRUE(space.grid.has_value());
-  const GaussianCloud instance = scene.cloud.Subset(split->instance);
-  input.instance = &instance;
-  input.free_space = &*space.grid;
+  const PriorFixture fixture(scene);
+  ASSERT_TRUE(fixture.ok());
+  const PriorInput& input = fixture.input;
   GeometricPriorOptions options;
   options.support_cap = false;
   auto out = GeometricPrior(options).Complete(input);
