@@ -244,9 +244,9 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
                    RayCaster::Create(SurfelDiscs(surfels, everything, SurfelDiscOptions{})));
   ASSIGN_OR_RETURN(FreeSpaceGrid free_space,
                    FreeSpaceGrid::Carve(cameras, *scene_caster, out.frame, options.free_space));
-  ASSIGN_OR_RETURN(SeenThroughTest seen_through,
-                   SeenThroughTest::Create(cameras, surfels, out.frame.radius,
-                                           options.seen_through));
+  ASSIGN_OR_RETURN(
+      SeenThroughTest seen_through,
+      SeenThroughTest::Create(cameras, surfels, out.frame.radius, options.seen_through));
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
   report("rendering conditions", 3, 7);
   PriorInput input;

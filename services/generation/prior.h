@@ -40,8 +40,8 @@ struct PriorInput {
   const FreeSpaceGrid* free_space = nullptr;  // not owned
   // The exact free-space test (did a real view see through a point?); may be null.
   const SeenThroughTest* seen_through = nullptr;  // not owned
-  std::vector<ViewImages> conditions;         // known ring views
-  std::vector<PinholeCamera> targets;         // unknown ring views
+  std::vector<ViewImages> conditions;             // known ring views
+  std::vector<PinholeCamera> targets;             // unknown ring views
   uint64_t seed = 1;
   const CancelFlag* cancel = nullptr;
 };

@@ -12,10 +12,12 @@ namespace instascene::generation {
 
 absl::Status SeenThroughOptions::Validate() const {
   if (!(min_opacity > 0) || !(min_opacity < 1) || !(blocked_below > 0) || !(blocked_below < 1) ||
-      !(tolerance_radii >= 0) || !(extent_sigma > 0) || !(extent_sigma <= 4) || max_crossings < 1 || max_crossings > 4096) {
-    return absl::InvalidArgumentError(absl::StrCat(
-        "seen-through test: bad options (min_opacity ", min_opacity, ", blocked_below ",
-        blocked_below, ", tolerance ", tolerance_radii, ", max_crossings ", max_crossings, ")"));
+      !(tolerance_radii >= 0) || !(extent_sigma > 0) || !(extent_sigma <= 4) || max_crossings < 1 ||
+      max_crossings > 4096) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("seen-through test: bad options (min_opacity ", min_opacity,
+                     ", blocked_below ", blocked_below, ", extent_sigma ", extent_sigma,
+                     ", tolerance ", tolerance_radii, ", max_crossings ", max_crossings, ")"));
   }
   return absl::OkStatus();
 }

@@ -25,11 +25,11 @@
 namespace instascene::generation {
 
 struct SeenThroughOptions {
-  float min_opacity = 0.05f;     // fainter surfels are ignored (they barely attenuate)
-  float extent_sigma = 1.0f;     // a surfel attenuates rays within this many sigmas of its centre
-  float blocked_below = 0.5f;    // a ray whose transmittance falls below this is stopped
+  float min_opacity = 0.05f;      // fainter surfels are ignored (they barely attenuate)
+  float extent_sigma = 1.0f;      // a surfel attenuates rays within this many sigmas of its centre
+  float blocked_below = 0.5f;     // a ray whose transmittance falls below this is stopped
   float tolerance_radii = 0.02f;  // surfaces nearer than this behind p do not see through it
-  int max_crossings = 64;        // per ray; a ray crossing more is taken as stopped
+  int max_crossings = 64;         // per ray; a ray crossing more is taken as stopped
   absl::Status Validate() const;
 };
 

@@ -57,12 +57,12 @@ TEST(SeenThrough, AnOpaqueWallHidesWhatIsBehindIt) {
   const float radius = 0.1f;  // tolerance 0.02 * radius = 2 mm
   auto test = SeenThroughTest::Create({FrontCamera()}, scene, radius, SeenThroughOptions{});
   ASSERT_TRUE(test.ok()) << test.status();
-  EXPECT_TRUE(test->SeenThrough({0.0f, 0.0f, 0.5f}));     // in front of the wall: seen empty
+  EXPECT_TRUE(test->SeenThrough({0.0f, 0.0f, 0.5f}));      // in front of the wall: seen empty
   EXPECT_TRUE(test->SeenThrough({0.05f, -0.03f, 0.99f}));  // 1 cm in front: still seen empty
-  EXPECT_FALSE(test->SeenThrough({0.0f, 0.0f, 0.999f}));  // within the tolerance of the wall
-  EXPECT_FALSE(test->SeenThrough({0.0f, 0.0f, 1.2f}));    // behind it: never seen
-  EXPECT_FALSE(test->SeenThrough({2.0f, 0.0f, 0.5f}));    // outside the image
-  EXPECT_FALSE(test->SeenThrough({0.0f, 0.0f, -0.5f}));   // behind the camera
+  EXPECT_FALSE(test->SeenThrough({0.0f, 0.0f, 0.999f}));   // within the tolerance of the wall
+  EXPECT_FALSE(test->SeenThrough({0.0f, 0.0f, 1.2f}));     // behind it: never seen
+  EXPECT_FALSE(test->SeenThrough({2.0f, 0.0f, 0.5f}));     // outside the image
+  EXPECT_FALSE(test->SeenThrough({0.0f, 0.0f, -0.5f}));    // behind the camera
   EXPECT_EQ(test->ViewsSeeingThrough({0.0f, 0.0f, 0.5f}, 5), 1);
 }
 
