@@ -18,21 +18,24 @@ namespace {
 constexpr double kCutoff2 = 9.0;  // squared 3-sigma cut-off of the AABB (projection.cc)
 
 // Per splat and view: dL / d(k-plane offset tu', l-plane offset tv', Tw, low-pass centre,
-// opacity) and dL / d rgb, summed over pixels.
+// opacity), dL / d rgb and dL / d normal (camera frame, facing the camera), summed over pixels.
 struct SplatGrad {
-  double tu[3], tv[3], tw[3], mean[2], opacity, rgb[3];
+  double tu[3], tv[3], tw[3], mean[2], opacity, rgb[3], normal[3];
 };
 
 // Carries dL/d(Tu, Tv, Tw, low-pass centre, opacity) of surfel g to its 10 parameters (position
 // 3, log-scale 2, quaternion 4, logit 1) through the production projection (projection.cc):
 // M = K [R_cam r0 su | R_cam r1 sv | R_cam p + t] with rows Tu, Tv, Tw, the centre of the 3-sigma
-// ellipse's screen box, opacity = sigmoid(logit). The quaternion's rotation columns are
-// differentiated by forward-mode AD (4 derivatives); the rest is the chain rule by hand.
+// ellipse's screen box, opacity = sigmoid(logit), and of its camera-frame normal
+// n = sign R_cam r2 (sign: the one that makes it face the camera, `normal_view`). The quaternion's
+// rotation columns are differentiated by forward-mode AD (4 derivatives); the rest is the chain
+// rule by hand.
 using Quat = Eigen::AutoDiffScalar<Eigen::Vector4d>;
 
 void ChainToParameters(const GaussianCloud& cloud, size_t g, const ProjectionParams& p,
                        double dTu[3], double dTv[3], double dTw[3], const double d_mean[2],
-                       double d_opacity, double out[10]) {
+                       double d_opacity, const double d_normal[3], const float normal_view[3],
+                       double out[10]) {
   Eigen::Matrix3d rot;
   Eigen::Vector3d trans, pos;
   for (int r = 0; r < 3; ++r) {
@@ -47,10 +50,12 @@ void ChainToParameters(const GaussianCloud& cloud, size_t g, const ProjectionPar
   const Quat s = 2.0 / (w * w + x * x + y * y + z * z);
   const Quat r0[3] = {1.0 - s * (y * y + z * z), s * (x * y + w * z), s * (x * z - w * y)};
   const Quat r1[3] = {s * (x * y - w * z), 1.0 - s * (x * x + z * z), s * (y * z + w * x)};
-  Eigen::Vector3d r0v, r1v;
+  const Quat r2[3] = {s * (x * z + w * y), s * (y * z - w * x), 1.0 - s * (x * x + y * y)};
+  Eigen::Vector3d r0v, r1v, r2v;
   for (int k = 0; k < 3; ++k) {
     r0v[k] = r0[k].value();
     r1v[k] = r1[k].value();
+    r2v[k] = r2[k].value();
   }
   const Eigen::Vector3d a = rot * r0v * su, b = rot * r1v * sv, c = rot * pos + trans;
   const Eigen::Vector3d* cols[3] = {&a, &b, &c};
@@ -82,9 +87,17 @@ void ChainToParameters(const GaussianCloud& cloud, size_t g, const ProjectionPar
   for (int k = 0; k < 3; ++k) out[k] = d_pos[k];
   out[3] = dcol[0].dot(a);  // d a / d log su = a
   out[4] = dcol[1].dot(b);
+  const Eigen::Vector3d n_cam = rot * r2v;
+  const double facing =
+      n_cam[0] * normal_view[0] + n_cam[1] * normal_view[1] + n_cam[2] * normal_view[2] < 0 ? -1.0
+                                                                                            : 1.0;
+  const Eigen::Vector3d d_r2 =
+      facing * (rot.transpose() * Eigen::Vector3d(d_normal[0], d_normal[1], d_normal[2]));
   Eigen::Vector4d d_quat = Eigen::Vector4d::Zero();
-  for (int k = 0; k < 3; ++k)
-    d_quat += d_r0[k] * r0[k].derivatives() + d_r1[k] * r1[k].derivatives();
+  for (int k = 0; k < 3; ++k) {
+    d_quat += d_r0[k] * r0[k].derivatives() + d_r1[k] * r1[k].derivatives() +
+              d_r2[k] * r2[k].derivatives();
+  }
   for (int k = 0; k < 4; ++k) out[5 + k] = d_quat[k];
   const double opacity = 1.0 / (1.0 + std::exp(-double(cloud.opacity_logits[g])));
   out[9] = d_opacity * opacity * (1.0 - opacity);
@@ -141,6 +154,18 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
                                              const RenderResult& forward,
                                              const std::vector<float>& dloss_dcolor,
                                              const std::vector<float>& dloss_dalpha) {
+  if (dloss_dcolor.size() != 3 * static_cast<size_t>(camera.width) * camera.height) {
+    return absl::InvalidArgumentError("backward: loss gradients do not match the image");
+  }
+  return TileBackward(cloud, camera, options, forward,
+                      ImageAdjoints{.color = dloss_dcolor, .alpha = dloss_dalpha});
+}
+
+absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
+                                             const PinholeCamera& camera,
+                                             const RenderOptions& options,
+                                             const RenderResult& forward,
+                                             const ImageAdjoints& adjoints) {
   if (cloud.num_scales != 2) return absl::InvalidArgumentError("backward: needs a 2DGS cloud");
   const size_t pixels = static_cast<size_t>(camera.width) * camera.height;
   const ContributorTrace& trace = forward.trace;
@@ -150,8 +175,13 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
     return absl::InvalidArgumentError(
         "backward: the forward is not a full trace with transmittance of this cloud and camera");
   }
-  if (dloss_dcolor.size() != 3 * pixels ||
-      (!dloss_dalpha.empty() && dloss_dalpha.size() != pixels)) {
+  const std::span<const float> dloss_dcolor = adjoints.color, dloss_dalpha = adjoints.alpha,
+                               dloss_dnormal = adjoints.normal,
+                               dloss_dmedian = adjoints.median_depth;
+  if ((!dloss_dcolor.empty() && dloss_dcolor.size() != 3 * pixels) ||
+      (!dloss_dalpha.empty() && dloss_dalpha.size() != pixels) ||
+      (!dloss_dnormal.empty() && dloss_dnormal.size() != 3 * pixels) ||
+      (!dloss_dmedian.empty() && dloss_dmedian.size() != pixels)) {
     return absl::InvalidArgumentError("backward: loss gradients do not match the image");
   }
   const ProjectionParams params = MakeProjectionParams(camera, options, cloud.sh_degree);
@@ -170,6 +200,7 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
   }
   const ProjectedSplat* splats = splats_ptr;
   const double bg[3] = {options.background[0], options.background[1], options.background[2]};
+  const float* cam_from_world = params.rotation;  // row-major
 
   const int bands = (camera.height + kTileSize - 1) / kTileSize;
   std::vector<Band> band_grads(bands);
@@ -192,19 +223,33 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
           const size_t i = static_cast<size_t>(y) * camera.width + x;
           const uint64_t first = trace.offsets[i], last = trace.offsets[i + 1];
           if (first == last) continue;
-          const double dc[3] = {dloss_dcolor[3 * i], dloss_dcolor[3 * i + 1],
-                                dloss_dcolor[3 * i + 2]};
+          double dc[3] = {0, 0, 0}, dn[3] = {0, 0, 0};
+          if (!dloss_dcolor.empty()) {
+            for (int c = 0; c < 3; ++c) dc[c] = dloss_dcolor[3 * i + c];
+          }
+          if (!dloss_dnormal.empty()) {  // world -> camera frame: dL/dn_cam = R_cw dL/dn_world
+            for (int r = 0; r < 3; ++r) {
+              for (int c = 0; c < 3; ++c)
+                dn[r] += cam_from_world[3 * r + c] * dloss_dnormal[3 * i + c];
+            }
+          }
           const double da = dloss_dalpha.empty() ? 0.0 : dloss_dalpha[i];
+          const double dmedian = dloss_dmedian.empty() ? 0.0 : dloss_dmedian[i];
           // T before each contributor, front to back: T_0 = 1, T_{k+1} = T_k - w_k (w = alpha T).
+          // The median depth is the last contributor's with T > 0.5 before it (tile_blend.h).
           transmittance.resize(last - first);
           double T_run = 1.0;
+          uint64_t median = last;
           for (uint64_t e = first; e < last; ++e) {
             transmittance[e - first] = T_run;
+            if (T_run > 0.5) median = e;
             T_run -= trace.entries[e].weight;
           }
           const double T_final = T_run;
-          // Back to front: "after" = the colour behind contributor k (background included).
+          // Back to front: "after" = the colour (normal) behind contributor k (background
+          // included; the normal's is 0).
           double after[3] = {T_final * bg[0], T_final * bg[1], T_final * bg[2]};
+          double after_n[3] = {0, 0, 0};
           for (uint64_t e = last; e-- > first;) {
             const uint32_t g = trace.entries[e].gaussian;
             const ProjectedSplat& s = splats[g];
@@ -213,18 +258,24 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
             const double alpha = w / T;
             SplatGrad& grad = at(g);
             // C = sum c_j a_j T_j + T_N bg: dC/da_k = c_k T_k - after_k / (1 - a_k);
-            // A = 1 - T_N: dA/da_k = T_N / (1 - a_k).
+            // A = 1 - T_N: dA/da_k = T_N / (1 - a_k). The normal is a channel like C.
             double dl_dalpha = da * T_final / (1.0 - alpha);
             for (int c = 0; c < 3; ++c) {
               grad.rgb[c] += w * dc[c];
               dl_dalpha += dc[c] * (s.rgb[c] * T - after[c] / (1.0 - alpha));
               after[c] += w * s.rgb[c];
+              grad.normal[c] += w * dn[c];
+              dl_dalpha += dn[c] * (s.normal_view[c] * T - after_n[c] / (1.0 - alpha));
+              after_n[c] += w * s.normal_view[c];
             }
-            // The 0.99 clamp passes no gradient (w / T is 0.99 up to float rounding there);
-            // otherwise alpha = opacity * G.
-            if (alpha > kAlphaMax - 1e-5) continue;
-            grad.opacity += dl_dalpha * alpha / s.opacity;
-            const float d_power = static_cast<float>(dl_dalpha * alpha);  // d alpha / d power
+            // The 0.99 clamp passes no gradient to alpha (w / T is 0.99 up to float rounding
+            // there); otherwise alpha = opacity * G.
+            const bool clamped = alpha > kAlphaMax - 1e-5;
+            const double d_depth = e == median ? dmedian : 0.0;
+            if (clamped && d_depth == 0.0) continue;
+            if (!clamped) grad.opacity += dl_dalpha * alpha / s.opacity;
+            const float d_power =  // d alpha / d power
+                clamped ? 0.0f : static_cast<float>(dl_dalpha * alpha);
             // The per-pixel planes, intersection and branch exactly as the forward computed them
             // (tile_blend.h, float); the derivatives are taken in float too and summed in double.
             const float rx = static_cast<float>(x - s.origin_px[0]);
@@ -242,10 +293,16 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
             if (!(u * u + v * v <= 2.0f * (dx * dx + dy * dy))) {  // 2D: power = -(dx^2 + dy^2)
               grad.mean[0] += d_power * -2.0f * dx;
               grad.mean[1] += d_power * -2.0f * dy;
+              grad.tw[2] += d_depth;  // depth = Tw_z, the centre's
               continue;
             }
-            // 3D: power = -(u^2 + v^2) / 2, u = nu / pz, v = nv / pz.
-            const float du = -d_power * u, dv = -d_power * v;
+            // 3D: power = -(u^2 + v^2) / 2, depth = u Tw_x + v Tw_y + Tw_z, u = nu / pz,
+            // v = nv / pz.
+            const float fd = static_cast<float>(d_depth);
+            const float du = -d_power * u + fd * s.tw[0], dv = -d_power * v + fd * s.tw[1];
+            grad.tw[0] += d_depth * u;
+            grad.tw[1] += d_depth * v;
+            grad.tw[2] += d_depth;
             const float dnu = du * inv, dnv = dv * inv, dpz = -(du * u + dv * v) * inv;
             float dk[3], dl[3];
             // nu = k1 l2 - k2 l1, nv = k2 l0 - k0 l2, pz = k0 l1 - k1 l0.
@@ -277,6 +334,7 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
         t.tv[c] += b.tv[c];
         t.tw[c] += b.tw[c];
         t.rgb[c] += b.rgb[c];
+        t.normal[c] += b.normal[c];
       }
       t.mean[0] += b.mean[0];
       t.mean[1] += b.mean[1];
@@ -304,7 +362,8 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
         dTw[c] = t.tw[c] + s.origin_px[0] * t.tu[c] + s.origin_px[1] * t.tv[c];
       }
       double geo[10];
-      ChainToParameters(cloud, g, params, dTu, dTv, dTw, t.mean, t.opacity, geo);
+      ChainToParameters(cloud, g, params, dTu, dTv, dTw, t.mean, t.opacity, t.normal, s.normal_view,
+                        geo);
       // Colour: rgb = max(0, 0.5 + sum basis_k(dir) sh_k), dir = (p - eye) / |p - eye|.
       using D3 = Eigen::AutoDiffScalar<Eigen::Vector3d>;
       Eigen::Matrix<D3, 3, 1> dir;

@@ -122,6 +122,95 @@ TEST(TileBackward, MatchesFiniteDifferencesWithDegree3Colour) {
   EXPECT_LT(pos_error, 3e-2);
 }
 
+// The normal and median-depth images (the depth-normal consistency term): central differences of
+// the production forward for every geometric parameter and opacity. Surfels roughly facing the
+// camera and wide enough that their 3-sigma boxes and alpha >= 1/255 cover the whole image, so no
+// cut-off lies near the evaluation point (at 8x the boxes' edges cross the image: steps the
+// gradient rightly ignores); the median depth is a
+// step where the contributor that crosses T = 0.5 changes, so two scenes keep that contributor
+// fixed over the image: faint surfels (T > 0.5 after all of them: the median is the last one's
+// depth) and an opaque front surfel (T < 0.5 after it: the median is its depth).
+TEST(TileBackward, MatchesFiniteDifferencesForNormalAndMedianDepth) {
+  const PinholeCamera camera = Camera();
+  const size_t pixels = 40 * 30;
+  RenderOptions options = Options();
+  options.depth = true;
+  options.normal = true;
+  for (int scene = 0; scene < 2; ++scene) {
+    GaussianCloud cloud = RandomSurfels(40 + scene, 3, 0);
+    for (float& s : cloud.log_scales) s += std::log(30.0f);
+    for (int g = 0; g < 3; ++g) {
+      for (int k = 1; k < 4; ++k) cloud.rotations[4 * g + k] *= 0.2f;
+      cloud.opacity_logits[g] = std::log(0.2f / 0.8f);  // opacity 0.2: T > 0.512 after three
+    }
+    if (scene == 1) {  // the nearest surfel opaque and wide enough to cover the whole image
+      int front = 0;
+      for (int g = 1; g < 3; ++g) {
+        if (cloud.positions[3 * g + 2] < cloud.positions[3 * front + 2]) front = g;
+      }
+      cloud.opacity_logits[front] = std::log(0.95f / 0.05f);
+      cloud.log_scales[2 * front] += std::log(4.0f);
+      cloud.log_scales[2 * front + 1] += std::log(4.0f);
+    }
+    Weights wn = RandomWeights(50 + scene, pixels), wd = RandomWeights(60 + scene, pixels);
+    auto forward = RenderForBackward(cloud, camera, options);
+    ASSERT_TRUE(forward.ok());
+    ImageAdjoints adjoints;
+    adjoints.normal = wn.color;
+    adjoints.median_depth = wd.alpha;
+    auto grad = TileBackward(cloud, camera, options, *forward, adjoints);
+    ASSERT_TRUE(grad.ok()) << grad.status();
+    auto loss = [&](const GaussianCloud& c) {
+      auto r = Render(c, camera, options);
+      double sum = 0;
+      for (size_t i = 0; i < pixels; ++i) {
+        EXPECT_GT(r->median_depth[i], 0.0f) << "a pixel the surfels do not cover";
+        sum += wd.alpha[i] * double(r->median_depth[i]);
+        for (int ch = 0; ch < 3; ++ch) sum += wn.color[3 * i + ch] * double(r->normal[3 * i + ch]);
+      }
+      return sum;
+    };
+    auto numeric = [&](std::vector<float> GaussianCloud::*field, float eps) {
+      std::vector<float> out((cloud.*field).size());
+      for (size_t k = 0; k < out.size(); ++k) {
+        GaussianCloud plus = cloud, minus = cloud;
+        (plus.*field)[k] += eps;
+        (minus.*field)[k] -= eps;
+        out[k] = static_cast<float>((loss(plus) - loss(minus)) / (2 * eps));
+      }
+      return out;
+    };
+    const double errors[4] = {
+        RelativeError(grad->positions, numeric(&GaussianCloud::positions, 2e-3f)),
+        RelativeError(grad->log_scales, numeric(&GaussianCloud::log_scales, 2e-3f)),
+        RelativeError(grad->rotations, numeric(&GaussianCloud::rotations, 2e-3f)),
+        RelativeError(grad->opacity_logits, numeric(&GaussianCloud::opacity_logits, 2e-3f))};
+    std::printf(
+        "scene %d: normal + median depth vs finite differences: position %.2e log-scale %.2e "
+        "rotation %.2e opacity %.2e\n",
+        scene, errors[0], errors[1], errors[2], errors[3]);
+    for (double e : errors) EXPECT_LT(e, 1e-2);
+  }
+}
+
+// Each adjoint must match its image; an empty one is allowed (no dependence).
+TEST(TileBackward, RefusesAdjointsOfTheWrongSize) {
+  const GaussianCloud cloud = RandomSurfels(14, 5, 0);
+  auto forward = RenderForBackward(cloud, Camera(), Options());
+  ASSERT_TRUE(forward.ok());
+  const std::vector<float> short_image(10, 0.0f);
+  ImageAdjoints bad_normal, bad_median, none;
+  bad_normal.normal = short_image;
+  bad_median.median_depth = short_image;
+  EXPECT_EQ(TileBackward(cloud, Camera(), Options(), *forward, bad_normal).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ(TileBackward(cloud, Camera(), Options(), *forward, bad_median).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  auto zero = TileBackward(cloud, Camera(), Options(), *forward, none);
+  ASSERT_TRUE(zero.ok());
+  for (float g : zero->positions) EXPECT_EQ(g, 0.0f);
+}
+
 TEST(TileBackward, DoesNotDependOnTheThreadCount) {
   const GaussianCloud cloud = RandomSurfels(11, 40, 1);
   const Weights w = RandomWeights(12, 40 * 30);
