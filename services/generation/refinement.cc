@@ -9,13 +9,21 @@
 #include "common/raster/rasterizer.h"
 #include "common/raster/tile_backward.h"
 #include "services/generation/image_losses.h"
+#include "services/generation/normal_consistency.h"
 
 namespace instascene::generation {
 namespace {
 
-RenderOptions ViewOptions(const RefinementView& view, int num_threads, RasterWorkspace* ws) {
+// The real views' normal-consistency term needs the median depth and the normals.
+bool WantsNormals(const RefinementView& view, const RefinementOptions& options) {
+  return !view.generated && options.lambda_normal > 0;
+}
+
+RenderOptions ViewOptions(const RefinementView& view, const RefinementOptions& options,
+                          int num_threads, RasterWorkspace* ws) {
   RenderOptions o;
   for (float& b : o.background) b = 1.0f;
+  o.depth = o.normal = WantsNormals(view, options);
   o.near_plane = view.near_plane;
   o.num_threads = num_threads;
   o.workspace = ws;
@@ -42,15 +50,35 @@ const GaussianCloud& WithContext(const GaussianCloud& object, const RefinementVi
   return out;
 }
 
-// The view's loss at `render`; its gradient is added into d_color / d_alpha (zeroed by the caller).
+// dL/d of the rendered images, zeroed and of the render's size (normal / median depth only
+// when the view wants them).
+struct ViewGradients {
+  std::vector<float> color, alpha, normal, median_depth;
+  explicit ViewGradients(const RenderResult& r)
+      : color(r.color.size(), 0.0f),
+        alpha(r.alpha.size(), 0.0f),
+        normal(r.normal.size(), 0.0f),
+        median_depth(r.median_depth.size(), 0.0f) {}
+  ImageAdjoints Adjoints() const { return {color, alpha, normal, median_depth}; }
+};
+
+// The view's loss at `render`; its gradient is added into `grad`.
 double ViewLoss(const RefinementView& view, const RenderResult& render,
-                const RefinementOptions& options, std::vector<float>* d_color,
-                std::vector<float>* d_alpha) {
-  if (!view.generated) return MaskedL1(render.color, view.rgb, view.mask, 1.0, d_color);
-  const double l1 = MaskedL1(render.color, view.rgb, {}, 1.0 - options.lambda_dssim, d_color);
-  const double dssim =
-      Dssim(render.color, view.rgb, render.width, render.height, options.lambda_dssim, d_color);
-  const double bce = AlphaBce(render.alpha, view.mask, options.lambda_mask, d_alpha);
+                const RefinementOptions& options, ViewGradients* grad) {
+  if (!view.generated) {
+    double loss = MaskedL1(render.color, view.rgb, view.mask, 1.0, &grad->color);
+    if (WantsNormals(view, options)) {
+      loss += options.lambda_normal * NormalConsistency(render.normal, render.median_depth,
+                                                        render.alpha, view.mask, view.camera,
+                                                        options.lambda_normal, &grad->normal,
+                                                        &grad->median_depth);
+    }
+    return loss;
+  }
+  const double l1 = MaskedL1(render.color, view.rgb, {}, 1.0 - options.lambda_dssim, &grad->color);
+  const double dssim = Dssim(render.color, view.rgb, render.width, render.height,
+                             options.lambda_dssim, &grad->color);
+  const double bce = AlphaBce(render.alpha, view.mask, options.lambda_mask, &grad->alpha);
   return (1.0 - options.lambda_dssim) * l1 + options.lambda_dssim * dssim +
          options.lambda_mask * bce;
 }
@@ -63,9 +91,9 @@ absl::StatusOr<double> MeanLoss(const GaussianCloud& cloud,
   GaussianCloud scratch;
   for (const RefinementView& view : views) {
     ASSIGN_OR_RETURN(RenderResult r, Render(WithContext(cloud, view, &scratch), view.camera,
-                                            ViewOptions(view, options.num_threads, ws)));
-    std::vector<float> dc(r.color.size(), 0.0f), da(r.alpha.size(), 0.0f);
-    sum += ViewLoss(view, r, options, &dc, &da);
+                                            ViewOptions(view, options, options.num_threads, ws)));
+    ViewGradients unused(r);
+    sum += ViewLoss(view, r, options, &unused);
   }
   return views.empty() ? 0.0 : sum / views.size();
 }
@@ -122,10 +150,10 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
                                                  const RefinementProgress& progress) {
   if (cloud->num_scales != 2) return absl::InvalidArgumentError("refinement needs 2DGS surfels");
   if (options.iterations < 0 || options.fixed_view_every < 1 || options.curve_every < 1 ||
-      !(options.spatial_scale > 0)) {
+      !(options.spatial_scale > 0) || !(options.lambda_normal >= 0)) {
     return absl::InvalidArgumentError(
         "refinement: needs iterations >= 0, fixed_view_every >= 1, curve_every >= 1, "
-        "spatial_scale > 0");
+        "spatial_scale > 0, lambda_normal >= 0");
   }
   RETURN_IF_ERROR(CheckViews(views, cloud->sh_degree));
   const auto start = std::chrono::steady_clock::now();
@@ -152,13 +180,13 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
     const size_t chosen = pick(rng);
     const size_t k = it % options.fixed_view_every == 0 ? 0 : chosen;
     const RefinementView& view = views[k];
-    const RenderOptions ro = ViewOptions(view, options.num_threads, &ws);
+    const RenderOptions ro = ViewOptions(view, options, options.num_threads, &ws);
     const GaussianCloud& scene = WithContext(work, view, &scratch);
     ASSIGN_OR_RETURN(RenderResult render, RenderForBackward(scene, view.camera, ro));
-    std::vector<float> d_color(render.color.size(), 0.0f), d_alpha(render.alpha.size(), 0.0f);
-    const double loss = ViewLoss(view, render, options, &d_color, &d_alpha);
+    ViewGradients image_grad(render);
+    const double loss = ViewLoss(view, render, options, &image_grad);
     ASSIGN_OR_RETURN(SurfelGradients grad,
-                     TileBackward(scene, view.camera, ro, render, d_color, d_alpha));
+                     TileBackward(scene, view.camera, ro, render, image_grad.Adjoints()));
     if (view.context.size() > 0) {  // the context is frozen: keep the object's gradients
       const size_t n = work.size();
       grad.positions.resize(3 * n);

@@ -4,15 +4,16 @@
 //   real views:      L1 inside the mask, the object rendered in situ: with the view's `context`
 //                    (the rest of the scene that the view sees, frozen) in front of and behind it,
 //                    so the real image is explained everywhere and only what the object changes
-//                    matters;
+//                    matters; + lambda_normal times 2DGS's depth-normal consistency inside the
+//                    mask (normal_consistency.h: rendered normals against the normals of the
+//                    median depth map);
 //   generated views: (1 - lambda_dssim) L1 + lambda_dssim (1 - SSIM) over the image, white
 //                    background, + lambda_mask BCE(alpha, mask);
 // back-propagates it with the fast 2DGS backward pass (common/raster/tile_backward.h) and takes
 // one Adam step on every parameter (position, log-scale, rotation, opacity logit, SH) with the 2DGS
 // learning rates (ALGORITHM.md 2.6; the position's decays exponentially, scaled by
 // `spatial_scale`). No densification or pruning (the prototype has none either): the surfel count,
-// order and every extra channel (provenance) are kept. The normal-consistency term is not
-// implemented (it needs the depth/normal backward). Deterministic for a given seed and
+// order and every extra channel (provenance) are kept. Deterministic for a given seed and
 // thread-count independent. Thread-compatible.
 #pragma once
 
@@ -41,6 +42,7 @@ struct RefinementOptions {
   int iterations = 2000;  // the prototype's refineGS
   double lambda_dssim = 0.2;
   double lambda_mask = 0.1;
+  double lambda_normal = 0.05;  // 2DGS's normal consistency on the real views; 0 = off
   // 2DGS learning rates; the position's decays from init to final over the iterations and is
   // multiplied by spatial_scale (the scene's camera extent, as 2DGS does).
   double position_lr_init = 1.6e-4, position_lr_final = 1.6e-6, spatial_scale = 1.0;

@@ -5,6 +5,7 @@
 #include <random>
 
 #include <gtest/gtest.h>
+#include <Eigen/Geometry>
 
 #include "common/raster/rasterizer.h"
 #include "common/synth/primitives.h"
@@ -178,6 +179,57 @@ TEST(Refinement, MaskedRealViewsOnlyTeachInsideTheMask) {
   ASSERT_TRUE(none.ok());
   EXPECT_EQ(none->initial_loss, 0.0);
   EXPECT_EQ(unchanged.positions, Perturbed(f.truth).positions);
+}
+
+// Surfel g's normal (the rotation's third column).
+Eigen::Vector3d SurfelNormal(const GaussianCloud& c, size_t g) {
+  const float* q = &c.rotations[4 * g];
+  return Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized().toRotationMatrix().col(2);
+}
+
+// Mean angle (degrees) between the cloud's surfel normals and the truth's, up to sign.
+double MeanNormalError(const GaussianCloud& cloud, const GaussianCloud& truth) {
+  double sum = 0;
+  for (size_t g = 0; g < cloud.size(); ++g) {
+    const double c = std::min(1.0, std::abs(SurfelNormal(cloud, g).dot(SurfelNormal(truth, g))));
+    sum += std::acos(c) * 180.0 / M_PI;
+  }
+  return sum / cloud.size();
+}
+
+// Surfels tilted off their surface keep the colour the views see nearly unchanged, so the masked
+// L1 of the real views barely turns them back; the depth-normal consistency term does.
+TEST(Refinement, TheNormalTermTurnsTiltedSurfelsBackOntoTheirSurface) {
+  const Fixture f = MakeFixture();
+  GaussianCloud tilted = f.truth;
+  std::mt19937_64 rng(17);
+  std::normal_distribution<double> n(0.0, 1.0);
+  for (size_t g = 0; g < tilted.size(); ++g) {
+    float* q = &tilted.rotations[4 * g];
+    const Eigen::Vector3d axis = Eigen::Vector3d(n(rng), n(rng), n(rng)).normalized();
+    const Eigen::Quaterniond turned =
+        Eigen::Quaterniond(q[0], q[1], q[2], q[3]).normalized() *
+        Eigen::Quaterniond(
+            Eigen::AngleAxisd(0.5, Eigen::Vector3d(axis.x(), axis.y(), 0).normalized()));
+    q[0] = turned.w(), q[1] = turned.x(), q[2] = turned.y(), q[3] = turned.z();
+  }
+  const std::vector<RefinementView> views = Targets(f, false);
+  double error[2];
+  const double lambdas[2] = {0.0, 0.05};  // off, the default
+  for (int k = 0; k < 2; ++k) {
+    GaussianCloud cloud = tilted;
+    RefinementOptions options;
+    options.iterations = 300;
+    options.spatial_scale = 0.6;
+    options.lambda_normal = lambdas[k];
+    ASSERT_TRUE(RefineGaussians(&cloud, views, options).ok());
+    error[k] = MeanNormalError(cloud, f.truth);
+  }
+  const double before = MeanNormalError(tilted, f.truth);
+  std::printf("mean normal error: tilted %.1f deg, refined without the term %.1f, with %.1f\n",
+              before, error[0], error[1]);
+  EXPECT_LT(error[1], 0.8 * error[0]);  // measured 24.6 -> 17.0 (from 28.6)
+  EXPECT_LT(error[1], 0.7 * before);
 }
 
 TEST(Refinement, DoesNotDependOnTheThreadCount) {
