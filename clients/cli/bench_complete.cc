@@ -22,9 +22,10 @@ namespace instascene::cli {
 // (azimuth -70..70 degrees): the surfels facing away from every camera are dropped, as a capture
 // would have nothing there. The views' images are renders of the complete scene.
 absl::Status BenchComplete(const CompleteBenchArgs& args) {
-  if (args.gaussians < 1000 || args.gaussians > 2'000'000 || args.iterations < 0) {
+  if (args.gaussians < 1000 || args.gaussians > 2'000'000 || args.iterations < 0 ||
+      !(args.lambda_normal >= 0)) {
     return absl::InvalidArgumentError(
-        "bench complete: --gaussians in [1000, 2e6], iterations >= 0");
+        "bench complete: --gaussians in [1000, 2e6], iterations >= 0, lambda-normal >= 0");
   }
   std::mt19937_64 rng(args.seed);
   Appearance table_look, bottle_look;
@@ -67,6 +68,7 @@ absl::Status BenchComplete(const CompleteBenchArgs& args) {
   const GaussianCloud scene = all.Subset(keep);
   generation::CompletionOptions options;
   options.refinement.iterations = args.iterations;
+  options.refinement.lambda_normal = args.lambda_normal;
   options.num_threads = args.threads;
   options.seed = args.seed;
   options.load_view = [&](int view) -> absl::StatusOr<Image> { return images.at(view); };

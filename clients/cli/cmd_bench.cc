@@ -33,6 +33,7 @@ struct BenchArgs {
   bool gaussians_set = false, views_set = false;
   int iterations = 0;
   int width = 1280, height = 720, frames = 5, threads = 0, objects = 40;
+  double lambda_normal = 0.05;
   uint64_t seed = 1;
   bool json = false;
 };
@@ -289,6 +290,9 @@ void AddBenchCommand(CLI::App& app, Action* action) {
          "raster: timed frames, each from another view (default 5); decompose: views (preset's)")
       ->check(CLI::Range(1, 1000));
   cmd->add_option("--objects", args->objects, "Objects in the scene (default 40)");
+  cmd->add_option("--lambda-normal", args->lambda_normal,
+                  "complete: the refinement's depth-normal consistency weight (default 0.05; 0 = "
+                  "off)");
   cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");
   cmd->add_option("--seed", args->seed, "Scene seed");
   cmd->add_flag("--json", args->json, "Print the figures as one JSON line (last stdout line)");
@@ -303,6 +307,7 @@ void AddBenchCommand(CLI::App& app, Action* action) {
         if (args->width != 1280) c.width = args->width;
         if (args->height != 720) c.height = args->height;
         c.threads = args->threads;
+        c.lambda_normal = args->lambda_normal;
         c.seed = args->seed;
         c.json = args->json;
         return BenchComplete(c);

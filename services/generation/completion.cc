@@ -244,16 +244,18 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
                    RayCaster::Create(SurfelDiscs(surfels, everything, SurfelDiscOptions{})));
   ASSIGN_OR_RETURN(FreeSpaceGrid free_space,
                    FreeSpaceGrid::Carve(cameras, *scene_caster, out.frame, options.free_space));
-  ASSIGN_OR_RETURN(
-      SeenThroughTest seen_through,
-      SeenThroughTest::Create(cameras, surfels, out.frame.radius, options.seen_through));
+  std::optional<SeenThroughTest> seen_through;
+  if (prior->UsesSeenThrough()) {
+    ASSIGN_OR_RETURN(seen_through, SeenThroughTest::Create(cameras, surfels, out.frame.radius,
+                                                           options.seen_through));
+  }
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
   report("rendering conditions", 3, 7);
   PriorInput input;
   input.instance = &out.raw;
   input.frame = out.frame;
   input.free_space = &free_space;
-  input.seen_through = &seen_through;
+  input.seen_through = seen_through ? &*seen_through : nullptr;
   input.seed = options.seed;
   input.cancel = options.cancel;
   for (size_t k = 0; k < out.ring.size(); ++k) {

@@ -3,6 +3,7 @@
 #include <tbb/parallel_for.h>
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <filesystem>
 #include <map>
@@ -22,6 +23,7 @@
 #include "common/splat/gaussian_ply.h"
 #include "services/generation/completion.h"
 #include "services/generation/object_mesh.h"
+#include "services/generation/seen_through.h"
 #include "services/generation/viewpoints.h"
 
 namespace instascene::generation {
@@ -69,16 +71,11 @@ bool SeenBySomeView(const Eigen::Vector3f& p, const std::vector<PinholeCamera>& 
 bool InObservedFreeSpace(const Eigen::Vector3f& p, const std::vector<PinholeCamera>& cameras,
                          const RayCaster& scene, float tolerance) {
   for (const PinholeCamera& c : cameras) {
-    Eigen::Vector3d in_camera;
-    if (!c.SeesPoint(p.cast<double>(), &in_camera)) continue;
+    std::array<Eigen::Vector3f, 5> footprint;
+    if (!PixelFootprint(c, p, &footprint)) continue;
     const Eigen::Vector3f o = c.CenterInWorld().cast<float>();
-    const Eigen::Matrix3d to_world = c.camera_from_world.rotation.transpose();
-    const double half_x = 0.5 * in_camera.z() / c.fx, half_y = 0.5 * in_camera.z() / c.fy;
     bool all_clear = true;
-    for (const Eigen::Vector3d& offset :
-         {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(half_x, 0, 0), Eigen::Vector3d(-half_x, 0, 0),
-          Eigen::Vector3d(0, half_y, 0), Eigen::Vector3d(0, -half_y, 0)}) {
-      const Eigen::Vector3f q = p + (to_world * offset).cast<float>();
+    for (const Eigen::Vector3f& q : footprint) {
       const float line = (q - o).norm();
       if (scene.Cast(o, (q - o) / line, 0.0f, line + tolerance).hit) {
         all_clear = false;

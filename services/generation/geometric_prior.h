@@ -34,6 +34,7 @@ class GeometricPrior final : public CompletionPrior {
   explicit GeometricPrior(GeometricPriorOptions options = {}) : options_(options) {}
   std::string name() const override { return "geometric"; }
   absl::StatusOr<PriorOutput> Complete(const PriorInput& input) const override;
+  bool UsesSeenThrough() const override { return options_.exact_free_space; }
 
  private:
   GeometricPriorOptions options_;

@@ -59,6 +59,9 @@ class CompletionPrior {
   virtual ~CompletionPrior() = default;
   virtual std::string name() const = 0;
   virtual absl::StatusOr<PriorOutput> Complete(const PriorInput& input) const = 0;
+  // Whether Complete reads PriorInput::seen_through (the caller builds it only then: a second
+  // ray-casting structure over the whole scene).
+  virtual bool UsesSeenThrough() const { return false; }
 };
 
 // The diffusion prior's two open choices of ALGORITHM.md 7.7, as settings (defaults and why:

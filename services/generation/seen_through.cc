@@ -80,16 +80,24 @@ float SeenThroughTest::Transmittance(const Eigen::Vector3f& origin,
   return 0.0f;
 }
 
-bool SeenThroughTest::ViewSeesThrough(const PinholeCamera& c, const Eigen::Vector3f& p) const {
+bool PixelFootprint(const PinholeCamera& c, const Eigen::Vector3f& p,
+                    std::array<Eigen::Vector3f, 5>* points) {
   Eigen::Vector3d in_camera;
   if (!c.SeesPoint(p.cast<double>(), &in_camera)) return false;
-  const Eigen::Vector3f eye = c.CenterInWorld().cast<float>();
   const Eigen::Matrix3d to_world = c.camera_from_world.rotation.transpose();
   const double half_x = 0.5 * in_camera.z() / c.fx, half_y = 0.5 * in_camera.z() / c.fy;
-  for (const Eigen::Vector3d& offset :
-       {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(half_x, 0, 0), Eigen::Vector3d(-half_x, 0, 0),
-        Eigen::Vector3d(0, half_y, 0), Eigen::Vector3d(0, -half_y, 0)}) {
-    const Eigen::Vector3f q = p + (to_world * offset).cast<float>();
+  const Eigen::Vector3d offsets[5] = {Eigen::Vector3d(0, 0, 0), Eigen::Vector3d(half_x, 0, 0),
+                                      Eigen::Vector3d(-half_x, 0, 0), Eigen::Vector3d(0, half_y, 0),
+                                      Eigen::Vector3d(0, -half_y, 0)};
+  for (int k = 0; k < 5; ++k) (*points)[k] = p + (to_world * offsets[k]).cast<float>();
+  return true;
+}
+
+bool SeenThroughTest::ViewSeesThrough(const PinholeCamera& c, const Eigen::Vector3f& p) const {
+  std::array<Eigen::Vector3f, 5> footprint;
+  if (!PixelFootprint(c, p, &footprint)) return false;
+  const Eigen::Vector3f eye = c.CenterInWorld().cast<float>();
+  for (const Eigen::Vector3f& q : footprint) {
     const float line = (q - eye).norm();
     if (Transmittance(eye, (q - eye) / line, line + tolerance_) < options_.blocked_below) {
       return false;  // this ray of the footprint stopped at or before p (or just behind it)

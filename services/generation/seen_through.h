@@ -12,6 +12,7 @@
 // Immutable after Create; thread-safe reads.
 #pragma once
 
+#include <array>
 #include <memory>
 #include <vector>
 
@@ -23,6 +24,12 @@
 #include "common/splat/gaussian_cloud.h"
 
 namespace instascene::generation {
+
+// p's one-pixel footprint in camera c: p and p moved by half a pixel left, right, up and down at
+// its depth (world frame). False, and nothing written, when c does not see p (behind it or off
+// the image). The evaluation's free-space test (completion_eval.cc) uses the same footprint.
+bool PixelFootprint(const PinholeCamera& c, const Eigen::Vector3f& p,
+                    std::array<Eigen::Vector3f, 5>* points);
 
 struct SeenThroughOptions {
   float min_opacity = 0.05f;      // fainter surfels are ignored (they barely attenuate)

@@ -50,6 +50,7 @@ CompletionOptions ToCompletionOptions(const CompleteStageOptions& o) {
   options.min_gaussians = static_cast<size_t>(o.min_gaussians);
   options.seed = o.seed;
   options.refinement.iterations = o.refine_iterations;
+  options.refinement.lambda_normal = o.refine_lambda_normal;
   options.refine_view_max_side = o.refine_view_size;
   options.diffusion.replace_fraction = o.diffusion_replace_fraction;
   options.diffusion.warp = o.diffusion_warp;

@@ -31,6 +31,9 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
         .Int("refine_view_size", &O::refine_view_size, 32, 1024,
              "Joint refinement: real views are cropped to the object and binned to at most this, "
              "px")
+        .Real("refine_lambda_normal", &O::refine_lambda_normal, 0.0, 10.0,
+              "Joint refinement: weight of 2DGS's depth-normal consistency on the real views "
+              "(0 = off)")
         .Real("diffusion_replace_fraction", &O::diffusion_replace_fraction, 0.0, 1.0,
               "Diffusion prior: known pixels replace the sampler's during this share of the "
               "steps, from the noisiest (1 = every step, RePaint; 0 = never)")

@@ -26,6 +26,7 @@ struct CompleteStageOptions {
   // prototype's setting is 2000.
   int refine_iterations = 0;
   int refine_view_size = 256;               // real views cropped and binned to at most this, px
+  double refine_lambda_normal = 0.05;       // depth-normal consistency on the real views (2DGS)
   double diffusion_replace_fraction = 1.0;  // diffusion prior: steps that replace known pixels
   std::string diffusion_warp = "latent";    // diffusion prior: latent | pixel
   bool diffusion_unseen_mask = true;        // diffusion prior: the 7.8 generation mask
