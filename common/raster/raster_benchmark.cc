@@ -198,6 +198,34 @@ void BM_TileBackward(benchmark::State& state) {
   }
 }
 BENCHMARK(BM_TileBackward)->Arg(20000)->Unit(benchmark::kMillisecond)->UseRealTime();
+// With the depth-normal consistency's images too: the forward renders median depth and normals,
+// the backward takes all four adjoints.
+void BM_TileForwardForBackwardNormalDepth(benchmark::State& state) {
+  const RingObject& o = Object(state.range(0));
+  RenderOptions options;
+  options.depth = options.normal = true;
+  for (auto _ : state) {
+    auto image = RenderForBackward(o.cloud, o.camera, options);
+    benchmark::DoNotOptimize(image);
+  }
+}
+BENCHMARK(BM_TileForwardForBackwardNormalDepth)
+    ->Arg(20000)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+void BM_TileBackwardNormalDepth(benchmark::State& state) {
+  const RingObject& o = Object(state.range(0));
+  RenderOptions options;
+  options.depth = options.normal = true;
+  auto forward = RenderForBackward(o.cloud, o.camera, options);
+  const std::vector<float> d_rgb(3 * 256 * 256, 0.1f), d_one(256 * 256, 0.1f);
+  const ImageAdjoints adjoints{d_rgb, d_one, d_rgb, d_one};
+  for (auto _ : state) {
+    auto grads = TileBackward(o.cloud, o.camera, options, *forward, adjoints);
+    benchmark::DoNotOptimize(grads);
+  }
+}
+BENCHMARK(BM_TileBackwardNormalDepth)->Arg(20000)->Unit(benchmark::kMillisecond)->UseRealTime();
 
 void BM_EvalShDegree3(benchmark::State& state) {
   float coeffs[48];
