@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstdio>
+#include <functional>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -45,6 +46,20 @@ double RelativeError(const std::vector<float>& a, const std::vector<float>& b) {
     norm += b[i] * double(b[i]);
   }
   return std::sqrt(diff / std::max(norm, 1e-30));
+}
+
+// Central differences of `loss` for every value of one parameter array of `cloud`.
+std::vector<float> CentralDifferences(const GaussianCloud& cloud,
+                                      std::vector<float> GaussianCloud::*field, float eps,
+                                      const std::function<double(const GaussianCloud&)>& loss) {
+  std::vector<float> out((cloud.*field).size());
+  for (size_t k = 0; k < out.size(); ++k) {
+    GaussianCloud plus = cloud, minus = cloud;
+    (plus.*field)[k] += eps;
+    (minus.*field)[k] -= eps;
+    out[k] = static_cast<float>((loss(plus) - loss(minus)) / (2 * eps));
+  }
+  return out;
 }
 
 // The slow double-precision kernel (itself checked against finite differences for every
@@ -105,14 +120,7 @@ TEST(TileBackward, MatchesFiniteDifferencesWithDegree3Colour) {
     return sum;
   };
   auto numeric = [&](std::vector<float> GaussianCloud::*field, float eps) {
-    std::vector<float> out((cloud.*field).size());
-    for (size_t k = 0; k < out.size(); ++k) {
-      GaussianCloud plus = cloud, minus = cloud;
-      (plus.*field)[k] += eps;
-      (minus.*field)[k] -= eps;
-      out[k] = static_cast<float>((loss(plus) - loss(minus)) / (2 * eps));
-    }
-    return out;
+    return CentralDifferences(cloud, field, eps, loss);
   };
   const double sh_error = RelativeError(grad->sh, numeric(&GaussianCloud::sh, 0.05f));
   const double pos_error =
@@ -171,14 +179,7 @@ TEST(TileBackward, MatchesFiniteDifferencesForNormalAndMedianDepth) {
       return sum;
     };
     auto numeric = [&](std::vector<float> GaussianCloud::*field, float eps) {
-      std::vector<float> out((cloud.*field).size());
-      for (size_t k = 0; k < out.size(); ++k) {
-        GaussianCloud plus = cloud, minus = cloud;
-        (plus.*field)[k] += eps;
-        (minus.*field)[k] -= eps;
-        out[k] = static_cast<float>((loss(plus) - loss(minus)) / (2 * eps));
-      }
-      return out;
+      return CentralDifferences(cloud, field, eps, loss);
     };
     const double errors[4] = {
         RelativeError(grad->positions, numeric(&GaussianCloud::positions, 2e-3f)),
