@@ -215,6 +215,32 @@ TEST(ObjectFrame, UpFromTheSupportAndSupportHeight) {
   EXPECT_GT(frame.spacing, 0);
 }
 
+// The table near the bottle is hidden (no surfel within 60 cm) and a neighbour's face, tilted 30
+// degrees, lies beside it: no surfel near the object shows its support. The up is still the
+// table's (the scene's support), neither the face's nor the cameras' mean up (22 degrees off
+// here: what the frame fell back to before the scene's up).
+TEST(ObjectFrame, UpIsTheScenesSupportNotANeighboursTiltedFace) {
+  PartialObject scene = MakePartialObject(Bottle(), 4000, 3);
+  std::vector<uint32_t> keep, labels;
+  for (uint32_t g = 0; g < scene.cloud.size(); ++g) {
+    const Eigen::Vector3f p(&scene.cloud.positions[3 * g]);
+    if (scene.labels[g] == 0 && Eigen::Vector2f(p.x(), p.y()).norm() < 0.6f) continue;
+    keep.push_back(g);
+    labels.push_back(scene.labels[g]);
+  }
+  GaussianCloud cloud = scene.cloud.Subset(keep);
+  TriangleMesh face = MakeRectangle(0.2f, 0.2f, 4, 4);
+  const Eigen::Matrix3f tilt = Eigen::AngleAxisf(30 * kPi / 180, Eigen::Vector3f::UnitX()).matrix();
+  for (Eigen::Vector3f& v : face.vertices) v = tilt * v + Eigen::Vector3f(0.16f, 0, 0.02f);
+  std::mt19937_64 rng(4);
+  AppendSurfels(face, 1500, Appearance{}, SurfelSampling{}, rng, &cloud);
+  labels.resize(cloud.size(), 0);
+  auto split = SplitInstance(labels, 1, 50);
+  ASSERT_TRUE(split.ok());
+  const ObjectFrame frame = ComputeObjectFrame(cloud, *split, scene.cameras);
+  EXPECT_GT(frame.up.z(), std::cos(2 * kPi / 180)) << frame.up.transpose();
+}
+
 TEST(Symmetry, RecoversTheAxisOfAPartlySeenBottle) {
   // 10-70 % occlusion: cameras over 140, 100 and 60 degrees of azimuth.
   for (double half_angle : {70.0, 50.0, 30.0}) {

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 
 #include "absl/strings/str_cat.h"
 #include "common/geometry/point_index.h"
@@ -15,6 +16,29 @@ Eigen::Vector3f MeanUp(const std::vector<PinholeCamera>& cameras) {
   // OpenCV axes: the camera's y points down, so its up in the world is -row 1 of R.
   for (const PinholeCamera& c : cameras) sum -= c.camera_from_world.rotation.row(1).transpose();
   if (sum.norm() < 1e-9) return Eigen::Vector3f::UnitZ();
+  return sum.normalized().cast<float>();
+}
+
+// The mean of the directions within 10 degrees of the most supported one (the mode, searched
+// over at most 400 of them); nullopt for fewer than `min_count` directions.
+std::optional<Eigen::Vector3f> ModeDirection(const std::vector<Eigen::Vector3f>& directions,
+                                             size_t min_count) {
+  if (directions.size() < min_count) return std::nullopt;
+  constexpr float kModeCos = 0.985f;  // 10 degrees
+  const size_t stride = std::max<size_t>(1, directions.size() / 400);
+  size_t best = 0, best_count = 0;
+  for (size_t i = 0; i < directions.size(); i += stride) {
+    size_t count = 0;
+    for (const Eigen::Vector3f& n : directions) count += n.dot(directions[i]) >= kModeCos;
+    if (count > best_count) {
+      best = i;
+      best_count = count;
+    }
+  }
+  Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  for (const Eigen::Vector3f& n : directions) {
+    if (n.dot(directions[best]) >= kModeCos) sum += n.cast<double>();
+  }
   return sum.normalized().cast<float>();
 }
 
@@ -133,9 +157,25 @@ ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& 
     const Eigen::Vector3f offset = p - frame.center;
     return (offset - offset.dot(frame.up) * frame.up).norm() <= reach;
   };
-  // 1. Up: the mode of the normals of occluder surfels near and below the object that face
-  // roughly up (within 35 degrees of the camera estimate): the support's orientation, robust
-  // against neighbouring objects' tilted surfaces.
+  // 1. Up, in two steps. (a) The scene's: the mode of the normals of every occluder surfel
+  // facing roughly up (within 35 degrees of the camera estimate; at most 20000 of them, a fixed
+  // stride): the support most of the scene rests on. (b) The object's: the mode of the normals
+  // of occluder surfels near and below the object within 15 degrees of the scene's up: its own
+  // support, robust against neighbouring objects' tilted surfaces (with only the camera
+  // estimate's 35-degree cone, a bowl whose table was hidden under it took a neighbour's side,
+  // 56 degrees off, for its support; RESULTS.md "Object frames").
+  auto facing = [&](uint32_t g, const Eigen::Vector3f& reference, float min_cos,
+                    std::vector<Eigen::Vector3f>* out) {
+    Eigen::Vector3f n = normal_of(g);
+    if (n.dot(reference) < 0) n = -n;
+    if (n.dot(reference) >= min_cos) out->push_back(n);
+  };
+  std::vector<Eigen::Vector3f> scene_normals;
+  const size_t scene_stride = std::max<size_t>(1, split.occluders.size() / 20000);
+  for (size_t k = 0; k < split.occluders.size(); k += scene_stride) {
+    facing(split.occluders[k], frame.up, 0.82f, &scene_normals);
+  }
+  const Eigen::Vector3f scene_up = ModeDirection(scene_normals, 20).value_or(frame.up);
   std::vector<Eigen::Vector3f> candidates;
   for (uint32_t g : split.occluders) {
     const Eigen::Vector3f p(&cloud.positions[3 * g]);
@@ -144,31 +184,12 @@ ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& 
         !in_footprint(p, 2.0f * frame.radius)) {
       continue;
     }
-    Eigen::Vector3f n = normal_of(g);
-    if (n.dot(frame.up) < 0) n = -n;
-    if (n.dot(frame.up) >= 0.82f) candidates.push_back(n);
+    facing(g, scene_up, 0.966f, &candidates);
   }
-  if (candidates.size() >= 20) {
-    constexpr float kModeCos = 0.985f;  // 10 degrees
-    const size_t stride = std::max<size_t>(1, candidates.size() / 400);
-    size_t best = 0, best_count = 0;
-    for (size_t i = 0; i < candidates.size(); i += stride) {
-      size_t count = 0;
-      for (const Eigen::Vector3f& n : candidates) count += n.dot(candidates[i]) >= kModeCos;
-      if (count > best_count) {
-        best = i;
-        best_count = count;
-      }
-    }
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-    for (const Eigen::Vector3f& n : candidates) {
-      if (n.dot(candidates[best]) >= kModeCos) sum += n.cast<double>();
-    }
-    frame.up = sum.normalized().cast<float>();
-    frame.bottom_height = std::numeric_limits<float>::infinity();
-    for (const Eigen::Vector3f& p : points) {
-      frame.bottom_height = std::min(frame.bottom_height, frame.up.dot(p));
-    }
+  frame.up = ModeDirection(candidates, 20).value_or(scene_up);
+  frame.bottom_height = std::numeric_limits<float>::infinity();
+  for (const Eigen::Vector3f& p : points) {
+    frame.bottom_height = std::min(frame.bottom_height, frame.up.dot(p));
   }
   // 2. Support: occluder surfels that face up, within four radii (what lies right under the
   // object is rarely reconstructed), below the bottom by at most one radius (the object's lower
