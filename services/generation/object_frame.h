@@ -1,6 +1,7 @@
 // services/generation/object_frame.h: the instance / occluder split of a segmented scene and the
 // object's local frame (ALGORITHM.md 7.1): centre (AABB centre of the instance's Gaussians), up
-// (the cameras' mean up: the scene is never rotated), radius (largest distance from the centre),
+// (the support's normal: the scene's dominant up-facing surface, refined by the support right under
+// the object; see object_frame.cc), radius (largest distance from the centre),
 // and the support plane under the object when the occluders show one. Value types, thread-safe.
 #pragma once
 
