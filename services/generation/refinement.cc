@@ -20,12 +20,12 @@ bool WantsNormals(const RefinementView& view, const RefinementOptions& options) 
 }
 
 RenderOptions ViewOptions(const RefinementView& view, const RefinementOptions& options,
-                          int num_threads, RasterWorkspace* ws) {
+                          RasterWorkspace* ws) {
   RenderOptions o;
   for (float& b : o.background) b = 1.0f;
   o.depth = o.normal = WantsNormals(view, options);
   o.near_plane = view.near_plane;
-  o.num_threads = num_threads;
+  o.num_threads = options.num_threads;
   o.workspace = ws;
   return o;
 }
@@ -91,7 +91,7 @@ absl::StatusOr<double> MeanLoss(const GaussianCloud& cloud,
   GaussianCloud scratch;
   for (const RefinementView& view : views) {
     ASSIGN_OR_RETURN(RenderResult r, Render(WithContext(cloud, view, &scratch), view.camera,
-                                            ViewOptions(view, options, options.num_threads, ws)));
+                                            ViewOptions(view, options, ws)));
     ViewGradients unused(r);
     sum += ViewLoss(view, r, options, &unused);
   }
@@ -180,7 +180,7 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
     const size_t chosen = pick(rng);
     const size_t k = it % options.fixed_view_every == 0 ? 0 : chosen;
     const RefinementView& view = views[k];
-    const RenderOptions ro = ViewOptions(view, options, options.num_threads, &ws);
+    const RenderOptions ro = ViewOptions(view, options, &ws);
     const GaussianCloud& scene = WithContext(work, view, &scratch);
     ASSIGN_OR_RETURN(RenderResult render, RenderForBackward(scene, view.camera, ro));
     ViewGradients image_grad(render);
