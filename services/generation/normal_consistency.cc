@@ -2,14 +2,41 @@
 
 #include <Eigen/Geometry>
 
+#include "absl/strings/str_cat.h"
+
 namespace instascene::generation {
 
-double NormalConsistency(const std::vector<float>& normal, const std::vector<float>& depth,
-                         const std::vector<float>& alpha, const std::vector<uint8_t>& mask,
-                         const PinholeCamera& camera, double weight, std::vector<float>* d_normal,
-                         std::vector<float>* d_depth) {
+namespace {
+
+absl::Status CheckSize(const char* name, size_t size, size_t expected) {
+  if (size == expected) return absl::OkStatus();
+  return absl::InvalidArgumentError(absl::StrCat("normal consistency: ", name, " has ", size,
+                                                 " values, the camera's image needs ", expected));
+}
+
+}  // namespace
+
+absl::StatusOr<double> NormalConsistency(
+    const std::vector<float>& normal, const std::vector<float>& depth,
+    const std::vector<float>& alpha, const std::vector<uint8_t>& mask, const PinholeCamera& camera,
+    double weight, std::vector<float>* d_normal, std::vector<float>* d_depth) {
   const int w = camera.width, h = camera.height;
+  if (w <= 0 || h <= 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("normal consistency: camera of ", w, "x", h, " pixels"));
+  }
+  if (d_normal == nullptr || d_depth == nullptr) {
+    return absl::InvalidArgumentError("normal consistency: null gradient buffer");
+  }
   const size_t pixels = static_cast<size_t>(w) * h;
+  for (absl::Status s :
+       {CheckSize("normal", normal.size(), 3 * pixels), CheckSize("depth", depth.size(), pixels),
+        CheckSize("alpha", alpha.size(), pixels),
+        mask.empty() ? absl::OkStatus() : CheckSize("mask", mask.size(), pixels),
+        CheckSize("d_normal", d_normal->size(), 3 * pixels),
+        CheckSize("d_depth", d_depth->size(), pixels)}) {
+    if (!s.ok()) return s;
+  }
   size_t counted = 0;
   for (size_t i = 0; i < pixels; ++i) counted += mask.empty() || mask[i] != 0;
   if (counted == 0) return 0.0;

@@ -17,16 +17,20 @@
 #include <cstdint>
 #include <vector>
 
+#include "absl/status/statusor.h"
 #include "common/geometry/camera.h"
 
 namespace instascene::generation {
 
 // Mean over the masked pixels (mask[i] != 0; every pixel when `mask` is empty) of
 // 1 - n_rend . n_surf; 0 when no pixel is masked. Adds `weight` times its gradient into d_normal
-// (HxWx3) and d_depth (HxW). normal: HxWx3, depth and alpha: HxW, all of the camera's size.
-double NormalConsistency(const std::vector<float>& normal, const std::vector<float>& depth,
-                         const std::vector<float>& alpha, const std::vector<uint8_t>& mask,
-                         const PinholeCamera& camera, double weight, std::vector<float>* d_normal,
-                         std::vector<float>* d_depth);
+// (HxWx3) and d_depth (HxW). normal: HxWx3, depth and alpha: HxW, all of the camera's size;
+// InvalidArgument (naming the buffer and both sizes) for any other size or a null gradient.
+absl::StatusOr<double> NormalConsistency(const std::vector<float>& normal,
+                                         const std::vector<float>& depth,
+                                         const std::vector<float>& alpha,
+                                         const std::vector<uint8_t>& mask,
+                                         const PinholeCamera& camera, double weight,
+                                         std::vector<float>* d_normal, std::vector<float>* d_depth);
 
 }  // namespace instascene::generation

@@ -3,6 +3,7 @@
 #include <cmath>
 #include <cstdio>
 #include <random>
+#include <string>
 
 #include <gtest/gtest.h>
 #include <Eigen/Geometry>
@@ -55,13 +56,13 @@ TEST(NormalConsistency, APlaneWithItsOwnNormalGivesOneMinusAlpha) {
     for (int x = 1; x + 1 < c.width; ++x) interior[size_t(y) * c.width + x] = 1;
   }
   std::vector<float> dn(3 * pixels, 0.0f), dd(pixels, 0.0f);
-  EXPECT_NEAR(NormalConsistency(normal, depth, alpha, interior, c, 1.0, &dn, &dd), 0.2, 1e-5);
-  EXPECT_NEAR(NormalConsistency(reversed, depth, alpha, interior, c, 1.0, &dn, &dd), 1.8, 1e-5);
+  EXPECT_NEAR(*NormalConsistency(normal, depth, alpha, interior, c, 1.0, &dn, &dd), 0.2, 1e-5);
+  EXPECT_NEAR(*NormalConsistency(reversed, depth, alpha, interior, c, 1.0, &dn, &dd), 1.8, 1e-5);
   const double inner = double(c.width - 2) * (c.height - 2);  // the border's pixels count 1
-  EXPECT_NEAR(NormalConsistency(normal, depth, alpha, {}, c, 1.0, &dn, &dd),
+  EXPECT_NEAR(*NormalConsistency(normal, depth, alpha, {}, c, 1.0, &dn, &dd),
               (0.2 * inner + (pixels - inner)) / pixels, 1e-5);
   EXPECT_EQ(
-      NormalConsistency(normal, depth, alpha, std::vector<uint8_t>(pixels, 0), c, 1.0, &dn, &dd),
+      *NormalConsistency(normal, depth, alpha, std::vector<uint8_t>(pixels, 0), c, 1.0, &dn, &dd),
       0.0);
 }
 
@@ -86,7 +87,7 @@ TEST(NormalConsistency, MatchesFiniteDifferences) {
   depth[5 * c.width + 7] = 0.0f;  // a hole
   auto loss = [&](const std::vector<float>& n, const std::vector<float>& d, std::vector<float>* gn,
                   std::vector<float>* gd) {
-    return NormalConsistency(n, d, alpha, mask, c, 1.0, gn, gd);
+    return *NormalConsistency(n, d, alpha, mask, c, 1.0, gn, gd);
   };
   std::vector<float> gn(3 * pixels, 0.0f), gd(pixels, 0.0f);
   loss(normal, depth, &gn, &gd);
@@ -118,6 +119,31 @@ TEST(NormalConsistency, MatchesFiniteDifferences) {
   EXPECT_GT(nonzero, 20);
   EXPECT_LT(worst_normal, 1e-2);
   EXPECT_LT(worst_depth, 1e-2);
+}
+
+// Buffers of another size than the camera's image are refused, naming the buffer, and nothing
+// is written into the gradients.
+TEST(NormalConsistency, RefusesBuffersOfTheWrongSize) {
+  const PinholeCamera c = Camera();
+  const size_t pixels = size_t(c.width) * c.height;
+  const std::vector<float> normal(3 * pixels, 0.5f), depth(pixels, 2.0f), alpha(pixels, 1.0f);
+  std::vector<float> dn(3 * pixels, 0.0f), dd(pixels, 0.0f);
+  auto refused = [&](const absl::StatusOr<double>& r, const std::string& name) {
+    EXPECT_EQ(r.status().code(), absl::StatusCode::kInvalidArgument) << name;
+    EXPECT_NE(r.status().message().find(name + " has"), std::string::npos) << r.status();
+  };
+  refused(NormalConsistency(std::vector<float>(pixels), depth, alpha, {}, c, 1.0, &dn, &dd),
+          "normal");
+  refused(NormalConsistency(normal, std::vector<float>(pixels - 1), alpha, {}, c, 1.0, &dn, &dd),
+          "depth");
+  refused(NormalConsistency(normal, depth, {}, {}, c, 1.0, &dn, &dd), "alpha");
+  refused(NormalConsistency(normal, depth, alpha, std::vector<uint8_t>(3), c, 1.0, &dn, &dd),
+          "mask");
+  std::vector<float> short_dd(pixels / 2, 0.0f);
+  refused(NormalConsistency(normal, depth, alpha, {}, c, 1.0, &dn, &short_dd), "d_depth");
+  EXPECT_FALSE(NormalConsistency(normal, depth, alpha, {}, c, 1.0, nullptr, &dd).ok());
+  for (float v : dn) ASSERT_EQ(v, 0.0f);
+  for (float v : dd) ASSERT_EQ(v, 0.0f);
 }
 
 }  // namespace

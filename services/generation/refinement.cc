@@ -63,15 +63,16 @@ struct ViewGradients {
 };
 
 // The view's loss at `render`; its gradient is added into `grad`.
-double ViewLoss(const RefinementView& view, const RenderResult& render,
-                const RefinementOptions& options, ViewGradients* grad) {
+absl::StatusOr<double> ViewLoss(const RefinementView& view, const RenderResult& render,
+                                const RefinementOptions& options, ViewGradients* grad) {
   if (!view.generated) {
     double loss = MaskedL1(render.color, view.rgb, view.mask, 1.0, &grad->color);
     if (WantsNormals(view, options)) {
-      loss += options.lambda_normal * NormalConsistency(render.normal, render.median_depth,
-                                                        render.alpha, view.mask, view.camera,
-                                                        options.lambda_normal, &grad->normal,
-                                                        &grad->median_depth);
+      ASSIGN_OR_RETURN(const double normal,
+                       NormalConsistency(render.normal, render.median_depth, render.alpha,
+                                         view.mask, view.camera, options.lambda_normal,
+                                         &grad->normal, &grad->median_depth));
+      loss += options.lambda_normal * normal;
     }
     return loss;
   }
@@ -93,7 +94,8 @@ absl::StatusOr<double> MeanLoss(const GaussianCloud& cloud,
     ASSIGN_OR_RETURN(RenderResult r, Render(WithContext(cloud, view, &scratch), view.camera,
                                             ViewOptions(view, options, ws)));
     ViewGradients unused(r);
-    sum += ViewLoss(view, r, options, &unused);
+    ASSIGN_OR_RETURN(const double loss, ViewLoss(view, r, options, &unused));
+    sum += loss;
   }
   return views.empty() ? 0.0 : sum / views.size();
 }
@@ -184,7 +186,7 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
     const GaussianCloud& scene = WithContext(work, view, &scratch);
     ASSIGN_OR_RETURN(RenderResult render, RenderForBackward(scene, view.camera, ro));
     ViewGradients image_grad(render);
-    const double loss = ViewLoss(view, render, options, &image_grad);
+    ASSIGN_OR_RETURN(const double loss, ViewLoss(view, render, options, &image_grad));
     ASSIGN_OR_RETURN(SurfelGradients grad,
                      TileBackward(scene, view.camera, ro, render, image_grad.Adjoints()));
     if (view.context.size() > 0) {  // the context is frozen: keep the object's gradients
