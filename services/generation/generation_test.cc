@@ -25,6 +25,7 @@
 #include "services/generation/free_space.h"
 #include "services/generation/geometric_prior.h"
 #include "services/generation/stage.h"
+#include "services/generation/support_completion.h"
 #include "services/generation/symmetry.h"
 
 namespace instascene::generation {
@@ -202,6 +203,51 @@ TEST(FreeSpace, RaysThroughSmallHolesDoNotCarve) {
   EXPECT_GT(carved(0, behind_hole), 0);  // without closing the hole's rays carve behind it
   EXPECT_EQ(carved(1, behind_hole), 0);
   EXPECT_GT(carved(1, beside_wall), 0);  // past the wall's edge rays still carve
+}
+
+// The support cap fills the footprint of the lower walls and stops at them: a cylinder's wall of
+// surfels (radius 5 cm, 4 mm apart) gets a cap no wider than the wall plus half a grid cell (the
+// cap's cells are 1.5 spacings; the dilation that keeps the outside from leaking in between the
+// wall's surfels is taken back), and covers the inside.
+TEST(SupportCompletion, TheCapFillsTheFootprintWithoutOverhangingTheWalls) {
+  ObjectFrame frame;
+  frame.center = Eigen::Vector3f(0.2f, -0.1f, 0.05f);
+  frame.radius = 0.08f;
+  frame.has_support = true;
+  frame.support_height = 0.0f;
+  frame.spacing = 0.004f;
+  const float wall = 0.05f;
+  std::vector<Eigen::Vector3f> positions;
+  std::vector<uint32_t> sources;
+  const int around = static_cast<int>(2 * M_PI * wall / frame.spacing);
+  for (float z = 0.002f; z < 0.1f; z += frame.spacing) {
+    for (int k = 0; k < around; ++k) {
+      const double a = 2 * M_PI * k / around;
+      positions.push_back(frame.center + Eigen::Vector3f(wall * std::cos(a), wall * std::sin(a),
+                                                         z - frame.center.z()));
+      sources.push_back(static_cast<uint32_t>(sources.size()));
+    }
+  }
+  auto caster = RayCaster::Create(MakeRectangle(0.1f, 0.1f, 2, 2));
+  ASSERT_TRUE(caster.ok());
+  auto grid = FreeSpaceGrid::Carve({}, **caster, frame, FreeSpaceOptions{});  // nothing seen
+  ASSERT_TRUE(grid.ok()) << grid.status();
+  const std::vector<SurfelCandidate> cap = SupportCap(positions, sources, frame, *grid);
+  ASSERT_FALSE(cap.empty());
+  const float cell = 1.5f * frame.spacing;
+  const double disc_cells = M_PI * wall * wall / (cell * cell);  // the disc's area in cells
+  float widest = 0;
+  for (const SurfelCandidate& c : cap) {
+    const Eigen::Vector3f q = c.position - frame.center;
+    widest = std::max(widest, std::hypot(q.x(), q.y()));
+    EXPECT_NEAR(c.position.z(), 0.25f * frame.spacing, 1e-5f);
+  }
+  EXPECT_LE(widest, wall + 0.75f * cell)
+      << "cap " << cap.size() << " cells for a disc of "
+      << disc_cells;  // a cell's centre in a cell the wall crosses
+  EXPECT_GE(widest, wall - 1.5f * cell);
+  EXPECT_GT(cap.size(), 0.9 * disc_cells);
+  EXPECT_LT(cap.size(), 1.25 * disc_cells);
 }
 
 TEST(ObjectFrame, UpFromTheSupportAndSupportHeight) {

@@ -74,6 +74,7 @@ std::vector<SurfelCandidate> SupportCap(const std::vector<Eigen::Vector3f>& posi
   }
   if (low.empty()) return out;
   // Gaps between surfels must not let the outside leak in: the barrier is dilated by one cell.
+  const std::vector<uint8_t> seen = occupied;
   std::vector<uint8_t> barrier = occupied;
   for (int j = 0; j < side; ++j) {
     for (int i = 0; i < side; ++i) {
@@ -116,10 +117,22 @@ std::vector<SurfelCandidate> SupportCap(const std::vector<Eigen::Vector3f>& posi
   const Eigen::Vector3f plane_origin =
       frame.center +
       (frame.support_height + 0.25f * frame.spacing - frame.up.dot(frame.center)) * frame.up;
+  // The dilation is taken back (a closing): a cell next to the outside is footprint only where a
+  // surfel lies in it, else the cap would overhang the walls by a cell.
+  auto next_to_outside = [&](int i, int j) {
+    for (int dj = -1; dj <= 1; ++dj) {
+      for (int di = -1; di <= 1; ++di) {
+        const int ni = i + di, nj = j + dj;
+        if (ni < 0 || nj < 0 || ni >= side || nj >= side || outside[nj * side + ni]) return true;
+      }
+    }
+    return false;
+  };
   const float lift = 3.0f * free_space.voxel();
   for (int j = 0; j < side; ++j) {
     for (int i = 0; i < side; ++i) {
       if (outside[j * side + i]) continue;
+      if (!seen[j * side + i] && next_to_outside(i, j)) continue;
       SurfelCandidate c;
       c.position = plane_origin + basis.col(0) * ((i - half + 0.5f) * cell) +
                    basis.col(1) * ((j - half + 0.5f) * cell);
