@@ -24,6 +24,7 @@
 #include "services/generation/diffusion/latent_codec.h"
 #include "services/generation/free_space.h"
 #include "services/generation/geometric_prior.h"
+#include "services/generation/object_mesh.h"
 #include "services/generation/stage.h"
 #include "services/generation/support_completion.h"
 #include "services/generation/symmetry.h"
@@ -248,6 +249,40 @@ TEST(SupportCompletion, TheCapFillsTheFootprintWithoutOverhangingTheWalls) {
   EXPECT_GE(widest, wall - 1.5f * cell);
   EXPECT_GT(cap.size(), 0.9 * disc_cells);
   EXPECT_LT(cap.size(), 1.25 * disc_cells);
+}
+
+// One blurred surfel (sigma 100x the spacing, opaque, centred inside a sphere of surfels) made a
+// brim of false surface in the fused mesh; clamped to 3 spacings for meshing it is hidden inside.
+TEST(ObjectMesh, ABlurredSurfelMakesNoSheetOfFalseSurface) {
+  ShapeSpec sphere;
+  sphere.kind = ShapeKind::kSphere;
+  sphere.size = {0.05f, 0, 0};
+  GaussianCloud object;
+  object.num_scales = 2;
+  object.sh_degree = 0;
+  std::mt19937_64 rng(5);
+  const size_t count = 3000;
+  AppendSurfels(MakeShapeMesh(sphere, 32), count, Appearance{}, SurfelSampling{}, rng, &object);
+  AppendSurfels(MakeRectangle(0.001f, 0.001f, 1, 1), 1, Appearance{}, SurfelSampling{}, rng,
+                &object);  // horizontal, at the sphere's centre
+  const size_t blur = object.size() - 1;
+  ObjectFrame frame;
+  frame.radius = 0.06f;
+  frame.spacing = std::sqrt(4 * kPi * 0.05f * 0.05f / count);  // about 3.2 mm
+  object.log_scales[2 * blur] = object.log_scales[2 * blur + 1] = std::log(100 * frame.spacing);
+  object.opacity_logits[blur] = std::log(0.999f / 0.001f);
+  auto width = [&](float max_scale_spacings) {
+    MeshingOptions options;
+    options.size_px = 96;
+    options.max_scale_spacings = max_scale_spacings;
+    auto mesh = MeshObject(object, frame, options, 2);
+    EXPECT_TRUE(mesh.ok()) << mesh.status();
+    Eigen::AlignedBox3f box;
+    for (const Eigen::Vector3f& v : mesh->vertices) box.extend(v);
+    return box.sizes().head<2>().maxCoeff();
+  };
+  EXPECT_GT(width(0.0f), 0.14f);  // unclamped: a brim far past the 10 cm sphere
+  EXPECT_LT(width(3.0f), 0.11f);
 }
 
 TEST(ObjectFrame, UpFromTheSupportAndSupportHeight) {

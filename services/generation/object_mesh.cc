@@ -1,5 +1,8 @@
 #include "services/generation/object_mesh.h"
 
+#include <algorithm>
+#include <cmath>
+
 #include "common/core/status.h"
 #include "common/mesh/depth_fusion.h"
 #include "common/raster/rasterizer.h"
@@ -46,8 +49,16 @@ std::vector<PinholeCamera> MeshingCameras(const ObjectFrame& frame, const Meshin
   return cameras;
 }
 
-absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& object, const ObjectFrame& frame,
+absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const ObjectFrame& frame,
                                         const MeshingOptions& options, int num_threads) {
+  GaussianCloud clamped;
+  const bool clamp = options.max_scale_spacings > 0 && frame.spacing > 0;
+  if (clamp) {
+    clamped = input;
+    const float limit = std::log(options.max_scale_spacings * frame.spacing);
+    for (float& s : clamped.log_scales) s = std::min(s, limit);
+  }
+  const GaussianCloud& object = clamp ? clamped : input;
   std::vector<DepthView> views;
   for (const PinholeCamera& camera : MeshingCameras(frame, options)) {
     ASSIGN_OR_RETURN(ViewImages render,

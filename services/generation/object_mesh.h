@@ -32,6 +32,14 @@ struct MeshingOptions {
   // centre, which widens the mesh; a higher threshold trims that lip (0.9: mean largest extent
   // error of exported objects 0.28 -> 0.25 on tiny scenes, seeds 3-5, docs/OBJECTS.md).
   float min_alpha = 0.9f;
+  // Surfels are rendered for meshing with their scales clamped to this many times the object's
+  // surfel spacing (ObjectFrame::spacing; 0 = no clamp). A surfel that much larger than its
+  // neighbours' spacing is a blur, not surface detail: a few such footprints (a cap surfel that
+  // took a large source's scale, a stray of the support) become sheets of false surface in the
+  // fused mesh. 3: pipeline completion, seeds 21-24, volume IoU 0.715 -> 0.776, Chamfer / diag
+  // 0.0224 -> 0.0120 (docs/RESULTS.md, "Meshing: surfel scale clamp"); tighter clamps (1-2
+  // spacings) open gaps between the surfels and leave hollow meshes.
+  float max_scale_spacings = 3.0f;
 };
 
 // The meshing cameras: elevations -60, -30, 0, 30, 60 degrees x `azimuths`, plus both poles.
