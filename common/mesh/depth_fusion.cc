@@ -5,12 +5,14 @@
 #include <open3d/geometry/RGBDImage.h>
 #include <open3d/geometry/TriangleMesh.h>
 #include <open3d/pipelines/integration/ScalableTSDFVolume.h>
+#include <open3d/pipelines/integration/UniformTSDFVolume.h>
 
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <exception>
 #include <numeric>
+#include <vector>
 
 #include "absl/strings/str_cat.h"
 
@@ -21,6 +23,12 @@ absl::Status CheckInputs(const std::vector<DepthView>& views, const DepthFusionO
   if (!(options.voxel > 0) || !(options.depth_trunc > 0) || options.sdf_trunc < 0 ||
       !std::isfinite(options.voxel) || !std::isfinite(options.depth_trunc)) {
     return absl::InvalidArgumentError("depth fusion: voxel and depth_trunc must be positive");
+  }
+  if (!options.closed_bounds.isEmpty() &&
+      (!options.closed_bounds.sizes().allFinite() || options.max_closed_resolution < 8 ||
+       options.max_closed_resolution > 512)) {
+    return absl::InvalidArgumentError(
+        "depth fusion: closed bounds must be finite and max_closed_resolution in [8, 512]");
   }
   for (size_t v = 0; v < views.size(); ++v) {
     const PinholeCamera& camera = views[v].camera;
@@ -38,7 +46,7 @@ absl::Status CheckInputs(const std::vector<DepthView>& views, const DepthFusionO
 }
 
 void Integrate(const DepthView& view, float depth_trunc,
-               open3d::pipelines::integration::ScalableTSDFVolume* volume) {
+               open3d::pipelines::integration::TSDFVolume* volume) {
   using open3d::geometry::Image;
   const PinholeCamera& camera = view.camera;
   const int w = camera.width, h = camera.height;
@@ -64,6 +72,128 @@ void Integrate(const DepthView& view, float depth_trunc,
   extrinsic.topLeftCorner<3, 3>() = camera.camera_from_world.rotation;
   extrinsic.topRightCorner<3, 1>() = camera.camera_from_world.translation;
   volume->Integrate(*rgbd, intrinsic, extrinsic);
+}
+
+// Gives every voxel of `volume` a value (see DepthFusionOptions::closed_bounds). A voxel is
+// blocked when it lies behind an observed surface (tsdf <= 0), passable otherwise (unobserved, or
+// in front of a surface). The outside is what the grid's border reaches through passable voxels
+// farther than `gap` voxels from a blocked one (so the flood does not leak through holes up to
+// 2 * gap voxels wide), grown back by `gap` through passable voxels (an opening). Passable
+// voxels outside become +1 when unobserved; the rest of the passable voxels are enclosed (the
+// unobserved inside, pockets seen from within through a hole) and become -1; the border is +1.
+// Filled voxels take the colour of the nearest observed one (breadth first).
+void CloseVolume(int gap, open3d::pipelines::integration::UniformTSDFVolume* volume) {
+  const int n = volume->resolution_;
+  std::vector<open3d::geometry::TSDFVoxel>& voxels = volume->voxels_;
+  const size_t count = voxels.size();
+  auto blocked = [&](size_t i) { return voxels[i].weight_ > 0 && voxels[i].tsdf_ <= 0; };
+  auto for_neighbours = [&](int i, auto&& visit) {
+    const int x = i / (n * n), y = (i / n) % n, z = i % n;
+    if (x > 0) visit(i - n * n);
+    if (x + 1 < n) visit(i + n * n);
+    if (y > 0) visit(i - n);
+    if (y + 1 < n) visit(i + n);
+    if (z > 0) visit(i - 1);
+    if (z + 1 < n) visit(i + 1);
+  };
+  // Breadth-first steps from `queue` through voxels `may_enter` admits, at most `steps` deep
+  // (all when negative); marks `reached`.
+  auto spread = [&](std::vector<int> queue, int steps, auto&& may_enter,
+                    std::vector<uint8_t>* reached) {
+    std::vector<int> next;
+    for (int step = 0; !queue.empty() && step != steps; ++step) {
+      next.clear();
+      for (int i : queue) {
+        for_neighbours(i, [&](int j) {
+          if (!(*reached)[j] && may_enter(j)) {
+            (*reached)[j] = 1;
+            next.push_back(j);
+          }
+        });
+      }
+      queue.swap(next);
+    }
+  };
+  std::vector<uint8_t> near_block(count, 0);
+  std::vector<int> seeds;
+  for (size_t i = 0; i < count; ++i) {
+    if (blocked(i)) {
+      near_block[i] = 1;
+      seeds.push_back(static_cast<int>(i));
+    }
+  }
+  spread(
+      seeds, gap, [](int) { return true; }, &near_block);
+  auto on_border = [&](int i) {
+    const int x = i / (n * n), y = (i / n) % n, z = i % n;
+    return x == 0 || y == 0 || z == 0 || x == n - 1 || y == n - 1 || z == n - 1;
+  };
+  std::vector<uint8_t> outside(count, 0);
+  seeds.clear();
+  for (size_t i = 0; i < count; ++i) {
+    if (on_border(static_cast<int>(i))) {
+      outside[i] = 1;
+      seeds.push_back(static_cast<int>(i));
+    }
+  }
+  spread(
+      seeds, -1, [&](int j) { return !near_block[j]; }, &outside);
+  seeds.clear();
+  for (size_t i = 0; i < count; ++i) {
+    if (outside[i]) seeds.push_back(static_cast<int>(i));
+  }
+  spread(
+      seeds, gap, [&](int j) { return !blocked(j); }, &outside);
+  std::vector<uint8_t> coloured(count, 0);
+  seeds.clear();
+  for (size_t i = 0; i < count; ++i) {
+    const bool observed = voxels[i].weight_ > 0;
+    if (on_border(static_cast<int>(i))) {
+      voxels[i].tsdf_ = 1.0f;
+      voxels[i].weight_ = 1.0f;
+    } else if (!blocked(i) && !outside[i]) {
+      voxels[i].tsdf_ = -1.0f;  // enclosed
+      voxels[i].weight_ = 1.0f;
+    } else if (!observed) {
+      voxels[i].tsdf_ = 1.0f;  // the outside no view looked into
+      voxels[i].weight_ = 1.0f;
+    }
+    if (observed) {
+      coloured[i] = 1;
+      seeds.push_back(static_cast<int>(i));
+    }
+  }
+  for (size_t head = 0; head < seeds.size(); ++head) {
+    const Eigen::Vector3d color = voxels[seeds[head]].color_;
+    for_neighbours(seeds[head], [&](int j) {
+      if (!coloured[j]) {
+        coloured[j] = 1;
+        voxels[j].color_ = color;
+        seeds.push_back(j);
+      }
+    });
+  }
+}
+
+std::shared_ptr<open3d::geometry::TriangleMesh> FuseClosed(const std::vector<DepthView>& views,
+                                                           const DepthFusionOptions& options,
+                                                           double sdf_trunc) {
+  const Eigen::Vector3d center = options.closed_bounds.center().cast<double>();
+  // The cube around the box, with room for the truncation band and an outside border.
+  const double side = options.closed_bounds.sizes().maxCoeff() + 2.0 * sdf_trunc;
+  int resolution = static_cast<int>(std::ceil(side / options.voxel)) + 4;
+  double voxel = options.voxel;
+  if (resolution > options.max_closed_resolution) {
+    resolution = options.max_closed_resolution;
+    voxel = side / (resolution - 4);
+  }
+  const double length = voxel * resolution;
+  open3d::pipelines::integration::UniformTSDFVolume volume(
+      length, resolution, sdf_trunc, open3d::pipelines::integration::TSDFVolumeColorType::RGB8,
+      center - Eigen::Vector3d::Constant(0.5 * length));
+  for (const DepthView& view : views) Integrate(view, options.depth_trunc, &volume);
+  CloseVolume(options.closed_gap_voxels, &volume);
+  return volume.ExtractTriangleMesh();
 }
 
 // 2DGS post_process_mesh: keep the largest components.
@@ -94,10 +224,15 @@ absl::StatusOr<TriangleMesh> FuseDepthMaps(const std::vector<DepthView>& views,
   if (absl::Status s = CheckInputs(views, options); !s.ok()) return s;
   const double sdf_trunc = options.sdf_trunc > 0 ? options.sdf_trunc : 5.0 * options.voxel;
   try {
-    open3d::pipelines::integration::ScalableTSDFVolume volume(
-        options.voxel, sdf_trunc, open3d::pipelines::integration::TSDFVolumeColorType::RGB8);
-    for (const DepthView& view : views) Integrate(view, options.depth_trunc, &volume);
-    std::shared_ptr<open3d::geometry::TriangleMesh> fused = volume.ExtractTriangleMesh();
+    std::shared_ptr<open3d::geometry::TriangleMesh> fused;
+    if (!options.closed_bounds.isEmpty()) {
+      fused = FuseClosed(views, options, sdf_trunc);
+    } else {
+      open3d::pipelines::integration::ScalableTSDFVolume volume(
+          options.voxel, sdf_trunc, open3d::pipelines::integration::TSDFVolumeColorType::RGB8);
+      for (const DepthView& view : views) Integrate(view, options.depth_trunc, &volume);
+      fused = volume.ExtractTriangleMesh();
+    }
     KeepLargestComponents(options, fused.get());
     TriangleMesh mesh;
     mesh.vertices.reserve(fused->vertices_.size());

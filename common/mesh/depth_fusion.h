@@ -8,6 +8,8 @@
 
 #include <vector>
 
+#include <Eigen/Geometry>
+
 #include "absl/status/statusor.h"
 #include "common/geometry/camera.h"
 #include "common/geometry/triangle_mesh.h"
@@ -26,9 +28,20 @@ struct DepthFusionOptions {
   float depth_trunc = 0.0f;          // ignore depth beyond this, scene units (> 0)
   int keep_components = 50;          // keep at most this many largest connected components
   int min_component_triangles = 50;  // and drop smaller ones (2DGS post_process_mesh)
+  // When not empty, the fusion is closed over this box: a uniform grid over the cube around it
+  // (at most `max_closed_resolution` voxels a side; the voxel grows to fit), where every voxel no
+  // view observed counts as outside when the grid's border reaches it through voxels not behind
+  // a surface, else as inside, and the border as outside. Marching cubes then yields a closed
+  // surface: an open TSDF mesh has holes wherever its surface meets space no view looked into (a
+  // object's underside seen through a gap, the far side of a thin part). Surface outside the box
+  // is cut off there.
+  Eigen::AlignedBox3f closed_bounds;
+  int max_closed_resolution = 192;
+  int closed_gap_voxels = 4;  // the outside does not flow through holes up to twice this wide
 };
 
-// Fuses the views into one mesh with vertex colours. Fails (InvalidArgument) on bad options or a
+// Fuses the views into one mesh with vertex colours (closed when options.closed_bounds is set).
+// Fails (InvalidArgument) on bad options or a
 // view whose buffers do not match its camera.
 absl::StatusOr<TriangleMesh> FuseDepthMaps(const std::vector<DepthView>& views,
                                            const DepthFusionOptions& options);

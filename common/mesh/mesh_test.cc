@@ -5,6 +5,7 @@
 
 #include "common/geometry/camera.h"
 #include "common/mesh/depth_fusion.h"
+#include "common/mesh/mesh_checks.h"
 #include "common/mesh/mesh_ply.h"
 #include "common/mesh/ray_caster.h"
 #include "common/mesh/surfel_mesh.h"
@@ -135,6 +136,72 @@ TEST(SurfelDiscs, OneDiscPerOpaqueSurfelOnItsPlane) {
   // Identity rotation: the disc lies in the xy plane at z = 1, radius 0.2 along x, 0.1 along y.
   EXPECT_NEAR((*caster)->Cast({0.15f, 0, 3}, {0, 0, -1}).distance, 2.0f, 1e-5f);
   EXPECT_FALSE((*caster)->Cast({0, 0.15f, 3}, {0, 0, -1}).hit);
+}
+
+// Ring depth maps of `mesh` (camera-z depth by ray casting, 0 where nothing is hit).
+std::vector<DepthView> RingDepthMaps(const TriangleMesh& mesh) {
+  auto caster = RayCaster::Create(mesh);
+  EXPECT_TRUE(caster.ok());
+  std::vector<DepthView> views;
+  for (int k = 0; k < 12; ++k) {
+    for (double elevation : {-40.0, 0.0, 40.0, 80.0}) {
+      DepthView view;
+      view.camera = OrbitCamera({0, 0, 0}, {0, 0, 1}, 2.0, 30.0 * k, elevation, 64, 64, 50.0);
+      const Eigen::Vector3f center = view.camera.CenterInWorld().cast<float>();
+      const Eigen::Vector3d forward = view.camera.camera_from_world.rotation.row(2).transpose();
+      view.depth.assign(64 * 64, 0.0f);
+      for (int row = 0; row < 64; ++row) {
+        for (int col = 0; col < 64; ++col) {
+          const Eigen::Vector3d ray = view.camera.PixelRayInWorld(col, row);
+          const RayHit hit = (*caster)->Cast(center, ray.cast<float>());
+          if (hit.hit) view.depth[row * 64 + col] = hit.distance * ray.dot(forward);
+        }
+      }
+      views.push_back(std::move(view));
+    }
+  }
+  return views;
+}
+
+// A sphere with a hole 5 voxels wide in its top: the open fusion sees the inside through the hole
+// and leaves open inner surfaces; the closed fusion gives one closed surface around a solid
+// inside, true to the sphere where it was seen, and refuses bad bounds.
+TEST(DepthFusion, ClosesTheSurfaceOverHolesAndUnseenSpace) {
+  const float radius = 0.5f;
+  const TriangleMesh sphere = Sphere(radius);
+  TriangleMesh holed = sphere;
+  holed.triangles.clear();
+  for (const auto& t : sphere.triangles) {
+    const Eigen::Vector3f c =
+        (sphere.vertices[t[0]] + sphere.vertices[t[1]] + sphere.vertices[t[2]]) / 3;
+    if ((c - Eigen::Vector3f(0, 0, radius)).norm() > 0.05f) holed.triangles.push_back(t);
+  }
+  ASSERT_LT(holed.triangles.size(), sphere.triangles.size());
+  const std::vector<DepthView> views = RingDepthMaps(holed);
+  DepthFusionOptions options;
+  options.voxel = 0.02f;
+  options.depth_trunc = 4.0f;
+  auto open = FuseDepthMaps(views, options);
+  ASSERT_TRUE(open.ok()) << open.status();
+  EXPECT_FALSE(IsClosedManifold(*open));
+  options.closed_bounds =
+      Eigen::AlignedBox3f(Eigen::Vector3f::Constant(-0.55f), Eigen::Vector3f::Constant(0.55f));
+  auto closed = FuseDepthMaps(views, options);
+  ASSERT_TRUE(closed.ok()) << closed.status();
+  EXPECT_TRUE(IsClosedManifold(*closed));
+  ASSERT_EQ(closed->colors.size(), closed->vertices.size());
+  double error = 0;
+  for (const Eigen::Vector3f& v : closed->vertices) error += std::abs(v.norm() - radius);
+  EXPECT_LT(error / closed->vertices.size(), 0.5 * options.voxel);
+  // Solid: a line through the centre crosses the surface twice, the hole's axis included.
+  auto caster = RayCaster::Create(*closed);
+  ASSERT_TRUE(caster.ok());
+  for (const Eigen::Vector3f& d : {Eigen::Vector3f(0, 0, -1), Eigen::Vector3f(0, -1, 0)}) {
+    EXPECT_EQ((*caster)->CountCrossings(-2.0f * d + Eigen::Vector3f(0.01f, 0.02f, 0.0f), d), 2)
+        << d.transpose();
+  }
+  options.max_closed_resolution = 4;
+  EXPECT_EQ(FuseDepthMaps(views, options).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
 TEST(DepthFusion, ReconstructsASphereFromRingDepthMaps) {

@@ -72,6 +72,17 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
   fusion.voxel = options.voxel_radii * frame.radius;
   fusion.depth_trunc = 3.0f * frame.radius + 2.0f * frame.radius;
   fusion.min_component_triangles = 50;
+  if (options.closed) {
+    // The box of the surfel centres, widened by the largest footprint the meshing renders show.
+    float widest = 0;
+    for (float s : object.log_scales) widest = std::max(widest, std::exp(s));
+    for (size_t g = 0; g < object.size(); ++g) {
+      fusion.closed_bounds.extend(Eigen::Vector3f(&object.positions[3 * g]));
+    }
+    const float margin = 2.0f * options.scale_modifier * widest + 2.0f * fusion.voxel;
+    fusion.closed_bounds.min().array() -= margin;
+    fusion.closed_bounds.max().array() += margin;
+  }
   return FuseDepthMaps(views, fusion);
 }
 

@@ -40,6 +40,9 @@ struct MeshingOptions {
   // 0.0224 -> 0.0120 (docs/RESULTS.md, "Meshing: surfel scale clamp"); tighter clamps (1-2
   // spacings) open gaps between the surfels and leave hollow meshes.
   float max_scale_spacings = 3.0f;
+  // Close the fused surface (DepthFusionOptions::closed_bounds over the object's surfels): space
+  // no meshing view looked into counts as inside unless the outside reaches it.
+  bool closed = true;
 };
 
 // The meshing cameras: elevations -60, -30, 0, 30, 60 degrees x `azimuths`, plus both poles.
