@@ -192,6 +192,21 @@ std::shared_ptr<open3d::geometry::TriangleMesh> FuseClosed(const std::vector<Dep
       length, resolution, sdf_trunc, open3d::pipelines::integration::TSDFVolumeColorType::RGB8,
       center - Eigen::Vector3d::Constant(0.5 * length));
   for (const DepthView& view : views) Integrate(view, options.depth_trunc, &volume);
+  if (!options.outside_below.isZero()) {
+    const Eigen::Vector3d normal = options.outside_below.head<3>().cast<double>();
+    const Eigen::Vector3d origin = volume.origin_;
+    for (int x = 0; x < resolution; ++x) {
+      for (int y = 0; y < resolution; ++y) {
+        for (int z = 0; z < resolution; ++z) {
+          const Eigen::Vector3d p = origin + voxel * Eigen::Vector3d(x + 0.5, y + 0.5, z + 0.5);
+          if (normal.dot(p) >= options.outside_below[3]) continue;
+          open3d::geometry::TSDFVoxel& v = volume.voxels_[volume.IndexOf(x, y, z)];
+          v.tsdf_ = 1.0f;
+          v.weight_ = std::max(v.weight_, 1.0f);
+        }
+      }
+    }
+  }
   CloseVolume(options.closed_gap_voxels, &volume);
   return volume.ExtractTriangleMesh();
 }

@@ -1,3 +1,4 @@
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -200,6 +201,15 @@ TEST(DepthFusion, ClosesTheSurfaceOverHolesAndUnseenSpace) {
     EXPECT_EQ((*caster)->CountCrossings(-2.0f * d + Eigen::Vector3f(0.01f, 0.02f, 0.0f), d), 2)
         << d.transpose();
   }
+  // A support plane at z = -0.2: nothing below it, and still closed (capped at the plane).
+  options.outside_below = Eigen::Vector4f(0, 0, 1, -0.2f);
+  auto cut = FuseDepthMaps(views, options);
+  ASSERT_TRUE(cut.ok()) << cut.status();
+  EXPECT_TRUE(IsClosedManifold(*cut));
+  float lowest = 1;
+  for (const Eigen::Vector3f& v : cut->vertices) lowest = std::min(lowest, v.z());
+  EXPECT_GT(lowest, -0.2f - options.voxel);
+  EXPECT_LT(lowest, -0.2f + options.voxel);
   options.max_closed_resolution = 4;
   EXPECT_EQ(FuseDepthMaps(views, options).status().code(), absl::StatusCode::kInvalidArgument);
 }

@@ -82,6 +82,11 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
     const float margin = 2.0f * options.scale_modifier * widest + 2.0f * fusion.voxel;
     fusion.closed_bounds.min().array() -= margin;
     fusion.closed_bounds.max().array() += margin;
+    // Nothing of the object lies below its support (nor below its lowest observed point, where
+    // the support was estimated above it).
+    if (frame.has_support) {
+      fusion.outside_below << frame.up, std::min(frame.support_height, frame.bottom_height);
+    }
   }
   return FuseDepthMaps(views, fusion);
 }
