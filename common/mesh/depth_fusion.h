@@ -36,8 +36,8 @@ struct DepthFusionOptions {
   // object's underside seen through a gap, the far side of a thin part). Surface outside the box
   // is cut off there.
   Eigen::AlignedBox3f closed_bounds;
-  int max_closed_resolution = 192;
-  int closed_gap_voxels = 4;  // the outside does not flow through holes up to twice this wide
+  int max_closed_resolution = 160;  // 160^3 Open3D voxels: about 230 MB
+  int closed_gap_voxels = 4;        // the outside does not flow through holes up to twice this wide
   // Closed fusion only: when not zero, voxels with outside_below.head<3>() . x < outside_below[3]
   // are outside (an object's support plane: a truncation band reaching past it is no surface).
   Eigen::Vector4f outside_below = Eigen::Vector4f::Zero();
