@@ -139,13 +139,15 @@ TEST(SurfelDiscs, OneDiscPerOpaqueSurfelOnItsPlane) {
   EXPECT_FALSE((*caster)->Cast({0, 0.15f, 3}, {0, 0, -1}).hit);
 }
 
-// Ring depth maps of `mesh` (camera-z depth by ray casting, 0 where nothing is hit).
-std::vector<DepthView> RingDepthMaps(const TriangleMesh& mesh) {
+// Ring depth maps of `mesh` at 12 azimuths x `elevations` (camera-z depth by ray casting, 0 where
+// nothing is hit).
+std::vector<DepthView> RingDepthMaps(const TriangleMesh& mesh,
+                                     const std::vector<double>& elevations) {
   auto caster = RayCaster::Create(mesh);
   EXPECT_TRUE(caster.ok());
   std::vector<DepthView> views;
   for (int k = 0; k < 12; ++k) {
-    for (double elevation : {-40.0, 0.0, 40.0, 80.0}) {
+    for (double elevation : elevations) {
       DepthView view;
       view.camera = OrbitCamera({0, 0, 0}, {0, 0, 1}, 2.0, 30.0 * k, elevation, 64, 64, 50.0);
       const Eigen::Vector3f center = view.camera.CenterInWorld().cast<float>();
@@ -178,7 +180,7 @@ TEST(DepthFusion, ClosesTheSurfaceOverHolesAndUnseenSpace) {
     if ((c - Eigen::Vector3f(0, 0, radius)).norm() > 0.05f) holed.triangles.push_back(t);
   }
   ASSERT_LT(holed.triangles.size(), sphere.triangles.size());
-  const std::vector<DepthView> views = RingDepthMaps(holed);
+  const std::vector<DepthView> views = RingDepthMaps(holed, {-40.0, 0.0, 40.0, 80.0});
   DepthFusionOptions options;
   options.voxel = 0.02f;
   options.depth_trunc = 4.0f;
@@ -216,26 +218,7 @@ TEST(DepthFusion, ClosesTheSurfaceOverHolesAndUnseenSpace) {
 
 TEST(DepthFusion, ReconstructsASphereFromRingDepthMaps) {
   const float radius = 0.5f;
-  auto caster = RayCaster::Create(Sphere(radius));
-  ASSERT_TRUE(caster.ok());
-  std::vector<DepthView> views;
-  for (int k = 0; k < 12; ++k) {
-    for (double elevation : {-40.0, 0.0, 40.0}) {
-      DepthView view;
-      view.camera = OrbitCamera({0, 0, 0}, {0, 0, 1}, 2.0, 30.0 * k, elevation, 64, 64, 50.0);
-      const Eigen::Vector3f center = view.camera.CenterInWorld().cast<float>();
-      const Eigen::Vector3d forward = view.camera.camera_from_world.rotation.row(2).transpose();
-      view.depth.assign(64 * 64, 0.0f);
-      for (int row = 0; row < 64; ++row) {
-        for (int col = 0; col < 64; ++col) {
-          const Eigen::Vector3d ray = view.camera.PixelRayInWorld(col, row);
-          const RayHit hit = (*caster)->Cast(center, ray.cast<float>());
-          if (hit.hit) view.depth[row * 64 + col] = hit.distance * ray.dot(forward);
-        }
-      }
-      views.push_back(std::move(view));
-    }
-  }
+  std::vector<DepthView> views = RingDepthMaps(Sphere(radius), {-40.0, 0.0, 40.0});
   DepthFusionOptions options;
   options.voxel = 0.02f;
   options.depth_trunc = 4.0f;
