@@ -181,11 +181,12 @@ std::shared_ptr<open3d::geometry::TriangleMesh> FuseClosed(const std::vector<Dep
   const Eigen::Vector3d center = options.closed_bounds.center().cast<double>();
   // The cube around the box, with room for the truncation band and an outside border.
   const double side = options.closed_bounds.sizes().maxCoeff() + 2.0 * sdf_trunc;
-  int resolution = static_cast<int>(std::ceil(side / options.voxel)) + 4;
-  double voxel = options.voxel;
-  if (resolution > options.max_closed_resolution) {
-    resolution = options.max_closed_resolution;
-    voxel = side / (resolution - 4);
+  const double cells = std::ceil(side / options.voxel) + 4;  // may be huge: compared as double
+  int resolution = options.max_closed_resolution;
+  double voxel = side / (resolution - 4);
+  if (cells <= options.max_closed_resolution) {
+    resolution = static_cast<int>(cells);
+    voxel = options.voxel;
   }
   const double length = voxel * resolution;
   open3d::pipelines::integration::UniformTSDFVolume volume(

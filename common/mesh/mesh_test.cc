@@ -212,6 +212,12 @@ TEST(DepthFusion, ClosesTheSurfaceOverHolesAndUnseenSpace) {
   for (const Eigen::Vector3f& v : cut->vertices) lowest = std::min(lowest, v.z());
   EXPECT_GT(lowest, -0.2f - options.voxel);
   EXPECT_LT(lowest, -0.2f + options.voxel);
+  // Bounds far larger than the voxel: the grid keeps its size limit, the voxel grows.
+  options.outside_below.setZero();
+  options.closed_bounds =
+      Eigen::AlignedBox3f(Eigen::Vector3f::Constant(-1e6f), Eigen::Vector3f::Constant(1e6f));
+  options.max_closed_resolution = 16;
+  EXPECT_TRUE(FuseDepthMaps(views, options).ok());
   options.max_closed_resolution = 4;
   EXPECT_EQ(FuseDepthMaps(views, options).status().code(), absl::StatusCode::kInvalidArgument);
 }
