@@ -26,9 +26,11 @@ absl::Status CheckInputs(const std::vector<DepthView>& views, const DepthFusionO
   }
   if (!options.closed_bounds.isEmpty() &&
       (!options.closed_bounds.sizes().allFinite() || options.max_closed_resolution < 8 ||
-       options.max_closed_resolution > 512)) {
+       options.max_closed_resolution > 512 || options.closed_gap_voxels < 0 ||
+       options.closed_gap_voxels > 32 || !options.outside_below.allFinite())) {
     return absl::InvalidArgumentError(
-        "depth fusion: closed bounds must be finite and max_closed_resolution in [8, 512]");
+        "depth fusion: closed bounds and support plane must be finite, max_closed_resolution in "
+        "[8, 512], closed_gap_voxels in [0, 32]");
   }
   for (size_t v = 0; v < views.size(); ++v) {
     const PinholeCamera& camera = views[v].camera;

@@ -220,6 +220,9 @@ TEST(DepthFusion, ClosesTheSurfaceOverHolesAndUnseenSpace) {
   EXPECT_TRUE(FuseDepthMaps(views, options).ok());
   options.max_closed_resolution = 4;
   EXPECT_EQ(FuseDepthMaps(views, options).status().code(), absl::StatusCode::kInvalidArgument);
+  options.max_closed_resolution = 16;
+  options.closed_gap_voxels = -1;
+  EXPECT_EQ(FuseDepthMaps(views, options).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
 TEST(DepthFusion, ReconstructsASphereFromRingDepthMaps) {
