@@ -13,11 +13,13 @@ namespace instascene::generation {
 absl::Status SeenThroughOptions::Validate() const {
   if (!(min_opacity > 0) || !(min_opacity < 1) || !(blocked_below > 0) || !(blocked_below < 1) ||
       !(tolerance_radii >= 0) || !(extent_sigma > 0) || !(extent_sigma <= 4) || max_crossings < 1 ||
-      max_crossings > 4096) {
+      max_crossings > 4096 || !(core_sigma > 0) || !(core_sigma <= extent_sigma) ||
+      core_views < 0 || core_views > 1000) {
     return absl::InvalidArgumentError(
         absl::StrCat("seen-through test: bad options (min_opacity ", min_opacity,
                      ", blocked_below ", blocked_below, ", extent_sigma ", extent_sigma,
-                     ", tolerance ", tolerance_radii, ", max_crossings ", max_crossings, ")"));
+                     ", tolerance ", tolerance_radii, ", max_crossings ", max_crossings,
+                     ", core_sigma ", core_sigma, ", core_views ", core_views, ")"));
   }
   return absl::OkStatus();
 }
@@ -32,44 +34,54 @@ absl::StatusOr<SeenThroughTest> SeenThroughTest::Create(const std::vector<Pinhol
   out.cameras_ = cameras;
   out.options_ = options;
   out.tolerance_ = options.tolerance_radii * radius;
-  SurfelDiscOptions discs;
-  discs.min_opacity = options.min_opacity;
-  discs.extent_sigma = options.extent_sigma;
-  std::vector<uint32_t> source;
-  const TriangleMesh mesh = SurfelDiscs(scene, {}, discs, &source);
-  ASSIGN_OR_RETURN(out.discs_, RayCaster::Create(mesh));
-  // Compact the surfels that made discs; triangles map to them.
+  // The surfels that make discs (the same at every extent), compacted in scene order.
   std::vector<int64_t> compact(scene.size(), -1);
-  out.triangle_surfel_.reserve(source.size());
-  for (uint32_t g : source) {
-    if (compact[g] < 0) {
-      compact[g] = static_cast<int64_t>(out.surfels_.size());
-      const float* q = &scene.rotations[4 * g];
-      const Eigen::Matrix3f r = RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).cast<float>();
-      const float* ls = &scene.log_scales[2 * g];
-      Surfel s;
-      s.center = Eigen::Vector3f(&scene.positions[3 * g]);
-      s.u = r.col(0) / std::max(std::exp(ls[0]), 1e-12f);
-      s.v = r.col(1) / std::max(std::exp(ls[1]), 1e-12f);
-      s.opacity = 1.0f / (1.0f + std::exp(-scene.opacity_logits[g]));
-      out.surfels_.push_back(s);
+  auto make_discs = [&](float extent_sigma) -> absl::StatusOr<Discs> {
+    SurfelDiscOptions options_discs;
+    options_discs.min_opacity = options.min_opacity;
+    options_discs.extent_sigma = extent_sigma;
+    std::vector<uint32_t> source;
+    const TriangleMesh mesh = SurfelDiscs(scene, {}, options_discs, &source);
+    Discs discs;
+    ASSIGN_OR_RETURN(discs.caster, RayCaster::Create(mesh));
+    discs.triangle_surfel.reserve(source.size());
+    for (uint32_t g : source) {
+      if (compact[g] < 0) {
+        compact[g] = static_cast<int64_t>(out.surfels_.size());
+        const float* q = &scene.rotations[4 * g];
+        const Eigen::Matrix3f r = RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).cast<float>();
+        const float* ls = &scene.log_scales[2 * g];
+        Surfel s;
+        s.center = Eigen::Vector3f(&scene.positions[3 * g]);
+        s.u = r.col(0) / std::max(std::exp(ls[0]), 1e-12f);
+        s.v = r.col(1) / std::max(std::exp(ls[1]), 1e-12f);
+        s.opacity = 1.0f / (1.0f + std::exp(-scene.opacity_logits[g]));
+        out.surfels_.push_back(s);
+      }
+      discs.triangle_surfel.push_back(static_cast<uint32_t>(compact[g]));
     }
-    out.triangle_surfel_.push_back(static_cast<uint32_t>(compact[g]));
+    return discs;
+  };
+  ASSIGN_OR_RETURN(out.discs_, make_discs(options.extent_sigma));
+  if (options.core_views > 0) {
+    ASSIGN_OR_RETURN(out.core_discs_, make_discs(options.core_sigma));
   }
   return out;
 }
 
 float SeenThroughTest::Transmittance(const Eigen::Vector3f& origin,
-                                     const Eigen::Vector3f& direction, float t_far) const {
+                                     const Eigen::Vector3f& direction, float t_far,
+                                     bool core) const {
+  const Discs& discs = core && core_discs_.caster ? core_discs_ : discs_;
   float transmittance = 1.0f;
   float t = 0.0f;
   // Each crossing attenuates by the surfel's alpha there (2DGS's clamp at 0.99); the next cast
   // starts just past it (a disc is planar: it is crossed once).
   const float step = 1e-6f * std::max(1.0f, t_far);
   for (int crossing = 0; crossing < options_.max_crossings; ++crossing) {
-    const RayHit hit = discs_->Cast(origin, direction, t, t_far);
+    const RayHit hit = discs.caster->Cast(origin, direction, t, t_far);
     if (!hit.hit) return transmittance;
-    const Surfel& s = surfels_[triangle_surfel_[hit.triangle]];
+    const Surfel& s = surfels_[discs.triangle_surfel[hit.triangle]];
     const Eigen::Vector3f d = origin + hit.distance * direction - s.center;
     const float a = d.dot(s.u), b = d.dot(s.v);
     const float alpha = std::min(0.99f, s.opacity * std::exp(-0.5f * (a * a + b * b)));
@@ -93,25 +105,32 @@ bool PixelFootprint(const PinholeCamera& c, const Eigen::Vector3f& p,
   return true;
 }
 
-bool SeenThroughTest::ViewSeesThrough(const PinholeCamera& c, const Eigen::Vector3f& p) const {
+bool SeenThroughTest::ViewSeesThrough(const PinholeCamera& c, const Eigen::Vector3f& p,
+                                      bool core) const {
   std::array<Eigen::Vector3f, 5> footprint;
   if (!PixelFootprint(c, p, &footprint)) return false;
   const Eigen::Vector3f eye = c.CenterInWorld().cast<float>();
   for (const Eigen::Vector3f& q : footprint) {
     const float line = (q - eye).norm();
-    if (Transmittance(eye, (q - eye) / line, line + tolerance_) < options_.blocked_below) {
+    if (Transmittance(eye, (q - eye) / line, line + tolerance_, core) < options_.blocked_below) {
       return false;  // this ray of the footprint stopped at or before p (or just behind it)
     }
   }
   return true;
 }
 
-int SeenThroughTest::ViewsSeeingThrough(const Eigen::Vector3f& p, int enough) const {
+int SeenThroughTest::ViewsSeeingThrough(const Eigen::Vector3f& p, int enough, bool core) const {
   int count = 0;
   for (const PinholeCamera& c : cameras_) {
-    if (ViewSeesThrough(c, p) && ++count >= enough) break;
+    if (ViewSeesThrough(c, p, core) && ++count >= enough) break;
   }
   return count;
+}
+
+bool SeenThroughTest::SeenThrough(const Eigen::Vector3f& p) const {
+  if (ViewsSeeingThrough(p) > 0) return true;
+  return core_discs_.caster != nullptr &&
+         ViewsSeeingThrough(p, options_.core_views, true) >= options_.core_views;
 }
 
 }  // namespace instascene::generation

@@ -150,12 +150,65 @@ TEST(SeenThrough, APointIsSeenThroughOnlyWhenItsWholePixelIs) {
   }
 }
 
+// The rim of a blurred silhouette: the surfels along a wall's edge reach past it by their
+// sigma, so a point beside the edge is hidden at 1 sigma in every view, but seen through by the
+// stricter count (0.5 sigma) in as many views as look past the edge. A point behind the wall
+// stays hidden in both counts.
+TEST(SeenThrough, TheStricterCountSeesPastABlurredRimFromEnoughViews) {
+  GaussianCloud scene;
+  scene.num_scales = 2;
+  const float sigma = 0.01f, spacing = 0.005f;
+  std::vector<Eigen::Vector3f> centres;  // a half-wall x <= 0 at z = 1
+  for (float x = -0.1f; x <= 1e-6f; x += spacing) {
+    for (float y = -0.1f; y <= 0.1f; y += spacing) centres.emplace_back(x, y, 1.0f);
+  }
+  scene.Resize(centres.size());
+  for (size_t g = 0; g < centres.size(); ++g) {
+    for (int k = 0; k < 3; ++k) scene.positions[3 * g + k] = centres[g][k];
+    scene.log_scales[2 * g] = scene.log_scales[2 * g + 1] = std::log(sigma);
+    scene.opacity_logits[g] = Logit(0.95f);
+  }
+  // Four cameras beside each other looking down +z, 640 px with a 600 px focal length (a pixel
+  // is 2 mm wide at depth 1.2).
+  std::vector<PinholeCamera> cameras;
+  for (double y : {-0.02, -0.01, 0.01, 0.02}) {
+    PinholeCamera c;
+    c.width = c.height = 640;
+    c.fx = c.fy = 600;
+    c.cx = c.cy = 320;
+    c.camera_from_world.translation = Eigen::Vector3d(0, -y, 0);
+    cameras.push_back(c);
+  }
+  const Eigen::Vector3f beside(0.007f, 0.0f, 1.2f);  // its rays cross the wall 0.58 sigma out
+  const Eigen::Vector3f behind(-0.03f, 0.0f, 1.2f);
+  SeenThroughOptions one_sigma;
+  one_sigma.core_views = 0;
+  SeenThroughOptions core;  // defaults: 0.5 sigma, 4 views
+  SeenThroughOptions too_many = core;
+  too_many.core_views = 5;
+  for (const auto& [options, seen] :
+       {std::pair{one_sigma, false}, std::pair{core, true}, std::pair{too_many, false}}) {
+    auto test = SeenThroughTest::Create(cameras, scene, 0.1f, options);
+    ASSERT_TRUE(test.ok()) << test.status();
+    EXPECT_EQ(test->SeenThrough(beside), seen) << "core views " << options.core_views;
+    EXPECT_FALSE(test->SeenThrough(behind));
+    EXPECT_EQ(test->ViewsSeeingThrough(beside, 4), 0);  // at 1 sigma, no view
+    if (options.core_views > 0) {
+      EXPECT_EQ(test->ViewsSeeingThrough(beside, 4, true), 4);
+    }
+  }
+}
+
 TEST(SeenThrough, RefusesBadOptionsAndClouds) {
   GaussianCloud scene;
   AddWall(1.0f, 0.1f, 0.01f, 0.01f, 0.9f, &scene);
   SeenThroughOptions bad;
   bad.blocked_below = 1.5f;
   EXPECT_EQ(SeenThroughTest::Create({FrontCamera()}, scene, 0.1f, bad).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  SeenThroughOptions wide_core;
+  wide_core.core_sigma = 1.5f;  // wider than extent_sigma: the discs would not hold it
+  EXPECT_EQ(SeenThroughTest::Create({FrontCamera()}, scene, 0.1f, wide_core).status().code(),
             absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(SeenThroughTest::Create({FrontCamera()}, scene, 0.0f, {}).status().code(),
             absl::StatusCode::kInvalidArgument);
