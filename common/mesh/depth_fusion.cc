@@ -32,6 +32,12 @@ absl::Status CheckInputs(const std::vector<DepthView>& views, const DepthFusionO
         "depth fusion: closed bounds and support plane must be finite, max_closed_resolution in "
         "[8, 512], closed_gap_voxels in [0, 32]");
   }
+  const double sdf_trunc = options.sdf_trunc > 0 ? options.sdf_trunc : 5.0 * options.voxel;
+  if (!(options.inset >= 0) || !(options.inset <= 0.5 * sdf_trunc)) {
+    return absl::InvalidArgumentError(absl::StrCat("depth fusion: inset ", options.inset,
+                                                   " is not in [0, half the truncation band ",
+                                                   0.5 * sdf_trunc, "]"));
+  }
   for (size_t v = 0; v < views.size(); ++v) {
     const PinholeCamera& camera = views[v].camera;
     if (absl::Status s = camera.Validate(); !s.ok()) {
@@ -211,6 +217,15 @@ std::shared_ptr<open3d::geometry::TriangleMesh> FuseClosed(const std::vector<Dep
     }
   }
   CloseVolume(options.closed_gap_voxels, &volume);
+  // The inset shifts the zero level: the fused TSDF is projective (distances along each view's
+  // rays), steeper across the surface than 1 / sdf_trunc wherever views met it obliquely, so the
+  // surface moves by `inset` where views met it head-on and less elsewhere.
+  if (options.inset > 0) {
+    const float shift = static_cast<float>(options.inset / sdf_trunc);
+    for (open3d::geometry::TSDFVoxel& v : volume.voxels_) {
+      v.tsdf_ = std::clamp(v.tsdf_ + shift, -1.0f, 1.0f);
+    }
+  }
   return volume.ExtractTriangleMesh();
 }
 

@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -223,6 +224,39 @@ TEST(DepthFusion, ClosesTheSurfaceOverHolesAndUnseenSpace) {
   options.max_closed_resolution = 16;
   options.closed_gap_voxels = -1;
   EXPECT_EQ(FuseDepthMaps(views, options).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+// The inset moves the closed surface inward (a sphere fused from a ring of views shrinks by 0.4-1x
+// the inset: the projective TSDF is steeper than the true distance where the views met it
+// obliquely) and keeps it closed; beyond half the truncation band it is refused.
+TEST(DepthFusion, TheInsetMovesTheClosedSurfaceInward) {
+  const float radius = 0.5f;
+  const std::vector<DepthView> views = RingDepthMaps(Sphere(radius), {-40.0, 0.0, 40.0, 80.0});
+  DepthFusionOptions options;
+  options.voxel = 0.02f;
+  options.depth_trunc = 4.0f;
+  options.closed_bounds =
+      Eigen::AlignedBox3f(Eigen::Vector3f::Constant(-0.55f), Eigen::Vector3f::Constant(0.55f));
+  for (float inset : {0.0f, 0.03f}) {
+    options.inset = inset;
+    auto mesh = FuseDepthMaps(views, options);
+    ASSERT_TRUE(mesh.ok()) << mesh.status();
+    EXPECT_TRUE(IsClosedManifold(*mesh));
+    double mean = 0;
+    for (const Eigen::Vector3f& v : mesh->vertices) mean += v.norm();
+    mean /= mesh->vertices.size();
+    if (inset == 0) {
+      EXPECT_NEAR(mean, radius, 0.25 * options.voxel);
+    } else {
+      EXPECT_LT(mean, radius - 0.4 * inset);
+      EXPECT_GT(mean, radius - inset);
+    }
+  }
+  for (float bad : {-0.01f, 0.051f, std::numeric_limits<float>::quiet_NaN()}) {
+    options.inset = bad;  // the band is 5 voxels = 0.1: half of it is 0.05
+    EXPECT_EQ(FuseDepthMaps(views, options).status().code(), absl::StatusCode::kInvalidArgument)
+        << bad;
+  }
 }
 
 TEST(DepthFusion, ReconstructsASphereFromRingDepthMaps) {

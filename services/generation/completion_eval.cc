@@ -307,6 +307,8 @@ absl::StatusOr<std::vector<ObjectCompletionEval>> Evaluate(const std::string& sc
     if (m.contains("meshing")) {
       meshing.size_px = m["meshing"].value("size_px", meshing.size_px);
       meshing.min_alpha = m["meshing"].value("min_alpha", meshing.min_alpha);
+      // Manifests written before the inset meshed without it.
+      meshing.inset_sigmas = m["meshing"].value("inset_sigmas", 0.0f);
     }
     ASSIGN_OR_RETURN(TriangleMesh closed_mesh, MeshObject(raw, frame, meshing, o.num_threads));
     const std::vector<Eigen::Vector3f> closed_points =

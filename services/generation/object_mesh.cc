@@ -87,6 +87,18 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
     if (frame.has_support) {
       fusion.outside_below << frame.up, std::min(frame.support_height, frame.bottom_height);
     }
+    // The footprint's reach past the true surface: the median surfel sigma as rendered.
+    std::vector<float> sigmas(object.size());
+    const int stride = object.num_scales;
+    for (size_t g = 0; g < object.size(); ++g) {
+      const float* ls = &object.log_scales[stride * g];
+      sigmas[g] = options.scale_modifier * std::exp(std::max(ls[0], ls[1]));
+    }
+    if (!sigmas.empty() && options.inset_sigmas > 0) {
+      std::nth_element(sigmas.begin(), sigmas.begin() + sigmas.size() / 2, sigmas.end());
+      const float half_band = 0.5f * 5.0f * fusion.voxel;  // sdf_trunc is 5 voxels
+      fusion.inset = std::min(options.inset_sigmas * sigmas[sigmas.size() / 2], half_band);
+    }
   }
   return FuseDepthMaps(views, fusion);
 }

@@ -43,6 +43,13 @@ struct MeshingOptions {
   // Close the fused surface (DepthFusionOptions::closed_bounds over the object's surfels): space
   // no meshing view looked into counts as inside unless the outside reaches it.
   bool closed = true;
+  // Closed meshing only: the surface is moved this many of the object's median surfel sigma
+  // inward (DepthFusionOptions::inset, at most half the truncation band). A surfel's footprint
+  // keeps alpha > min_alpha up to about half a sigma past the true silhouette, so the fused
+  // surface stands that far outside the object. 0.4: pipeline completion, seeds 21-24, mean
+  // largest extent error 0.112 -> 0.076, volume IoU 0.802 -> 0.835 (docs/RESULTS.md "Meshing:
+  // the footprint inset").
+  float inset_sigmas = 0.4f;
 };
 
 // The meshing cameras: elevations -60, -30, 0, 30, 60 degrees x `azimuths`, plus both poles.

@@ -47,6 +47,7 @@ CompletionOptions ToCompletionOptions(const CompleteStageOptions& o) {
   options.free_space.resolution = o.free_space_resolution;
   options.meshing.size_px = o.mesh_size;
   options.meshing.min_alpha = static_cast<float>(o.mesh_min_alpha);
+  options.meshing.inset_sigmas = static_cast<float>(o.mesh_inset_sigmas);
   options.min_gaussians = static_cast<size_t>(o.min_gaussians);
   options.seed = o.seed;
   options.refinement.iterations = o.refine_iterations;

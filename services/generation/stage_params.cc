@@ -24,6 +24,9 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
         .Real("mesh_min_alpha", &O::mesh_min_alpha, 0.5, 0.99,
               "Meshing: pixels fused into the TSDF need this much alpha (higher: less silhouette "
               "inflation by the surfels' footprint)")
+        .Real("mesh_inset_sigmas", &O::mesh_inset_sigmas, 0.0, 2.0,
+              "Meshing: the closed surface is moved this many median surfel sigmas inward (the "
+              "surfels' footprints stand about half a sigma past the true surface)")
         .Int("min_gaussians", &O::min_gaussians, 1, 1000000,
              "Instances with fewer Gaussians fail as degenerate")
         .Int("refine_iterations", &O::refine_iterations, 0, 20000,

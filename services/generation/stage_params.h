@@ -20,6 +20,7 @@ struct CompleteStageOptions {
   double min_agreement = 0.85;     // symmetry acceptance
   int mesh_size = 160;             // meshing view size, px
   double mesh_min_alpha = 0.9;     // meshing: alpha a fused pixel needs
+  double mesh_inset_sigmas = 0.4;  // meshing: surface moved inward, in median surfel sigmas
   int min_gaussians = 50;          // fewer: a degenerate object (fails permanently)
   // Joint refinement (ALGORITHM.md 7.9); 0 = not run. Off by default: with the geometric prior it
   // measured no gain at the 2DGS learning rates (docs/RESULTS.md "Joint refinement"); the
