@@ -226,6 +226,40 @@ TEST(DepthFusion, ClosesTheSurfaceOverHolesAndUnseenSpace) {
   EXPECT_EQ(FuseDepthMaps(views, options).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
+// A hole 12 voxels wide: the outside flows through it at closed_gap_voxels 4 (the inside turns
+// hollow: four crossings on a line through the centre beside the hole), not at 8 (solid: two).
+TEST(DepthFusion, AWiderGapRuleKeepsAWiderHoleClosed) {
+  const float radius = 0.5f;
+  const TriangleMesh sphere = Sphere(radius);
+  TriangleMesh holed = sphere;
+  holed.triangles.clear();
+  for (const auto& t : sphere.triangles) {
+    const Eigen::Vector3f c =
+        (sphere.vertices[t[0]] + sphere.vertices[t[1]] + sphere.vertices[t[2]]) / 3;
+    if ((c - Eigen::Vector3f(0, 0, radius)).norm() > 0.12f) holed.triangles.push_back(t);
+  }
+  const std::vector<DepthView> views = RingDepthMaps(holed, {-40.0, 0.0, 40.0, 80.0});
+  DepthFusionOptions options;
+  options.voxel = 0.02f;
+  options.depth_trunc = 4.0f;
+  options.closed_bounds =
+      Eigen::AlignedBox3f(Eigen::Vector3f::Constant(-0.55f), Eigen::Vector3f::Constant(0.55f));
+  for (int gap : {4, 8}) {
+    options.closed_gap_voxels = gap;
+    auto mesh = FuseDepthMaps(views, options);
+    ASSERT_TRUE(mesh.ok()) << mesh.status();
+    auto caster = RayCaster::Create(*mesh);
+    ASSERT_TRUE(caster.ok());
+    const int crossings =
+        (*caster)->CountCrossings(Eigen::Vector3f(-2.0f, 0.01f, 0.02f), Eigen::Vector3f(1, 0, 0));
+    if (gap == 4) {
+      EXPECT_GT(crossings, 2) << "gap " << gap;
+    } else {
+      EXPECT_EQ(crossings, 2) << "gap " << gap;
+    }
+  }
+}
+
 // The inset moves the closed surface inward (a sphere fused from a ring of views shrinks by 0.4-1x
 // the inset: the projective TSDF is steeper than the true distance where the views met it
 // obliquely) and keeps it closed; beyond half the truncation band it is refused.

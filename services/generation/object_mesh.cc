@@ -72,6 +72,7 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
   fusion.voxel = options.voxel_radii * frame.radius;
   fusion.depth_trunc = 3.0f * frame.radius + 2.0f * frame.radius;
   fusion.min_component_triangles = 50;
+  fusion.closed_gap_voxels = options.closed_gap_voxels;
   if (options.closed) {
     // The box of the surfel centres, widened by the largest footprint the meshing renders show.
     float widest = 0;
