@@ -167,20 +167,36 @@ std::vector<DepthView> RingDepthMaps(const TriangleMesh& mesh,
   return views;
 }
 
-// A sphere with a hole 5 voxels wide in its top: the open fusion sees the inside through the hole
-// and leaves open inner surfaces; the closed fusion gives one closed surface around a solid
-// inside, true to the sphere where it was seen, and refuses bad bounds.
-TEST(DepthFusion, ClosesTheSurfaceOverHolesAndUnseenSpace) {
-  const float radius = 0.5f;
+// Closed fusion over the cube around a sphere of radius 0.5, 0.02 voxels.
+DepthFusionOptions ClosedAroundUnitSphere() {
+  DepthFusionOptions options;
+  options.voxel = 0.02f;
+  options.depth_trunc = 4.0f;
+  options.closed_bounds =
+      Eigen::AlignedBox3f(Eigen::Vector3f::Constant(-0.55f), Eigen::Vector3f::Constant(0.55f));
+  return options;
+}
+
+// Sphere(radius) without the triangles whose centroid lies within `hole` of its top.
+TriangleMesh SphereWithHole(float radius, float hole) {
   const TriangleMesh sphere = Sphere(radius);
   TriangleMesh holed = sphere;
   holed.triangles.clear();
   for (const auto& t : sphere.triangles) {
     const Eigen::Vector3f c =
         (sphere.vertices[t[0]] + sphere.vertices[t[1]] + sphere.vertices[t[2]]) / 3;
-    if ((c - Eigen::Vector3f(0, 0, radius)).norm() > 0.05f) holed.triangles.push_back(t);
+    if ((c - Eigen::Vector3f(0, 0, radius)).norm() > hole) holed.triangles.push_back(t);
   }
-  ASSERT_LT(holed.triangles.size(), sphere.triangles.size());
+  return holed;
+}
+
+// A sphere with a hole 5 voxels wide in its top: the open fusion sees the inside through the hole
+// and leaves open inner surfaces; the closed fusion gives one closed surface around a solid
+// inside, true to the sphere where it was seen, and refuses bad bounds.
+TEST(DepthFusion, ClosesTheSurfaceOverHolesAndUnseenSpace) {
+  const float radius = 0.5f;
+  const TriangleMesh holed = SphereWithHole(radius, 0.05f);
+  ASSERT_LT(holed.triangles.size(), Sphere(radius).triangles.size());
   const std::vector<DepthView> views = RingDepthMaps(holed, {-40.0, 0.0, 40.0, 80.0});
   DepthFusionOptions options;
   options.voxel = 0.02f;
@@ -229,21 +245,9 @@ TEST(DepthFusion, ClosesTheSurfaceOverHolesAndUnseenSpace) {
 // A hole 12 voxels wide: the outside flows through it at closed_gap_voxels 4 (the inside turns
 // hollow: four crossings on a line through the centre beside the hole), not at 8 (solid: two).
 TEST(DepthFusion, AWiderGapRuleKeepsAWiderHoleClosed) {
-  const float radius = 0.5f;
-  const TriangleMesh sphere = Sphere(radius);
-  TriangleMesh holed = sphere;
-  holed.triangles.clear();
-  for (const auto& t : sphere.triangles) {
-    const Eigen::Vector3f c =
-        (sphere.vertices[t[0]] + sphere.vertices[t[1]] + sphere.vertices[t[2]]) / 3;
-    if ((c - Eigen::Vector3f(0, 0, radius)).norm() > 0.12f) holed.triangles.push_back(t);
-  }
-  const std::vector<DepthView> views = RingDepthMaps(holed, {-40.0, 0.0, 40.0, 80.0});
-  DepthFusionOptions options;
-  options.voxel = 0.02f;
-  options.depth_trunc = 4.0f;
-  options.closed_bounds =
-      Eigen::AlignedBox3f(Eigen::Vector3f::Constant(-0.55f), Eigen::Vector3f::Constant(0.55f));
+  const std::vector<DepthView> views =
+      RingDepthMaps(SphereWithHole(0.5f, 0.12f), {-40.0, 0.0, 40.0, 80.0});
+  DepthFusionOptions options = ClosedAroundUnitSphere();
   for (int gap : {4, 8}) {
     options.closed_gap_voxels = gap;
     auto mesh = FuseDepthMaps(views, options);
@@ -266,11 +270,7 @@ TEST(DepthFusion, AWiderGapRuleKeepsAWiderHoleClosed) {
 TEST(DepthFusion, TheInsetMovesTheClosedSurfaceInward) {
   const float radius = 0.5f;
   const std::vector<DepthView> views = RingDepthMaps(Sphere(radius), {-40.0, 0.0, 40.0, 80.0});
-  DepthFusionOptions options;
-  options.voxel = 0.02f;
-  options.depth_trunc = 4.0f;
-  options.closed_bounds =
-      Eigen::AlignedBox3f(Eigen::Vector3f::Constant(-0.55f), Eigen::Vector3f::Constant(0.55f));
+  DepthFusionOptions options = ClosedAroundUnitSphere();
   for (float inset : {0.0f, 0.03f}) {
     options.inset = inset;
     auto mesh = FuseDepthMaps(views, options);
