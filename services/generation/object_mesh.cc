@@ -70,6 +70,7 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
   }
   DepthFusionOptions fusion;
   fusion.voxel = options.voxel_radii * frame.radius;
+  fusion.sdf_trunc = 5.0f * fusion.voxel;  // 2DGS's truncation
   fusion.depth_trunc = 3.0f * frame.radius + 2.0f * frame.radius;
   fusion.min_component_triangles = 50;
   fusion.closed_gap_voxels = options.closed_gap_voxels;
@@ -89,16 +90,15 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
       fusion.outside_below << frame.up, std::min(frame.support_height, frame.bottom_height);
     }
     // The footprint's reach past the true surface: the median surfel sigma as rendered.
-    std::vector<float> sigmas(object.size());
-    const int stride = object.num_scales;
-    for (size_t g = 0; g < object.size(); ++g) {
-      const float* ls = &object.log_scales[stride * g];
-      sigmas[g] = options.scale_modifier * std::exp(std::max(ls[0], ls[1]));
-    }
-    if (!sigmas.empty() && options.inset_sigmas > 0) {
+    if (options.inset_sigmas > 0 && object.size() > 0) {
+      std::vector<float> sigmas(object.size());
+      for (size_t g = 0; g < object.size(); ++g) {
+        const float* ls = &object.log_scales[object.num_scales * g];
+        sigmas[g] = options.scale_modifier * std::exp(std::max(ls[0], ls[1]));
+      }
       std::nth_element(sigmas.begin(), sigmas.begin() + sigmas.size() / 2, sigmas.end());
-      const float half_band = 0.5f * 5.0f * fusion.voxel;  // sdf_trunc is 5 voxels
-      fusion.inset = std::min(options.inset_sigmas * sigmas[sigmas.size() / 2], half_band);
+      fusion.inset =
+          std::min(options.inset_sigmas * sigmas[sigmas.size() / 2], 0.5f * fusion.sdf_trunc);
     }
   }
   return FuseDepthMaps(views, fusion);
