@@ -1,13 +1,13 @@
 #!/usr/bin/env bash
 # Decomposition robustness on scenes nobody tuned on (docs/RESULTS.md, "Robustness"): for each
 # scene, the offline pipeline up to the final labels (`instascene run --stages
-# decompose,train,segment`) with the previous session's defaults (`previous`: no labelling of
-# untraced Gaussians, no growth limit on the tau rule) and with today's defaults (`default`),
-# scored by the click protocol on labels (`eval --labels-only`). Scenes: the `small` preset at
-# 320x240 (32 views) and 640x480 (48 views) under both segmenter-noise families, and real-capture
-# composites with the two statues pressed together. Prints a markdown table and mean ± std per
-# group and configuration.
-# Usage: scripts/results_robustness.sh [BUILD_DIR] [WORK_DIR] [SEEDS] [COMPOSITE_SEEDS] [HIRES_SEEDS]
+# decompose,train,segment`, today's defaults), scored by the click protocol on labels (`eval
+# --labels-only`). Every synthetic scene is generated twice: with the coarse table of the scenes
+# before 2026-12-03 (`coarse`: `synth --table-detail 1`, whose discs painted over low objects) and
+# with today's generator (`refined`). Scenes: the `small` preset at 320x240 (32 views) and 640x480
+# (48 views) under both segmenter-noise families, and real-capture composites with the two statues
+# pressed together (no table: generated once, `refined` only). Prints a markdown table and
+# mean ± std per group and configuration.
 set -euo pipefail
 BUILD_DIR=${1:-build}
 WORK=${2:-$(mktemp -d)}
@@ -19,21 +19,16 @@ BIN="$BUILD_DIR/clients/cli/instascene"
 mkdir -p "$WORK"
 rows="$WORK/rows.jsonl"
 : > "$rows"
-declare -A CONFIG=(
-  [previous]="--untraced-radius 0 --max-growth 0"
-  [default]=""
-)
-run_scene() {  # run_scene GROUP LABEL DIR
-  for config in previous default; do
-    local out="$3/run_$config" t0 t1
-    rm -rf "$out"
-    t0=$(date +%s.%N)
-    # shellcheck disable=SC2086
-    "$BIN" run --scene "$3" --out "$out" --stages decompose,train,segment ${CONFIG[$config]} >/dev/null 2>&1
-    t1=$(date +%s.%N)
-    "$BIN" eval --scene "$3" --result "$out/segmentation" --json --labels-only 2>/dev/null |
-      tail -n 1 > "$out/eval.json"
-    python3 - "$1" "$2" "$config" "$out/eval.json" "$(python3 -c "print($t1-$t0)")" >> "$rows" <<'PY'
+declare -A DETAIL=([coarse]=1 [refined]=3)
+score() {  # score GROUP LABEL CONFIG DIR: run the pipeline on DIR and append a row
+  local out="$4/run" t0 t1
+  rm -rf "$out"
+  t0=$(date +%s.%N)
+  "$BIN" run --scene "$4" --out "$out" --stages decompose,train,segment >/dev/null 2>&1
+  t1=$(date +%s.%N)
+  "$BIN" eval --scene "$4" --result "$out/segmentation" --json --labels-only 2>/dev/null |
+    tail -n 1 > "$out/eval.json"
+  python3 - "$1" "$2" "$3" "$out/eval.json" "$(python3 -c "print($t1-$t0)")" >> "$rows" <<'PY'
 import json, sys
 group, label, config, path, seconds = sys.argv[1:6]
 ev = json.load(open(path))
@@ -43,20 +38,23 @@ print(json.dumps({"group": group, "scene": label, "config": config, "miou": ev["
                   "ari": ev["ari"], "precision": ev["precision_3d"], "recall": ev["recall_3d"],
                   "seconds": float(seconds), "low": low, "objects": objects}))
 PY
+}
+synth_scene() {  # synth_scene GROUP LABEL DIR SYNTH_ARGS...: both table variants, scored
+  local group=$1 label=$2 dir=$3 config
+  shift 3
+  for config in coarse refined; do
+    "$BIN" synth --out "${dir}_$config" --table-detail "${DETAIL[$config]}" "$@" >/dev/null 2>&1
+    score "$group" "$label" "$config" "${dir}_$config"
   done
 }
 for noise in medium sam-medium; do
   for seed in $SEEDS; do
-    d="$WORK/small320_${noise}_$seed"
-    "$BIN" synth --out "$d" --preset small --seed "$seed" --mask-noise "$noise" --width 320 \
-      --height 240 --views 32 >/dev/null 2>&1
-    run_scene "320x240, $noise" "small 320x240, $noise, seed $seed" "$d"
+    synth_scene "320x240, $noise" "small 320x240, $noise, seed $seed" "$WORK/small320_${noise}_$seed" \
+      --preset small --seed "$seed" --mask-noise "$noise" --width 320 --height 240 --views 32
   done
   for seed in $HIRES_SEEDS; do
-    d="$WORK/small640_${noise}_$seed"
-    "$BIN" synth --out "$d" --preset small --seed "$seed" --mask-noise "$noise" --width 640 \
-      --height 480 --views 48 >/dev/null 2>&1
-    run_scene "640x480, $noise" "small 640x480, $noise, seed $seed" "$d"
+    synth_scene "640x480, $noise" "small 640x480, $noise, seed $seed" "$WORK/small640_${noise}_$seed" \
+      --preset small --seed "$seed" --mask-noise "$noise" --width 640 --height 480 --views 48
   done
 done
 for seed in $COMPOSITE_SEEDS; do
@@ -65,18 +63,18 @@ for seed in $COMPOSITE_SEEDS; do
     --gap -0.15 --from-splats \
     "$SPLATS/statue_massa.ply,$SPLATS/statue_angel.ply,$SPLATS/playbot_lod4_3dgs_order.ply" \
     >/dev/null 2>&1
-  run_scene "touching statues 320x240, medium" "touching statues, seed $seed" "$d"
+  score "touching statues 320x240, medium" "touching statues, seed $seed" refined "$d"
 done
 python3 - "$rows" <<'PY'
 import json, statistics, sys
 rows = [json.loads(l) for l in open(sys.argv[1])]
-print("| scene | decomposition | click mIoU (labels) | ARI | 3D precision@0.5 | 3D recall@0.5 | run s | objects < 0.6 |")
+print("| scene | table | click mIoU (labels) | ARI | 3D precision@0.5 | 3D recall@0.5 | run s | objects < 0.6 |")
 print("|---|---|---|---|---|---|---|---|")
 for r in rows:
     print(f"| {r['scene']} | {r['config']} | {r['miou']:.3f} | {r['ari']:.3f} | {r['precision']:.2f} | "
           f"{r['recall']:.2f} | {r['seconds']:.0f} | {', '.join(r['low']) or '-'} |")
 print()
-print("| group | decomposition | n | click mIoU (labels) | ARI | 3D precision@0.5 | 3D recall@0.5 | "
+print("| group | table | n | click mIoU (labels) | ARI | 3D precision@0.5 | 3D recall@0.5 | "
       "thin/concave objects (torus, bowl, cup) | objects seen in ≥ 6 views below 0.6 |")
 print("|---|---|---|---|---|---|---|---|---|")
 groups = list(dict.fromkeys(r["group"] for r in rows))
@@ -90,7 +88,7 @@ def failed(sel):
 def ms(v):
     return f"{statistics.mean(v):.3f} ± {statistics.stdev(v) if len(v) > 1 else 0:.3f}"
 for g in groups:
-    for config in ("previous", "default"):
+    for config in ("coarse", "refined"):
         sel = [r for r in rows if r["group"] == g and r["config"] == config]
         if sel:
             print(f"| {g} | {config} | {len(sel)} | {ms([r['miou'] for r in sel])} | "

@@ -26,7 +26,7 @@ void AddSynthCommand(CLI::App& app, Action* action) {
     std::vector<std::string> from_splats;
     double object_height = 0.5, asymmetric = 0.0, gap = 0.03;
     int64_t seed = -1, objects = -1, views = -1, width = -1, height = -1, gaussians = -1;
-    int threads = 0;
+    int threads = 0, table_detail = 3;
     bool json = false;
   };
   auto args = std::make_shared<Args>();
@@ -59,6 +59,11 @@ void AddSynthCommand(CLI::App& app, Action* action) {
   cmd->add_option("--asymmetric", args->asymmetric,
                   "Share of objects drawn from shapes without symmetry (mug with a handle, "
                   "L-block, irregular block); default 0");
+  cmd->add_option("--table-detail", args->table_detail,
+                  "Split table-top surfels whose disc reaches an object into N x N smaller ones "
+                  "(default 3), as a model trained on photographs would; 1 = the coarse table of "
+                  "scenes generated before 2026-12-03, whose discs painted over low objects")
+      ->check(CLI::Range(1, 8));
   cmd->add_option("--unseen", args->unseen,
                   "Surfels no view sees: keep (default: every surface is covered) or drop (what "
                   "a model trained on the images would hold; for completion experiments)")
@@ -75,6 +80,7 @@ void AddSynthCommand(CLI::App& app, Action* action) {
       if (args->height >= 0) options.height = static_cast<int>(args->height);
       if (args->gaussians >= 0) options.gaussians = static_cast<size_t>(args->gaussians);
       options.asymmetric_share = static_cast<float>(args->asymmetric);
+      options.table_detail = args->table_detail;
       Stopwatch watch;
       ClutterScene scene;
       if (args->from_splats.empty()) {

@@ -26,7 +26,7 @@ struct ClutterOptions {
   int views = 24;   // number of cameras
   int width = 160;  // image size, px
   int height = 120;
-  size_t gaussians = 20000;     // total surfels (objects + stuff)
+  size_t gaussians = 20000;     // surfels (objects + stuff) before the table refinement
   float stuff_fraction = 0.3f;  // share of surfels on floor, wall and table
   int duplicates = 3;           // identical objects side by side (0 or 1 = none)
   int sh_degree = 1;            // 0 or 1
@@ -34,6 +34,11 @@ struct ClutterOptions {
   // Share of the (non-duplicate) objects drawn from the asymmetric shapes (mug, L-block, irregular
   // block); 0 keeps the original shape distribution (and every earlier scene) unchanged.
   float asymmetric_share = 0.0f;
+  // Table-top surfels whose disc reaches an object are split into table_detail x table_detail
+  // smaller ones (RefineTableNearObjects in the .cc says why); the scene then holds a few per cent
+  // more than `gaussians`. 1 = none: the scenes generated before 2026-12-03, in which low objects
+  // (bowls, tori) were partly painted over by the table.
+  int table_detail = 3;
 
   absl::Status Validate() const;
 };

@@ -88,7 +88,8 @@ TEST(MemoryEstimate, EveryStageStaysWithinItsEstimate) {
 TEST(MemoryEstimate, AJobOverTheBudgetIsRefusedBeforeItRuns) {
   const testing::ScopedTempDir temp("memory_budget");
   const std::string scene = temp.Sub("scene");
-  ASSERT_TRUE(WriteClutterScene(*GenerateClutterScene(*ClutterPreset("tiny")), scene).ok());
+  const absl::StatusOr<ClutterScene> tiny = GenerateClutterScene(*ClutterPreset("tiny"));
+  ASSERT_TRUE(tiny.ok() && WriteClutterScene(*tiny, scene).ok());
   StageRegistry r;
   ASSERT_TRUE(stages::RegisterStages(&r).ok());
   StageContext c;
@@ -106,7 +107,7 @@ TEST(MemoryEstimate, AJobOverTheBudgetIsRefusedBeforeItRuns) {
   ASSERT_TRUE(f.ok()) << f.status();
   EXPECT_EQ(f->views, 12);
   EXPECT_EQ(f->max_view_pixels, 96 * 72);
-  EXPECT_EQ(f->gaussians, 8000);
+  EXPECT_EQ(f->gaussians, tiny->cloud.size());
   EXPECT_FALSE(ReadSceneFootprint(temp.Sub("nowhere")).ok());
 }
 
