@@ -341,6 +341,37 @@ TEST(Symmetry, RecoversTheAxisOfAPartlySeenBottle) {
   }
 }
 
+// A box turned by anything but its own turns puts its corners into space the views saw empty: its
+// axis is n-fold (4 for a square footprint, 2 for a rectangle) through its centre, not a solid of
+// revolution; a bottle's stays continuous.
+TEST(Symmetry, ABoxHasAnNFoldAxisThroughItsCentre) {
+  const Eigen::Matrix3d yaw = Eigen::AngleAxisd(0.3, Eigen::Vector3d::UnitZ()).matrix();
+  for (const auto& [size, order] : std::vector<std::pair<Eigen::Vector3f, int>>{
+           {{0.14f, 0.14f, 0.07f}, 4}, {{0.11f, 0.075f, 0.14f}, 2}}) {
+    ShapeSpec spec;
+    spec.kind = ShapeKind::kBox;
+    spec.size = size;
+    TriangleMesh box = MakeShapeMesh(spec);
+    box.Transform({yaw, Eigen::Vector3d::Zero()});
+    const Detected d = Detect(MakePartialObject(box, 5000, 9));
+    const SymmetryHypothesis* axis = nullptr;
+    for (const SymmetryHypothesis& h : d.hypotheses) {
+      if (h.kind == SymmetryKind::kAxis) axis = &h;
+    }
+    ASSERT_NE(axis, nullptr);
+    EXPECT_EQ(axis->order, order) << axis->Describe();
+    EXPECT_EQ(axis->copies, order - 1);
+    EXPECT_TRUE(axis->accepted) << axis->Describe();
+    EXPECT_LT(Eigen::Vector2f(axis->point.x(), axis->point.y()).norm(), 0.004f) << axis->Describe();
+  }
+  const Detected bottle = Detect(MakePartialObject(Bottle(), 4000, 5));
+  for (const SymmetryHypothesis& h : bottle.hypotheses) {
+    if (h.kind == SymmetryKind::kAxis) {
+      EXPECT_EQ(h.order, 0) << h.Describe();
+    }
+  }
+}
+
 TEST(Symmetry, ClaimsNoSymmetryOfAnAsymmetricBlock) {
   const Detected d = Detect(MakePartialObject(LBlock(), 5000, 7));
   ASSERT_FALSE(d.hypotheses.empty());

@@ -222,7 +222,8 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   // The lower end of each accepted axis, closed across its lowest ring.
   if (options_.axis_cap) {
     for (const SymmetryHypothesis& h : hypotheses) {
-      if (!h.accepted || h.kind != SymmetryKind::kAxis) continue;
+      // An n-fold axis (a box) has no round lower ring: the support cap closes its bottom.
+      if (!h.accepted || h.kind != SymmetryKind::kAxis || h.order > 0) continue;
       std::vector<Eigen::Vector3f> positions = points;
       std::vector<uint32_t> sources(points.size());
       for (uint32_t g = 0; g < sources.size(); ++g) sources[g] = g;

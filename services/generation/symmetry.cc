@@ -86,9 +86,12 @@ std::string SymmetryHypothesis::Describe() const {
   return absl::StrFormat(
       "%s through (%.4f, %.4f, %.4f) %s (%.4f, %.4f, %.4f): agreement %.3f, "
       "evidence %.3f, %s",
-      kind == SymmetryKind::kPlane ? "plane" : "axis", point.x(), point.y(), point.z(),
-      kind == SymmetryKind::kPlane ? "normal" : "direction", direction.x(), direction.y(),
-      direction.z(), agreement, evidence, accepted ? "accepted" : "rejected");
+      kind == SymmetryKind::kPlane ? "plane"
+      : order > 0                  ? absl::StrFormat("%d-fold axis", order)
+                                   : std::string("axis"),
+      point.x(), point.y(), point.z(), kind == SymmetryKind::kPlane ? "normal" : "direction",
+      direction.x(), direction.y(), direction.z(), agreement, evidence,
+      accepted ? "accepted" : "rejected");
 }
 
 namespace {
@@ -99,6 +102,8 @@ void ScoreWithIndex(const std::vector<Eigen::Vector3f>& points,
                     const SymmetryOptions& options, SymmetryHypothesis* h) {
   const float match = options.match_spacings * std::max(frame.spacing, 1e-6f);
   h->scored = h->agree = h->contradict = 0;
+  h->copy_agree.assign(h->copies, 0);
+  h->copy_contradict.assign(h->copies, 0);
   for (size_t i = 0; i < points.size(); ++i) {
     if (DistanceToElement(*h, points[i]) < match) continue;
     ++h->scored;
@@ -108,8 +113,10 @@ void ScoreWithIndex(const std::vector<Eigen::Vector3f>& points,
       if (dist_sq <= match * match &&
           std::abs((h->Linear(k) * normals[i]).dot(normals[nearest])) >= options.normal_agreement) {
         ++h->agree;
+        ++h->copy_agree[k];
       } else if (free_space.IsFree(image)) {
         ++h->contradict;
+        ++h->copy_contradict[k];
       }
     }
   }
@@ -117,6 +124,31 @@ void ScoreWithIndex(const std::vector<Eigen::Vector3f>& points,
   h->agreement = decided > 0 ? static_cast<double>(h->agree) / decided : 0.0;
   h->evidence = h->scored > 0 ? static_cast<double>(decided) / (h->scored * h->copies) : 0.0;
   h->accepted = h->agreement >= options.min_agreement && h->evidence >= options.min_evidence;
+}
+
+// The largest n (a divisor of the axis's steps) whose images at 360 k / n degrees agree while the
+// other images do not; 0 when there is none (a solid of revolution, or no symmetry).
+int DiscreteOrder(const SymmetryHypothesis& h, const SymmetryOptions& options) {
+  const int steps = h.copies + 1;
+  for (int n = steps / 2; n >= 2; --n) {
+    if (steps % n != 0) continue;
+    int group_agree = 0, group_decided = 0, rest_agree = 0, rest_decided = 0;
+    for (int k = 0; k < h.copies; ++k) {
+      const int decided = h.copy_agree[k] + h.copy_contradict[k];
+      if ((k + 1) % (steps / n) == 0) {
+        group_agree += h.copy_agree[k];
+        group_decided += decided;
+      } else {
+        rest_agree += h.copy_agree[k];
+        rest_decided += decided;
+      }
+    }
+    if (group_decided == 0 || rest_decided == 0) continue;
+    const bool group_holds = group_agree >= options.min_agreement * group_decided &&
+                             group_decided >= options.min_evidence * h.scored * (n - 1);
+    if (group_holds && rest_agree < options.min_agreement * rest_decided) return n;
+  }
+  return 0;
 }
 
 }  // namespace
@@ -176,34 +208,46 @@ std::vector<SymmetryHypothesis> DetectSymmetries(const std::vector<Eigen::Vector
     coarse_normals.push_back(normals[i]);
   }
   const PointIndex3 coarse_index(coarse_points);
-  SymmetryOptions coarse = options;
-  coarse.axis_steps = 6;
-  constexpr int kReach = 6;
-  std::vector<SymmetryHypothesis> shifted((2 * kReach + 1) * (2 * kReach + 1));
-  tbb::parallel_for(size_t{0}, shifted.size(), [&](size_t slot) {
-    const int dx = static_cast<int>(slot) % (2 * kReach + 1) - kReach;
-    const int dy = static_cast<int>(slot) / (2 * kReach + 1) - kReach;
-    SymmetryHypothesis& h = shifted[slot];
-    h.kind = SymmetryKind::kAxis;
-    h.direction = frame.up;
-    h.point = fitted + 0.01f * frame.radius * (dx * basis.col(0) + dy * basis.col(1));
-    h.copies = coarse.axis_steps - 1;
-    ScoreWithIndex(coarse_points, coarse_normals, coarse_index, frame, free_space, coarse, &h);
-  });
-  size_t best_axis = shifted.size() / 2;  // the fit itself
-  for (size_t k = 0; k < shifted.size(); ++k) {
-    const SymmetryHypothesis& a = shifted[k];
-    const SymmetryHypothesis& b = shifted[best_axis];
-    if (a.agreement * std::min(1.0, 2 * a.evidence) > b.agreement * std::min(1.0, 2 * b.evidence)) {
-      best_axis = k;
+  // The axis point maximising the coarse score among shifts of the fit by reach x step radii.
+  auto search = [&](const Eigen::Vector3f& start, int order, int reach, float step_radii) {
+    SymmetryOptions coarse = options;
+    coarse.axis_steps = order > 0 ? order : 6;
+    std::vector<SymmetryHypothesis> shifted((2 * reach + 1) * (2 * reach + 1));
+    tbb::parallel_for(size_t{0}, shifted.size(), [&](size_t slot) {
+      const int dx = static_cast<int>(slot) % (2 * reach + 1) - reach;
+      const int dy = static_cast<int>(slot) / (2 * reach + 1) - reach;
+      SymmetryHypothesis& h = shifted[slot];
+      h.kind = SymmetryKind::kAxis;
+      h.direction = frame.up;
+      h.point = start + step_radii * frame.radius * (dx * basis.col(0) + dy * basis.col(1));
+      h.copies = coarse.axis_steps - 1;
+      ScoreWithIndex(coarse_points, coarse_normals, coarse_index, frame, free_space, coarse, &h);
+    });
+    size_t best = shifted.size() / 2;  // the start itself
+    for (size_t k = 0; k < shifted.size(); ++k) {
+      const SymmetryHypothesis& a = shifted[k];
+      const SymmetryHypothesis& b = shifted[best];
+      if (a.agreement * std::min(1.0, 2 * a.evidence) >
+          b.agreement * std::min(1.0, 2 * b.evidence)) {
+        best = k;
+      }
     }
-  }
+    return shifted[best].point;
+  };
   SymmetryHypothesis axis;
   axis.kind = SymmetryKind::kAxis;
   axis.direction = frame.up;
-  axis.point = shifted[best_axis].point;
+  axis.point = search(fitted, 0, 6, 0.01f);
   axis.copies = std::max(1, options.axis_steps - 1);
   ScoreWithIndex(points, normals, index, frame, free_space, options, &axis);
+  if (const int n = DiscreteOrder(axis, options); n > 0) {
+    // An n-fold axis: its own point (a box's centre, not a fitted circle's), coarse then fine.
+    axis.order = n;
+    axis.copies = n - 1;
+    axis.point = search(axis.point, n, 10, 0.02f);
+    axis.point = search(axis.point, n, 4, 0.005f);
+    ScoreWithIndex(points, normals, index, frame, free_space, options, &axis);
+  }
   std::vector<SymmetryHypothesis> out = {axis, best_plane};
   std::stable_sort(out.begin(), out.end(), Better);
   return out;

@@ -8,7 +8,10 @@
 // is *unknown* otherwise (never observed). agreement = agree / (agree + contradict); evidence =
 // (agree + contradict) / scored points. Points within that distance of the plane or axis map onto
 // themselves and are not scored. Accepted when agreement >= min_agreement and evidence >=
-// min_evidence. Pure functions, thread-safe.
+// min_evidence. An axis is scored per image too: when the images at the multiples of 360 / n
+// degrees agree (>= min_agreement) and the others do not, the axis is n-fold (largest such n among
+// the divisors of axis_steps), not continuous: a box turned by 45 degrees puts its corners into
+// space views saw empty, while its quarter turns map it onto itself. Pure functions, thread-safe.
 #pragma once
 
 #include <string>
@@ -27,11 +30,15 @@ struct SymmetryHypothesis {
   SymmetryKind kind = SymmetryKind::kPlane;
   Eigen::Vector3f point = Eigen::Vector3f::Zero();       // on the plane / axis, world frame
   Eigen::Vector3f direction = Eigen::Vector3f::UnitX();  // plane normal / axis direction (unit)
-  int copies = 1;  // images per point: 1 for a plane, steps - 1 for an axis
+  int copies = 1;  // images per point: 1 for a plane, steps - 1 (or order - 1) for an axis
+  // An axis's order: 0 = a solid of revolution (copies every 360 / (copies + 1) degrees); n >= 2 =
+  // n-fold (a box: 2 or 4), copies at 360 k / n degrees.
+  int order = 0;
   int scored = 0;  // points scored (off the plane / axis)
   int agree = 0, contradict = 0;
-  double agreement = 0;  // agree / (agree + contradict)
-  double evidence = 0;   // (agree + contradict) / (scored * copies)
+  std::vector<int> copy_agree, copy_contradict;  // per image k
+  double agreement = 0;                          // agree / (agree + contradict)
+  double evidence = 0;                           // (agree + contradict) / (scored * copies)
   bool accepted = false;
 
   // The k-th image (k in [0, copies)) of a point / of a direction.
