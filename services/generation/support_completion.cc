@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include <opencv2/imgproc.hpp>
+
 #include "common/geometry/point_index.h"
 
 namespace instascene::generation {
@@ -73,52 +75,31 @@ std::vector<SurfelCandidate> SupportCap(const std::vector<Eigen::Vector3f>& posi
     if (i >= 0 && j >= 0 && i < side && j < side) occupied[j * side + i] = 1;
   }
   if (low.empty()) return out;
-  // Gaps between surfels must not let the outside leak in: the barrier is dilated by one cell.
+  // The footprint is the convex hull of those cells: a completed wall may keep gaps (candidates
+  // refused near silhouettes), through which filling the outline's holes leaked and left boxes
+  // without a bottom. Concave footprints lose nothing real: where the hull spans space a view saw
+  // empty (a torus' hole, an L's inner corner), the free-space check below drops the cell.
   const std::vector<uint8_t> seen = occupied;
-  std::vector<uint8_t> barrier = occupied;
+  std::vector<cv::Point> cells;
   for (int j = 0; j < side; ++j) {
     for (int i = 0; i < side; ++i) {
-      if (!occupied[j * side + i]) continue;
-      for (int dj = -1; dj <= 1; ++dj) {
-        for (int di = -1; di <= 1; ++di) {
-          const int ni = i + di, nj = j + dj;
-          if (ni >= 0 && nj >= 0 && ni < side && nj < side) barrier[nj * side + ni] = 1;
-        }
-      }
+      if (seen[j * side + i]) cells.emplace_back(i, j);
     }
   }
-  occupied = std::move(barrier);
-  // Outside = reachable from the border through empty cells; the rest is the footprint.
+  std::vector<cv::Point> hull;
+  cv::convexHull(cells, hull);
+  cv::Mat footprint(side, side, CV_8U, cv::Scalar(0));
+  cv::fillConvexPoly(footprint, hull, cv::Scalar(1), cv::LINE_8);
   std::vector<uint8_t> outside(occupied.size(), 0);
-  std::vector<int> stack;
-  for (int i = 0; i < side; ++i) {
-    for (int border : {i, (side - 1) * side + i, i * side, i * side + side - 1}) {
-      if (!occupied[border] && !outside[border]) {
-        outside[border] = 1;
-        stack.push_back(border);
-      }
-    }
-  }
-  while (!stack.empty()) {
-    const int c = stack.back();
-    stack.pop_back();
-    const int i = c % side, j = c / side;
-    for (auto [di, dj] : {std::pair{1, 0}, {-1, 0}, {0, 1}, {0, -1}}) {
-      const int ni = i + di, nj = j + dj;
-      if (ni < 0 || nj < 0 || ni >= side || nj >= side) continue;
-      const int n = nj * side + ni;
-      if (!occupied[n] && !outside[n]) {
-        outside[n] = 1;
-        stack.push_back(n);
-      }
-    }
+  for (int j = 0; j < side; ++j) {
+    for (int i = 0; i < side; ++i) outside[j * side + i] = !footprint.at<uint8_t>(j, i);
   }
   const PointIndex3 low_index(low);
   const Eigen::Vector3f plane_origin =
       frame.center +
       (frame.support_height + 0.25f * frame.spacing - frame.up.dot(frame.center)) * frame.up;
-  // The dilation is taken back (a closing): a cell next to the outside is footprint only where a
-  // surfel lies in it, else the cap would overhang the walls by a cell.
+  // A cell on the hull's rim is footprint only where a surfel lies in it, else the cap would
+  // overhang the walls by a cell.
   auto next_to_outside = [&](int i, int j) {
     for (int dj = -1; dj <= 1; ++dj) {
       for (int di = -1; di <= 1; ++di) {

@@ -7,8 +7,9 @@
 //     time, to the support (a vertical-wall prior: exact
 //     for cylinders, bottles, boxes; it adds a skirt under a sphere, which the docs report);
 //   - cap: surfels on the support plane inside the footprint of the object's lower quarter seen
-//     from above (holes filled), except where the space just above was seen empty (a torus'
-//     hole is table, not underside). Under a sphere this overestimates the contact.
+//     from above (its convex hull, so gaps left in completed walls do not open the bottom),
+//     except where the space just above was seen empty (a torus' hole is table, not underside).
+//     Under a sphere this overestimates the contact.
 // Pure functions, thread-safe.
 #pragma once
 
