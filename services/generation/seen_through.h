@@ -41,7 +41,7 @@ struct SeenThroughOptions {
   float tolerance_radii = 0.02f;  // surfaces nearer than this behind p do not see through it
   int max_crossings = 64;         // per ray; a ray crossing more is taken as stopped
   float core_sigma = 0.5f;        // the stricter count: discs this many sigmas wide ...
-  int core_views = 4;             // ... and this many views must see through (0 = off)
+  int core_views = 2;             // ... and this many views must see through (0 = off)
   absl::Status Validate() const;
 };
 

@@ -183,7 +183,8 @@ TEST(SeenThrough, TheStricterCountSeesPastABlurredRimFromEnoughViews) {
   const Eigen::Vector3f behind(-0.03f, 0.0f, 1.2f);
   SeenThroughOptions one_sigma;
   one_sigma.core_views = 0;
-  SeenThroughOptions core;  // defaults: 0.5 sigma, 4 views
+  SeenThroughOptions core;  // 0.5 sigma (the default), 4 views
+  core.core_views = 4;
   SeenThroughOptions too_many = core;
   too_many.core_views = 5;
   for (const auto& [options, seen] :

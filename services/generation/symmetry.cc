@@ -127,24 +127,34 @@ void ScoreWithIndex(const std::vector<Eigen::Vector3f>& points,
 }
 
 // The largest n (a divisor of the axis's steps) whose images at 360 k / n degrees agree while the
-// other images do not; 0 when there is none (a solid of revolution, or no symmetry).
+// other images do not; 0 when there is none (a solid of revolution, or no symmetry). Every turn of
+// the group must agree on its own, within kTurnSpread of the group's best: a nearly square box's
+// quarter turns overhang its shorter faces by less than the match distance and agree at 0.83-0.86
+// while its half turn agrees at 1.00; completed by quarter turns it stands past its faces.
 int DiscreteOrder(const SymmetryHypothesis& h, const SymmetryOptions& options) {
+  constexpr double kTurnSpread = 0.1;
   const int steps = h.copies + 1;
+  auto turn_agreement = [&](int k) {
+    const int decided = h.copy_agree[k] + h.copy_contradict[k];
+    return decided > 0 ? static_cast<double>(h.copy_agree[k]) / decided : 0.0;
+  };
   for (int n = steps / 2; n >= 2; --n) {
     if (steps % n != 0) continue;
-    int group_agree = 0, group_decided = 0, rest_agree = 0, rest_decided = 0;
+    int group_decided = 0, rest_agree = 0, rest_decided = 0;
+    double worst = 1, best = 0;
     for (int k = 0; k < h.copies; ++k) {
       const int decided = h.copy_agree[k] + h.copy_contradict[k];
       if ((k + 1) % (steps / n) == 0) {
-        group_agree += h.copy_agree[k];
         group_decided += decided;
+        worst = std::min(worst, turn_agreement(k));
+        best = std::max(best, turn_agreement(k));
       } else {
         rest_agree += h.copy_agree[k];
         rest_decided += decided;
       }
     }
     if (group_decided == 0 || rest_decided == 0) continue;
-    const bool group_holds = group_agree >= options.min_agreement * group_decided &&
+    const bool group_holds = worst >= options.min_agreement && worst >= best - kTurnSpread &&
                              group_decided >= options.min_evidence * h.scored * (n - 1);
     if (group_holds && rest_agree < options.min_agreement * rest_decided) return n;
   }
@@ -241,12 +251,29 @@ std::vector<SymmetryHypothesis> DetectSymmetries(const std::vector<Eigen::Vector
   axis.copies = std::max(1, options.axis_steps - 1);
   ScoreWithIndex(points, normals, index, frame, free_space, options, &axis);
   if (const int n = DiscreteOrder(axis, options); n > 0) {
-    // An n-fold axis: its own point (a box's centre, not a fitted circle's), coarse then fine.
-    axis.order = n;
-    axis.copies = n - 1;
-    axis.point = search(axis.point, n, 10, 0.02f);
-    axis.point = search(axis.point, n, 4, 0.005f);
-    ScoreWithIndex(points, normals, index, frame, free_space, options, &axis);
+    // An n-fold axis: each order dividing n with its own point (a box's centre, not a fitted
+    // circle's), coarse then fine; the largest order that agrees as well as the best one wins (a
+    // nearly square box's quarter turns agree a little less than its half turn: 2-fold).
+    constexpr double kOrderTolerance = 0.01;
+    std::vector<SymmetryHypothesis> orders;
+    for (int m = n; m >= 2; --m) {
+      if (n % m != 0) continue;
+      SymmetryHypothesis h = axis;
+      h.order = m;
+      h.copies = m - 1;
+      h.point = search(axis.point, m, 10, 0.02f);
+      h.point = search(h.point, m, 4, 0.005f);
+      ScoreWithIndex(points, normals, index, frame, free_space, options, &h);
+      orders.push_back(std::move(h));
+    }
+    double top = 0;
+    for (const SymmetryHypothesis& h : orders) top = std::max(top, h.agreement);
+    for (const SymmetryHypothesis& h : orders) {
+      if (h.agreement >= top - kOrderTolerance) {
+        axis = h;
+        break;
+      }
+    }
   }
   std::vector<SymmetryHypothesis> out = {axis, best_plane};
   std::stable_sort(out.begin(), out.end(), Better);
