@@ -299,6 +299,35 @@ TEST(ObjectFrame, UpFromTheSupportAndSupportHeight) {
   EXPECT_GT(frame.spacing, 0);
 }
 
+// A segmentation that gave the bottle the table's surfels around its base: they leave the
+// instance (the bottle's own surfels all stay), and the support and bottom are the table's.
+TEST(ObjectFrame, TheSupportsSurfelsAroundTheBaseLeaveTheInstance) {
+  PartialObject scene = MakePartialObject(Bottle(), 4000, 3);
+  auto clean = SplitInstance(scene.labels, 1, 50);
+  ASSERT_TRUE(clean.ok());
+  size_t ring = 0;
+  for (uint32_t g = 0; g < scene.cloud.size(); ++g) {
+    const Eigen::Vector3f p(&scene.cloud.positions[3 * g]);
+    const float r = Eigen::Vector2f(p.x(), p.y()).norm();
+    if (scene.labels[g] == 0 && std::abs(p.z()) < 1e-4f && r < 0.1f) {
+      scene.labels[g] = 1;
+      ++ring;
+    }
+  }
+  ASSERT_GT(ring, 5u);
+  auto split = SplitInstance(scene.labels, 1, 50);
+  ASSERT_TRUE(split.ok());
+  const ObjectFrame frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
+  ASSERT_TRUE(frame.has_support);
+  EXPECT_EQ(RemoveSupportSurfels(scene.cloud, frame, &*split), ring);
+  EXPECT_EQ(split->instance, clean->instance);
+  EXPECT_EQ(split->outliers, ring);
+  EXPECT_EQ(split->instance.size() + split->occluders.size(), scene.cloud.size());
+  const ObjectFrame again = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
+  EXPECT_NEAR(again.support_height, 0.0f, 0.005f);
+  EXPECT_EQ(RemoveSupportSurfels(scene.cloud, again, &*split), 0u);  // nothing more to move
+}
+
 // The table near the bottle is hidden (no surfel within 60 cm) and a neighbour's face, tilted 30
 // degrees, lies beside it: no surfel near the object shows its support. The up is still the
 // table's (the scene's support), neither the face's nor the cameras' mean up (22 degrees off

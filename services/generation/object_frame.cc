@@ -129,6 +129,37 @@ void RemoveStrayGaussians(const GaussianCloud& cloud, InstanceSplit* split, floa
   std::sort(split->occluders.begin(), split->occluders.end());
 }
 
+size_t RemoveSupportSurfels(const GaussianCloud& cloud, const ObjectFrame& frame,
+                            InstanceSplit* split, float band_spacings) {
+  if (!frame.has_support || !(frame.spacing > 0) || cloud.num_scales != 2) return 0;
+  const float band = band_spacings * frame.spacing;
+  const float min_cos = std::cos(15.0f * static_cast<float>(M_PI) / 180.0f);
+  std::vector<uint32_t> kept;
+  size_t moved = 0;
+  for (uint32_t g : split->instance) {
+    const Eigen::Vector3f p(&cloud.positions[3 * g]);
+    const float* q = &cloud.rotations[4 * g];
+    const Eigen::Vector3f normal =
+        RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).col(2).cast<float>();
+    if (std::abs(frame.up.dot(p) - frame.support_height) <= band &&
+        std::abs(normal.dot(frame.up)) >= min_cos) {
+      split->occluders.push_back(g);
+      ++moved;
+    } else {
+      kept.push_back(g);
+    }
+  }
+  if (moved == 0 || kept.empty()) {
+    // Nothing to move, or nothing would be left (a flat object lying on the support).
+    if (moved > 0) split->occluders.resize(split->occluders.size() - moved);
+    return 0;
+  }
+  split->outliers += moved;
+  split->instance = std::move(kept);
+  std::sort(split->occluders.begin(), split->occluders.end());
+  return moved;
+}
+
 ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& split,
                                const std::vector<PinholeCamera>& cameras) {
   ObjectFrame frame;

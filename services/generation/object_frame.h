@@ -47,6 +47,14 @@ absl::StatusOr<InstanceSplit> SplitInstance(const std::vector<uint32_t>& labels,
 void RemoveStrayGaussians(const GaussianCloud& cloud, InstanceSplit* split,
                           float link_spacings = 4.0f, float min_share = 0.2f);
 
+// Surfels of the support labelled as the instance (the table's small surfels around an object's
+// base): instance surfels within `band_spacings` frame spacings of the support plane whose
+// normal is within 15 degrees of up become occluders (counted in `outliers`). An object's own
+// underside never shows, so nothing of it is lost; left in, they widened the base and the
+// support cap over them by a centimetre. Returns how many moved; the caller recomputes the frame.
+size_t RemoveSupportSurfels(const GaussianCloud& cloud, const ObjectFrame& frame,
+                            InstanceSplit* split, float band_spacings = 0.5f);
+
 // The frame of `split.instance` in `cloud` (surfels). Support: occluder surfels facing up within
 // the object's footprint, just below its lowest point (median of their heights).
 ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& split,
