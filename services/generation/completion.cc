@@ -219,16 +219,13 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
   RemoveStrayGaussians(surfels, &split);
   CompletedObject out;
   out.id = id;
+  out.frame = ComputeObjectFrame(surfels, split, cameras);
+  if (RemoveSupportSurfels(surfels, out.frame, &split) > 0) {
+    out.frame = ComputeObjectFrame(surfels, split, cameras);  // the bottom was the support's
+  }
   out.stray_removed = split.outliers;
   out.raw = surfels.Subset(split.instance);
   out.raw.extras.clear();
-  out.frame = ComputeObjectFrame(surfels, split, cameras);
-  if (RemoveSupportSurfels(surfels, out.frame, &split) > 0) {
-    out.stray_removed = split.outliers;
-    out.raw = surfels.Subset(split.instance);
-    out.raw.extras.clear();
-    out.frame = ComputeObjectFrame(surfels, split, cameras);
-  }
   if (!(out.frame.radius > 0) || !(out.frame.spacing > 0)) {
     return absl::FailedPreconditionError(
         absl::StrCat("instance ", id, " is degenerate: its Gaussians span no volume"));

@@ -134,30 +134,23 @@ size_t RemoveSupportSurfels(const GaussianCloud& cloud, const ObjectFrame& frame
   if (!frame.has_support || !(frame.spacing > 0) || cloud.num_scales != 2) return 0;
   const float band = band_spacings * frame.spacing;
   const float min_cos = std::cos(15.0f * static_cast<float>(M_PI) / 180.0f);
-  std::vector<uint32_t> kept;
-  size_t moved = 0;
+  std::vector<uint32_t> kept, moved;
   for (uint32_t g : split->instance) {
     const Eigen::Vector3f p(&cloud.positions[3 * g]);
     const float* q = &cloud.rotations[4 * g];
     const Eigen::Vector3f normal =
         RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).col(2).cast<float>();
-    if (std::abs(frame.up.dot(p) - frame.support_height) <= band &&
-        std::abs(normal.dot(frame.up)) >= min_cos) {
-      split->occluders.push_back(g);
-      ++moved;
-    } else {
-      kept.push_back(g);
-    }
+    const bool in_support = std::abs(frame.up.dot(p) - frame.support_height) <= band &&
+                            std::abs(normal.dot(frame.up)) >= min_cos;
+    (in_support ? moved : kept).push_back(g);
   }
-  if (moved == 0 || kept.empty()) {
-    // Nothing to move, or nothing would be left (a flat object lying on the support).
-    if (moved > 0) split->occluders.resize(split->occluders.size() - moved);
-    return 0;
-  }
-  split->outliers += moved;
-  split->instance = std::move(kept);
+  // Nothing to move, or nothing would be left (a flat object lying on the support).
+  if (moved.empty() || kept.empty()) return 0;
+  split->occluders.insert(split->occluders.end(), moved.begin(), moved.end());
   std::sort(split->occluders.begin(), split->occluders.end());
-  return moved;
+  split->outliers += moved.size();
+  split->instance = std::move(kept);
+  return moved.size();
 }
 
 ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& split,
