@@ -6,6 +6,7 @@
 #include <open3d/geometry/TriangleMesh.h>
 #include <open3d/pipelines/integration/ScalableTSDFVolume.h>
 #include <open3d/pipelines/integration/UniformTSDFVolume.h>
+#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
@@ -27,10 +28,11 @@ absl::Status CheckInputs(const std::vector<DepthView>& views, const DepthFusionO
   if (!options.closed_bounds.isEmpty() &&
       (!options.closed_bounds.sizes().allFinite() || options.max_closed_resolution < 8 ||
        options.max_closed_resolution > 512 || options.closed_gap_voxels < 0 ||
-       options.closed_gap_voxels > 32 || !options.outside_below.allFinite())) {
+       options.closed_gap_voxels > 32 || !options.outside_below.allFinite() ||
+       options.carve_views < 0)) {
     return absl::InvalidArgumentError(
         "depth fusion: closed bounds and support plane must be finite, max_closed_resolution in "
-        "[8, 512], closed_gap_voxels in [0, 32]");
+        "[8, 512], closed_gap_voxels in [0, 32], carve_views >= 0");
   }
   const double sdf_trunc = options.sdf_trunc > 0 ? options.sdf_trunc : 5.0 * options.voxel;
   if (!(options.inset >= 0) || !(options.inset <= 0.5 * sdf_trunc)) {
@@ -45,7 +47,8 @@ absl::Status CheckInputs(const std::vector<DepthView>& views, const DepthFusionO
     }
     const size_t pixels = static_cast<size_t>(camera.width) * camera.height;
     if (views[v].depth.size() != pixels ||
-        (!views[v].color.empty() && views[v].color.size() != 3 * pixels)) {
+        (!views[v].color.empty() && views[v].color.size() != 3 * pixels) ||
+        (!views[v].empty_distance_px.empty() && views[v].empty_distance_px.size() != pixels)) {
       return absl::InvalidArgumentError(absl::StrCat(
           "depth fusion view ", v, ": buffers do not match ", camera.width, "x", camera.height));
     }
@@ -80,6 +83,68 @@ void Integrate(const DepthView& view, float depth_trunc,
   extrinsic.topLeftCorner<3, 3>() = camera.camera_from_world.rotation;
   extrinsic.topRightCorner<3, 1>() = camera.camera_from_world.translation;
   volume->Integrate(*rgbd, intrinsic, extrinsic);
+}
+
+// Silhouette carving (DepthFusionOptions::carve_views): raises each voxel to the
+// `carve_views`-th largest outside distance the views' empty pixels give it.
+void CarveSilhouettes(const std::vector<DepthView>& views, int carve_views, double sdf_trunc,
+                      open3d::pipelines::integration::UniformTSDFVolume* volume) {
+  const int n = volume->resolution_;
+  const double voxel = volume->voxel_length_;
+  // Per carving view: pixel-homogeneous coordinates (u z, v z, z) = K (R p + t), affine in p.
+  std::vector<const DepthView*> carving;
+  std::vector<Eigen::Matrix<double, 3, 4>> projections;
+  for (const DepthView& view : views) {
+    if (view.empty_distance_px.empty()) continue;
+    const PinholeCamera& c = view.camera;
+    Eigen::Matrix3d k;
+    k << c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1;
+    Eigen::Matrix<double, 3, 4> m;
+    m.leftCols<3>() = k * c.camera_from_world.rotation.cast<double>();
+    m.col(3) = k * c.camera_from_world.translation.cast<double>();
+    carving.push_back(&view);
+    projections.push_back(m);
+  }
+  if (static_cast<int>(carving.size()) < carve_views) return;
+  // Each voxel is independent: parallel over x slabs, the same result for any thread count.
+  tbb::parallel_for(0, n, [&](int x) {
+    std::vector<float> distances;
+    distances.reserve(carving.size());
+    std::vector<Eigen::Vector3d> start(carving.size());
+    for (int y = 0; y < n; ++y) {
+      const Eigen::Vector3d p0 = volume->origin_ + voxel * Eigen::Vector3d(x + 0.5, y + 0.5, 0.5);
+      for (size_t i = 0; i < carving.size(); ++i) {
+        start[i] = projections[i].leftCols<3>() * p0 + projections[i].col(3);
+      }
+      for (int z = 0; z < n; ++z) {
+        open3d::geometry::TSDFVoxel& voxel_value = volume->voxels_[volume->IndexOf(x, y, z)];
+        // Observed free space (the views' truncated +1) cannot be raised further.
+        if (voxel_value.weight_ > 0 && voxel_value.tsdf_ >= 1.0f) continue;
+        distances.clear();
+        for (size_t i = 0; i < carving.size(); ++i) {
+          const Eigen::Vector3d q = start[i] + (z * voxel) * projections[i].col(2);
+          if (!(q.z() > 0)) continue;
+          const PinholeCamera& c = carving[i]->camera;
+          const double u = q.x() / q.z(), v = q.y() / q.z();
+          if (!(u >= 0 && v >= 0 && u < c.width && v < c.height)) continue;
+          const float d =
+              carving[i]
+                  ->empty_distance_px[static_cast<size_t>(v) * c.width + static_cast<size_t>(u)];
+          if (d > 0) distances.push_back(static_cast<float>(d * q.z() / c.fx / sdf_trunc));
+        }
+        if (static_cast<int>(distances.size()) < carve_views) continue;
+        std::nth_element(distances.begin(), distances.begin() + (carve_views - 1), distances.end(),
+                         std::greater<float>());
+        const float carve = std::min(1.0f, distances[carve_views - 1]);
+        if (voxel_value.weight_ <= 0) {
+          voxel_value.tsdf_ = carve;
+          voxel_value.weight_ = 1.0f;
+        } else {
+          voxel_value.tsdf_ = std::max(voxel_value.tsdf_, carve);
+        }
+      }
+    }
+  });
 }
 
 // Gives every voxel of `volume` a value (see DepthFusionOptions::closed_bounds). A voxel is
@@ -201,6 +266,7 @@ std::shared_ptr<open3d::geometry::TriangleMesh> FuseClosed(const std::vector<Dep
       length, resolution, sdf_trunc, open3d::pipelines::integration::TSDFVolumeColorType::RGB8,
       center - Eigen::Vector3d::Constant(0.5 * length));
   for (const DepthView& view : views) Integrate(view, options.depth_trunc, &volume);
+  if (options.carve_views > 0) CarveSilhouettes(views, options.carve_views, sdf_trunc, &volume);
   if (!options.outside_below.isZero()) {
     const Eigen::Vector3d normal = options.outside_below.head<3>().cast<double>();
     const Eigen::Vector3d origin = volume.origin_;

@@ -20,6 +20,10 @@ struct DepthView {
   PinholeCamera camera;
   std::vector<float> depth;  // HxW camera-z depth; 0 or non-finite = no surface
   std::vector<float> color;  // HxWx3 linear RGB in [0, 1], or empty (grey)
+  // Optional (closed fusion with carve_views > 0): HxW, for a pixel whose whole ray is empty
+  // (a render of the object alone that shows nothing there) its distance in pixels to the
+  // nearest pixel that shows the object; 0 elsewhere. Empty = the view carves nothing.
+  std::vector<float> empty_distance_px;
 };
 
 struct DepthFusionOptions {
@@ -46,6 +50,14 @@ struct DepthFusionOptions {
   // at most half the truncation band. The surface moves by `inset` where the views met it
   // head-on and less where they met it obliquely (0.013 for 0.03 on a sphere fused from a ring).
   float inset = 0.0f;
+  // Closed fusion only: silhouette carving. A voxel that projects onto empty pixels
+  // (DepthView::empty_distance_px) of at least this many views is outside by the
+  // `carve_views`-th largest of those views' distances (the pixel distance times depth over
+  // focal length, as a TSDF value); the fused value is raised to it, never lowered. Depth maps
+  // alone leave a lip wherever a footprint reaches past an edge that the views seeing past it
+  // do not show as surface (a cap's rim seen from above); the views that see past the edge
+  // empty remove it. 0 = no carving.
+  int carve_views = 0;
 };
 
 // Fuses the views into one mesh with vertex colours (closed when options.closed_bounds is set).

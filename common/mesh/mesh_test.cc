@@ -293,6 +293,75 @@ TEST(DepthFusion, TheInsetMovesTheClosedSurfaceInward) {
   }
 }
 
+// Each view's empty pixels (no depth) with their distance in pixels to the nearest pixel with
+// depth, by brute force (DepthView::empty_distance_px).
+void AddEmptyDistances(std::vector<DepthView>* views) {
+  for (DepthView& view : *views) {
+    const int w = view.camera.width, h = view.camera.height;
+    std::vector<int> filled;
+    for (int i = 0; i < w * h; ++i) {
+      if (view.depth[i] > 0) filled.push_back(i);
+    }
+    view.empty_distance_px.assign(view.depth.size(), 0.0f);
+    for (int i = 0; i < w * h; ++i) {
+      if (view.depth[i] > 0) continue;
+      int best = std::numeric_limits<int>::max();
+      for (int j : filled) {
+        const int dx = i % w - j % w, dy = i / w - j / w;
+        best = std::min(best, dx * dx + dy * dy);
+      }
+      view.empty_distance_px[i] = std::sqrt(static_cast<float>(best));
+    }
+  }
+}
+
+// A sphere with a thin brim (a disc of radius 0.58 in its equator's plane, which the views at
+// elevation 0 see edge-on, i.e. not at all, and the views above and below see as surface): depth
+// maps alone fuse the brim into a lip; silhouette carving from two views removes it, leaves the
+// sphere where it was (carving never lowers a value) and keeps the surface closed.
+TEST(DepthFusion, SilhouetteCarvingRemovesALipTheSideViewsSeePast) {
+  const float radius = 0.5f, brim = 0.58f;
+  TriangleMesh shape = Sphere(radius);
+  const uint32_t centre = static_cast<uint32_t>(shape.vertices.size());
+  shape.vertices.emplace_back(0, 0, 0);
+  constexpr int kRim = 96;
+  for (int k = 0; k < kRim; ++k) {
+    const float a = 2.0f * static_cast<float>(M_PI) * k / kRim;
+    shape.vertices.emplace_back(brim * std::cos(a), brim * std::sin(a), 0.0f);
+  }
+  for (int k = 0; k < kRim; ++k) {
+    const uint32_t a = centre + 1 + k, b = centre + 1 + (k + 1) % kRim;
+    shape.triangles.push_back({centre, a, b});
+    shape.triangles.push_back({centre, b, a});
+  }
+  std::vector<DepthView> views = RingDepthMaps(shape, {-40.0, 0.0, 40.0, 80.0});
+  AddEmptyDistances(&views);
+  DepthFusionOptions options = ClosedAroundUnitSphere();
+  options.closed_bounds =
+      Eigen::AlignedBox3f(Eigen::Vector3f::Constant(-0.62f), Eigen::Vector3f::Constant(0.62f));
+  auto widest = [](const TriangleMesh& mesh) {
+    float r = 0;
+    for (const Eigen::Vector3f& v : mesh.vertices) r = std::max(r, v.head<2>().norm());
+    return r;
+  };
+  auto lipped = FuseDepthMaps(views, options);
+  ASSERT_TRUE(lipped.ok()) << lipped.status();
+  EXPECT_GT(widest(*lipped), radius + 3 * options.voxel);
+  options.carve_views = 2;
+  auto carved = FuseDepthMaps(views, options);
+  ASSERT_TRUE(carved.ok()) << carved.status();
+  EXPECT_TRUE(IsClosedManifold(*carved));
+  EXPECT_LT(widest(*carved), radius + 1.5f * options.voxel);  // a pixel there is 2 voxels
+  double error = 0;
+  for (const Eigen::Vector3f& v : carved->vertices) error += std::abs(v.norm() - radius);
+  EXPECT_LT(error / carved->vertices.size(), 0.5 * options.voxel);
+  options.carve_views = -1;
+  EXPECT_EQ(FuseDepthMaps(views, options).status().code(), absl::StatusCode::kInvalidArgument);
+  options.carve_views = 2;
+  views[3].empty_distance_px.pop_back();
+  EXPECT_EQ(FuseDepthMaps(views, options).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
 TEST(DepthFusion, ReconstructsASphereFromRingDepthMaps) {
   const float radius = 0.5f;
   std::vector<DepthView> views = RingDepthMaps(Sphere(radius), {-40.0, 0.0, 40.0});

@@ -309,6 +309,9 @@ absl::StatusOr<std::vector<ObjectCompletionEval>> Evaluate(const std::string& sc
       meshing.min_alpha = m["meshing"].value("min_alpha", meshing.min_alpha);
       // Manifests written before the inset meshed without it.
       meshing.inset_sigmas = m["meshing"].value("inset_sigmas", 0.0f);
+      // And before the silhouette carving without it.
+      meshing.carve_views = m["meshing"].value("carve_views", 0);
+      meshing.empty_alpha = m["meshing"].value("empty_alpha", meshing.empty_alpha);
     }
     ASSIGN_OR_RETURN(TriangleMesh closed_mesh, MeshObject(raw, frame, meshing, o.num_threads));
     const std::vector<Eigen::Vector3f> closed_points =

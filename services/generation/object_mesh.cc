@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include <opencv2/imgproc.hpp>
+
 #include "common/core/status.h"
 #include "common/mesh/depth_fusion.h"
 #include "common/raster/rasterizer.h"
@@ -66,7 +68,18 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
     for (size_t i = 0; i < render.depth.size(); ++i) {
       if (render.alpha[i] <= options.min_alpha) render.depth[i] = 0.0f;  // not fused
     }
-    views.push_back({camera, std::move(render.depth), std::move(render.rgb)});
+    DepthView view{camera, std::move(render.depth), std::move(render.rgb), {}};
+    if (options.closed && options.carve_views > 0) {
+      // Distance of each empty pixel to the nearest pixel that shows the object.
+      cv::Mat empty(camera.height, camera.width, CV_8U);
+      for (int i = 0; i < camera.width * camera.height; ++i) {
+        empty.data[i] = render.alpha[i] < options.empty_alpha ? 255 : 0;
+      }
+      cv::Mat distance;
+      cv::distanceTransform(empty, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE);
+      view.empty_distance_px.assign(distance.begin<float>(), distance.end<float>());
+    }
+    views.push_back(std::move(view));
   }
   DepthFusionOptions fusion;
   fusion.voxel = options.voxel_radii * frame.radius;
@@ -74,6 +87,7 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
   fusion.depth_trunc = 3.0f * frame.radius + 2.0f * frame.radius;
   fusion.min_component_triangles = 50;
   fusion.closed_gap_voxels = options.closed_gap_voxels;
+  fusion.carve_views = options.closed ? options.carve_views : 0;
   if (options.closed) {
     // The box of the surfel centres, widened by the largest footprint the meshing renders show.
     float widest = 0;

@@ -56,6 +56,11 @@ struct MeshingOptions {
   // largest extent error 0.112 -> 0.076, volume IoU 0.802 -> 0.835 (docs/RESULTS.md "Meshing:
   // the footprint inset").
   float inset_sigmas = 0.4f;
+  // Closed meshing only: silhouette carving (DepthFusionOptions::carve_views). Pixels of a
+  // meshing render with alpha below `empty_alpha` see nothing of the object; a voxel that this
+  // many renders see past is outside. 0 = off.
+  int carve_views = 2;
+  float empty_alpha = 0.5f;
 };
 
 // The meshing cameras: elevations -60, -30, 0, 30, 60 degrees x `azimuths`, plus both poles.

@@ -48,6 +48,7 @@ CompletionOptions ToCompletionOptions(const CompleteStageOptions& o) {
   options.meshing.size_px = o.mesh_size;
   options.meshing.min_alpha = static_cast<float>(o.mesh_min_alpha);
   options.meshing.inset_sigmas = static_cast<float>(o.mesh_inset_sigmas);
+  options.meshing.carve_views = o.mesh_carve_views;
   options.min_gaussians = static_cast<size_t>(o.min_gaussians);
   options.seed = o.seed;
   options.refinement.iterations = o.refine_iterations;

@@ -27,6 +27,9 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
         .Real("mesh_inset_sigmas", &O::mesh_inset_sigmas, 0.0, 2.0,
               "Meshing: the closed surface is moved this many median surfel sigmas inward (the "
               "surfels' footprints stand about half a sigma past the true surface)")
+        .Int("mesh_carve_views", &O::mesh_carve_views, 0, 64,
+             "Meshing: silhouette carving; a voxel this many meshing renders see past (alpha "
+             "below 0.5 where it projects) is outside the closed surface (0 = off)")
         .Int("min_gaussians", &O::min_gaussians, 1, 1000000,
              "Instances with fewer Gaussians fail as degenerate")
         .Int("refine_iterations", &O::refine_iterations, 0, 20000,
