@@ -312,6 +312,7 @@ absl::StatusOr<std::vector<ObjectCompletionEval>> Evaluate(const std::string& sc
       // And before the silhouette carving without it.
       meshing.carve_views = m["meshing"].value("carve_views", 0);
       meshing.empty_alpha = m["meshing"].value("empty_alpha", meshing.empty_alpha);
+      meshing.empty_close_px = m["meshing"].value("empty_close_px", 0.0f);
     }
     ASSIGN_OR_RETURN(TriangleMesh closed_mesh, MeshObject(raw, frame, meshing, o.num_threads));
     const std::vector<Eigen::Vector3f> closed_points =

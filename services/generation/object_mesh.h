@@ -57,10 +57,14 @@ struct MeshingOptions {
   // the footprint inset").
   float inset_sigmas = 0.4f;
   // Closed meshing only: silhouette carving (DepthFusionOptions::carve_views). Pixels of a
-  // meshing render with alpha below `empty_alpha` see nothing of the object; a voxel that this
-  // many renders see past is outside. 0 = off.
+  // meshing render with alpha below `empty_alpha` see nothing of the object, once the object's
+  // pixels are closed (morphologically) with a disc of `empty_close_px` at a 160 px render
+  // (scaled with size_px) so that gaps between sparse surfels do not count; a voxel that
+  // `carve_views` renders see past is outside. 0 = off. Chosen on seeds 21-24, checked on held-out
+  // sets (docs/RESULTS.md "Meshing: silhouette carving").
   int carve_views = 2;
-  float empty_alpha = 0.5f;
+  float empty_alpha = 0.9f;
+  float empty_close_px = 9.0f;
 };
 
 // The meshing cameras: elevations -60, -30, 0, 30, 60 degrees x `azimuths`, plus both poles.

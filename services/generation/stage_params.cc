@@ -29,7 +29,8 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
               "surfels' footprints stand about half a sigma past the true surface)")
         .Int("mesh_carve_views", &O::mesh_carve_views, 0, 64,
              "Meshing: silhouette carving; a voxel this many meshing renders see past (alpha "
-             "below 0.5 where it projects) is outside the closed surface (0 = off)")
+             "below 0.9 where it projects, gaps between surfels closed) is outside the closed "
+             "surface (0 = off)")
         .Int("min_gaussians", &O::min_gaussians, 1, 1000000,
              "Instances with fewer Gaussians fail as degenerate")
         .Int("refine_iterations", &O::refine_iterations, 0, 20000,
