@@ -70,21 +70,19 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
     }
     DepthView view{camera, std::move(render.depth), std::move(render.rgb), {}};
     if (options.closed && options.carve_views > 0) {
-      // Distance of each empty pixel to the nearest pixel that shows the object.
-      cv::Mat empty(camera.height, camera.width, CV_8U);
-      for (int i = 0; i < camera.width * camera.height; ++i) {
-        empty.data[i] = render.alpha[i] < options.empty_alpha ? 255 : 0;
-      }
-      // Pinholes and cracks between sparse surfels are not views past the object: closed with a
-      // disc of empty_close_px (at a 160 px render, scaled with the render size).
+      // Distance of each empty pixel to the nearest pixel that shows the object. Pinholes and
+      // cracks between sparse surfels are not views past the object: the shown pixels are closed
+      // with a disc of empty_close_px (at a 160 px render, scaled with the render size).
+      cv::Mat shown;
+      cv::compare(cv::Mat(camera.height, camera.width, CV_32F, render.alpha.data()),
+                  options.empty_alpha, shown, cv::CMP_GE);
       const int close =
           static_cast<int>(std::lround(options.empty_close_px * camera.width / 160.0));
       if (close > 1) {
-        cv::Mat shown = 255 - empty;
         cv::morphologyEx(shown, shown, cv::MORPH_CLOSE,
                          cv::getStructuringElement(cv::MORPH_ELLIPSE, cv::Size(close, close)));
-        empty = 255 - shown;
       }
+      const cv::Mat empty = shown == 0;
       cv::Mat distance;
       cv::distanceTransform(empty, distance, cv::DIST_L2, cv::DIST_MASK_PRECISE);
       view.empty_distance_px.assign(distance.begin<float>(), distance.end<float>());
