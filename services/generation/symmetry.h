@@ -57,6 +57,9 @@ struct SymmetryOptions {
   float match_spacings = 2.5f;    // agreement distance in instance spacings
   float normal_agreement = 0.5f;  // |cos| between an image's normal and its match's
   int max_points = 1500;          // observed surfels scored (deterministic stride)
+  // The best plane is refined over +- refine_steps finer steps (a refine_steps-th of the grid's
+  // angle and offset steps) by the alignment cost (symmetry.cc); 0 = the grid's plane.
+  int refine_steps = 8;
 };
 
 // The best plane and the best axis found (each reported even when rejected, so the manifest can
