@@ -51,7 +51,8 @@ absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const Gaussian
   double post_seconds = 0;  // instance building inside the re-judgement loop is post-processing
   auto build_instances = [&](const std::vector<MaskNode>& nodes) {
     Stopwatch post;
-    result.instances = BuildInstances(result.trackers, nodes, cloud, options);
+    result.instances =
+        BuildInstances(result.trackers, nodes, cloud, options, &result.judgement.undersegmented);
     post_seconds += post.ElapsedSeconds();
   };
   std::vector<MaskNode> nodes =

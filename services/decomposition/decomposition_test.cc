@@ -122,6 +122,33 @@ TEST(Rejudge, WholeObjectMaskSplitByPartMasksIsRestored) {
   EXPECT_EQ(instances[0].gaussians.size(), 200u);
 }
 
+// The point filter (detected / appear > 0.5) and merges: object A (Gaussians 0..99) has its own
+// masks in views 0 and 1 and lies in a mask merged with its neighbour B (0..199, judged
+// under-segmented) in views 2-4, where A's node is visible. Counting those frames, A's points are
+// detected in 2 of 5 and the whole object is filtered away (the released code); a merged mask says
+// nothing about which object a point belongs to, so they do not count and A is kept whole.
+TEST(PostProcess, FramesWhereAPointLiesInAMergedMaskDoNotCountAgainstIt) {
+  const TrackerSet set = MakeSet(
+      5, 200, {{0, 1, 0, 100}, {1, 1, 0, 100}, {2, 1, 0, 200}, {3, 1, 0, 200}, {4, 1, 0, 200}});
+  GaussianCloud cloud;
+  cloud.Resize(200);
+  for (int g = 0; g < 200; ++g) {
+    cloud.positions[3 * g] = 0.001f * g;
+    cloud.positions[3 * g + 1] = cloud.positions[3 * g + 2] = 0.0f;
+  }
+  MaskNode node{{0, 1}, ViewSet(5), {}};
+  for (int v = 0; v < 5; ++v) node.visible.Set(v);
+  const std::vector<uint8_t> flags = {0, 0, 1, 1, 1};
+  DecompositionOptions options;
+  const std::vector<Instance> kept = BuildInstances(set, {node}, cloud, options, &flags);
+  ASSERT_EQ(kept.size(), 1u);
+  EXPECT_EQ(kept[0].gaussians.size(), 100u);
+  options.filter_skips_merged_frames = false;
+  EXPECT_TRUE(BuildInstances(set, {node}, cloud, options, &flags).empty());
+  // Without the judgement (no flags given) the frames count as before.
+  EXPECT_TRUE(BuildInstances(set, {node}, cloud, DecompositionOptions{}).empty());
+}
+
 // A true merge stays flagged: a mask over A (0..99) and B (100..199) whose Gaussians lie half in
 // each instance; and a mask too little of which lies in any instance is not judged at all.
 TEST(Rejudge, MergedMaskAndMostlyUncoveredMaskStayUndersegmented) {

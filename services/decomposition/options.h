@@ -23,11 +23,15 @@ struct DecompositionOptions {
       0.3;  // split frames / visible frames above this = under-segmented
   double view_consensus_threshold = 0.9;  // graph edge if supporter / observer >= this
   double point_filter_threshold = 0.5;    // keep a point if detected / appear > this
-  double dbscan_eps = 0.1;                // scene units, or a fraction of the scene extent (below)
-  bool dbscan_eps_relative = false;       // eps = dbscan_eps * robust scene diagonal
-  int dbscan_min_points = 4;              // Open3D convention: the point itself counts
-  double overlap_ratio = 0.8;             // duplicate-object removal
-  double remedy_ratio = 0.8;              // under-segmentation remedy
+  // Not in the released code (docs/DECOMPOSITION.md): the point filter does not count a frame
+  // where the point lies in a mask judged under-segmented (merged with a neighbour): with frequent
+  // merges an object's own points fall below the threshold and leave it.
+  bool filter_skips_merged_frames = true;
+  double dbscan_eps = 0.1;           // scene units, or a fraction of the scene extent (below)
+  bool dbscan_eps_relative = false;  // eps = dbscan_eps * robust scene diagonal
+  int dbscan_min_points = 4;         // Open3D convention: the point itself counts
+  double overlap_ratio = 0.8;        // duplicate-object removal
+  double remedy_ratio = 0.8;         // under-segmentation remedy
   // Re-judgement (not in the released code; docs/DECOMPOSITION.md): after clustering, a mask
   // judged under-segmented whose Gaussians lie mostly in one instance (>= remedy_ratio of those
   // inside any instance, and those >= rejudge_min_coverage of the tracker) was split by other

@@ -32,7 +32,7 @@ size_t IntersectionSize(const std::vector<uint32_t>& a, const std::vector<uint32
 // Sub-objects of one node (4.7 steps 1-2).
 std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node,
                                 const GaussianCloud& cloud, const DecompositionOptions& options,
-                                float eps) {
+                                float eps, const std::vector<uint8_t>* undersegmented) {
   std::vector<Instance> out;
   if (node.masks.size() < 2) return out;
   // The node's Gaussians: the union of its trackers.
@@ -49,10 +49,21 @@ std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node,
       1 + *std::max_element(cluster.begin(), cluster.end()) + 1;  // noise is group 0
   // Detection ratio over the node's visible frames.
   std::vector<uint16_t> appear(points.size(), 0), detected(points.size(), 0);
+  // A frame where the point lies in a mask judged under-segmented (a merge of this object with
+  // its neighbour) says nothing about the point's object and does not count against it
+  // (DecompositionOptions::filter_skips_merged_frames).
+  const bool skip_merged = options.filter_skips_merged_frames && undersegmented != nullptr;
   for (size_t i = 0; i < points.size(); ++i) {
     const uint16_t* frames = nullptr;
     const size_t count = set.FramesOf(points[i], &frames);
     for (size_t k = 0; k < count; ++k) appear[i] += node.visible.Test(frames[k]);
+    if (!skip_merged) continue;
+    const uint32_t g = points[i];
+    for (uint64_t m = set.mask_offsets[g]; m < set.mask_offsets[g + 1]; ++m) {
+      const uint32_t t = set.masks[m];
+      if ((*undersegmented)[t] && node.visible.Test(set.trackers[t].view) && appear[i] > 0)
+        --appear[i];
+    }
   }
   std::vector<uint32_t> masks_by_view = node.masks;
   std::stable_sort(masks_by_view.begin(), masks_by_view.end(), [&](uint32_t a, uint32_t b) {
@@ -222,14 +233,15 @@ float RobustSceneDiagonal(const GaussianCloud& cloud) {
 
 std::vector<Instance> BuildInstances(const TrackerSet& set, const std::vector<MaskNode>& nodes,
                                      const GaussianCloud& cloud,
-                                     const DecompositionOptions& options) {
+                                     const DecompositionOptions& options,
+                                     const std::vector<uint8_t>* undersegmented) {
   const float eps = static_cast<float>(options.dbscan_eps_relative
                                            ? options.dbscan_eps * RobustSceneDiagonal(cloud)
                                            : options.dbscan_eps);
   std::vector<std::vector<Instance>> per_node(nodes.size());
   RunWithThreads(options.num_threads, [&] {
     tbb::parallel_for(size_t{0}, nodes.size(), [&](size_t k) {
-      per_node[k] = SplitNode(set, nodes[k], cloud, options, eps);
+      per_node[k] = SplitNode(set, nodes[k], cloud, options, eps, undersegmented);
     });
   });
   std::vector<Instance> objects;

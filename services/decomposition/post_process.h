@@ -29,9 +29,12 @@ std::vector<int> Dbscan(const std::vector<Eigen::Vector3f>& points, float eps, i
 // Robust diagonal of the Gaussian centres (2nd-98th percentile box), for scene-relative constants.
 float RobustSceneDiagonal(const GaussianCloud& cloud);
 
+// `undersegmented` (per tracker, may be null): the masks judged merges, whose frames the point
+// filter skips (DecompositionOptions::filter_skips_merged_frames).
 std::vector<Instance> BuildInstances(const TrackerSet& trackers, const std::vector<MaskNode>& nodes,
                                      const GaussianCloud& cloud,
-                                     const DecompositionOptions& options);
+                                     const DecompositionOptions& options,
+                                     const std::vector<uint8_t>* undersegmented = nullptr);
 
 // Re-judgement: clears the under-segmented flag of every flagged tracker whose Gaussians lie
 // mostly in one instance (see DecompositionOptions::rejudge_passes); returns how many changed.

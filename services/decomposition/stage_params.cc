@@ -44,6 +44,9 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
               "Graph edge when supporters / observers reach this")
         .Real("point_filter_threshold", &O::point_filter_threshold, 0.0, 1.0,
               "Keep a Gaussian in an instance when detected / appeared exceeds this")
+        .Bool("filter_skips_merged_frames", &O::filter_skips_merged_frames,
+              "The point filter does not count frames where the Gaussian lies in a mask judged "
+              "under-segmented (false = the released code)")
         .Real("dbscan_eps", &O::dbscan_eps, 1e-9, 1e6,
               "DBSCAN radius: scene units, or a fraction of the scene diagonal when relative")
         .Bool("dbscan_eps_relative", &O::dbscan_eps_relative,
