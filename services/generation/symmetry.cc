@@ -108,6 +108,24 @@ std::string SymmetryHypothesis::Describe() const {
 
 namespace {
 
+// The k-th image of observed point i under h: agreeing when an observed point with a compatible
+// normal lies within `match` (its squared distance written to *dist_sq), contradicting when it
+// lands in seen-empty space, unknown otherwise.
+enum class Image { kAgrees, kContradicts, kUnknown };
+Image ClassifyImage(const std::vector<Eigen::Vector3f>& points,
+                    const std::vector<Eigen::Vector3f>& normals, const PointIndex3& index,
+                    const FreeSpaceGrid& free_space, const SymmetryOptions& options, float match,
+                    const SymmetryHypothesis& h, size_t i, int k, float* dist_sq) {
+  const Eigen::Vector3f image = h.MapPoint(points[i], k);
+  const auto [nearest, squared] = index.Nearest(image);
+  *dist_sq = squared;
+  if (squared <= match * match &&
+      std::abs((h.Linear(k) * normals[i]).dot(normals[nearest])) >= options.normal_agreement) {
+    return Image::kAgrees;
+  }
+  return free_space.IsFree(image) ? Image::kContradicts : Image::kUnknown;
+}
+
 void ScoreWithIndex(const std::vector<Eigen::Vector3f>& points,
                     const std::vector<Eigen::Vector3f>& normals, const PointIndex3& index,
                     const ObjectFrame& frame, const FreeSpaceGrid& free_space,
@@ -120,15 +138,19 @@ void ScoreWithIndex(const std::vector<Eigen::Vector3f>& points,
     if (DistanceToElement(*h, points[i]) < match) continue;
     ++h->scored;
     for (int k = 0; k < h->copies; ++k) {
-      const Eigen::Vector3f image = h->MapPoint(points[i], k);
-      const auto [nearest, dist_sq] = index.Nearest(image);
-      if (dist_sq <= match * match &&
-          std::abs((h->Linear(k) * normals[i]).dot(normals[nearest])) >= options.normal_agreement) {
-        ++h->agree;
-        ++h->copy_agree[k];
-      } else if (free_space.IsFree(image)) {
-        ++h->contradict;
-        ++h->copy_contradict[k];
+      float dist_sq = 0;
+      switch (
+          ClassifyImage(points, normals, index, free_space, options, match, *h, i, k, &dist_sq)) {
+        case Image::kAgrees:
+          ++h->agree;
+          ++h->copy_agree[k];
+          break;
+        case Image::kContradicts:
+          ++h->contradict;
+          ++h->copy_contradict[k];
+          break;
+        case Image::kUnknown:
+          break;
       }
     }
   }
@@ -153,16 +175,12 @@ double AlignmentCost(const std::vector<Eigen::Vector3f>& points,
   size_t decided = 0;
   for (size_t i = 0; i < points.size(); ++i) {
     for (int k = 0; k < h.copies; ++k) {
-      const Eigen::Vector3f image = h.MapPoint(points[i], k);
-      const auto [nearest, dist_sq] = index.Nearest(image);
-      if (dist_sq <= match * match &&
-          std::abs((h.Linear(k) * normals[i]).dot(normals[nearest])) >= options.normal_agreement) {
-        cost += dist_sq;
-        ++decided;
-      } else if (free_space.IsFree(image)) {
-        cost += match * match;
-        ++decided;
-      }
+      float dist_sq = 0;
+      const Image image =
+          ClassifyImage(points, normals, index, free_space, options, match, h, i, k, &dist_sq);
+      if (image == Image::kUnknown) continue;
+      cost += image == Image::kAgrees ? dist_sq : match * match;
+      ++decided;
     }
   }
   return decided ? cost / (decided * static_cast<double>(match) * match) : 1.0;
