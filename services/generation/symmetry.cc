@@ -108,6 +108,20 @@ std::string SymmetryHypothesis::Describe() const {
 
 namespace {
 
+// The vertical plane whose normal is at `theta` from the frame's first horizontal axis, `offset`
+// along that normal from the frame's centre.
+SymmetryHypothesis VerticalPlane(const ObjectFrame& frame, double theta, float offset) {
+  const Eigen::Matrix3f basis = frame.Basis();
+  SymmetryHypothesis h;
+  h.kind = SymmetryKind::kPlane;
+  h.copies = 1;
+  h.direction = (basis.col(0) * static_cast<float>(std::cos(theta)) +
+                 basis.col(1) * static_cast<float>(std::sin(theta)))
+                    .normalized();
+  h.point = frame.center + offset * h.direction;
+  return h;
+}
+
 // The k-th image of observed point i under h: agreeing when an observed point with a compatible
 // normal lies within `match` (its squared distance written to *dist_sq), contradicting when it
 // lands in seen-empty space, unknown otherwise.
@@ -253,16 +267,11 @@ std::vector<SymmetryHypothesis> DetectSymmetries(const std::vector<Eigen::Vector
   tbb::parallel_for(size_t{0}, planes.size(), [&](size_t slot) {
     const int a = static_cast<int>(slot) / offsets, o = static_cast<int>(slot) % offsets;
     const double theta = kPi * a / angles;
-    SymmetryHypothesis& h = planes[slot];
-    h.kind = SymmetryKind::kPlane;
-    h.direction = (basis.col(0) * static_cast<float>(std::cos(theta)) +
-                   basis.col(1) * static_cast<float>(std::sin(theta)))
-                      .normalized();
     const float offset = offsets == 1 ? 0.0f
                                       : options.offset_range_radii * frame.radius *
                                             (2.0f * o / (offsets - 1) - 1.0f);
-    h.point = frame.center + offset * h.direction;
-    h.copies = 1;
+    SymmetryHypothesis& h = planes[slot];
+    h = VerticalPlane(frame, theta, offset);
     ScoreWithIndex(points, normals, index, frame, free_space, options, &h);
   });
   SymmetryHypothesis best_plane = planes[0];
@@ -285,15 +294,8 @@ std::vector<SymmetryHypothesis> DetectSymmetries(const std::vector<Eigen::Vector
     tbb::parallel_for(size_t{0}, fine.size(), [&](size_t slot) {
       const int da = static_cast<int>(slot) / (2 * n + 1) - n;
       const int doff = static_cast<int>(slot) % (2 * n + 1) - n;
-      const double theta = theta0 + da * angle_step;
-      SymmetryHypothesis& h = fine[slot];
-      h.kind = SymmetryKind::kPlane;
-      h.copies = 1;
-      h.direction = (basis.col(0) * static_cast<float>(std::cos(theta)) +
-                     basis.col(1) * static_cast<float>(std::sin(theta)))
-                        .normalized();
-      h.point = frame.center + (offset0 + doff * offset_step) * h.direction;
-      cost[slot] = AlignmentCost(points, normals, index, frame, free_space, options, h);
+      fine[slot] = VerticalPlane(frame, theta0 + da * angle_step, offset0 + doff * offset_step);
+      cost[slot] = AlignmentCost(points, normals, index, frame, free_space, options, fine[slot]);
     });
     const size_t best = static_cast<size_t>(std::min_element(cost.begin(), cost.end()) -
                                             cost.begin());  // first minimum: deterministic
