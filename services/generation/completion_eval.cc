@@ -313,6 +313,12 @@ absl::StatusOr<std::vector<ObjectCompletionEval>> Evaluate(const std::string& sc
       meshing.carve_views = m["meshing"].value("carve_views", 0);
       meshing.empty_alpha = m["meshing"].value("empty_alpha", meshing.empty_alpha);
       meshing.empty_close_px = m["meshing"].value("empty_close_px", 0.0f);
+      // And before the snap without it.
+      meshing.snap_radius_spacings = m["meshing"].value("snap_radius_spacings", 0.0f);
+      meshing.snap_layer_spacings =
+          m["meshing"].value("snap_layer_spacings", meshing.snap_layer_spacings);
+      meshing.snap_max_voxels = m["meshing"].value("snap_max_voxels", meshing.snap_max_voxels);
+      meshing.snap_reach_spacings = m["meshing"].value("snap_reach_spacings", 0.0f);
     }
     ASSIGN_OR_RETURN(TriangleMesh closed_mesh, MeshObject(raw, frame, meshing, o.num_threads));
     const std::vector<Eigen::Vector3f> closed_points =

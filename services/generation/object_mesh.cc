@@ -6,7 +6,9 @@
 #include <opencv2/imgproc.hpp>
 
 #include "common/core/status.h"
+#include "common/geometry/rigid.h"
 #include "common/mesh/depth_fusion.h"
+#include "common/mesh/surfel_snap.h"
 #include "common/raster/rasterizer.h"
 #include "services/generation/viewpoints.h"
 
@@ -123,7 +125,22 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
           std::min(options.inset_sigmas * sigmas[sigmas.size() / 2], 0.5f * fusion.sdf_trunc);
     }
   }
-  return FuseDepthMaps(views, fusion);
+  ASSIGN_OR_RETURN(TriangleMesh mesh, FuseDepthMaps(views, fusion));
+  if (options.closed && options.snap_radius_spacings > 0 && frame.spacing > 0) {
+    std::vector<Eigen::Vector3f> points(object.size()), normals(object.size());
+    for (size_t g = 0; g < object.size(); ++g) {
+      points[g] = Eigen::Vector3f(&object.positions[3 * g]);
+      const float* q = &object.rotations[4 * g];
+      normals[g] = RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).cast<float>().col(2);
+    }
+    SurfelSnapOptions snap;
+    snap.radius = options.snap_radius_spacings * frame.spacing;
+    snap.layer = options.snap_layer_spacings * frame.spacing;
+    snap.max_move = options.snap_max_voxels * fusion.voxel;
+    snap.reach = options.snap_reach_spacings * frame.spacing;
+    SnapToSurfels(points, normals, snap, &mesh);
+  }
+  return mesh;
 }
 
 }  // namespace instascene::generation

@@ -27,6 +27,9 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
         .Real("mesh_inset_sigmas", &O::mesh_inset_sigmas, 0.0, 2.0,
               "Meshing: the closed surface is moved this many median surfel sigmas inward (the "
               "surfels' footprints stand about half a sigma past the true surface)")
+        .Real("mesh_snap_spacings", &O::mesh_snap_spacings, 0.0, 8.0,
+              "Meshing: each vertex of the closed surface moves along its normal onto the "
+              "outermost layer of the surfel centres within this many surfel spacings (0 = off)")
         .Int("mesh_carve_views", &O::mesh_carve_views, 0, 64,
              "Meshing: silhouette carving; a voxel this many meshing renders see past (alpha "
              "below 0.9 where it projects, gaps between surfels closed) is outside the closed "

@@ -16,13 +16,14 @@ struct CompleteStageOptions {
   double ring_elevation = 30.0;     // degrees
   int ring_size = 256;              // px
   int top_training_views = 10;
-  int free_space_resolution = 64;  // voxels per axis
-  double min_agreement = 0.85;     // symmetry acceptance
-  int mesh_size = 160;             // meshing view size, px
-  double mesh_min_alpha = 0.9;     // meshing: alpha a fused pixel needs
-  double mesh_inset_sigmas = 0.4;  // meshing: surface moved inward, in median surfel sigmas
-  int mesh_carve_views = 2;        // meshing: renders that must see past a voxel to carve it
-  int min_gaussians = 50;          // fewer: a degenerate object (fails permanently)
+  int free_space_resolution = 64;   // voxels per axis
+  double min_agreement = 0.85;      // symmetry acceptance
+  int mesh_size = 160;              // meshing view size, px
+  double mesh_min_alpha = 0.9;      // meshing: alpha a fused pixel needs
+  double mesh_inset_sigmas = 0.4;   // meshing: surface moved inward, in median surfel sigmas
+  int mesh_carve_views = 2;         // meshing: renders that must see past a voxel to carve it
+  double mesh_snap_spacings = 3.0;  // meshing: vertices snapped to surfels this many spacings near
+  int min_gaussians = 50;           // fewer: a degenerate object (fails permanently)
   // Joint refinement (ALGORITHM.md 7.9); 0 = not run. Off by default: with the geometric prior it
   // measured no gain at the 2DGS learning rates (docs/RESULTS.md "Joint refinement"); the
   // prototype's setting is 2000.

@@ -1,0 +1,40 @@
+// common/mesh/surfel_snap.h: moves a fused mesh's vertices onto the surface its surfels sample.
+//
+// A mesh fused from renders of splats stands where the rendered footprints reach, not where the
+// surfel centres lie: past a silhouette a stack of discs keeps alpha above the fusion's threshold
+// a fraction of a sigma beyond the true surface, and the grid quantises the rest. 2DGS surfel
+// centres lie on the surface. Each vertex is moved along its normal onto the outermost layer of
+// the surfel centres around it that face its way (a moving-least-squares projection that keeps
+// the two sides of a thin wall apart), the move bounded and smoothed over the mesh so that a few
+// stray surfels cannot pull a spike. Stateless, thread-safe.
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "common/geometry/triangle_mesh.h"
+
+namespace instascene {
+
+struct SurfelSnapOptions {
+  float radius = 0.0f;    // neighbourhood of a vertex (world units, > 0)
+  float layer = 0.0f;     // surfels within this of the outermost along the normal form the layer
+  float max_move = 0.0f;  // bound on a vertex's move (world units, > 0)
+  float min_cos = 0.7f;   // a surfel faces the vertex's way when |n_surfel . n_vertex| >= this
+  int min_surfels = 3;    // fewer facing surfels around a vertex: it stays (a closed hole)
+  int smooth_passes = 2;  // passes averaging the moves over each vertex's 1-ring
+  // Then a vertex farther than this from every surfel centre (past the edge of the sampled
+  // surface: a fused lip over a rim or a corner) is pulled towards the nearest centre until it is
+  // this far, by at most max_move (smoothed likewise). 0 = off.
+  float reach = 0.0f;
+};
+
+// Moves the vertices of `mesh` (a closed or open triangle mesh; normals taken outward by the sign
+// of its volume) onto the surfel centres `points` with unit normals `normals` (either sign).
+// Returns how many vertices moved.
+size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
+                     const std::vector<Eigen::Vector3f>& normals, const SurfelSnapOptions& options,
+                     TriangleMesh* mesh);
+
+}  // namespace instascene
