@@ -36,13 +36,14 @@ std::vector<Eigen::Vector3f> OutwardVertexNormals(const TriangleMesh& mesh) {
 
 size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
                      const std::vector<Eigen::Vector3f>& normals, const SurfelSnapOptions& options,
-                     TriangleMesh* mesh) {
+                     TriangleMesh* mesh, const std::vector<uint8_t>& fixed) {
   if (points.empty() || mesh->vertices.empty() || options.radius <= 0 || options.max_move <= 0) {
     return 0;
   }
   const std::vector<Eigen::Vector3f> vertex_normals = OutwardVertexNormals(*mesh);
   const PointIndex3 index(points);
   const size_t n = mesh->vertices.size();
+  auto is_fixed = [&fixed](size_t v) { return v < fixed.size() && fixed[v]; };
   // Each vertex's signed move along its normal (0 where too few surfels face its way).
   std::vector<float> move(n, 0.0f);
   std::vector<uint8_t> snapped(n, 0);
@@ -93,7 +94,7 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
     for (size_t v = 0; v < n; ++v) {
       double sum = move[v];
       for (uint32_t u : ring[v]) sum += move[u];
-      next[v] = static_cast<float>(sum / (1 + ring[v].size()));
+      next[v] = is_fixed(v) ? 0.0f : static_cast<float>(sum / (1 + ring[v].size()));
     }
     move.swap(next);
   }
@@ -109,7 +110,7 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
                       for (size_t v = r.begin(); v != r.end(); ++v) {
                         const auto [nearest, dist_sq] = index.Nearest(mesh->vertices[v]);
                         const float dist = std::sqrt(dist_sq);
-                        if (dist <= options.reach) continue;
+                        if (dist <= options.reach || is_fixed(v)) continue;
                         const float length = std::min(dist - options.reach, options.max_move);
                         pull[v] = length / dist * (points[nearest] - mesh->vertices[v]);
                       }
@@ -119,7 +120,8 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
     for (size_t v = 0; v < n; ++v) {
       Eigen::Vector3f sum = pull[v];
       for (uint32_t u : ring[v]) sum += pull[u];
-      next[v] = sum / static_cast<float>(1 + ring[v].size());
+      next[v] = is_fixed(v) ? Eigen::Vector3f::Zero()
+                            : Eigen::Vector3f(sum / static_cast<float>(1 + ring[v].size()));
     }
     pull.swap(next);
   }

@@ -32,9 +32,10 @@ struct SurfelSnapOptions {
 
 // Moves the vertices of `mesh` (a closed or open triangle mesh; normals taken outward by the sign
 // of its volume) onto the surfel centres `points` with unit normals `normals` (either sign).
-// Returns how many vertices moved.
+// Vertices flagged in `fixed` (empty, or one flag per vertex) do not move (an object's base on
+// its support). Returns how many vertices moved.
 size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
                      const std::vector<Eigen::Vector3f>& normals, const SurfelSnapOptions& options,
-                     TriangleMesh* mesh);
+                     TriangleMesh* mesh, const std::vector<uint8_t>& fixed = {});
 
 }  // namespace instascene

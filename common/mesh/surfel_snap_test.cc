@@ -101,7 +101,7 @@ TEST(SurfelSnap, TwoStraySurfelsDoNotHoldTheSurfaceOut) {
   EXPECT_LT(RadiusRange(mesh).second, 1.01f);
 }
 
-TEST(SurfelSnap, MovesAreBoundedAndASurfaceWithoutSurfelsStays) {
+TEST(SurfelSnap, MovesAreBoundedAndFixedVerticesOrASurfaceWithoutSurfelsStay) {
   std::vector<Eigen::Vector3f> points, normals;
   SphereSurfels(1.0f, kSurfels, &points, &normals);
   TriangleMesh far = Sphere(1.2f);
@@ -109,6 +109,20 @@ TEST(SurfelSnap, MovesAreBoundedAndASurfaceWithoutSurfelsStays) {
   o.radius = 0.5f;  // reaches the surfels, but the move is bounded
   SnapToSurfels(points, normals, o, &far);
   EXPECT_GT(RadiusRange(far).first, 1.2f - o.max_move - 1e-4f);
+  TriangleMesh held = Sphere(1.05f);  // the lower half fixed (a base on its support)
+  std::vector<uint8_t> fixed(held.vertices.size());
+  for (size_t v = 0; v < fixed.size(); ++v) fixed[v] = held.vertices[v].z() < 0;
+  const TriangleMesh unheld = held;
+  SnapToSurfels(points, normals, Options(), &held, fixed);
+  for (const auto& t : held.triangles) {
+    for (uint32_t v : t) {
+      if (fixed[v]) {
+        EXPECT_EQ(held.vertices[v], unheld.vertices[v]);
+      } else if (held.vertices[v].z() > 0.3f) {
+        EXPECT_LT(held.vertices[v].norm(), 1.01f);
+      }
+    }
+  }
   TriangleMesh alone = Sphere(2.0f);  // no surfel within the radius
   const TriangleMesh before = alone;
   EXPECT_EQ(SnapToSurfels(points, normals, Options(), &alone), 0u);

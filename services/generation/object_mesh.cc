@@ -138,7 +138,17 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
     snap.layer = options.snap_layer_spacings * frame.spacing;
     snap.max_move = options.snap_max_voxels * fusion.voxel;
     snap.reach = options.snap_reach_spacings * frame.spacing;
-    SnapToSurfels(points, normals, snap, &mesh);
+    // The base on the support stays flat: it is where the object stands (a sphere's cap, a
+    // bottle's foot), and a rounded base rolls in a simulator.
+    std::vector<uint8_t> fixed;
+    if (frame.has_support) {
+      const float floor = std::min(frame.support_height, frame.bottom_height) + fusion.voxel;
+      fixed.resize(mesh.vertices.size());
+      for (size_t v = 0; v < mesh.vertices.size(); ++v) {
+        fixed[v] = frame.up.dot(mesh.vertices[v]) <= floor;
+      }
+    }
+    SnapToSurfels(points, normals, snap, &mesh, fixed);
   }
   return mesh;
 }

@@ -73,7 +73,7 @@ struct MeshingOptions {
   // farther than `snap_reach_spacings` from every surfel centre (a lip past a rim or a top edge)
   // is pulled towards the nearest one. The inset alone moves the surface by one amount
   // everywhere; the snap moves each part by what its own surfels say. 3 / 0.5 / 2 / 0.5:
-  // pipeline completion, seeds 21-24, volume IoU 0.883 -> 0.912, extents within 5 % 15 -> 26
+  // pipeline completion, seeds 21-24, volume IoU 0.883 -> 0.911, extents within 5 % 15 -> 26
   // of 32 (docs/RESULTS.md "Meshing: vertices snapped to the surfels"). 0 radius = off.
   float snap_radius_spacings = 3.0f;
   float snap_layer_spacings = 0.5f;
