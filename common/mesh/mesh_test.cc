@@ -16,15 +16,7 @@
 namespace instascene {
 namespace {
 
-TriangleMesh Sphere(float radius) {
-  ShapeSpec spec;
-  spec.kind = ShapeKind::kSphere;
-  spec.size = {radius, 0, 0};
-  TriangleMesh mesh = MakeShapeMesh(spec, 48);
-  // Centre it at the origin (shapes rest on z = 0).
-  for (Eigen::Vector3f& v : mesh.vertices) v.z() -= radius;
-  return mesh;
-}
+TriangleMesh Sphere(float radius) { return MakeCenteredSphere(radius, 48); }
 
 // Brute-force Moller-Trumbore over every triangle: the reference for the Embree casts.
 float BruteForceDistance(const TriangleMesh& mesh, const Eigen::Vector3f& o,

@@ -32,6 +32,23 @@ std::vector<Eigen::Vector3f> OutwardVertexNormals(const TriangleMesh& mesh) {
   return normals;
 }
 
+// `passes` times, each value becomes the mean over its vertex and the vertex's 1-ring (`zero`
+// where `is_fixed`).
+template <typename T, typename Fixed>
+void SmoothOverRings(const std::vector<std::vector<uint32_t>>& ring, const Fixed& is_fixed,
+                     int passes, const T& zero, std::vector<T>* values) {
+  for (int pass = 0; pass < passes; ++pass) {
+    std::vector<T> next(values->size(), zero);
+    for (size_t v = 0; v < values->size(); ++v) {
+      if (is_fixed(v)) continue;
+      T sum = (*values)[v];
+      for (uint32_t u : ring[v]) sum += (*values)[u];
+      next[v] = sum / static_cast<float>(1 + ring[v].size());
+    }
+    values->swap(next);
+  }
+}
+
 }  // namespace
 
 size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
@@ -44,6 +61,7 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
   const PointIndex3 index(points);
   const size_t n = mesh->vertices.size();
   auto is_fixed = [&fixed](size_t v) { return v < fixed.size() && fixed[v]; };
+  const int min_surfels = std::max(1, options.min_surfels);
   // Each vertex's signed move along its normal (0 where too few surfels face its way).
   std::vector<float> move(n, 0.0f);
   std::vector<uint8_t> snapped(n, 0);
@@ -54,7 +72,7 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
         for (size_t v = r.begin(); v != r.end(); ++v) {
           const Eigen::Vector3f& p = mesh->vertices[v];
           const Eigen::Vector3f& nv = vertex_normals[v];
-          if (nv.isZero()) continue;
+          if (nv.isZero() || is_fixed(v)) continue;
           facing.clear();
           for (uint32_t i : index.WithinRadius(p, options.radius)) {
             if (std::abs(normals[i].dot(nv)) < options.min_cos) continue;
@@ -63,12 +81,12 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
             const float tangential_sq = std::max(0.0f, d.squaredNorm() - along * along);
             facing.emplace_back(along, std::exp(-0.5f * tangential_sq / tangential_var));
           }
-          if (static_cast<int>(facing.size()) < options.min_surfels) continue;
+          if (static_cast<int>(facing.size()) < min_surfels) continue;
           // The outermost layer: surfels within `layer` of the min_surfels-th outermost one (fewer
           // stray surfels standing farther out do not define it, nor count in it).
-          std::nth_element(facing.begin(), facing.begin() + (options.min_surfels - 1), facing.end(),
+          std::nth_element(facing.begin(), facing.begin() + (min_surfels - 1), facing.end(),
                            [](const auto& a, const auto& b) { return a.first > b.first; });
-          const float outer = facing[options.min_surfels - 1].first;
+          const float outer = facing[min_surfels - 1].first;
           double sum = 0, weight = 0;
           for (const auto& [along, w] : facing) {
             if (std::abs(along - outer) > options.layer) continue;
@@ -89,15 +107,7 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
       ring[t[k]].push_back(t[(k + 2) % 3]);
     }
   }
-  for (int pass = 0; pass < options.smooth_passes; ++pass) {
-    std::vector<float> next(n);
-    for (size_t v = 0; v < n; ++v) {
-      double sum = move[v];
-      for (uint32_t u : ring[v]) sum += move[u];
-      next[v] = is_fixed(v) ? 0.0f : static_cast<float>(sum / (1 + ring[v].size()));
-    }
-    move.swap(next);
-  }
+  SmoothOverRings(ring, is_fixed, options.smooth_passes, 0.0f, &move);
   size_t moved = 0;
   for (size_t v = 0; v < n; ++v) {
     mesh->vertices[v] += move[v] * vertex_normals[v];
@@ -115,16 +125,7 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
                         pull[v] = length / dist * (points[nearest] - mesh->vertices[v]);
                       }
                     });
-  for (int pass = 0; pass < options.smooth_passes; ++pass) {
-    std::vector<Eigen::Vector3f> next(n);
-    for (size_t v = 0; v < n; ++v) {
-      Eigen::Vector3f sum = pull[v];
-      for (uint32_t u : ring[v]) sum += pull[u];
-      next[v] = is_fixed(v) ? Eigen::Vector3f::Zero()
-                            : Eigen::Vector3f(sum / static_cast<float>(1 + ring[v].size()));
-    }
-    pull.swap(next);
-  }
+  SmoothOverRings(ring, is_fixed, options.smooth_passes, Eigen::Vector3f::Zero().eval(), &pull);
   for (size_t v = 0; v < n; ++v) {
     mesh->vertices[v] += pull[v];
     moved += !snapped[v] && !pull[v].isZero();

@@ -11,14 +11,7 @@
 namespace instascene {
 namespace {
 
-TriangleMesh Sphere(float radius) {
-  ShapeSpec spec;
-  spec.kind = ShapeKind::kSphere;
-  spec.size = {radius, 0, 0};
-  TriangleMesh mesh = MakeShapeMesh(spec, 48);
-  for (Eigen::Vector3f& v : mesh.vertices) v.z() -= radius;  // centred at the origin
-  return mesh;
-}
+TriangleMesh Sphere(float radius) { return MakeCenteredSphere(radius, 48); }
 
 // Surfel centres on a sphere of `radius` (a Fibonacci lattice) with their normals, negated
 // every other surfel (2DGS normals have no sign).

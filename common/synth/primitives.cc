@@ -153,6 +153,15 @@ TriangleMesh MakeLathe(const std::vector<Eigen::Vector2f>& profile, int segments
   return mesh;
 }
 
+TriangleMesh MakeCenteredSphere(float radius, int segments) {
+  ShapeSpec spec;
+  spec.kind = ShapeKind::kSphere;
+  spec.size = {radius, 0, 0};
+  TriangleMesh mesh = MakeShapeMesh(spec, segments);
+  for (Eigen::Vector3f& v : mesh.vertices) v.z() -= radius;
+  return mesh;
+}
+
 TriangleMesh MakeRectangle(float size_x, float size_y, int cells_x, int cells_y) {
   TriangleMesh mesh;
   for (int j = 0; j <= cells_y; ++j) {

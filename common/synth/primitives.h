@@ -49,6 +49,9 @@ struct ShapeSpec {
 // A closed mesh of the shape; `segments` is the angular resolution of revolution shapes.
 TriangleMesh MakeShapeMesh(const ShapeSpec& spec, int segments = 48);
 
+// A sphere of `radius` centred at the origin (MakeShapeMesh's rests on z = 0).
+TriangleMesh MakeCenteredSphere(float radius, int segments = 48);
+
 // A flat rectangle in the xy plane centred at the origin (normal +z), split into cells.
 TriangleMesh MakeRectangle(float size_x, float size_y, int cells_x, int cells_y);
 
