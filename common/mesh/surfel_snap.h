@@ -18,8 +18,10 @@
 namespace instascene {
 
 struct SurfelSnapOptions {
-  float radius = 0.0f;    // neighbourhood of a vertex (world units, > 0)
-  float layer = 0.0f;     // surfels within this of the outermost along the normal form the layer
+  float radius = 0.0f;  // neighbourhood of a vertex (world units, > 0)
+  // The layer: facing surfels within this, along the normal, of the min_surfels-th outermost
+  // (on either side: fewer strays standing farther out neither define it nor count in it).
+  float layer = 0.0f;
   float max_move = 0.0f;  // bound on a vertex's move (world units, > 0)
   float min_cos = 0.7f;   // a surfel faces the vertex's way when |n_surfel . n_vertex| >= this
   int min_surfels = 3;    // fewer facing surfels around a vertex: it stays (a closed hole)
