@@ -11,6 +11,7 @@
 #include "common/geometry/rigid.h"
 #include "common/mesh/ray_caster.h"
 #include "common/mesh/surfel_mesh.h"
+#include "services/generation/observed_surface.h"
 
 namespace instascene::generation {
 namespace {
@@ -140,6 +141,7 @@ absl::StatusOr<PriorOutput> NoPrior::Complete(const PriorInput& input) const {
 }
 
 absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) const {
+  RETURN_IF_ERROR(options_.observed_surface.Validate());
   const GaussianCloud& instance = *input.instance;
   const ObjectFrame& frame = input.frame;
   std::vector<Eigen::Vector3f> points(instance.size()), normals(instance.size());
@@ -151,10 +153,18 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
       DetectSymmetries(points, normals, frame, *input.free_space, options_.symmetry);
   RETURN_IF_ERROR(CheckCancelled(input.cancel, "complete"));
   const PointIndex3 observed(points);
+  const ObservedSurfaceOptions& oso = options_.observed_surface;
+  // The normals' sides cost a few rays per real view and surfel: only when the test is on.
+  const ObservedSurface observed_surface(
+      &observed,
+      oso.front_spacings > 0 ? SeenSideNormals(points, normals, input.seen_through, frame.center)
+                             : std::vector<Eigen::Vector3f>(points.size(), Eigen::Vector3f::Zero()),
+      frame.spacing, oso);
   const float cover = options_.cover_spacings * std::max(frame.spacing, 1e-6f);
   CoverSet added_set(cover);
   std::vector<Candidate> added;
-  int rejected_free = 0, rejected_covered = 0, rejected_below = 0, rejected_open = 0;
+  int rejected_free = 0, rejected_covered = 0, rejected_below = 0, rejected_open = 0,
+      rejected_off_surface = 0;
   auto consider = [&](const Candidate& c) {
     if (frame.has_support &&
         frame.up.dot(c.position) < frame.support_height - 0.5f * frame.spacing) {
@@ -167,6 +177,10 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     }
     if (observed.Nearest(c.position).second <= cover * cover || added_set.Covered(c.position)) {
       ++rejected_covered;
+      return;
+    }
+    if (observed_surface.Contradicts(c.position)) {
+      ++rejected_off_surface;
       return;
     }
     // The exact test last (a few rays per real view): the grid is coarse and its margin keeps
@@ -296,6 +310,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   out.report["rejected"] = {{"observed_free", rejected_free},
                             {"already_covered", rejected_covered},
                             {"below_support", rejected_below},
+                            {"off_observed_surface", rejected_off_surface},
                             {"axis_cap_open_above", rejected_open}};
   return out;
 }

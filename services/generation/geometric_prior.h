@@ -7,6 +7,7 @@
 // and says so. Thread-safe (stateless apart from options).
 #pragma once
 
+#include "services/generation/observed_surface.h"
 #include "services/generation/prior.h"
 #include "services/generation/support_completion.h"
 #include "services/generation/symmetry.h"
@@ -27,6 +28,9 @@ struct GeometricPriorOptions {
   // RESULTS.md ("Free-space violations").
   int candidate_free_views = 1;
   float max_support_gap_radii = 1.0f;  // no support completion when it is farther below
+  // Refuse a candidate standing off the observed surface beside it (observed_surface.h).
+  // Measured in RESULTS.md ("Free-space violations: candidates off the observed surface").
+  ObservedSurfaceOptions observed_surface;
 };
 
 class GeometricPrior final : public CompletionPrior {

@@ -127,6 +127,20 @@ int SeenThroughTest::ViewsSeeingThrough(const Eigen::Vector3f& p, int enough, bo
   return count;
 }
 
+int SeenThroughTest::SeenSide(const Eigen::Vector3f& p, const Eigen::Vector3f& n) const {
+  float vote = 0;
+  for (const PinholeCamera& c : cameras_) {
+    if (!c.SeesPoint(p.cast<double>())) continue;
+    const Eigen::Vector3f eye = c.CenterInWorld().cast<float>();
+    const float line = (p - eye).norm();
+    if (!(line > tolerance_)) continue;
+    const Eigen::Vector3f dir = (p - eye) / line;
+    if (Transmittance(eye, dir, line - tolerance_) < options_.blocked_below) continue;
+    vote -= dir.dot(n);
+  }
+  return vote > 0 ? 1 : vote < 0 ? -1 : 0;
+}
+
 bool SeenThroughTest::SeenThrough(const Eigen::Vector3f& p) const {
   if (ViewsSeeingThrough(p) > 0) return true;
   return core_discs_.caster != nullptr &&

@@ -62,6 +62,9 @@ class SeenThroughTest {
   float Transmittance(const Eigen::Vector3f& origin, const Eigen::Vector3f& direction, float t_far,
                       bool core = false) const;
   float tolerance() const { return tolerance_; }
+  // +1 / -1: the side of the plane (p, n) the real views that see p look from (the majority,
+  // weighted by |cos|); 0 when no view sees p.
+  int SeenSide(const Eigen::Vector3f& p, const Eigen::Vector3f& n) const;
 
  private:
   struct Surfel {

@@ -66,6 +66,18 @@ TEST(SeenThrough, AnOpaqueWallHidesWhatIsBehindIt) {
   EXPECT_EQ(test->ViewsSeeingThrough({0.0f, 0.0f, 0.5f}, 5), 1);
 }
 
+TEST(SeenThrough, SeenSideIsTheSideTheViewsSeeingThePointLookFrom) {
+  GaussianCloud scene;
+  AddWall(1.0f, 0.3f, 0.01f, 0.01f, 0.95f, &scene);
+  auto test = SeenThroughTest::Create({FrontCamera()}, scene, 0.1f, SeenThroughOptions{});
+  ASSERT_TRUE(test.ok()) << test.status();
+  const Eigen::Vector3f on_wall(0.02f, 0.01f, 1.0f);
+  EXPECT_EQ(test->SeenSide(on_wall, Eigen::Vector3f::UnitZ()), -1);  // the camera is at -z
+  EXPECT_EQ(test->SeenSide(on_wall, -Eigen::Vector3f::UnitZ()), 1);
+  EXPECT_EQ(test->SeenSide({0.0f, 0.0f, 1.2f}, Eigen::Vector3f::UnitZ()), 0);  // hidden
+  EXPECT_EQ(test->SeenSide({2.0f, 0.0f, 1.0f}, Eigen::Vector3f::UnitZ()), 0);  // off the image
+}
+
 // The transmittance along a ray is the product of (1 - alpha) over the surfels it crosses, alpha
 // being each Gaussian's value where the ray meets it (a brute-force sum over the surfels).
 TEST(SeenThrough, TransmittanceIsTheProductOverTheCrossedSurfels) {

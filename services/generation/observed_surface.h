@@ -1,0 +1,52 @@
+// services/generation/observed_surface.h: does a completion candidate contradict the observed
+// surface beside it? (GENERATION.md step 4). Each observed surfel is a small piece of surface
+// whose normal is turned to the side the real views saw it from. A candidate within
+// `lateral_spacings` of such a surfel along its plane that stands more than `front_spacings` in
+// front of it lies where those views looked through to the surfel; one more than
+// `behind_spacings` behind it (and within max(front, behind) + lateral spacings of it: a thicker
+// solid's far side is not asked) lies inside a wall the capture saw from one side only (a mug's
+// cavity behind its seen outer wall), not on it. Either contradicts the observation, so the prior
+// refuses it. The free-space tests cannot: near the object the model's own blurred surfels stop
+// their rays (RESULTS.md "Free-space violations: candidates off the observed surface").
+// Immutable after construction; thread-safe reads.
+#pragma once
+
+#include <vector>
+
+#include <Eigen/Core>
+
+#include "absl/status/status.h"
+#include "common/geometry/point_index.h"
+#include "services/generation/seen_through.h"
+
+namespace instascene::generation {
+
+struct ObservedSurfaceOptions {
+  float front_spacings = 0.75f;   // in front of a seen surfel by more than this (0 = test off) ...
+  float behind_spacings = 1.5f;   // ... or behind it by more than this (0 = not tested) ...
+  float lateral_spacings = 2.0f;  // ... and within this of it along its plane: contradicted
+  absl::Status Validate() const;
+};
+
+// The unit normals turned to the side the real views saw each surfel from
+// (SeenThroughTest::SeenSide); away from `center` where no view sees the surfel or `seen` is null.
+std::vector<Eigen::Vector3f> SeenSideNormals(const std::vector<Eigen::Vector3f>& points,
+                                             const std::vector<Eigen::Vector3f>& normals,
+                                             const SeenThroughTest* seen,
+                                             const Eigen::Vector3f& center);
+
+class ObservedSurface {
+ public:
+  // `index` holds the observed surfels' centres (not owned; must outlive this), `seen_normals`
+  // their SeenSideNormals, `spacing` their median nearest-neighbour distance.
+  ObservedSurface(const PointIndex3* index, std::vector<Eigen::Vector3f> seen_normals,
+                  float spacing, const ObservedSurfaceOptions& options);
+  bool Contradicts(const Eigen::Vector3f& p) const;
+
+ private:
+  const PointIndex3* index_;
+  std::vector<Eigen::Vector3f> seen_normals_;
+  float front_ = 0, behind_ = 0, lateral_ = 0, search_ = 0;
+};
+
+}  // namespace instascene::generation

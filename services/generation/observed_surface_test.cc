@@ -1,0 +1,80 @@
+#include "services/generation/observed_surface.h"
+
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+namespace instascene::generation {
+namespace {
+
+constexpr float kSpacing = 0.01f;
+
+// Observed surfels on a 21 x 21 grid in the plane z = 0, kSpacing apart, seen from +z.
+std::vector<Eigen::Vector3f> Patch() {
+  std::vector<Eigen::Vector3f> points;
+  for (int i = -10; i <= 10; ++i) {
+    for (int j = -10; j <= 10; ++j) points.emplace_back(i * kSpacing, j * kSpacing, 0.0f);
+  }
+  return points;
+}
+
+TEST(ObservedSurface, RefusesCandidatesInFrontOfOrDeepBehindTheSeenSide) {
+  const PointIndex3 index(Patch());
+  const std::vector<Eigen::Vector3f> normals(index.size(), Eigen::Vector3f::UnitZ());
+  const ObservedSurface surface(&index, normals, kSpacing, ObservedSurfaceOptions{});
+  EXPECT_FALSE(surface.Contradicts({0.003f, 0.0f, 0.005f}));  // on the layer (half a spacing)
+  EXPECT_TRUE(surface.Contradicts({0.003f, 0.0f, 0.01f}));    // a spacing in front
+  EXPECT_TRUE(surface.Contradicts({0.0f, 0.004f, 0.03f}));    // three spacings in front
+  EXPECT_FALSE(surface.Contradicts({0.0f, 0.0f, -0.01f}));    // a wall's other side, 1 spacing
+  EXPECT_TRUE(surface.Contradicts({0.0f, 0.0f, -0.02f}));     // inside, past a thin wall
+  EXPECT_FALSE(surface.Contradicts({0.0f, 0.0f, -0.06f}));    // a thick solid's far side
+  // Beside the patch (its edge at x = 0.1): off the surfels' planes, nothing was seen there.
+  EXPECT_FALSE(surface.Contradicts({0.125f, 0.0f, 0.01f}));
+  EXPECT_TRUE(surface.Contradicts({0.115f, 0.0f, 0.01f}));
+}
+
+TEST(ObservedSurface, OffWhenFrontSpacingsIsZero) {
+  const PointIndex3 index(Patch());
+  const std::vector<Eigen::Vector3f> normals(index.size(), Eigen::Vector3f::UnitZ());
+  ObservedSurfaceOptions options;
+  options.front_spacings = 0;
+  ASSERT_TRUE(options.Validate().ok());
+  const ObservedSurface surface(&index, normals, kSpacing, options);
+  EXPECT_FALSE(surface.Contradicts({0.0f, 0.0f, 0.03f}));
+  EXPECT_FALSE(surface.Contradicts({0.0f, 0.0f, -0.02f}));
+}
+
+TEST(ObservedSurface, BehindSpacingsZeroTestsTheFrontOnly) {
+  const PointIndex3 index(Patch());
+  const std::vector<Eigen::Vector3f> normals(index.size(), Eigen::Vector3f::UnitZ());
+  ObservedSurfaceOptions options;
+  options.behind_spacings = 0;
+  ASSERT_TRUE(options.Validate().ok());
+  const ObservedSurface surface(&index, normals, kSpacing, options);
+  EXPECT_TRUE(surface.Contradicts({0.0f, 0.0f, 0.01f}));
+  EXPECT_FALSE(surface.Contradicts({0.0f, 0.0f, -0.02f}));
+}
+
+TEST(ObservedSurface, WithoutViewsNormalsTurnAwayFromTheCentre) {
+  const std::vector<Eigen::Vector3f> points = {{1, 0, 0}, {-1, 0, 0}};
+  const std::vector<Eigen::Vector3f> normals = {{-1, 0, 0}, {-1, 0, 0}};
+  const std::vector<Eigen::Vector3f> seen =
+      SeenSideNormals(points, normals, nullptr, Eigen::Vector3f::Zero());
+  EXPECT_EQ(seen[0], Eigen::Vector3f(1, 0, 0));
+  EXPECT_EQ(seen[1], Eigen::Vector3f(-1, 0, 0));
+}
+
+TEST(ObservedSurface, OptionsOutOfRangeAreRefused) {
+  ObservedSurfaceOptions options;
+  options.front_spacings = -1;
+  EXPECT_FALSE(options.Validate().ok());
+  options = {};
+  options.lateral_spacings = 0;
+  EXPECT_FALSE(options.Validate().ok());
+  options = {};
+  options.behind_spacings = std::nanf("");
+  EXPECT_FALSE(options.Validate().ok());
+}
+
+}  // namespace
+}  // namespace instascene::generation
