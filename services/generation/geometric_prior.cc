@@ -153,13 +153,8 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
       DetectSymmetries(points, normals, frame, *input.free_space, options_.symmetry);
   RETURN_IF_ERROR(CheckCancelled(input.cancel, "complete"));
   const PointIndex3 observed(points);
-  const ObservedSurfaceOptions& oso = options_.observed_surface;
-  // The normals' sides cost a few rays per real view and surfel: only when the test is on.
-  const ObservedSurface observed_surface(
-      &observed,
-      oso.front_spacings > 0 ? SeenSideNormals(points, normals, input.seen_through, frame.center)
-                             : std::vector<Eigen::Vector3f>(points.size(), Eigen::Vector3f::Zero()),
-      frame.spacing, oso);
+  const ObservedSurface observed_surface(&observed, normals, input.seen_through, frame.center,
+                                         frame.spacing, options_.observed_surface);
   const float cover = options_.cover_spacings * std::max(frame.spacing, 1e-6f);
   CoverSet added_set(cover);
   std::vector<Candidate> added;

@@ -34,9 +34,12 @@ std::vector<Eigen::Vector3f> SeenSideNormals(const std::vector<Eigen::Vector3f>&
 }
 
 ObservedSurface::ObservedSurface(const PointIndex3* index,
-                                 std::vector<Eigen::Vector3f> seen_normals, float spacing,
-                                 const ObservedSurfaceOptions& options)
-    : index_(index), seen_normals_(std::move(seen_normals)) {
+                                 const std::vector<Eigen::Vector3f>& normals,
+                                 const SeenThroughTest* seen, const Eigen::Vector3f& center,
+                                 float spacing, const ObservedSurfaceOptions& options)
+    : index_(options.front_spacings > 0 ? index : nullptr) {
+  if (index_ == nullptr) return;  // off: no rays for the normals' sides
+  seen_normals_ = SeenSideNormals(index_->points(), normals, seen, center);
   const float s = std::max(spacing, 1e-6f);
   front_ = options.front_spacings * s;
   // No behind test: -infinity never passes `along < -behind_`.
@@ -46,7 +49,6 @@ ObservedSurface::ObservedSurface(const PointIndex3* index,
   // Only surfels this near are asked: the far side of a solid more than a few spacings thick is
   // not a wall the candidate stands behind.
   search_ = std::max(front_, options.behind_spacings * s) + lateral_;
-  if (options.front_spacings <= 0) index_ = nullptr;
 }
 
 bool ObservedSurface::Contradicts(const Eigen::Vector3f& p) const {

@@ -37,15 +37,17 @@ std::vector<Eigen::Vector3f> SeenSideNormals(const std::vector<Eigen::Vector3f>&
 
 class ObservedSurface {
  public:
-  // `index` holds the observed surfels' centres (not owned; must outlive this), `seen_normals`
-  // their SeenSideNormals, `spacing` their median nearest-neighbour distance.
-  ObservedSurface(const PointIndex3* index, std::vector<Eigen::Vector3f> seen_normals,
-                  float spacing, const ObservedSurfaceOptions& options);
+  // `index` holds the observed surfels' centres (not owned; must outlive this), `normals` their
+  // unit normals (either sign), turned by SeenSideNormals(`seen`, `center`) when the test is on;
+  // `spacing` is their median nearest-neighbour distance.
+  ObservedSurface(const PointIndex3* index, const std::vector<Eigen::Vector3f>& normals,
+                  const SeenThroughTest* seen, const Eigen::Vector3f& center, float spacing,
+                  const ObservedSurfaceOptions& options);
   bool Contradicts(const Eigen::Vector3f& p) const;
 
  private:
-  const PointIndex3* index_;
-  std::vector<Eigen::Vector3f> seen_normals_;
+  const PointIndex3* index_;                   // null: the test is off
+  std::vector<Eigen::Vector3f> seen_normals_;  // SeenSideNormals of the index's points
   float front_ = 0, behind_ = 0, lateral_ = 0, search_ = 0;
 };
 

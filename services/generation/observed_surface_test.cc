@@ -18,10 +18,20 @@ std::vector<Eigen::Vector3f> Patch() {
   return points;
 }
 
-TEST(ObservedSurface, RefusesCandidatesInFrontOfOrDeepBehindTheSeenSide) {
-  const PointIndex3 index(Patch());
-  const std::vector<Eigen::Vector3f> normals(index.size(), Eigen::Vector3f::UnitZ());
-  const ObservedSurface surface(&index, normals, kSpacing, ObservedSurfaceOptions{});
+// The patch's normals point -z in storage: with no views, turning them away from a centre below
+// the patch gives +z.
+class ObservedSurfaceTest : public ::testing::Test {
+ protected:
+  ObservedSurface Surface(const ObservedSurfaceOptions& options) const {
+    return ObservedSurface(&index_,
+                           std::vector<Eigen::Vector3f>(index_.size(), -Eigen::Vector3f::UnitZ()),
+                           nullptr, Eigen::Vector3f(0, 0, -1), kSpacing, options);
+  }
+  const PointIndex3 index_{Patch()};
+};
+
+TEST_F(ObservedSurfaceTest, RefusesCandidatesInFrontOfOrDeepBehindTheSeenSide) {
+  const ObservedSurface surface = Surface(ObservedSurfaceOptions{});
   EXPECT_FALSE(surface.Contradicts({0.003f, 0.0f, 0.005f}));  // on the layer (half a spacing)
   EXPECT_TRUE(surface.Contradicts({0.003f, 0.0f, 0.01f}));    // a spacing in front
   EXPECT_TRUE(surface.Contradicts({0.0f, 0.004f, 0.03f}));    // three spacings in front
@@ -33,26 +43,19 @@ TEST(ObservedSurface, RefusesCandidatesInFrontOfOrDeepBehindTheSeenSide) {
   EXPECT_TRUE(surface.Contradicts({0.115f, 0.0f, 0.01f}));
 }
 
-TEST(ObservedSurface, OffWhenFrontSpacingsIsZero) {
-  const PointIndex3 index(Patch());
-  const std::vector<Eigen::Vector3f> normals(index.size(), Eigen::Vector3f::UnitZ());
-  ObservedSurfaceOptions options;
-  options.front_spacings = 0;
-  ASSERT_TRUE(options.Validate().ok());
-  const ObservedSurface surface(&index, normals, kSpacing, options);
-  EXPECT_FALSE(surface.Contradicts({0.0f, 0.0f, 0.03f}));
-  EXPECT_FALSE(surface.Contradicts({0.0f, 0.0f, -0.02f}));
-}
-
-TEST(ObservedSurface, BehindSpacingsZeroTestsTheFrontOnly) {
-  const PointIndex3 index(Patch());
-  const std::vector<Eigen::Vector3f> normals(index.size(), Eigen::Vector3f::UnitZ());
+TEST_F(ObservedSurfaceTest, ZeroBehindTestsTheFrontOnlyAndZeroFrontTurnsTheTestOff) {
   ObservedSurfaceOptions options;
   options.behind_spacings = 0;
   ASSERT_TRUE(options.Validate().ok());
-  const ObservedSurface surface(&index, normals, kSpacing, options);
-  EXPECT_TRUE(surface.Contradicts({0.0f, 0.0f, 0.01f}));
-  EXPECT_FALSE(surface.Contradicts({0.0f, 0.0f, -0.02f}));
+  const ObservedSurface front_only = Surface(options);
+  EXPECT_TRUE(front_only.Contradicts({0.0f, 0.0f, 0.01f}));
+  EXPECT_FALSE(front_only.Contradicts({0.0f, 0.0f, -0.02f}));
+  options = {};
+  options.front_spacings = 0;
+  ASSERT_TRUE(options.Validate().ok());
+  const ObservedSurface off = Surface(options);
+  EXPECT_FALSE(off.Contradicts({0.0f, 0.0f, 0.03f}));
+  EXPECT_FALSE(off.Contradicts({0.0f, 0.0f, -0.02f}));
 }
 
 TEST(ObservedSurface, WithoutViewsNormalsTurnAwayFromTheCentre) {
