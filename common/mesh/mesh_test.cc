@@ -10,6 +10,7 @@
 #include "common/mesh/mesh_checks.h"
 #include "common/mesh/mesh_ply.h"
 #include "common/mesh/ray_caster.h"
+#include "common/mesh/surface_distance.h"
 #include "common/mesh/surfel_mesh.h"
 #include "common/synth/primitives.h"
 
@@ -113,6 +114,44 @@ TEST(RayCaster, RejectsBadMeshesAndHandlesEmptyOnes) {
   auto empty = RayCaster::Create(TriangleMesh{});
   ASSERT_TRUE(empty.ok());
   EXPECT_FALSE((*empty)->Cast({0, 0, 0}, {1, 0, 0}).hit);
+}
+
+TEST(SurfaceDistance, MatchesTheAnalyticDistanceToABoxInsideAndOutside) {
+  ShapeSpec spec;
+  spec.size = Eigen::Vector3f(0.4f, 0.2f, 0.3f);
+  const TriangleMesh mesh = MakeShapeMesh(spec);
+  const Eigen::AlignedBox3f box = mesh.Bounds();
+  ASSERT_NEAR(box.sizes().x(), 0.4f, 1e-5f);
+  auto distance = SurfaceDistance::Create(mesh);
+  ASSERT_TRUE(distance.ok()) << distance.status();
+  std::mt19937 rng(3);
+  std::uniform_real_distribution<float> u(-0.3f, 0.3f);
+  std::vector<Eigen::Vector3f> points;
+  for (int i = 0; i < 500; ++i)
+    points.push_back(box.center() + Eigen::Vector3f(u(rng), u(rng), u(rng)));
+  const std::vector<float> d = (*distance)->Distances(points);
+  ASSERT_EQ(d.size(), points.size());
+  const Eigen::Vector3f half = box.sizes() / 2;
+  int inside = 0;
+  for (size_t i = 0; i < points.size(); ++i) {
+    const Eigen::Vector3f q = (points[i] - box.center()).cwiseAbs();
+    const bool in = (q.array() <= half.array()).all();
+    inside += in;
+    const float reference =
+        in ? (half - q).minCoeff() : (q - half).cwiseMax(Eigen::Vector3f::Zero()).norm();
+    EXPECT_NEAR(d[i], reference, 1e-5f) << i;
+  }
+  EXPECT_GT(inside, 50);  // both sides were tested
+  EXPECT_GT(points.size() - inside, 50u);
+  EXPECT_TRUE((*distance)->Distances({}).empty());
+}
+
+TEST(SurfaceDistance, RejectsEmptyAndOutOfRangeMeshes) {
+  EXPECT_EQ(SurfaceDistance::Create(TriangleMesh{}).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  TriangleMesh bad = Sphere(0.5f);
+  bad.triangles[3][2] = 1u << 30;
+  EXPECT_EQ(SurfaceDistance::Create(bad).status().code(), absl::StatusCode::kInvalidArgument);
 }
 
 TEST(SurfelDiscs, OneDiscPerOpaqueSurfelOnItsPlane) {

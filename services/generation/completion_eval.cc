@@ -18,6 +18,7 @@
 #include "common/mesh/mesh_ply.h"
 #include "common/mesh/mesh_volume.h"
 #include "common/mesh/ray_caster.h"
+#include "common/mesh/surface_distance.h"
 #include "common/scene/image_io.h"
 #include "common/scene/scene.h"
 #include "common/splat/gaussian_ply.h"
@@ -238,8 +239,11 @@ absl::StatusOr<std::vector<ObjectCompletionEval>> Evaluate(const std::string& sc
   TriangleMesh all_meshes;
   ASSIGN_OR_RETURN(std::vector<GroundTruthObject> truth,
                    ReadGroundTruth(scene, o, &all_meshes, &caster));
-  // Dense samples of every GT surface (objects and stuff), for "is p on some surface".
-  const PointIndex3 surfaces(SampleSurface(all_meshes, 400000, o.seed + 3));
+  // Every GT surface (objects and stuff), for "is p on some surface": the exact distance (400k
+  // samples of the scene stood up to two of an object's surfel spacings off its surface, and
+  // counted surfels on it as violations).
+  ASSIGN_OR_RETURN(const std::unique_ptr<SurfaceDistance> surfaces,
+                   SurfaceDistance::Create(all_meshes));
   std::vector<std::unique_ptr<PointIndex3>> truth_index;
   for (const GroundTruthObject& gt : truth) {
     truth_index.push_back(std::make_unique<PointIndex3>(gt.samples));
@@ -347,10 +351,13 @@ absl::StatusOr<std::vector<ObjectCompletionEval>> Evaluate(const std::string& sc
     // Free space: completed surfels a real view saw through, away from every GT surface (a
     // surfel on a surface is no violation, whatever the pixel quantisation of the views).
     const float tolerance = static_cast<float>(0.01 * gt.diagonal);
+    std::vector<Eigen::Vector3f> seen_through;
     for (uint32_t g : added) {
       const Eigen::Vector3f p(&object.positions[3 * g]);
-      e.completed.free_space_violations += InObservedFreeSpace(p, cameras, *caster, tolerance) &&
-                                           surfaces.Nearest(p).second > tolerance * tolerance;
+      if (InObservedFreeSpace(p, cameras, *caster, tolerance)) seen_through.push_back(p);
+    }
+    for (float d : surfaces->Distances(seen_through)) {
+      e.completed.free_space_violations += d > tolerance;
     }
     // Appearance at the ring views.
     const nlohmann::json& ring_json = m.at("ring");
