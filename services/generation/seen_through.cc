@@ -14,12 +14,12 @@ absl::Status SeenThroughOptions::Validate() const {
   if (!(min_opacity > 0) || !(min_opacity < 1) || !(blocked_below > 0) || !(blocked_below < 1) ||
       !(tolerance_radii >= 0) || !(extent_sigma > 0) || !(extent_sigma <= 4) || max_crossings < 1 ||
       max_crossings > 4096 || !(core_sigma > 0) || !(core_sigma <= extent_sigma) ||
-      core_views < 0 || core_views > 1000) {
-    return absl::InvalidArgumentError(
-        absl::StrCat("seen-through test: bad options (min_opacity ", min_opacity,
-                     ", blocked_below ", blocked_below, ", extent_sigma ", extent_sigma,
-                     ", tolerance ", tolerance_radii, ", max_crossings ", max_crossings,
-                     ", core_sigma ", core_sigma, ", core_views ", core_views, ")"));
+      core_views < 0 || core_views > 1000 || !(rim_depth_radii >= 0) || !(rim_depth_radii <= 2)) {
+    return absl::InvalidArgumentError(absl::StrCat(
+        "seen-through test: bad options (min_opacity ", min_opacity, ", blocked_below ",
+        blocked_below, ", extent_sigma ", extent_sigma, ", tolerance ", tolerance_radii,
+        ", max_crossings ", max_crossings, ", core_sigma ", core_sigma, ", core_views ", core_views,
+        ", rim_depth_radii ", rim_depth_radii, ")"));
   }
   return absl::OkStatus();
 }
@@ -34,6 +34,7 @@ absl::StatusOr<SeenThroughTest> SeenThroughTest::Create(const std::vector<Pinhol
   out.cameras_ = cameras;
   out.options_ = options;
   out.tolerance_ = options.tolerance_radii * radius;
+  out.rim_depth_ = options.rim_depth_radii * radius;
   // The surfels that make discs (the same at every extent), compacted in scene order.
   std::vector<int64_t> compact(scene.size(), -1);
   auto make_discs = [&](float extent_sigma) -> absl::StatusOr<Discs> {
@@ -141,10 +142,30 @@ int SeenThroughTest::SeenSide(const Eigen::Vector3f& p, const Eigen::Vector3f& n
   return vote > 0 ? 1 : vote < 0 ? -1 : 0;
 }
 
+bool SeenThroughTest::ViewSeesPastRim(const PinholeCamera& c, const Eigen::Vector3f& p) const {
+  std::array<Eigen::Vector3f, 5> footprint;
+  if (!PixelFootprint(c, p, &footprint)) return false;
+  const Eigen::Vector3f eye = c.CenterInWorld().cast<float>();
+  for (const Eigen::Vector3f& q : footprint) {
+    const float line = (q - eye).norm();
+    const Eigen::Vector3f direction = (q - eye) / line;
+    if (Transmittance(eye, direction, line - rim_depth_) < options_.blocked_below ||
+        Transmittance(eye, direction, line + tolerance_, true) < options_.blocked_below) {
+      return false;
+    }
+  }
+  return true;
+}
+
 bool SeenThroughTest::SeenThrough(const Eigen::Vector3f& p) const {
   if (ViewsSeeingThrough(p) > 0) return true;
-  return core_discs_.caster != nullptr &&
-         ViewsSeeingThrough(p, options_.core_views, true) >= options_.core_views;
+  if (core_discs_.caster == nullptr) return false;
+  if (ViewsSeeingThrough(p, options_.core_views, true) >= options_.core_views) return true;
+  if (!(rim_depth_ > 0)) return false;
+  for (const PinholeCamera& c : cameras_) {
+    if (ViewSeesPastRim(c, p)) return true;
+  }
+  return false;
 }
 
 }  // namespace instascene::generation

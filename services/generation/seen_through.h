@@ -11,7 +11,10 @@
 // "Free-space violations"). A second, stricter count takes surfels only within `core_sigma` of
 // their centres (their own discs: the rim of a blurred silhouette no longer blocks) and needs
 // `core_views` views to agree: a ray slipping through a gap between those smaller discs is one
-// view's accident, the space beside a blurred rim is seen by many.
+// view's accident, the space beside a blurred rim is seen by many. A third, the rim count, takes
+// one view whose rays are stopped by nothing farther than `rim_depth_radii` in front of p at 1
+// sigma and by nothing at `core_sigma`: they pass beside the object's own blurred rim next to p,
+// not through a gap in a surface far in front of it (a hidden back side seen through the front).
 // Immutable after Create; thread-safe reads.
 #pragma once
 
@@ -42,6 +45,9 @@ struct SeenThroughOptions {
   int max_crossings = 64;         // per ray; a ray crossing more is taken as stopped
   float core_sigma = 0.5f;        // the stricter count: discs this many sigmas wide ...
   int core_views = 2;             // ... and this many views must see through (0 = off)
+  // The rim count: one view sees through p when its rays reach within this many radii of p at
+  // 1 sigma and past p at core_sigma (0 = off; needs core_views > 0 for the core discs).
+  float rim_depth_radii = 0.2f;
   absl::Status Validate() const;
 };
 
@@ -77,11 +83,14 @@ class SeenThroughTest {
     std::vector<uint32_t> triangle_surfel;  // triangle -> index into surfels_
   };
   bool ViewSeesThrough(const PinholeCamera& camera, const Eigen::Vector3f& p, bool core) const;
+  // The rim count's test of one view.
+  bool ViewSeesPastRim(const PinholeCamera& camera, const Eigen::Vector3f& p) const;
   std::vector<PinholeCamera> cameras_;
   Discs discs_, core_discs_;  // at extent_sigma / at core_sigma (none when core_views = 0)
   std::vector<Surfel> surfels_;
   SeenThroughOptions options_;
   float tolerance_ = 0;
+  float rim_depth_ = 0;
 };
 
 }  // namespace instascene::generation

@@ -212,6 +212,59 @@ TEST(SeenThrough, TheStricterCountSeesPastABlurredRimFromEnoughViews) {
   }
 }
 
+// The rim count: one view is enough where its rays pass the object's own blurred rim right beside
+// p (within rim_depth_radii in front of it) and miss the core discs; a ray that slips through a
+// gap between the core discs of a surface far in front of p (a hidden back side) is not.
+TEST(SeenThrough, TheRimCountSeesBesideARimFromOneViewButNotThroughAGapFarInFront) {
+  PinholeCamera camera;
+  camera.width = camera.height = 640;
+  camera.fx = camera.fy = 600;
+  camera.cx = camera.cy = 320;
+  auto surfels = [](float spacing, float x_max) {
+    GaussianCloud scene;
+    scene.num_scales = 2;
+    std::vector<Eigen::Vector3f> centres;  // a wall x <= x_max at z = 1
+    for (float x = -0.1f; x <= x_max + 1e-6f; x += spacing) {
+      for (float y = -0.1f; y <= 0.1f + 1e-6f; y += spacing) centres.emplace_back(x, y, 1.0f);
+    }
+    scene.Resize(centres.size());
+    for (size_t g = 0; g < centres.size(); ++g) {
+      for (int k = 0; k < 3; ++k) scene.positions[3 * g + k] = centres[g][k];
+      scene.log_scales[2 * g] = scene.log_scales[2 * g + 1] = std::log(0.01f);
+      scene.opacity_logits[g] = Logit(0.95f);
+    }
+    return scene;
+  };
+  SeenThroughOptions without, with;
+  without.rim_depth_radii = 0;
+  with.rim_depth_radii = 0.2f;  // 2 cm with a radius of 0.1
+  // Beside the edge of a dense half-wall, 5 mm behind its plane: the rays cross the plane 0.7
+  // sigma past the edge (hidden at 1 sigma) and only this one view looks there.
+  const GaussianCloud half_wall = surfels(0.005f, 0.0f);
+  const Eigen::Vector3f beside(0.007f * 1.005f, 0.0f, 1.005f);
+  for (const auto& [options, seen] : {std::pair{without, false}, std::pair{with, true}}) {
+    auto test = SeenThroughTest::Create({camera}, half_wall, 0.1f, options);
+    ASSERT_TRUE(test.ok()) << test.status();
+    EXPECT_EQ(test->ViewsSeeingThrough(beside), 0);
+    EXPECT_EQ(test->SeenThrough(beside), seen) << options.rim_depth_radii;
+    EXPECT_FALSE(test->SeenThrough({-0.03f * 1.2f, 0.0f, 1.2f}));  // behind the wall
+  }
+  // Behind a sparse wall (14 mm apart: its 0.5 sigma discs leave gaps, its 1 sigma discs none),
+  // 20 cm behind its plane, in line with a gap: the core discs let this view through, the rim
+  // count does not (the surface that stops it at 1 sigma lies far in front).
+  const GaussianCloud sparse = surfels(0.014f, 0.1f);
+  const Eigen::Vector3f back(0.007f * 1.2f, 0.007f * 1.2f, 1.2f);
+  SeenThroughOptions one_core_view = without;
+  one_core_view.core_views = 1;
+  auto accident = SeenThroughTest::Create({camera}, sparse, 0.1f, one_core_view);
+  ASSERT_TRUE(accident.ok());
+  EXPECT_TRUE(accident->SeenThrough(back));  // what one view through the core discs would say
+  auto test = SeenThroughTest::Create({camera}, sparse, 0.1f, with);
+  ASSERT_TRUE(test.ok());
+  EXPECT_EQ(test->ViewsSeeingThrough(back), 0);
+  EXPECT_FALSE(test->SeenThrough(back));
+}
+
 TEST(SeenThrough, RefusesBadOptionsAndClouds) {
   GaussianCloud scene;
   AddWall(1.0f, 0.1f, 0.01f, 0.01f, 0.9f, &scene);
@@ -222,6 +275,10 @@ TEST(SeenThrough, RefusesBadOptionsAndClouds) {
   SeenThroughOptions wide_core;
   wide_core.core_sigma = 1.5f;  // wider than extent_sigma: the discs would not hold it
   EXPECT_EQ(SeenThroughTest::Create({FrontCamera()}, scene, 0.1f, wide_core).status().code(),
+            absl::StatusCode::kInvalidArgument);
+  SeenThroughOptions deep_rim;
+  deep_rim.rim_depth_radii = -0.1f;
+  EXPECT_EQ(SeenThroughTest::Create({FrontCamera()}, scene, 0.1f, deep_rim).status().code(),
             absl::StatusCode::kInvalidArgument);
   EXPECT_EQ(SeenThroughTest::Create({FrontCamera()}, scene, 0.0f, {}).status().code(),
             absl::StatusCode::kInvalidArgument);
