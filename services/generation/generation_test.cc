@@ -334,6 +334,59 @@ TEST(ObjectMesh, CarvingSeesNoEmptinessInTheGapsBetweenSparseSurfels) {
   EXPECT_LT(open, closed - 0.1);       // carving through the gaps cuts the box (to nothing)
 }
 
+// A completed shell with a refused patch: a hole in a box's top, wider than the closing's gap
+// rule passes. Views looking into it see the inner sides of the far walls; fused, those depths
+// mark the inside as empty and the box comes out hollow. Fusing only the surfels whose outer
+// side faces each view keeps it solid (MeshingOptions::cull_inner_sides).
+TEST(ObjectMesh, AViewThroughAHoleInTheShellDoesNotHollowIt) {
+  ShapeSpec box;
+  box.kind = ShapeKind::kBox;
+  box.size = {0.08f, 0.06f, 0.05f};
+  const TriangleMesh truth = MakeShapeMesh(box);
+  GaussianCloud shell;
+  shell.num_scales = 2;
+  shell.sh_degree = 0;
+  std::mt19937_64 rng(11);
+  const size_t count = 4000;
+  AppendSurfels(truth, count, Appearance{}, SurfelSampling{}, rng, &shell);
+  const Eigen::AlignedBox3f bounds = truth.Bounds();
+  // The hole: every surfel of the top face within 2 cm of its centre (4 cm wide; the gap rule
+  // keeps holes up to 16 voxels of R / 40, 2.5 cm, closed).
+  std::vector<uint32_t> kept;
+  const Eigen::Vector3f top(bounds.center().x(), bounds.center().y(), bounds.max().z());
+  for (uint32_t g = 0; g < shell.size(); ++g) {
+    const Eigen::Vector3f p(&shell.positions[3 * g]);
+    if (std::abs(p.z() - top.z()) < 0.002f && (p - top).norm() < 0.02f) continue;
+    kept.push_back(g);
+  }
+  ASSERT_LT(kept.size(), shell.size() - 100);
+  const GaussianCloud object = shell.Subset(kept);
+  ObjectFrame frame;
+  frame.center = bounds.center();
+  frame.radius = 0.5f * bounds.sizes().norm();
+  frame.spacing = std::sqrt(2 * (0.08f * 0.06f + 0.08f * 0.05f + 0.06f * 0.05f) / count);
+  Eigen::AlignedBox3f grid(bounds.min() - Eigen::Vector3f::Constant(0.02f),
+                           bounds.max() + Eigen::Vector3f::Constant(0.02f));
+  auto box_iou = [&](bool cull) {
+    MeshingOptions options;
+    options.cull_inner_sides = cull;
+    auto mesh = MeshObject(object, frame, options, 2);
+    EXPECT_TRUE(mesh.ok()) << mesh.status();
+    auto result = VoxelizeByRayParity(*mesh, grid, 48);
+    auto expected = VoxelizeByRayParity(truth, grid, 48);
+    EXPECT_TRUE(result.ok() && expected.ok());
+    size_t both = 0, either = 0;
+    for (size_t i = 0; i < result->size(); ++i) {
+      both += (*result)[i] && (*expected)[i];
+      either += (*result)[i] || (*expected)[i];
+    }
+    return static_cast<double>(both) / std::max<size_t>(either, 1);
+  };
+  const double hollow = box_iou(false), solid = box_iou(true);
+  EXPECT_LT(hollow, 0.6);  // 0.39 when written
+  EXPECT_GT(solid, 0.9);   // 0.96
+}
+
 TEST(ObjectFrame, UpFromTheSupportAndSupportHeight) {
   const PartialObject scene = MakePartialObject(Bottle(), 4000, 3);
   auto split = SplitInstance(scene.labels, 1, 50);

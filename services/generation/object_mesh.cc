@@ -53,6 +53,45 @@ std::vector<PinholeCamera> MeshingCameras(const ObjectFrame& frame, const Meshin
   return cameras;
 }
 
+namespace {
+
+// Per surfel, its normal turned to the side from which the views' blending weight sees it most
+// (MeshingOptions::cull_inner_sides). A surfel no view sees keeps its normal as it is: whichever
+// views it is then culled for, it is hidden behind others in all of them.
+absl::StatusOr<std::vector<Eigen::Vector3f>> OutwardNormals(
+    const GaussianCloud& object, const ObjectFrame& frame,
+    const std::vector<PinholeCamera>& cameras, int num_threads) {
+  std::vector<Eigen::Vector3f> normal(object.size()), position(object.size());
+  for (size_t g = 0; g < object.size(); ++g) {
+    const float* q = &object.rotations[4 * g];
+    normal[g] = RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).cast<float>().col(2);
+    position[g] = Eigen::Vector3f(&object.positions[3 * g]);
+  }
+  std::vector<double> vote(object.size(), 0.0);
+  RenderOptions options;
+  options.color = false;
+  options.num_threads = num_threads;
+  options.trace.enabled = true;
+  RasterWorkspace workspace;
+  options.workspace = &workspace;
+  RenderResult traced;
+  for (const PinholeCamera& camera : cameras) {
+    const Eigen::Vector3f eye = camera.CenterInWorld().cast<float>();
+    options.near_plane = std::max(1e-6f, 0.01f * (eye - frame.center).norm());
+    RETURN_IF_ERROR(RenderInto(object, camera, options, &traced));
+    for (const Contribution& c : traced.trace.entries) {
+      const float side = normal[c.gaussian].dot(eye - position[c.gaussian]);
+      vote[c.gaussian] += side >= 0 ? c.weight : -c.weight;
+    }
+  }
+  for (size_t g = 0; g < object.size(); ++g) {
+    if (vote[g] < 0) normal[g] = -normal[g];
+  }
+  return normal;
+}
+
+}  // namespace
+
 absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const ObjectFrame& frame,
                                         const MeshingOptions& options, int num_threads) {
   GaussianCloud clamped;
@@ -63,10 +102,32 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
     for (float& s : clamped.log_scales) s = std::min(s, limit);
   }
   const GaussianCloud& object = clamp ? clamped : input;
+  const std::vector<PinholeCamera> cameras = MeshingCameras(frame, options);
+  // Each surfel's outer side: the side most of the meshing views' weight sees it from.
+  std::vector<Eigen::Vector3f> outward;
+  if (options.cull_inner_sides) {
+    ASSIGN_OR_RETURN(outward, OutwardNormals(object, frame, cameras, num_threads));
+  }
   std::vector<DepthView> views;
-  for (const PinholeCamera& camera : MeshingCameras(frame, options)) {
+  for (const PinholeCamera& camera : cameras) {
     ASSIGN_OR_RETURN(ViewImages render,
                      RenderObjectView(object, camera, frame, num_threads, options.scale_modifier));
+    if (options.cull_inner_sides) {
+      // A view that looks through a hole in a closed shell sees the inner sides of the far
+      // walls; those depths would mark the object's inside as empty. The depth comes from the
+      // surfels that face the view; what the view shows at all (alpha, for the carving) from all.
+      const Eigen::Vector3f eye = camera.CenterInWorld().cast<float>();
+      std::vector<uint32_t> facing;
+      for (uint32_t g = 0; g < object.size(); ++g) {
+        if (outward[g].dot(eye - Eigen::Vector3f(&object.positions[3 * g])) >= 0)
+          facing.push_back(g);
+      }
+      ASSIGN_OR_RETURN(ViewImages front, RenderObjectView(object.Subset(facing), camera, frame,
+                                                          num_threads, options.scale_modifier));
+      for (size_t i = 0; i < render.depth.size(); ++i) {
+        render.depth[i] = front.alpha[i] > options.min_alpha ? front.depth[i] : 0.0f;
+      }
+    }
     for (size_t i = 0; i < render.depth.size(); ++i) {
       if (render.alpha[i] <= options.min_alpha) render.depth[i] = 0.0f;  // not fused
     }

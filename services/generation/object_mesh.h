@@ -49,6 +49,11 @@ struct MeshingOptions {
   // a torus 0.19 -> 0.41), at the price of openings narrower than that (a cup 0.64 -> 0.57, the
   // bowl 0.77 -> 0.72; docs/RESULTS.md "Meshing: the closing's gap").
   int closed_gap_voxels = 8;
+  // The depth each meshing view fuses comes only from the surfels whose outer side faces it
+  // (outer: the side the meshing views' blending weight sees each surfel from most). A view
+  // through a hole in a completed shell (a refused patch) then fuses nothing there instead of
+  // the far walls' inner sides, which would mark the object's inside as empty.
+  bool cull_inner_sides = true;
   // Closed meshing only: the surface is moved this many of the object's median surfel sigma
   // inward (DepthFusionOptions::inset, at most half the truncation band). A surfel's footprint
   // keeps alpha > min_alpha up to about half a sigma past the true silhouette, so the fused

@@ -34,6 +34,10 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
              "Meshing: silhouette carving; a voxel this many meshing renders see past (alpha "
              "below 0.9 where it projects, gaps between surfels closed) is outside the closed "
              "surface (0 = off)")
+        .Bool("mesh_cull_inner_sides", &O::mesh_cull_inner_sides,
+              "Meshing: each render fuses depth only from the surfels whose outer side (the side "
+              "the meshing renders see most) faces it, so a view through a hole in a completed "
+              "shell does not empty the object's inside")
         .Int("min_gaussians", &O::min_gaussians, 1, 1000000,
              "Instances with fewer Gaussians fail as degenerate")
         .Int("refine_iterations", &O::refine_iterations, 0, 20000,
