@@ -288,45 +288,57 @@ TEST(ObjectMesh, ABlurredSurfelMakesNoSheetOfFalseSurface) {
   EXPECT_LT(width(3.0f), 0.11f);
 }
 
-// Sparse surfels (sigma 0.35 of their spacing) leave gaps where a meshing render's alpha is below
-// the carving's 0.9; carving through them would cut into the box. Closing the object's pixels
-// before the distance transform (MeshingOptions::empty_close_px) keeps it whole.
-TEST(ObjectMesh, CarvingSeesNoEmptinessInTheGapsBetweenSparseSurfels) {
-  ShapeSpec box;
-  box.kind = ShapeKind::kBox;
-  box.size = {0.08f, 0.06f, 0.05f};
-  const TriangleMesh truth = MakeShapeMesh(box);
-  GaussianCloud object;
-  object.num_scales = 2;
-  object.sh_degree = 0;
-  std::mt19937_64 rng(7);
-  SurfelSampling sparse;
-  sparse.scale_factor = 0.35f;
-  const size_t count = 2500;
-  AppendSurfels(truth, count, Appearance{}, sparse, rng, &object);
-  const Eigen::AlignedBox3f bounds = truth.Bounds();
-  ObjectFrame frame;
-  frame.center = bounds.center();
-  frame.radius = 0.5f * bounds.sizes().norm();
-  frame.spacing = std::sqrt(2 * (0.08f * 0.06f + 0.08f * 0.05f + 0.06f * 0.05f) / count);
-  Eigen::AlignedBox3f grid(bounds.min() - Eigen::Vector3f::Constant(0.02f),
-                           bounds.max() + Eigen::Vector3f::Constant(0.02f));
-  const int r = 48;
-  auto box_iou = [&](float close_px, int carve_views) {
-    MeshingOptions options;
-    options.carve_views = carve_views;
-    options.empty_close_px = close_px;
+// A 8 x 6 x 5 cm box of surfels, and the volume IoU (48^3, ray parity) of a mesh of them.
+struct SurfelBox {
+  SurfelBox(size_t count, const SurfelSampling& sampling, uint64_t seed) {
+    ShapeSpec box;
+    box.kind = ShapeKind::kBox;
+    box.size = {0.08f, 0.06f, 0.05f};
+    truth = MakeShapeMesh(box);
+    surfels.num_scales = 2;
+    surfels.sh_degree = 0;
+    std::mt19937_64 rng(seed);
+    AppendSurfels(truth, count, Appearance{}, sampling, rng, &surfels);
+    bounds = truth.Bounds();
+    frame.center = bounds.center();
+    frame.radius = 0.5f * bounds.sizes().norm();
+    frame.spacing = std::sqrt(2 * (0.08f * 0.06f + 0.08f * 0.05f + 0.06f * 0.05f) / count);
+  }
+  double MeshIou(const GaussianCloud& object, const MeshingOptions& options) const {
     auto mesh = MeshObject(object, frame, options, 2);
     EXPECT_TRUE(mesh.ok()) << mesh.status();
-    auto result = VoxelizeByRayParity(*mesh, grid, r);
-    auto expected = VoxelizeByRayParity(truth, grid, r);
+    if (!mesh.ok()) return 0;
+    const Eigen::AlignedBox3f grid(bounds.min() - Eigen::Vector3f::Constant(0.02f),
+                                   bounds.max() + Eigen::Vector3f::Constant(0.02f));
+    auto result = VoxelizeByRayParity(*mesh, grid, 48);
+    auto expected = VoxelizeByRayParity(truth, grid, 48);
     EXPECT_TRUE(result.ok() && expected.ok());
+    if (!result.ok() || !expected.ok()) return 0;
     size_t both = 0, either = 0;
     for (size_t i = 0; i < result->size(); ++i) {
       both += (*result)[i] && (*expected)[i];
       either += (*result)[i] || (*expected)[i];
     }
     return static_cast<double>(both) / std::max<size_t>(either, 1);
+  }
+  TriangleMesh truth;
+  GaussianCloud surfels;
+  Eigen::AlignedBox3f bounds;
+  ObjectFrame frame;
+};
+
+// Sparse surfels (sigma 0.35 of their spacing) leave gaps where a meshing render's alpha is below
+// the carving's 0.9; carving through them would cut into the box. Closing the object's pixels
+// before the distance transform (MeshingOptions::empty_close_px) keeps it whole.
+TEST(ObjectMesh, CarvingSeesNoEmptinessInTheGapsBetweenSparseSurfels) {
+  SurfelSampling sparse;
+  sparse.scale_factor = 0.35f;
+  const SurfelBox box(2500, sparse, 7);
+  auto box_iou = [&](float close_px, int carve_views) {
+    MeshingOptions options;
+    options.carve_views = carve_views;
+    options.empty_close_px = close_px;
+    return box.MeshIou(box.surfels, options);
   };
   const double uncarved = box_iou(9.0f, 0), closed = box_iou(9.0f, 2), open = box_iou(0.0f, 2);
   EXPECT_GT(uncarved, 0.8);
@@ -339,50 +351,23 @@ TEST(ObjectMesh, CarvingSeesNoEmptinessInTheGapsBetweenSparseSurfels) {
 // mark the inside as empty and the box comes out hollow. Fusing only the surfels whose outer
 // side faces each view keeps it solid (MeshingOptions::cull_inner_sides).
 TEST(ObjectMesh, AViewThroughAHoleInTheShellDoesNotHollowIt) {
-  ShapeSpec box;
-  box.kind = ShapeKind::kBox;
-  box.size = {0.08f, 0.06f, 0.05f};
-  const TriangleMesh truth = MakeShapeMesh(box);
-  GaussianCloud shell;
-  shell.num_scales = 2;
-  shell.sh_degree = 0;
-  std::mt19937_64 rng(11);
-  const size_t count = 4000;
-  AppendSurfels(truth, count, Appearance{}, SurfelSampling{}, rng, &shell);
-  const Eigen::AlignedBox3f bounds = truth.Bounds();
+  const SurfelBox box(4000, SurfelSampling{}, 11);
   // The hole: every surfel of the top face within 2 cm of its centre (4 cm wide; the gap rule
   // keeps holes up to 16 voxels of R / 40, 2.5 cm, closed).
   std::vector<uint32_t> kept;
-  const Eigen::Vector3f top(bounds.center().x(), bounds.center().y(), bounds.max().z());
-  for (uint32_t g = 0; g < shell.size(); ++g) {
-    const Eigen::Vector3f p(&shell.positions[3 * g]);
+  const Eigen::Vector3f top(box.bounds.center().x(), box.bounds.center().y(), box.bounds.max().z());
+  for (uint32_t g = 0; g < box.surfels.size(); ++g) {
+    const Eigen::Vector3f p(&box.surfels.positions[3 * g]);
     if (std::abs(p.z() - top.z()) < 0.002f && (p - top).norm() < 0.02f) continue;
     kept.push_back(g);
   }
-  ASSERT_LT(kept.size(), shell.size() - 100);
-  const GaussianCloud object = shell.Subset(kept);
-  ObjectFrame frame;
-  frame.center = bounds.center();
-  frame.radius = 0.5f * bounds.sizes().norm();
-  frame.spacing = std::sqrt(2 * (0.08f * 0.06f + 0.08f * 0.05f + 0.06f * 0.05f) / count);
-  Eigen::AlignedBox3f grid(bounds.min() - Eigen::Vector3f::Constant(0.02f),
-                           bounds.max() + Eigen::Vector3f::Constant(0.02f));
-  auto box_iou = [&](bool cull) {
-    MeshingOptions options;
-    options.cull_inner_sides = cull;
-    auto mesh = MeshObject(object, frame, options, 2);
-    EXPECT_TRUE(mesh.ok()) << mesh.status();
-    auto result = VoxelizeByRayParity(*mesh, grid, 48);
-    auto expected = VoxelizeByRayParity(truth, grid, 48);
-    EXPECT_TRUE(result.ok() && expected.ok());
-    size_t both = 0, either = 0;
-    for (size_t i = 0; i < result->size(); ++i) {
-      both += (*result)[i] && (*expected)[i];
-      either += (*result)[i] || (*expected)[i];
-    }
-    return static_cast<double>(both) / std::max<size_t>(either, 1);
-  };
-  const double hollow = box_iou(false), solid = box_iou(true);
+  ASSERT_LT(kept.size(), box.surfels.size() - 100);
+  const GaussianCloud object = box.surfels.Subset(kept);
+  MeshingOptions options;
+  options.cull_inner_sides = false;
+  const double hollow = box.MeshIou(object, options);
+  options.cull_inner_sides = true;
+  const double solid = box.MeshIou(object, options);
   EXPECT_LT(hollow, 0.6);  // 0.39 when written
   EXPECT_GT(solid, 0.9);   // 0.96
 }
