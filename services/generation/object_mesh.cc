@@ -13,6 +13,56 @@
 #include "services/generation/viewpoints.h"
 
 namespace instascene::generation {
+namespace {
+
+// The ring sits a few radii away: the default 0.2-unit near plane would cull small objects.
+float ObjectNearPlane(const PinholeCamera& camera, const ObjectFrame& frame) {
+  return std::max(1e-6f, 0.01f * (camera.CenterInWorld().cast<float>() - frame.center).norm());
+}
+
+// Surfel centres and unit normals (the rotation's third column) of a 2DGS cloud.
+void SurfelGeometry(const GaussianCloud& cloud, std::vector<Eigen::Vector3f>* positions,
+                    std::vector<Eigen::Vector3f>* normals) {
+  positions->resize(cloud.size());
+  normals->resize(cloud.size());
+  for (size_t g = 0; g < cloud.size(); ++g) {
+    (*positions)[g] = Eigen::Vector3f(&cloud.positions[3 * g]);
+    const float* q = &cloud.rotations[4 * g];
+    (*normals)[g] = RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).cast<float>().col(2);
+  }
+}
+
+// Per surfel, its normal turned to the side from which the views' blending weight sees it most
+// (MeshingOptions::cull_inner_sides). A surfel no view sees keeps its normal as it is: whichever
+// views it is then culled for, it is hidden behind others in all of them.
+absl::StatusOr<std::vector<Eigen::Vector3f>> OutwardNormals(
+    const GaussianCloud& object, const std::vector<Eigen::Vector3f>& position,
+    std::vector<Eigen::Vector3f> normal, const ObjectFrame& frame,
+    const std::vector<PinholeCamera>& cameras, int num_threads) {
+  std::vector<double> vote(object.size(), 0.0);
+  RenderOptions options;
+  options.color = false;
+  options.num_threads = num_threads;
+  options.trace.enabled = true;
+  RasterWorkspace workspace;
+  options.workspace = &workspace;
+  RenderResult traced;
+  for (const PinholeCamera& camera : cameras) {
+    const Eigen::Vector3f eye = camera.CenterInWorld().cast<float>();
+    options.near_plane = ObjectNearPlane(camera, frame);
+    RETURN_IF_ERROR(RenderInto(object, camera, options, &traced));
+    for (const Contribution& c : traced.trace.entries) {
+      const float side = normal[c.gaussian].dot(eye - position[c.gaussian]);
+      vote[c.gaussian] += side >= 0 ? c.weight : -c.weight;
+    }
+  }
+  for (size_t g = 0; g < object.size(); ++g) {
+    if (vote[g] < 0) normal[g] = -normal[g];
+  }
+  return normal;
+}
+
+}  // namespace
 
 absl::StatusOr<ViewImages> RenderObjectView(const GaussianCloud& object,
                                             const PinholeCamera& camera, const ObjectFrame& frame,
@@ -22,9 +72,7 @@ absl::StatusOr<ViewImages> RenderObjectView(const GaussianCloud& object,
   options.depth = true;
   options.num_threads = num_threads;
   for (float& b : options.background) b = 1.0f;
-  // The ring sits a few radii away: the default 0.2-unit near plane would cull small objects.
-  const float distance = (camera.CenterInWorld().cast<float>() - frame.center).norm();
-  options.near_plane = std::max(1e-6f, 0.01f * distance);
+  options.near_plane = ObjectNearPlane(camera, frame);
   ASSIGN_OR_RETURN(RenderResult render, Render(object, camera, options));
   ViewImages view;
   view.camera = camera;
@@ -53,45 +101,6 @@ std::vector<PinholeCamera> MeshingCameras(const ObjectFrame& frame, const Meshin
   return cameras;
 }
 
-namespace {
-
-// Per surfel, its normal turned to the side from which the views' blending weight sees it most
-// (MeshingOptions::cull_inner_sides). A surfel no view sees keeps its normal as it is: whichever
-// views it is then culled for, it is hidden behind others in all of them.
-absl::StatusOr<std::vector<Eigen::Vector3f>> OutwardNormals(
-    const GaussianCloud& object, const ObjectFrame& frame,
-    const std::vector<PinholeCamera>& cameras, int num_threads) {
-  std::vector<Eigen::Vector3f> normal(object.size()), position(object.size());
-  for (size_t g = 0; g < object.size(); ++g) {
-    const float* q = &object.rotations[4 * g];
-    normal[g] = RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).cast<float>().col(2);
-    position[g] = Eigen::Vector3f(&object.positions[3 * g]);
-  }
-  std::vector<double> vote(object.size(), 0.0);
-  RenderOptions options;
-  options.color = false;
-  options.num_threads = num_threads;
-  options.trace.enabled = true;
-  RasterWorkspace workspace;
-  options.workspace = &workspace;
-  RenderResult traced;
-  for (const PinholeCamera& camera : cameras) {
-    const Eigen::Vector3f eye = camera.CenterInWorld().cast<float>();
-    options.near_plane = std::max(1e-6f, 0.01f * (eye - frame.center).norm());
-    RETURN_IF_ERROR(RenderInto(object, camera, options, &traced));
-    for (const Contribution& c : traced.trace.entries) {
-      const float side = normal[c.gaussian].dot(eye - position[c.gaussian]);
-      vote[c.gaussian] += side >= 0 ? c.weight : -c.weight;
-    }
-  }
-  for (size_t g = 0; g < object.size(); ++g) {
-    if (vote[g] < 0) normal[g] = -normal[g];
-  }
-  return normal;
-}
-
-}  // namespace
-
 absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const ObjectFrame& frame,
                                         const MeshingOptions& options, int num_threads) {
   GaussianCloud clamped;
@@ -104,9 +113,10 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
   const GaussianCloud& object = clamp ? clamped : input;
   const std::vector<PinholeCamera> cameras = MeshingCameras(frame, options);
   // Each surfel's outer side: the side most of the meshing views' weight sees it from.
-  std::vector<Eigen::Vector3f> outward;
+  std::vector<Eigen::Vector3f> points, normals, outward;
+  SurfelGeometry(object, &points, &normals);
   if (options.cull_inner_sides) {
-    ASSIGN_OR_RETURN(outward, OutwardNormals(object, frame, cameras, num_threads));
+    ASSIGN_OR_RETURN(outward, OutwardNormals(object, points, normals, frame, cameras, num_threads));
   }
   std::vector<DepthView> views;
   for (const PinholeCamera& camera : cameras) {
@@ -119,8 +129,7 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
       const Eigen::Vector3f eye = camera.CenterInWorld().cast<float>();
       std::vector<uint32_t> facing;
       for (uint32_t g = 0; g < object.size(); ++g) {
-        if (outward[g].dot(eye - Eigen::Vector3f(&object.positions[3 * g])) >= 0)
-          facing.push_back(g);
+        if (outward[g].dot(eye - points[g]) >= 0) facing.push_back(g);
       }
       ASSIGN_OR_RETURN(ViewImages front, RenderObjectView(object.Subset(facing), camera, frame,
                                                           num_threads, options.scale_modifier));
@@ -188,12 +197,6 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
   }
   ASSIGN_OR_RETURN(TriangleMesh mesh, FuseDepthMaps(views, fusion));
   if (options.closed && options.snap_radius_spacings > 0 && frame.spacing > 0) {
-    std::vector<Eigen::Vector3f> points(object.size()), normals(object.size());
-    for (size_t g = 0; g < object.size(); ++g) {
-      points[g] = Eigen::Vector3f(&object.positions[3 * g]);
-      const float* q = &object.rotations[4 * g];
-      normals[g] = RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).cast<float>().col(2);
-    }
     SurfelSnapOptions snap;
     snap.radius = options.snap_radius_spacings * frame.spacing;
     snap.layer = options.snap_layer_spacings * frame.spacing;
