@@ -61,7 +61,9 @@ absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const Gaussian
   std::vector<uint8_t> flags = judged.undersegmented;
   for (int pass = 0; pass < options.rejudge_passes; ++pass) {
     RETURN_IF_ERROR(CheckCancelled(options.cancel, "decompose"));
-    if (RejudgeUndersegmented(result.trackers, result.instances, options, &flags) == 0) break;
+    if (RejudgeUndersegmented(result.trackers, result.instances, options, &flags, &judged.frames) ==
+        0)
+      break;
     result.judgement = judged;
     result.judgement.undersegmented = flags;
     UndoUndersegmented(result.trackers, &result.judgement);

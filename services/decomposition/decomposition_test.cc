@@ -122,6 +122,61 @@ TEST(Rejudge, WholeObjectMaskSplitByPartMasksIsRestored) {
   EXPECT_EQ(instances[0].gaussians.size(), 200u);
 }
 
+// One object, Gaussians 0..199, whose part masks never repeat: views 0-2 hold whole-object masks,
+// views 3 and 4 mask two different pairs of small parts (each part seen once, so none becomes an
+// instance).
+// Split in 2 of 5 frames, every whole mask is flagged, and no instance covers any of them. The
+// masks hold the object in every frame that traces it and split it in a minority: the whole masks
+// are restored and the object comes out whole. A background patch (200..259) that a stray mask
+// covers in view 0 and two stray masks in view 1 is held in 2 of the 5 frames that trace it and
+// stays flagged.
+TEST(Rejudge, AnObjectWhoseEveryWholeMaskIsFlaggedIsRestoredStrayBackgroundIsNot) {
+  const TrackerSet set = MakeSet(5, 260,
+                                 {{0, 1, 0, 200},
+                                  {0, 2, 200, 260},
+                                  {1, 1, 0, 200},
+                                  {1, 2, 200, 230},
+                                  {1, 3, 230, 260},
+                                  {2, 1, 0, 200},
+                                  {3, 1, 0, 40},
+                                  {3, 2, 160, 200},
+                                  {4, 1, 40, 80},
+                                  {4, 2, 120, 160}});
+  GaussianCloud cloud;
+  cloud.Resize(260);
+  for (int g = 0; g < 260; ++g) {
+    cloud.positions[3 * g] = 0.001f * g + (g >= 200 ? 5.0f : 0.0f);
+    cloud.positions[3 * g + 1] = cloud.positions[3 * g + 2] = 0.0f;
+  }
+  DecompositionOptions options;
+  const MaskJudgement judged = JudgeTrackers(set, options);
+  for (uint32_t t : {0u, 1u, 2u, 5u}) ASSERT_TRUE(judged.undersegmented[t]) << t;  // 1: stray
+  EXPECT_EQ(judged.frames[0].traced, 5);
+  EXPECT_EQ(judged.frames[0].visible, 5);
+  EXPECT_EQ(judged.frames[0].split, 2);
+  EXPECT_EQ(judged.frames[1].traced, 5);
+  EXPECT_EQ(judged.frames[1].visible, 2);
+  MaskJudgement j = judged;
+  UndoUndersegmented(set, &j);
+  std::vector<Instance> instances =
+      BuildInstances(set, ClusterMasks(set, j, options), cloud, options);
+  ASSERT_TRUE(instances.empty());
+  std::vector<uint8_t> flags = judged.undersegmented;
+  EXPECT_EQ(RejudgeUndersegmented(set, instances, options, &flags), 0);  // no counts: released rule
+  DecompositionOptions off = options;
+  off.uncovered_min_labelled = 2.0;
+  EXPECT_EQ(RejudgeUndersegmented(set, instances, off, &flags, &judged.frames), 0);
+  EXPECT_EQ(RejudgeUndersegmented(set, instances, options, &flags, &judged.frames), 3);
+  for (uint32_t t : {0u, 2u, 5u}) EXPECT_FALSE(flags[t]) << t;
+  EXPECT_TRUE(flags[1]);  // the stray mask
+  j = judged;
+  j.undersegmented = flags;
+  UndoUndersegmented(set, &j);
+  instances = BuildInstances(set, ClusterMasks(set, j, options), cloud, options);
+  ASSERT_EQ(instances.size(), 1u);
+  EXPECT_EQ(instances[0].gaussians.size(), 200u);
+}
+
 // The point filter (detected / appear > 0.5) and merges: object A (Gaussians 0..99) has its own
 // masks in views 0 and 1 and lies in a mask merged with its neighbour B (0..199, judged
 // under-segmented) in views 2-4, where A's node is visible. Counting those frames, A's points are

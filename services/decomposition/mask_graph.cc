@@ -34,12 +34,14 @@ MaskJudgement JudgeTrackers(const TrackerSet& set, const DecompositionOptions& o
   j.visible.assign(m, ViewSet(set.num_views));
   j.contained.assign(m, {});
   j.undersegmented.assign(m, 0);
+  j.frames.assign(m, {});
   RunWithThreads(options.num_threads, [&] {
     tbb::parallel_for(
         tbb::blocked_range<size_t>(0, m, 16), [&](const tbb::blocked_range<size_t>& range) {
           std::vector<uint32_t> counts(m,
                                        0);  // per container tracker: members of P labelled with it
           std::vector<uint32_t> touched;
+          std::vector<uint32_t> traced(set.num_views, 0);  // per frame: members of P traced
           for (size_t t = range.begin(); t < range.end(); ++t) {
             const Tracker& tracker = set.trackers[t];
             touched.clear();
@@ -78,6 +80,19 @@ MaskJudgement JudgeTrackers(const TrackerSet& set, const DecompositionOptions& o
               }
               b = e;
             }
+            int traced_num = 0;
+            for (uint32_t g : tracker.gaussians) {
+              const uint16_t* frames;
+              const size_t count = set.FramesOf(g, &frames);
+              for (size_t q = 0; q < count; ++q) ++traced[frames[q]];
+            }
+            for (uint32_t& c : traced) {
+              traced_num +=
+                  (size - static_cast<double>(c)) / size <= options.mask_visible_threshold;
+              c = 0;
+            }
+            j.frames[t] = {static_cast<uint16_t>(traced_num), static_cast<uint16_t>(visible_num),
+                           static_cast<uint16_t>(split_num)};
             if (visible_num == 0 ||
                 split_num / static_cast<double>(visible_num) > options.undersegment_threshold) {
               j.undersegmented[t] = 1;

@@ -26,11 +26,19 @@ struct ViewSet {
   void Or(const ViewSet& other);
 };
 
+// Per tracker, how the frames saw it (4.3): `traced` frames trace at least 1 -
+// mask_visible_threshold of its Gaussians, `visible` frames hold that share in kept masks (the
+// own frame included), `split` visible frames spread it over several masks.
+struct TrackerFrames {
+  uint16_t traced = 0, visible = 0, split = 0;
+};
+
 struct MaskJudgement {
   std::vector<ViewSet> visible;  // per tracker: frames where it is visible and contained
   std::vector<std::vector<uint32_t>>
       contained;                        // per tracker: trackers (masks) that contain it, sorted
   std::vector<uint8_t> undersegmented;  // per tracker
+  std::vector<TrackerFrames> frames;    // per tracker
 };
 
 // 4.2-4.3: judge every tracker against every frame it could be seen in.

@@ -39,6 +39,15 @@ struct DecompositionOptions {
   // times.
   int rejudge_passes = 3;
   double rejudge_min_coverage = 0.5;
+  // A flagged mask lying mostly outside every instance (below rejudge_min_coverage) is restored
+  // too when the masks hold its Gaussians in >= uncovered_min_labelled of the frames that trace
+  // them (a segmenter masks an object wherever it sees it, stray background only now and then)
+  // and it was split in at most uncovered_max_split of its visible frames (a whole object's mask
+  // split by part masks in a minority of views; a merge is split wherever its objects are masked
+  // apart). Restores objects whose every whole mask other views' part masks flagged.
+  // uncovered_min_labelled > 1 = off.
+  double uncovered_min_labelled = 0.8;
+  double uncovered_max_split = 0.5;
   // Merging of unseparated instances (not in the released code; docs/DECOMPOSITION.md): two
   // instances that one mask holds together in >= merge_min_joins frames and that separate masks
   // hold apart in at most merge_max_separation of the frames where both are contained are one

@@ -270,8 +270,8 @@ std::vector<Instance> BuildInstances(const TrackerSet& set, const std::vector<Ma
 }
 
 int RejudgeUndersegmented(const TrackerSet& set, const std::vector<Instance>& instances,
-                          const DecompositionOptions& options,
-                          std::vector<uint8_t>* undersegmented) {
+                          const DecompositionOptions& options, std::vector<uint8_t>* undersegmented,
+                          const std::vector<TrackerFrames>* frames) {
   std::vector<uint32_t> instance_of(set.num_gaussians, 0);  // overlaps: the later instance
   for (size_t k = 0; k < instances.size(); ++k) {
     for (uint32_t g : instances[k].gaussians) instance_of[g] = static_cast<uint32_t>(k + 1);
@@ -285,8 +285,15 @@ int RejudgeUndersegmented(const TrackerSet& set, const std::vector<Instance>& in
     for (uint32_t g : gaussians) ++counts[instance_of[g]];
     const uint32_t covered = static_cast<uint32_t>(gaussians.size()) - counts[0];
     const uint32_t best = *std::max_element(counts.begin() + 1, counts.end());
-    if (covered > 0 && covered >= options.rejudge_min_coverage * gaussians.size() &&
-        best >= options.remedy_ratio * covered) {
+    const bool covered_enough =
+        covered > 0 && covered >= options.rejudge_min_coverage * gaussians.size();
+    bool restore = covered_enough && best >= options.remedy_ratio * covered;
+    if (!covered_enough && frames != nullptr) {
+      const TrackerFrames& f = (*frames)[t];
+      restore = f.visible >= options.uncovered_min_labelled * f.traced &&
+                f.split <= options.uncovered_max_split * f.visible;
+    }
+    if (restore) {
       (*undersegmented)[t] = 0;
       ++changed;
     }

@@ -37,10 +37,13 @@ std::vector<Instance> BuildInstances(const TrackerSet& trackers, const std::vect
                                      const std::vector<uint8_t>* undersegmented = nullptr);
 
 // Re-judgement: clears the under-segmented flag of every flagged tracker whose Gaussians lie
-// mostly in one instance (see DecompositionOptions::rejudge_passes); returns how many changed.
+// mostly in one instance (see DecompositionOptions::rejudge_passes) and, given the judgement's
+// per-tracker frame counts, of every flagged tracker mostly outside all instances that the
+// masks hold consistently and split rarely (DecompositionOptions::uncovered_min_labelled);
+// returns how many changed.
 int RejudgeUndersegmented(const TrackerSet& trackers, const std::vector<Instance>& instances,
-                          const DecompositionOptions& options,
-                          std::vector<uint8_t>* undersegmented);
+                          const DecompositionOptions& options, std::vector<uint8_t>* undersegmented,
+                          const std::vector<TrackerFrames>* frames = nullptr);
 
 // Merging of unseparated instances: per frame, an instance is held by a mask when at least
 // min_tracker_gaussians of its Gaussians lie in the frame's masks and one mask holds more than

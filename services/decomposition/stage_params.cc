@@ -7,7 +7,7 @@ absl::Status DecompositionOptions::Validate() const {
   if (!in01(mask_visible_threshold) || !in01(contained_threshold) ||
       !in01(undersegment_threshold) || !in01(view_consensus_threshold) ||
       !in01(point_filter_threshold) || !in01(overlap_ratio) || !in01(remedy_ratio) ||
-      !in01(rejudge_min_coverage) || !in01(merge_max_separation)) {
+      !in01(rejudge_min_coverage) || !in01(merge_max_separation) || !in01(uncovered_max_split)) {
     return absl::InvalidArgumentError("decomposition thresholds must lie in [0, 1]");
   }
   if (!(tracker_min_weight >= 0.0f && tracker_min_weight < 1.0f)) {
@@ -15,6 +15,8 @@ absl::Status DecompositionOptions::Validate() const {
   }
   if (rejudge_passes < 0 || rejudge_passes > 8)
     return absl::InvalidArgumentError("rejudge_passes must lie in [0, 8]");
+  if (!(uncovered_min_labelled >= 0.0 && uncovered_min_labelled <= 2.0))
+    return absl::InvalidArgumentError("uncovered_min_labelled must lie in [0, 2]");
   if (merge_min_joins < 0) return absl::InvalidArgumentError("merge_min_joins must be >= 0");
   if (min_tracker_gaussians < 1)
     return absl::InvalidArgumentError("min_tracker_gaussians must be >= 1");
@@ -65,6 +67,11 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
               "Largest share of frames holding two instances apart that still allows the merge")
         .Real("rejudge_min_coverage", &O::rejudge_min_coverage, 0.0, 1.0,
               "Share of a mask's tracker that must lie in instances before it is re-judged")
+        .Real("uncovered_min_labelled", &O::uncovered_min_labelled, 0.0, 2.0,
+              "A flagged mask mostly outside every instance is re-judged sound when masks hold "
+              "its Gaussians in at least this share of the frames that trace them (> 1 = off)")
+        .Real("uncovered_max_split", &O::uncovered_max_split, 0.0, 1.0,
+              "... and it was split in at most this share of its visible frames")
         .Real("untraced_radius", &O::untraced_radius, 0.0, 1.0,
               "A Gaussian no view traces joins the instance of the nearest traced Gaussian "
               "within this share of the robust scene diagonal (0 = off, the released code)")
