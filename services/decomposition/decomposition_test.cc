@@ -222,6 +222,47 @@ TEST(Rejudge, MergedMaskAndMostlyUncoveredMaskStayUndersegmented) {
   EXPECT_EQ(flags, (std::vector<uint8_t>{1, 0}));
 }
 
+// A flagged mask over A (0..199, an instance) and 60 more Gaussians (200..259) in no instance:
+// mostly inside A, so the re-judgement would restore it. When the 60 are another object that
+// masks hold apart from A in most frames (its own masks in views 0-3, merged with A in views 4
+// and 5), the mask keeps its flag; when they are the rest of A's object, masked together with it
+// in most frames (whole masks in views 0-3, a part split in view 4), it is restored.
+TEST(Rejudge, AMaskWhosePartOutsideEveryInstanceIsAnotherObjectStaysFlagged) {
+  std::vector<Instance> instances(1);
+  for (uint32_t g = 0; g < 200; ++g) instances[0].gaussians.push_back(g);
+  DecompositionOptions options;
+  {
+    std::vector<HandMask> masks;
+    for (int v = 0; v < 4; ++v) {
+      masks.push_back({v, 1, 0, 200});
+      masks.push_back({v, 2, 200, 260});
+    }
+    masks.push_back({4, 1, 0, 260});
+    masks.push_back({5, 1, 0, 260});
+    const TrackerSet set = MakeSet(6, 260, masks);
+    const uint32_t merged = 8;  // view 4's mask
+    std::vector<uint8_t> flags(set.trackers.size(), 0);
+    flags[merged] = 1;
+    DecompositionOptions off = options;
+    off.rejudge_remainder_max_apart = 1.0;
+    std::vector<uint8_t> released = flags;
+    EXPECT_EQ(RejudgeUndersegmented(set, instances, off, &released), 1);
+    EXPECT_EQ(RejudgeUndersegmented(set, instances, options, &flags), 0);
+    EXPECT_TRUE(flags[merged]);
+  }
+  {
+    std::vector<HandMask> masks;
+    for (int v = 0; v < 4; ++v) masks.push_back({v, 1, 0, 260});
+    masks.push_back({4, 1, 0, 200});
+    masks.push_back({4, 2, 200, 260});
+    const TrackerSet set = MakeSet(5, 260, masks);
+    std::vector<uint8_t> flags(set.trackers.size(), 0);
+    flags[0] = 1;
+    EXPECT_EQ(RejudgeUndersegmented(set, instances, options, &flags), 1);
+    EXPECT_FALSE(flags[0]);
+  }
+}
+
 // A (0..99) and B (100..199) are the two sides of one object, C (200..299) its neighbour. Masks
 // hold A and B together in 3 frames and apart in 1 (a part split); B and C together in 2 frames
 // (merged masks) and apart in 2; A and C together in 1, apart in 3. Only A and B merge.

@@ -48,6 +48,12 @@ struct DecompositionOptions {
   // uncovered_min_labelled > 1 = off.
   double uncovered_min_labelled = 0.8;
   double uncovered_max_split = 0.5;
+  // A flagged mask that the rule above would restore keeps its flag when the part of its tracker
+  // outside every instance (at least min_tracker_gaussians) and the part inside its instance are
+  // held apart by different masks in more than this share of the frames where masks hold both:
+  // that part is another object the clustering never found (a bottle merged into a torus's
+  // masks), not the rest of the instance's object. 1 = off.
+  double rejudge_remainder_max_apart = 0.5;
   // Merging of unseparated instances (not in the released code; docs/DECOMPOSITION.md): two
   // instances that one mask holds together in >= merge_min_joins frames and that separate masks
   // hold apart in at most merge_max_separation of the frames where both are contained are one

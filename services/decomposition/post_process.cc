@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <optional>
 #include <unordered_map>
 
 #include "common/core/parallel.h"
@@ -269,6 +270,52 @@ std::vector<Instance> BuildInstances(const TrackerSet& set, const std::vector<Ma
   return kept;
 }
 
+namespace {
+
+// Frames where masks hold the Gaussian groups `a` and `b` apart, over the frames where each is held
+// (at least 1 - mask_visible_threshold of it in kept masks, one mask holding more than
+// contained_threshold of that); nullopt when no frame holds both.
+std::optional<double> ShareHeldApart(const TrackerSet& set, const std::vector<uint32_t>& a,
+                                     const std::vector<uint32_t>& b,
+                                     const DecompositionOptions& options) {
+  // Per frame, per group: the holding tracker, or -1 when the group is not held there.
+  auto holders = [&](const std::vector<uint32_t>& group) {
+    std::unordered_map<uint32_t, uint32_t> counts;  // tracker -> members of the group
+    for (uint32_t g : group) {
+      for (uint64_t k = set.mask_offsets[g]; k < set.mask_offsets[g + 1]; ++k)
+        ++counts[set.masks[k]];
+    }
+    std::vector<uint32_t> total(set.num_views, 0), top(set.num_views, 0);
+    std::vector<int64_t> holder(set.num_views, -1);
+    for (const auto& [u, c] : counts) {
+      const int v = set.trackers[u].view;
+      total[v] += c;
+      if (c > top[v] || (c == top[v] && static_cast<int64_t>(u) < holder[v])) {
+        top[v] = c;
+        holder[v] = u;
+      }
+    }
+    const double size = static_cast<double>(group.size());
+    for (int v = 0; v < set.num_views; ++v) {
+      if ((size - total[v]) / size > options.mask_visible_threshold ||
+          !(top[v] > options.contained_threshold * total[v])) {
+        holder[v] = -1;
+      }
+    }
+    return holder;
+  };
+  const std::vector<int64_t> ha = holders(a), hb = holders(b);
+  int together = 0, apart = 0;
+  for (int v = 0; v < set.num_views; ++v) {
+    if (ha[v] < 0 || hb[v] < 0) continue;
+    (ha[v] == hb[v] ? together : apart) += 1;
+  }
+  if (together + apart == 0) return std::nullopt;
+  return static_cast<double>(apart) / (together + apart);
+}
+
+}  // namespace
+
 int RejudgeUndersegmented(const TrackerSet& set, const std::vector<Instance>& instances,
                           const DecompositionOptions& options, std::vector<uint8_t>* undersegmented,
                           const std::vector<TrackerFrames>* frames) {
@@ -288,6 +335,21 @@ int RejudgeUndersegmented(const TrackerSet& set, const std::vector<Instance>& in
     const bool covered_enough =
         covered > 0 && covered >= options.rejudge_min_coverage * gaussians.size();
     bool restore = covered_enough && best >= options.remedy_ratio * covered;
+    if (restore && options.rejudge_remainder_max_apart < 1.0 &&
+        gaussians.size() - covered >= static_cast<size_t>(options.min_tracker_gaussians)) {
+      // The part outside every instance: the rest of the same object, or another object the
+      // clustering never found. Masks hold an object's parts together in most frames, two
+      // objects apart.
+      const uint32_t b = static_cast<uint32_t>(std::max_element(counts.begin() + 1, counts.end()) -
+                                               counts.begin());
+      std::vector<uint32_t> inside, outside;
+      for (uint32_t g : gaussians) {
+        if (instance_of[g] == b) inside.push_back(g);
+        if (instance_of[g] == 0) outside.push_back(g);
+      }
+      const std::optional<double> apart = ShareHeldApart(set, inside, outside, options);
+      if (apart && *apart > options.rejudge_remainder_max_apart) restore = false;
+    }
     if (!covered_enough && frames != nullptr) {
       const TrackerFrames& f = (*frames)[t];
       restore = f.visible >= options.uncovered_min_labelled * f.traced &&

@@ -7,7 +7,8 @@ absl::Status DecompositionOptions::Validate() const {
   if (!in01(mask_visible_threshold) || !in01(contained_threshold) ||
       !in01(undersegment_threshold) || !in01(view_consensus_threshold) ||
       !in01(point_filter_threshold) || !in01(overlap_ratio) || !in01(remedy_ratio) ||
-      !in01(rejudge_min_coverage) || !in01(merge_max_separation) || !in01(uncovered_max_split)) {
+      !in01(rejudge_min_coverage) || !in01(merge_max_separation) || !in01(uncovered_max_split) ||
+      !in01(rejudge_remainder_max_apart)) {
     return absl::InvalidArgumentError("decomposition thresholds must lie in [0, 1]");
   }
   if (!(tracker_min_weight >= 0.0f && tracker_min_weight < 1.0f)) {
@@ -72,6 +73,9 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
               "its Gaussians in at least this share of the frames that trace them (> 1 = off)")
         .Real("uncovered_max_split", &O::uncovered_max_split, 0.0, 1.0,
               "... and it was split in at most this share of its visible frames")
+        .Real("rejudge_remainder_max_apart", &O::rejudge_remainder_max_apart, 0.0, 1.0,
+              "A re-judged mask stays flagged when its part outside every instance and its part "
+              "inside one are held apart in more than this share of frames (1 = off)")
         .Real("untraced_radius", &O::untraced_radius, 0.0, 1.0,
               "A Gaussian no view traces joins the instance of the nearest traced Gaussian "
               "within this share of the robust scene diagonal (0 = off, the released code)")
