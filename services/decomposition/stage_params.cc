@@ -72,7 +72,8 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
               "A flagged mask mostly outside every instance is re-judged sound when masks hold "
               "its Gaussians in at least this share of the frames that trace them (> 1 = off)")
         .Real("uncovered_max_split", &O::uncovered_max_split, 0.0, 1.0,
-              "... and it was split in at most this share of its visible frames")
+              "A flagged mask mostly outside every instance is re-judged sound only when split "
+              "in at most this share of its visible frames")
         .Real("rejudge_remainder_max_apart", &O::rejudge_remainder_max_apart, 0.0, 1.0,
               "A re-judged mask stays flagged when its part outside every instance and its part "
               "inside one are held apart in more than this share of frames (1 = off)")
