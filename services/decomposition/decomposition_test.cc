@@ -53,6 +53,18 @@ TrackerSet MakeSet(int num_views, uint32_t num_gaussians, const std::vector<Hand
   return set;
 }
 
+// Gaussians on the x axis, 1 mm apart (one DBSCAN cluster); those from `far_from` on are moved
+// 5 units away (a second cluster).
+GaussianCloud LineCloud(int n, int far_from) {
+  GaussianCloud cloud;
+  cloud.Resize(n);
+  for (int g = 0; g < n; ++g) {
+    cloud.positions[3 * g] = 0.001f * g + (g >= far_from ? 5.0f : 0.0f);
+    cloud.positions[3 * g + 1] = cloud.positions[3 * g + 2] = 0.0f;
+  }
+  return cloud;
+}
+
 TEST(MaskGraph, TwoViewsOfOneObjectMerge) {
   const TrackerSet set = MakeSet(2, 100, {{0, 1, 0, 100}, {1, 1, 0, 100}});
   MaskJudgement j = JudgeTrackers(set, DecompositionOptions{});
@@ -96,12 +108,7 @@ TEST(Rejudge, WholeObjectMaskSplitByPartMasksIsRestored) {
                                   {3, 2, 110, 140},
                                   {4, 1, 0, 110},
                                   {4, 2, 140, 170}});
-  GaussianCloud cloud;
-  cloud.Resize(200);
-  for (int g = 0; g < 200; ++g) {
-    cloud.positions[3 * g] = 0.001f * g;
-    cloud.positions[3 * g + 1] = cloud.positions[3 * g + 2] = 0.0f;
-  }
+  const GaussianCloud cloud = LineCloud(200, 200);
   DecompositionOptions options;
   const MaskJudgement judged = JudgeTrackers(set, options);
   for (int t = 0; t < 3; ++t) ASSERT_TRUE(judged.undersegmented[t]) << t;
@@ -124,12 +131,11 @@ TEST(Rejudge, WholeObjectMaskSplitByPartMasksIsRestored) {
 
 // One object, Gaussians 0..199, whose part masks never repeat: views 0-2 hold whole-object masks,
 // views 3 and 4 mask two different pairs of small parts (each part seen once, so none becomes an
-// instance).
-// Split in 2 of 5 frames, every whole mask is flagged, and no instance covers any of them. The
-// masks hold the object in every frame that traces it and split it in a minority: the whole masks
-// are restored and the object comes out whole. A background patch (200..259) that a stray mask
-// covers in view 0 and two stray masks in view 1 is held in 2 of the 5 frames that trace it and
-// stays flagged.
+// instance). Split in 2 of 5 frames, every whole mask is flagged, and no instance covers any of
+// them. The masks hold the object in every frame that traces it and split it in a minority: the
+// whole masks are restored and the object comes out whole. A background patch (200..259) that a
+// stray mask covers in view 0 and two stray masks in view 1 is held in 2 of the 5 frames that trace
+// it and stays flagged.
 TEST(Rejudge, AnObjectWhoseEveryWholeMaskIsFlaggedIsRestoredStrayBackgroundIsNot) {
   const TrackerSet set = MakeSet(5, 260,
                                  {{0, 1, 0, 200},
@@ -142,12 +148,7 @@ TEST(Rejudge, AnObjectWhoseEveryWholeMaskIsFlaggedIsRestoredStrayBackgroundIsNot
                                   {3, 2, 160, 200},
                                   {4, 1, 40, 80},
                                   {4, 2, 120, 160}});
-  GaussianCloud cloud;
-  cloud.Resize(260);
-  for (int g = 0; g < 260; ++g) {
-    cloud.positions[3 * g] = 0.001f * g + (g >= 200 ? 5.0f : 0.0f);
-    cloud.positions[3 * g + 1] = cloud.positions[3 * g + 2] = 0.0f;
-  }
+  const GaussianCloud cloud = LineCloud(260, 200);
   DecompositionOptions options;
   const MaskJudgement judged = JudgeTrackers(set, options);
   for (uint32_t t : {0u, 1u, 2u, 5u}) ASSERT_TRUE(judged.undersegmented[t]) << t;  // 1: stray
@@ -185,12 +186,7 @@ TEST(Rejudge, AnObjectWhoseEveryWholeMaskIsFlaggedIsRestoredStrayBackgroundIsNot
 TEST(PostProcess, FramesWhereAPointLiesInAMergedMaskDoNotCountAgainstIt) {
   const TrackerSet set = MakeSet(
       5, 200, {{0, 1, 0, 100}, {1, 1, 0, 100}, {2, 1, 0, 200}, {3, 1, 0, 200}, {4, 1, 0, 200}});
-  GaussianCloud cloud;
-  cloud.Resize(200);
-  for (int g = 0; g < 200; ++g) {
-    cloud.positions[3 * g] = 0.001f * g;
-    cloud.positions[3 * g + 1] = cloud.positions[3 * g + 2] = 0.0f;
-  }
+  const GaussianCloud cloud = LineCloud(200, 200);
   MaskNode node{{0, 1}, ViewSet(5), {}};
   for (int v = 0; v < 5; ++v) node.visible.Set(v);
   const std::vector<uint8_t> flags = {0, 0, 1, 1, 1};
