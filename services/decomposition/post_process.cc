@@ -331,7 +331,9 @@ int RejudgeUndersegmented(const TrackerSet& set, const std::vector<Instance>& in
     std::fill(counts.begin(), counts.end(), 0u);
     for (uint32_t g : gaussians) ++counts[instance_of[g]];
     const uint32_t covered = static_cast<uint32_t>(gaussians.size()) - counts[0];
-    const uint32_t best = *std::max_element(counts.begin() + 1, counts.end());
+    // The instance holding most of the tracker (none when there are no instances).
+    const auto best_it = std::max_element(counts.begin() + 1, counts.end());
+    const uint32_t best = best_it == counts.end() ? 0 : *best_it;
     const bool covered_enough =
         covered > 0 && covered >= options.rejudge_min_coverage * gaussians.size();
     bool restore = covered_enough && best >= options.remedy_ratio * covered;
@@ -340,8 +342,7 @@ int RejudgeUndersegmented(const TrackerSet& set, const std::vector<Instance>& in
       // The part outside every instance: the rest of the same object, or another object the
       // clustering never found. Masks hold an object's parts together in most frames, two
       // objects apart.
-      const uint32_t b = static_cast<uint32_t>(std::max_element(counts.begin() + 1, counts.end()) -
-                                               counts.begin());
+      const uint32_t b = static_cast<uint32_t>(best_it - counts.begin());
       std::vector<uint32_t> inside, outside;
       for (uint32_t g : gaussians) {
         if (instance_of[g] == b) inside.push_back(g);
