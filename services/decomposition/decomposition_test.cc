@@ -65,6 +65,17 @@ GaussianCloud LineCloud(int n, int far_from) {
   return cloud;
 }
 
+// Steps 3-6 with the given under-segmentation flags: undo, cluster, build instances.
+std::vector<Instance> InstancesWithFlags(const TrackerSet& set, const MaskJudgement& judged,
+                                         const std::vector<uint8_t>& flags,
+                                         const GaussianCloud& cloud,
+                                         const DecompositionOptions& options) {
+  MaskJudgement j = judged;
+  j.undersegmented = flags;
+  UndoUndersegmented(set, &j);
+  return BuildInstances(set, ClusterMasks(set, j, options), cloud, options);
+}
+
 TEST(MaskGraph, TwoViewsOfOneObjectMerge) {
   const TrackerSet set = MakeSet(2, 100, {{0, 1, 0, 100}, {1, 1, 0, 100}});
   MaskJudgement j = JudgeTrackers(set, DecompositionOptions{});
@@ -112,19 +123,14 @@ TEST(Rejudge, WholeObjectMaskSplitByPartMasksIsRestored) {
   DecompositionOptions options;
   const MaskJudgement judged = JudgeTrackers(set, options);
   for (int t = 0; t < 3; ++t) ASSERT_TRUE(judged.undersegmented[t]) << t;
-  MaskJudgement j = judged;
-  UndoUndersegmented(set, &j);
   std::vector<Instance> instances =
-      BuildInstances(set, ClusterMasks(set, j, options), cloud, options);
+      InstancesWithFlags(set, judged, judged.undersegmented, cloud, options);
   ASSERT_EQ(instances.size(), 1u);  // the part A only
   EXPECT_EQ(instances[0].gaussians.size(), 110u);
   std::vector<uint8_t> flags = judged.undersegmented;
   EXPECT_EQ(RejudgeUndersegmented(set, instances, options, &flags), 3);
   for (int t = 0; t < 3; ++t) EXPECT_FALSE(flags[t]) << t;
-  j = judged;
-  j.undersegmented = flags;
-  UndoUndersegmented(set, &j);
-  instances = BuildInstances(set, ClusterMasks(set, j, options), cloud, options);
+  instances = InstancesWithFlags(set, judged, flags, cloud, options);
   ASSERT_EQ(instances.size(), 1u);
   EXPECT_EQ(instances[0].gaussians.size(), 200u);
 }
@@ -157,10 +163,8 @@ TEST(Rejudge, AnObjectWhoseEveryWholeMaskIsFlaggedIsRestoredStrayBackgroundIsNot
   EXPECT_EQ(judged.frames[0].split, 2);
   EXPECT_EQ(judged.frames[1].traced, 5);
   EXPECT_EQ(judged.frames[1].visible, 2);
-  MaskJudgement j = judged;
-  UndoUndersegmented(set, &j);
   std::vector<Instance> instances =
-      BuildInstances(set, ClusterMasks(set, j, options), cloud, options);
+      InstancesWithFlags(set, judged, judged.undersegmented, cloud, options);
   ASSERT_TRUE(instances.empty());
   std::vector<uint8_t> flags = judged.undersegmented;
   EXPECT_EQ(RejudgeUndersegmented(set, instances, options, &flags), 0);  // no counts: released rule
@@ -170,10 +174,7 @@ TEST(Rejudge, AnObjectWhoseEveryWholeMaskIsFlaggedIsRestoredStrayBackgroundIsNot
   EXPECT_EQ(RejudgeUndersegmented(set, instances, options, &flags, &judged.frames), 3);
   for (uint32_t t : {0u, 2u, 5u}) EXPECT_FALSE(flags[t]) << t;
   EXPECT_TRUE(flags[1]);  // the stray mask
-  j = judged;
-  j.undersegmented = flags;
-  UndoUndersegmented(set, &j);
-  instances = BuildInstances(set, ClusterMasks(set, j, options), cloud, options);
+  instances = InstancesWithFlags(set, judged, flags, cloud, options);
   ASSERT_EQ(instances.size(), 1u);
   EXPECT_EQ(instances[0].gaussians.size(), 200u);
 }
