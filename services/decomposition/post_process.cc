@@ -351,7 +351,7 @@ int RejudgeUndersegmented(const TrackerSet& set, const std::vector<Instance>& in
       const std::optional<double> apart = ShareHeldApart(set, inside, outside, options);
       if (apart && *apart > options.rejudge_remainder_max_apart) restore = false;
     }
-    if (!covered_enough && frames != nullptr) {
+    if (!covered_enough && frames != nullptr && options.uncovered_min_labelled <= 1.0) {
       const TrackerFrames& f = (*frames)[t];
       restore = f.visible >= options.uncovered_min_labelled * f.traced &&
                 f.split <= options.uncovered_max_split * f.visible;
