@@ -81,6 +81,8 @@ absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const Gaussian
   result.merged_instances = MergeUnseparatedInstances(result.trackers, options, &result.instances);
   result.undersegmented =
       RemedyUndersegmented(result.trackers, result.judgement, options, &result.instances);
+  result.orphans_labelled =
+      LabelOrphanGaussians(result.trackers, cloud, options, &result.instances);
   result.untraced_labelled = LabelUntracedGaussians(
       result.trackers, cloud,
       static_cast<float>(options.untraced_radius * RobustSceneDiagonal(cloud)), options.num_threads,
@@ -180,6 +182,7 @@ absl::Status WriteDecomposition(const std::string& directory, const Scene& scene
                             {"trackers", set.trackers.size()},
                             {"observer_schedule", result.schedule},
                             {"merged_instances", result.merged_instances},
+                            {"orphans_labelled", result.orphans_labelled},
                             {"untraced_labelled", result.untraced_labelled},
                             {"seconds",
                              {{"tracking", result.tracking_seconds},

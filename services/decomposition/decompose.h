@@ -35,6 +35,7 @@ struct DecompositionResult {
   // to decomposition.json so a user can see why a mask was lost.
   std::vector<int32_t> cluster_of;
   int merged_instances = 0;      // merges of unseparated instances
+  size_t orphans_labelled = 0;   // traced Gaussians in no instance that joined one
   size_t untraced_labelled = 0;  // untraced Gaussians that joined an instance
   double tracking_seconds = 0, clustering_seconds = 0, post_seconds = 0;
 

@@ -3,6 +3,7 @@
 #include "common/core/testing/temp_dir.h"
 
 #include <filesystem>
+#include <numeric>
 #include <random>
 
 #include "common/eval/click_eval.h"
@@ -21,36 +22,47 @@ struct HandMask {
   uint32_t lo, hi;
 };
 
-TrackerSet MakeSet(int num_views, uint32_t num_gaussians, const std::vector<HandMask>& masks) {
+struct ListMask {
+  int view;
+  uint32_t id;
+  std::vector<uint32_t> gaussians;  // sorted
+};
+
+// Every Gaussian is traced in every view; it belongs to the masks that list it.
+TrackerSet MakeSetFromLists(int num_views, uint32_t num_gaussians,
+                            const std::vector<ListMask>& masks) {
   TrackerSet set;
   set.num_views = num_views;
   set.num_gaussians = num_gaussians;
   set.view_trackers.resize(num_views);
-  std::vector<std::vector<uint16_t>> frames(num_gaussians);
   std::vector<std::vector<uint32_t>> owner(num_gaussians);
-  for (const HandMask& m : masks) {
-    Tracker t{m.view, m.id, {}};
-    for (uint32_t g = m.lo; g < m.hi; ++g) t.gaussians.push_back(g);
+  for (const ListMask& m : masks) {
     const uint32_t index = static_cast<uint32_t>(set.trackers.size());
     set.view_trackers[m.view].push_back(index);
-    set.trackers.push_back(t);
-  }
-  // Every Gaussian is traced in every view; it belongs to the masks that list it.
-  for (uint32_t g = 0; g < num_gaussians; ++g) {
-    for (int v = 0; v < num_views; ++v) frames[g].push_back(static_cast<uint16_t>(v));
-  }
-  for (uint32_t t = 0; t < set.trackers.size(); ++t) {
-    for (uint32_t g : set.trackers[t].gaussians) owner[g].push_back(t);
+    set.trackers.push_back(Tracker{m.view, m.id, m.gaussians});
+    for (uint32_t g : m.gaussians) owner[g].push_back(index);
   }
   set.frame_offsets.push_back(0);
   set.mask_offsets.push_back(0);
   for (uint32_t g = 0; g < num_gaussians; ++g) {
-    set.frames.insert(set.frames.end(), frames[g].begin(), frames[g].end());
+    for (int v = 0; v < num_views; ++v) set.frames.push_back(static_cast<uint16_t>(v));
     set.masks.insert(set.masks.end(), owner[g].begin(), owner[g].end());
     set.frame_offsets.push_back(set.frames.size());
     set.mask_offsets.push_back(set.masks.size());
   }
   return set;
+}
+
+std::vector<uint32_t> Range(uint32_t lo, uint32_t hi) {
+  std::vector<uint32_t> r(hi - lo);
+  std::iota(r.begin(), r.end(), lo);
+  return r;
+}
+
+TrackerSet MakeSet(int num_views, uint32_t num_gaussians, const std::vector<HandMask>& masks) {
+  std::vector<ListMask> lists;
+  for (const HandMask& m : masks) lists.push_back({m.view, m.id, Range(m.lo, m.hi)});
+  return MakeSetFromLists(num_views, num_gaussians, lists);
 }
 
 // Gaussians on the x axis, 1 mm apart (one DBSCAN cluster); those from `far_from` on are moved
@@ -297,6 +309,67 @@ TEST(MergeUnseparated, TwoSidesOfOneObjectMergeNeighboursDoNot) {
     for (uint32_t g = 100 * k; g < 100 * (k + 1); ++g) strict[k].gaussians.push_back(g);
   }
   EXPECT_EQ(MergeUnseparatedInstances(set, options, &strict), 0);
+}
+
+TEST(PostProcess, GaussiansOnlyMergedMasksHoldJoinTheNearestHeldInstance) {
+  // Object A: instance 0 holds 0-59, its Gaussians 60-99 lie in no instance (only masks merging
+  // it with B hold them, or whole masks of A the clustering did not keep). B: instance 1, 100-199.
+  // 200-209: table beside A that one bleeding mask of A covers. 210-249: an object the
+  // clustering missed, held by its own masks only.
+  auto join = [](std::vector<uint32_t> a, const std::vector<uint32_t>& b) {
+    a.insert(a.end(), b.begin(), b.end());
+    return a;
+  };
+  const TrackerSet set = MakeSetFromLists(
+      4, 250,
+      {{0, 1, join(Range(0, 100), Range(200, 210))},  // A whole, bleeding onto the table
+       {0, 2, Range(100, 200)},
+       {0, 3, Range(210, 250)},
+       {1, 1, Range(0, 200)},  // A and B merged
+       {1, 3, Range(210, 250)},
+       {2, 1, Range(0, 60)},  // a part of A, the rest unmasked
+       {2, 2, Range(100, 200)},
+       {3, 1, Range(0, 200)},  // merged again
+       {3, 3, Range(210, 250)}});
+  GaussianCloud cloud;
+  cloud.Resize(250);
+  for (int g = 0; g < 250; ++g) {
+    float x = 0.001f * g;                              // A, its orphans, B: 1 mm apart on a line
+    if (g >= 200 && g < 210) x = -0.001f * (g - 199);  // the table, before A
+    if (g >= 210) x = 5.0f + 0.001f * g;               // far away
+    cloud.positions[3 * g] = x;
+  }
+  auto fresh = [] {
+    std::vector<Instance> instances(2);
+    instances[0].gaussians = Range(0, 60);
+    instances[1].gaussians = Range(100, 200);
+    return instances;
+  };
+  DecompositionOptions options;
+  options.num_threads = 1;
+  std::vector<Instance> instances = fresh();
+  // Orphans 60-99: A held by their masks in frames 0, 1, 3 (3 of 4), B in 1 and 3 (2 of 4): both
+  // qualify at 0.5, the nearer wins. The table: A in 1 of 4. The missed object: none.
+  EXPECT_EQ(LabelOrphanGaussians(set, cloud, options, &instances), 40u);
+  EXPECT_EQ(instances[0].gaussians, Range(0, 80));
+  EXPECT_EQ(instances[1].gaussians, join(Range(80, 100), Range(100, 200)));
+  // Above 0.5 only A qualifies; above 0.75 none does; above 1 the step is off.
+  options.orphan_min_held = 0.7;
+  instances = fresh();
+  EXPECT_EQ(LabelOrphanGaussians(set, cloud, options, &instances), 40u);
+  EXPECT_EQ(instances[0].gaussians, Range(0, 100));
+  options.orphan_min_held = 0.8;
+  instances = fresh();
+  EXPECT_EQ(LabelOrphanGaussians(set, cloud, options, &instances), 0u);
+  options.orphan_min_held = 2.0;
+  EXPECT_EQ(LabelOrphanGaussians(set, cloud, options, &instances), 0u);
+  EXPECT_EQ(instances[0].gaussians, Range(0, 60));
+  // The answer does not depend on the thread count.
+  options.orphan_min_held = 0.5;
+  options.num_threads = 2;
+  instances = fresh();
+  LabelOrphanGaussians(set, cloud, options, &instances);
+  EXPECT_EQ(instances[0].gaussians, Range(0, 80));
 }
 
 TEST(PostProcess, UntracedGaussiansJoinTheInstanceOfTheNearestTracedOne) {

@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
+#include <memory>
 #include <optional>
 #include <unordered_map>
 
@@ -364,6 +366,48 @@ int RejudgeUndersegmented(const TrackerSet& set, const std::vector<Instance>& in
   return changed;
 }
 
+namespace {
+
+// Per frame, per instance (n of them, labelled 1..n in instance_of): the tracker holding it, or -1.
+// An instance is held in a frame when at least min_tracker_gaussians of its Gaussians lie in the
+// frame's kept masks and one mask holds more than contained_threshold of them.
+std::vector<std::vector<int64_t>> HoldersPerFrame(const TrackerSet& set,
+                                                  const std::vector<uint32_t>& instance_of,
+                                                  size_t n, const DecompositionOptions& options) {
+  std::vector<std::vector<int64_t>> holders(set.num_views, std::vector<int64_t>(n, -1));
+  std::vector<uint32_t> counts, total(n + 1), best(n + 1);
+  for (int v = 0; v < set.num_views; ++v) {
+    const std::vector<uint32_t>& frame = set.view_trackers[v];
+    if (frame.empty()) continue;
+    counts.assign(frame.size() * (n + 1), 0);
+    for (size_t i = 0; i < frame.size(); ++i) {
+      for (uint32_t g : set.trackers[frame[i]].gaussians) ++counts[i * (n + 1) + instance_of[g]];
+    }
+    std::fill(total.begin(), total.end(), 0u);
+    std::fill(best.begin(), best.end(), 0u);
+    std::vector<int64_t>& holder = holders[v];
+    for (size_t i = 0; i < frame.size(); ++i) {
+      for (size_t a = 1; a <= n; ++a) {
+        const uint32_t c = counts[i * (n + 1) + a];
+        total[a] += c;
+        if (c > best[a]) {
+          best[a] = c;
+          holder[a - 1] = frame[i];
+        }
+      }
+    }
+    for (size_t a = 1; a <= n; ++a) {
+      if (total[a] < static_cast<uint32_t>(options.min_tracker_gaussians) ||
+          !(best[a] > options.contained_threshold * total[a])) {
+        holder[a - 1] = -1;
+      }
+    }
+  }
+  return holders;
+}
+
+}  // namespace
+
 int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions& options,
                               std::vector<Instance>* instances) {
   const size_t n = instances->size();
@@ -374,40 +418,16 @@ int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions&
   }
   // Per pair a < b (key a * n + b): frames holding them together, frames holding them apart.
   std::unordered_map<uint64_t, std::pair<uint32_t, uint32_t>> evidence;
-  std::vector<uint32_t> counts, total(n + 1), best(n + 1);
-  std::vector<int64_t> holder(n + 1);  // per instance: the tracker holding it in this frame
-  for (int v = 0; v < set.num_views; ++v) {
-    const std::vector<uint32_t>& frame = set.view_trackers[v];
-    if (frame.empty()) continue;
-    counts.assign(frame.size() * (n + 1), 0);
-    for (size_t i = 0; i < frame.size(); ++i) {
-      for (uint32_t g : set.trackers[frame[i]].gaussians) ++counts[i * (n + 1) + instance_of[g]];
-    }
-    std::fill(total.begin(), total.end(), 0u);
-    std::fill(best.begin(), best.end(), 0u);
-    std::fill(holder.begin(), holder.end(), -1);
-    for (size_t i = 0; i < frame.size(); ++i) {
-      for (size_t a = 1; a <= n; ++a) {
-        const uint32_t c = counts[i * (n + 1) + a];
-        total[a] += c;
-        if (c > best[a]) {
-          best[a] = c;
-          holder[a] = static_cast<int64_t>(i);
-        }
-      }
-    }
+  for (const std::vector<int64_t>& holder : HoldersPerFrame(set, instance_of, n, options)) {
     std::vector<uint32_t> held;  // instances held by one mask in this frame
-    for (size_t a = 1; a <= n; ++a) {
-      if (total[a] >= static_cast<uint32_t>(options.min_tracker_gaussians) &&
-          best[a] > options.contained_threshold * total[a]) {
-        held.push_back(static_cast<uint32_t>(a - 1));
-      }
+    for (size_t a = 0; a < n; ++a) {
+      if (holder[a] >= 0) held.push_back(static_cast<uint32_t>(a));
     }
     for (size_t i = 0; i < held.size(); ++i) {
       for (size_t k = i + 1; k < held.size(); ++k) {
         const uint32_t a = held[i], b = held[k];
         auto& e = evidence[uint64_t{a} * n + b];
-        (holder[a + 1] == holder[b + 1] ? e.first : e.second) += 1;
+        (holder[a] == holder[b] ? e.first : e.second) += 1;
       }
     }
   }
@@ -478,6 +498,73 @@ size_t LabelUntracedGaussians(const TrackerSet& set, const GaussianCloud& cloud,
     ++joined;
   }
   for (size_t k = 0; k < instances->size(); ++k) {
+    if (added[k].empty()) continue;
+    std::vector<uint32_t>& members = (*instances)[k].gaussians;
+    std::vector<uint32_t> merged;
+    merged.reserve(members.size() + added[k].size());
+    std::merge(members.begin(), members.end(), added[k].begin(), added[k].end(),
+               std::back_inserter(merged));  // both sorted and disjoint
+    members.swap(merged);
+  }
+  return joined;
+}
+
+size_t LabelOrphanGaussians(const TrackerSet& set, const GaussianCloud& cloud,
+                            const DecompositionOptions& options, std::vector<Instance>* instances) {
+  const double min_held = options.orphan_min_held;
+  const size_t n = instances->size();
+  if (!(min_held <= 1.0) || n == 0) return 0;
+  std::vector<uint32_t> instance_of(set.num_gaussians, 0);  // overlaps: the later instance
+  for (size_t k = 0; k < n; ++k) {
+    for (uint32_t g : (*instances)[k].gaussians) instance_of[g] = static_cast<uint32_t>(k + 1);
+  }
+  // Per tracker: the instances it holds.
+  std::vector<std::vector<uint32_t>> held_by(set.trackers.size());
+  for (const std::vector<int64_t>& holder : HoldersPerFrame(set, instance_of, n, options)) {
+    for (size_t a = 0; a < n; ++a) {
+      if (holder[a] >= 0) held_by[holder[a]].push_back(static_cast<uint32_t>(a));
+    }
+  }
+  std::vector<std::unique_ptr<PointIndex3>> index(n);
+  for (size_t k = 0; k < n; ++k) {
+    std::vector<Eigen::Vector3f> points;
+    for (uint32_t g : (*instances)[k].gaussians) points.emplace_back(&cloud.positions[3 * g]);
+    index[k] = std::make_unique<PointIndex3>(std::move(points));
+  }
+  std::vector<uint32_t> orphans;
+  for (uint32_t g = 0; g < set.num_gaussians; ++g) {
+    if (instance_of[g] == 0 && set.frame_offsets[g + 1] > set.frame_offsets[g])
+      orphans.push_back(g);
+  }
+  std::vector<uint32_t> joins(orphans.size(), 0);
+  RunWithThreads(options.num_threads, [&] {
+    tbb::parallel_for(size_t{0}, orphans.size(), [&](size_t i) {
+      const uint32_t g = orphans[i];
+      const uint64_t traced = set.frame_offsets[g + 1] - set.frame_offsets[g];
+      std::unordered_map<uint32_t, uint32_t> votes;  // instance -> frames whose mask holds it
+      for (uint64_t m = set.mask_offsets[g]; m < set.mask_offsets[g + 1]; ++m) {
+        for (uint32_t k : held_by[set.masks[m]]) ++votes[k];
+      }
+      const Eigen::Vector3f p(&cloud.positions[3 * g]);
+      float best_d2 = std::numeric_limits<float>::infinity();
+      for (const auto& [k, count] : votes) {
+        if (count < min_held * traced) continue;
+        const float d2 = index[k]->Nearest(p).second;
+        if (d2 < best_d2 || (d2 == best_d2 && k + 1 < joins[i])) {
+          best_d2 = d2;
+          joins[i] = k + 1;
+        }
+      }
+    });
+  });
+  size_t joined = 0;
+  std::vector<std::vector<uint32_t>> added(n);
+  for (size_t i = 0; i < orphans.size(); ++i) {
+    if (joins[i] == 0) continue;
+    added[joins[i] - 1].push_back(orphans[i]);
+    ++joined;
+  }
+  for (size_t k = 0; k < n; ++k) {
     if (added[k].empty()) continue;
     std::vector<uint32_t>& members = (*instances)[k].gaussians;
     std::vector<uint32_t> merged;

@@ -53,8 +53,6 @@ int RejudgeUndersegmented(const TrackerSet& trackers, const std::vector<Instance
 int MergeUnseparatedInstances(const TrackerSet& trackers, const DecompositionOptions& options,
                               std::vector<Instance>* instances);
 
-// 4.8: under-segmented masks whose tracker lies > remedy_ratio inside one instance join that
-// instance's 2D cluster; returns the masks that remain under-segmented.
 // Gaussians that no view traces (weight above the tracker threshold at no pixel: the surfels
 // between and behind the ones carrying a view's weight) join the instance of the nearest traced
 // Gaussian within `radius` (scene units), if that one is in an instance (see
@@ -62,6 +60,13 @@ int MergeUnseparatedInstances(const TrackerSet& trackers, const DecompositionOpt
 size_t LabelUntracedGaussians(const TrackerSet& trackers, const GaussianCloud& cloud, float radius,
                               int num_threads, std::vector<Instance>* instances);
 
+// Traced Gaussians in no instance join the instance that their masks hold in at least
+// orphan_min_held of the frames tracing them (the nearest such instance when several qualify).
+size_t LabelOrphanGaussians(const TrackerSet& trackers, const GaussianCloud& cloud,
+                            const DecompositionOptions& options, std::vector<Instance>* instances);
+
+// 4.8: under-segmented masks whose tracker lies > remedy_ratio inside one instance join that
+// instance's 2D cluster; returns the masks that remain under-segmented.
 std::vector<uint32_t> RemedyUndersegmented(const TrackerSet& trackers,
                                            const MaskJudgement& judgement,
                                            const DecompositionOptions& options,

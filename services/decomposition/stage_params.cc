@@ -18,6 +18,8 @@ absl::Status DecompositionOptions::Validate() const {
     return absl::InvalidArgumentError("rejudge_passes must lie in [0, 8]");
   if (!(uncovered_min_labelled >= 0.0 && uncovered_min_labelled <= 2.0))
     return absl::InvalidArgumentError("uncovered_min_labelled must lie in [0, 2]");
+  if (!(orphan_min_held >= 0.0 && orphan_min_held <= 2.0))
+    return absl::InvalidArgumentError("orphan_min_held must lie in [0, 2]");
   if (merge_min_joins < 0) return absl::InvalidArgumentError("merge_min_joins must be >= 0");
   if (min_tracker_gaussians < 1)
     return absl::InvalidArgumentError("min_tracker_gaussians must be >= 1");
@@ -80,6 +82,9 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
         .Real("untraced_radius", &O::untraced_radius, 0.0, 1.0,
               "A Gaussian no view traces joins the instance of the nearest traced Gaussian "
               "within this share of the robust scene diagonal (0 = off, the released code)")
+        .Real("orphan_min_held", &O::orphan_min_held, 0.0, 2.0,
+              "A traced Gaussian in no instance joins the nearest instance that its masks hold "
+              "in at least this share of the frames tracing it (> 1 = off, the released code)")
         .Check([](const O& o) { return o.Validate(); });
     return c;
   }();
