@@ -81,12 +81,11 @@ absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const Gaussian
   result.merged_instances = MergeUnseparatedInstances(result.trackers, options, &result.instances);
   result.undersegmented =
       RemedyUndersegmented(result.trackers, result.judgement, options, &result.instances);
+  const float step = static_cast<float>(options.untraced_radius * RobustSceneDiagonal(cloud));
   result.orphans_labelled =
-      LabelOrphanGaussians(result.trackers, cloud, options, &result.instances);
-  result.untraced_labelled = LabelUntracedGaussians(
-      result.trackers, cloud,
-      static_cast<float>(options.untraced_radius * RobustSceneDiagonal(cloud)), options.num_threads,
-      &result.instances);
+      LabelOrphanGaussians(result.trackers, cloud, step, options, &result.instances);
+  result.untraced_labelled =
+      LabelUntracedGaussians(result.trackers, cloud, step, options.num_threads, &result.instances);
   result.post_seconds = post_seconds + watch.ElapsedSeconds();
   if (progress) progress("post-processing", 1, 1);
   return result;

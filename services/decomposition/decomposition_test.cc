@@ -349,26 +349,31 @@ TEST(PostProcess, GaussiansOnlyMergedMasksHoldJoinTheNearestHeldInstance) {
   options.num_threads = 1;
   std::vector<Instance> instances = fresh();
   // Orphans 60-99: A held by their masks in frames 0, 1, 3 (3 of 4), B in 1 and 3 (2 of 4): both
-  // qualify at 0.5, the nearer wins. The table: A in 1 of 4. The missed object: none.
-  EXPECT_EQ(LabelOrphanGaussians(set, cloud, options, &instances), 40u);
+  // qualify at 0.5, and each grows from its end of the line in 1 mm steps: they meet halfway. The
+  // table: A in 1 of 4. The missed object: none.
+  EXPECT_EQ(LabelOrphanGaussians(set, cloud, 0.0015f, options, &instances), 40u);
   EXPECT_EQ(instances[0].gaussians, Range(0, 80));
   EXPECT_EQ(instances[1].gaussians, join(Range(80, 100), Range(100, 200)));
   // Above 0.5 only A qualifies; above 0.75 none does; above 1 the step is off.
   options.orphan_min_held = 0.7;
   instances = fresh();
-  EXPECT_EQ(LabelOrphanGaussians(set, cloud, options, &instances), 40u);
+  EXPECT_EQ(LabelOrphanGaussians(set, cloud, 0.0015f, options, &instances), 40u);
   EXPECT_EQ(instances[0].gaussians, Range(0, 100));
   options.orphan_min_held = 0.8;
   instances = fresh();
-  EXPECT_EQ(LabelOrphanGaussians(set, cloud, options, &instances), 0u);
+  EXPECT_EQ(LabelOrphanGaussians(set, cloud, 0.0015f, options, &instances), 0u);
   options.orphan_min_held = 2.0;
-  EXPECT_EQ(LabelOrphanGaussians(set, cloud, options, &instances), 0u);
+  EXPECT_EQ(LabelOrphanGaussians(set, cloud, 0.0015f, options, &instances), 0u);
   EXPECT_EQ(instances[0].gaussians, Range(0, 60));
+  // Steps shorter than the 1 mm spacing reach no orphan.
+  options.orphan_min_held = 0.5;
+  instances = fresh();
+  EXPECT_EQ(LabelOrphanGaussians(set, cloud, 0.0005f, options, &instances), 0u);
   // The answer does not depend on the thread count.
   options.orphan_min_held = 0.5;
   options.num_threads = 2;
   instances = fresh();
-  LabelOrphanGaussians(set, cloud, options, &instances);
+  LabelOrphanGaussians(set, cloud, 0.0015f, options, &instances);
   EXPECT_EQ(instances[0].gaussians, Range(0, 80));
 }
 

@@ -4,8 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
-#include <limits>
-#include <memory>
+#include <map>
 #include <optional>
 #include <unordered_map>
 
@@ -509,54 +508,86 @@ size_t LabelUntracedGaussians(const TrackerSet& set, const GaussianCloud& cloud,
   return joined;
 }
 
-size_t LabelOrphanGaussians(const TrackerSet& set, const GaussianCloud& cloud,
+size_t LabelOrphanGaussians(const TrackerSet& set, const GaussianCloud& cloud, float radius,
                             const DecompositionOptions& options, std::vector<Instance>* instances) {
   const double min_held = options.orphan_min_held;
   const size_t n = instances->size();
-  if (!(min_held <= 1.0) || n == 0) return 0;
-  std::vector<uint32_t> instance_of(set.num_gaussians, 0);  // overlaps: the later instance
+  if (!(min_held <= 1.0) || !(radius > 0) || n == 0) return 0;
+  std::vector<uint32_t> label(set.num_gaussians, 0);  // overlaps: the later instance
   for (size_t k = 0; k < n; ++k) {
-    for (uint32_t g : (*instances)[k].gaussians) instance_of[g] = static_cast<uint32_t>(k + 1);
+    for (uint32_t g : (*instances)[k].gaussians) label[g] = static_cast<uint32_t>(k + 1);
   }
   // Per tracker: the instances it holds.
   std::vector<std::vector<uint32_t>> held_by(set.trackers.size());
-  for (const std::vector<int64_t>& holder : HoldersPerFrame(set, instance_of, n, options)) {
+  for (const std::vector<int64_t>& holder : HoldersPerFrame(set, label, n, options)) {
     for (size_t a = 0; a < n; ++a) {
-      if (holder[a] >= 0) held_by[holder[a]].push_back(static_cast<uint32_t>(a));
+      if (holder[a] >= 0) held_by[holder[a]].push_back(static_cast<uint32_t>(a + 1));
     }
   }
-  std::vector<std::unique_ptr<PointIndex3>> index(n);
-  for (size_t k = 0; k < n; ++k) {
-    std::vector<Eigen::Vector3f> points;
-    for (uint32_t g : (*instances)[k].gaussians) points.emplace_back(&cloud.positions[3 * g]);
-    index[k] = std::make_unique<PointIndex3>(std::move(points));
-  }
+  // Per orphan (traced, in no instance): the instances its masks hold in enough of its frames.
   std::vector<uint32_t> orphans;
   for (uint32_t g = 0; g < set.num_gaussians; ++g) {
-    if (instance_of[g] == 0 && set.frame_offsets[g + 1] > set.frame_offsets[g])
-      orphans.push_back(g);
+    if (label[g] == 0 && set.frame_offsets[g + 1] > set.frame_offsets[g]) orphans.push_back(g);
   }
-  std::vector<uint32_t> joins(orphans.size(), 0);
+  std::vector<std::vector<uint32_t>> allowed(orphans.size());
   RunWithThreads(options.num_threads, [&] {
     tbb::parallel_for(size_t{0}, orphans.size(), [&](size_t i) {
       const uint32_t g = orphans[i];
       const uint64_t traced = set.frame_offsets[g + 1] - set.frame_offsets[g];
-      std::unordered_map<uint32_t, uint32_t> votes;  // instance -> frames whose mask holds it
+      std::map<uint32_t, uint32_t> votes;  // label -> frames whose mask holds that instance
       for (uint64_t m = set.mask_offsets[g]; m < set.mask_offsets[g + 1]; ++m) {
         for (uint32_t k : held_by[set.masks[m]]) ++votes[k];
       }
-      const Eigen::Vector3f p(&cloud.positions[3 * g]);
-      float best_d2 = std::numeric_limits<float>::infinity();
       for (const auto& [k, count] : votes) {
-        if (count < min_held * traced) continue;
-        const float d2 = index[k]->Nearest(p).second;
-        if (d2 < best_d2 || (d2 == best_d2 && k + 1 < joins[i])) {
-          best_d2 = d2;
-          joins[i] = k + 1;
-        }
+        if (count >= min_held * traced) allowed[i].push_back(k);
       }
     });
   });
+  // Grow the instances through their orphans in steps of at most `radius`, so that an orphan
+  // joins the allowed instance nearest along the orphans, not across a gap to a neighbour.
+  std::vector<uint32_t> pending, domain;
+  for (size_t i = 0; i < orphans.size(); ++i) {
+    if (!allowed[i].empty()) pending.push_back(static_cast<uint32_t>(i));
+  }
+  if (pending.empty()) return 0;
+  std::vector<Eigen::Vector3f> points;
+  for (uint32_t g = 0; g < set.num_gaussians; ++g) {
+    if (label[g] > 0) domain.push_back(g);
+  }
+  for (uint32_t i : pending) domain.push_back(orphans[i]);
+  for (uint32_t g : domain) points.emplace_back(&cloud.positions[3 * g]);
+  const PointIndex3 index(std::move(points));
+  constexpr size_t kNeighbours = 16;
+  const float radius2 = radius * radius;
+  std::vector<uint32_t> joins(orphans.size(), 0);
+  while (!pending.empty()) {
+    std::vector<uint32_t> found(pending.size(), 0);
+    RunWithThreads(options.num_threads, [&] {
+      tbb::parallel_for(size_t{0}, pending.size(), [&](size_t j) {
+        const uint32_t i = pending[j];
+        const Eigen::Vector3f p(&cloud.positions[3 * orphans[i]]);
+        for (const auto& [q, d2] : index.KNearest(p, kNeighbours)) {
+          if (d2 > radius2) break;
+          const uint32_t l = label[domain[q]];
+          if (l > 0 && std::binary_search(allowed[i].begin(), allowed[i].end(), l)) {
+            found[j] = l;
+            break;
+          }
+        }
+      });
+    });
+    std::vector<uint32_t> still;
+    for (size_t j = 0; j < pending.size(); ++j) {
+      if (found[j] == 0) {
+        still.push_back(pending[j]);
+        continue;
+      }
+      joins[pending[j]] = found[j];
+      label[orphans[pending[j]]] = found[j];  // visible to the next step only
+    }
+    if (still.size() == pending.size()) break;
+    pending.swap(still);
+  }
   size_t joined = 0;
   std::vector<std::vector<uint32_t>> added(n);
   for (size_t i = 0; i < orphans.size(); ++i) {

@@ -60,9 +60,11 @@ int MergeUnseparatedInstances(const TrackerSet& trackers, const DecompositionOpt
 size_t LabelUntracedGaussians(const TrackerSet& trackers, const GaussianCloud& cloud, float radius,
                               int num_threads, std::vector<Instance>* instances);
 
-// Traced Gaussians in no instance join the instance that their masks hold in at least
-// orphan_min_held of the frames tracing them (the nearest such instance when several qualify).
-size_t LabelOrphanGaussians(const TrackerSet& trackers, const GaussianCloud& cloud,
+// Traced Gaussians in no instance join an instance that their masks hold in at least
+// orphan_min_held of the frames tracing them, grown from the instances through such Gaussians in
+// steps of at most `radius` (scene units): the nearest along them when several qualify. Returns
+// how many joined an instance.
+size_t LabelOrphanGaussians(const TrackerSet& trackers, const GaussianCloud& cloud, float radius,
                             const DecompositionOptions& options, std::vector<Instance>* instances);
 
 // 4.8: under-segmented masks whose tracker lies > remedy_ratio inside one instance join that
