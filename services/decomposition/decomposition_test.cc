@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <numeric>
 #include <random>
+#include <tuple>
 
 #include "common/eval/click_eval.h"
 #include "common/synth/scene_writer.h"
@@ -339,42 +340,30 @@ TEST(PostProcess, GaussiansOnlyMergedMasksHoldJoinTheNearestHeldInstance) {
     if (g >= 210) x = 5.0f + 0.001f * g;               // far away
     cloud.positions[3 * g] = x;
   }
-  auto fresh = [] {
+  // Runs the step on fresh instances (A: 0-59, B: 100-199); returns (joined, A, B).
+  auto label = [&](double min_held, float step, int threads) {
+    DecompositionOptions options;
+    options.orphan_min_held = min_held;
+    options.num_threads = threads;
     std::vector<Instance> instances(2);
     instances[0].gaussians = Range(0, 60);
     instances[1].gaussians = Range(100, 200);
-    return instances;
+    const size_t joined = LabelOrphanGaussians(set, cloud, step, options, &instances);
+    return std::make_tuple(joined, instances[0].gaussians, instances[1].gaussians);
   };
-  DecompositionOptions options;
-  options.num_threads = 1;
-  std::vector<Instance> instances = fresh();
   // Orphans 60-99: A held by their masks in frames 0, 1, 3 (3 of 4), B in 1 and 3 (2 of 4): both
   // qualify at 0.5, and each grows from its end of the line in 1 mm steps: they meet halfway. The
   // table: A in 1 of 4. The missed object: none.
-  EXPECT_EQ(LabelOrphanGaussians(set, cloud, 0.0015f, options, &instances), 40u);
-  EXPECT_EQ(instances[0].gaussians, Range(0, 80));
-  EXPECT_EQ(instances[1].gaussians, join(Range(80, 100), Range(100, 200)));
+  EXPECT_EQ(label(0.5, 0.0015f, 1),
+            std::make_tuple(size_t{40}, Range(0, 80), join(Range(80, 100), Range(100, 200))));
   // Above 0.5 only A qualifies; above 0.75 none does; above 1 the step is off.
-  options.orphan_min_held = 0.7;
-  instances = fresh();
-  EXPECT_EQ(LabelOrphanGaussians(set, cloud, 0.0015f, options, &instances), 40u);
-  EXPECT_EQ(instances[0].gaussians, Range(0, 100));
-  options.orphan_min_held = 0.8;
-  instances = fresh();
-  EXPECT_EQ(LabelOrphanGaussians(set, cloud, 0.0015f, options, &instances), 0u);
-  options.orphan_min_held = 2.0;
-  EXPECT_EQ(LabelOrphanGaussians(set, cloud, 0.0015f, options, &instances), 0u);
-  EXPECT_EQ(instances[0].gaussians, Range(0, 60));
+  EXPECT_EQ(label(0.7, 0.0015f, 1), std::make_tuple(size_t{40}, Range(0, 100), Range(100, 200)));
+  EXPECT_EQ(label(0.8, 0.0015f, 1), std::make_tuple(size_t{0}, Range(0, 60), Range(100, 200)));
+  EXPECT_EQ(label(2.0, 0.0015f, 1), std::make_tuple(size_t{0}, Range(0, 60), Range(100, 200)));
   // Steps shorter than the 1 mm spacing reach no orphan.
-  options.orphan_min_held = 0.5;
-  instances = fresh();
-  EXPECT_EQ(LabelOrphanGaussians(set, cloud, 0.0005f, options, &instances), 0u);
+  EXPECT_EQ(std::get<0>(label(0.5, 0.0005f, 1)), 0u);
   // The answer does not depend on the thread count.
-  options.orphan_min_held = 0.5;
-  options.num_threads = 2;
-  instances = fresh();
-  LabelOrphanGaussians(set, cloud, 0.0015f, options, &instances);
-  EXPECT_EQ(instances[0].gaussians, Range(0, 80));
+  EXPECT_EQ(label(0.5, 0.0015f, 2), label(0.5, 0.0015f, 1));
 }
 
 TEST(PostProcess, UntracedGaussiansJoinTheInstanceOfTheNearestTracedOne) {

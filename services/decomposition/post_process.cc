@@ -461,6 +461,33 @@ int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions&
   return merges;
 }
 
+namespace {
+
+// Adds gaussians[i] to instance joins[i] - 1 where joins[i] > 0 (gaussians ascending, in no
+// instance); returns how many were added.
+size_t AddToInstances(const std::vector<uint32_t>& gaussians, const std::vector<uint32_t>& joins,
+                      std::vector<Instance>* instances) {
+  size_t joined = 0;
+  std::vector<std::vector<uint32_t>> added(instances->size());
+  for (size_t i = 0; i < gaussians.size(); ++i) {
+    if (joins[i] == 0) continue;
+    added[joins[i] - 1].push_back(gaussians[i]);
+    ++joined;
+  }
+  for (size_t k = 0; k < instances->size(); ++k) {
+    if (added[k].empty()) continue;
+    std::vector<uint32_t>& members = (*instances)[k].gaussians;
+    std::vector<uint32_t> merged;
+    merged.reserve(members.size() + added[k].size());
+    std::merge(members.begin(), members.end(), added[k].begin(), added[k].end(),
+               std::back_inserter(merged));  // both sorted and disjoint
+    members.swap(merged);
+  }
+  return joined;
+}
+
+}  // namespace
+
 size_t LabelUntracedGaussians(const TrackerSet& set, const GaussianCloud& cloud, float radius,
                               int num_threads, std::vector<Instance>* instances) {
   if (!(radius > 0) || instances->empty()) return 0;
@@ -489,23 +516,7 @@ size_t LabelUntracedGaussians(const TrackerSet& set, const GaussianCloud& cloud,
       if (d2 <= radius2) joins[i] = instance_of[traced[nearest]];
     });
   });
-  size_t joined = 0;
-  std::vector<std::vector<uint32_t>> added(instances->size());
-  for (size_t i = 0; i < untraced.size(); ++i) {
-    if (joins[i] == 0) continue;
-    added[joins[i] - 1].push_back(untraced[i]);
-    ++joined;
-  }
-  for (size_t k = 0; k < instances->size(); ++k) {
-    if (added[k].empty()) continue;
-    std::vector<uint32_t>& members = (*instances)[k].gaussians;
-    std::vector<uint32_t> merged;
-    merged.reserve(members.size() + added[k].size());
-    std::merge(members.begin(), members.end(), added[k].begin(), added[k].end(),
-               std::back_inserter(merged));  // both sorted and disjoint
-    members.swap(merged);
-  }
-  return joined;
+  return AddToInstances(untraced, joins, instances);
 }
 
 size_t LabelOrphanGaussians(const TrackerSet& set, const GaussianCloud& cloud, float radius,
@@ -588,23 +599,7 @@ size_t LabelOrphanGaussians(const TrackerSet& set, const GaussianCloud& cloud, f
     if (still.size() == pending.size()) break;
     pending.swap(still);
   }
-  size_t joined = 0;
-  std::vector<std::vector<uint32_t>> added(n);
-  for (size_t i = 0; i < orphans.size(); ++i) {
-    if (joins[i] == 0) continue;
-    added[joins[i] - 1].push_back(orphans[i]);
-    ++joined;
-  }
-  for (size_t k = 0; k < n; ++k) {
-    if (added[k].empty()) continue;
-    std::vector<uint32_t>& members = (*instances)[k].gaussians;
-    std::vector<uint32_t> merged;
-    merged.reserve(members.size() + added[k].size());
-    std::merge(members.begin(), members.end(), added[k].begin(), added[k].end(),
-               std::back_inserter(merged));  // both sorted and disjoint
-    members.swap(merged);
-  }
-  return joined;
+  return AddToInstances(orphans, joins, instances);
 }
 
 std::vector<uint32_t> RemedyUndersegmented(const TrackerSet& set, const MaskJudgement& judgement,
