@@ -5,6 +5,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <numeric>
 #include <optional>
 #include <unordered_map>
 
@@ -568,29 +569,41 @@ size_t LabelOrphanGaussians(const TrackerSet& set, const GaussianCloud& cloud, f
   for (uint32_t i : pending) domain.push_back(orphans[i]);
   for (uint32_t g : domain) points.emplace_back(&cloud.positions[3 * g]);
   const PointIndex3 index(std::move(points));
+  // Each pending orphan's neighbours within one step, nearest first, found once.
   constexpr size_t kNeighbours = 16;
   const float radius2 = radius * radius;
+  std::vector<std::vector<uint32_t>> near(pending.size());
+  RunWithThreads(options.num_threads, [&] {
+    tbb::parallel_for(size_t{0}, pending.size(), [&](size_t j) {
+      const Eigen::Vector3f p(&cloud.positions[3 * orphans[pending[j]]]);
+      for (const auto& [q, d2] : index.KNearest(p, kNeighbours)) {
+        if (d2 > radius2) break;
+        near[j].push_back(domain[q]);
+      }
+    });
+  });
   std::vector<uint32_t> joins(orphans.size(), 0);
+  std::vector<uint32_t> order(pending.size());  // position in `near` of each pending orphan
+  std::iota(order.begin(), order.end(), 0u);
   while (!pending.empty()) {
     std::vector<uint32_t> found(pending.size(), 0);
     RunWithThreads(options.num_threads, [&] {
       tbb::parallel_for(size_t{0}, pending.size(), [&](size_t j) {
-        const uint32_t i = pending[j];
-        const Eigen::Vector3f p(&cloud.positions[3 * orphans[i]]);
-        for (const auto& [q, d2] : index.KNearest(p, kNeighbours)) {
-          if (d2 > radius2) break;
-          const uint32_t l = label[domain[q]];
-          if (l > 0 && std::binary_search(allowed[i].begin(), allowed[i].end(), l)) {
+        const std::vector<uint32_t>& allow = allowed[pending[j]];
+        for (uint32_t q : near[order[j]]) {
+          const uint32_t l = label[q];
+          if (l > 0 && std::binary_search(allow.begin(), allow.end(), l)) {
             found[j] = l;
             break;
           }
         }
       });
     });
-    std::vector<uint32_t> still;
+    std::vector<uint32_t> still, still_order;
     for (size_t j = 0; j < pending.size(); ++j) {
       if (found[j] == 0) {
         still.push_back(pending[j]);
+        still_order.push_back(order[j]);
         continue;
       }
       joins[pending[j]] = found[j];
@@ -598,6 +611,7 @@ size_t LabelOrphanGaussians(const TrackerSet& set, const GaussianCloud& cloud, f
     }
     if (still.size() == pending.size()) break;
     pending.swap(still);
+    order.swap(still_order);
   }
   return AddToInstances(orphans, joins, instances);
 }
