@@ -84,6 +84,7 @@ absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const Gaussian
   const float step = static_cast<float>(options.untraced_radius * RobustSceneDiagonal(cloud));
   result.orphans_labelled =
       LabelOrphanGaussians(result.trackers, cloud, step, options, &result.instances);
+  RETURN_IF_ERROR(CheckCancelled(options.cancel, "decompose"));
   result.untraced_labelled =
       LabelUntracedGaussians(result.trackers, cloud, step, options.num_threads, &result.instances);
   result.post_seconds = post_seconds + watch.ElapsedSeconds();

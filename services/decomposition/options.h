@@ -65,8 +65,9 @@ struct DecompositionOptions {
   // share of the robust scene diagonal. 0 = off.
   double untraced_radius = 0.01;
   // Labelling of orphan Gaussians (not in the released code; docs/DECOMPOSITION.md): a traced
-  // Gaussian in no instance joins the instance that its masks hold in at least this share of the
-  // frames that trace it (the nearest such instance when several qualify). > 1 = off.
+  // Gaussian in no instance joins an instance that its masks hold in at least this share of the
+  // frames that trace it; instances grow through such Gaussians in steps of untraced_radius, so
+  // the nearest along them wins when several qualify. > 1 (or untraced_radius 0) = off.
   double orphan_min_held = 0.5;
   int num_threads = 0;                 // 0 = all cores; results never depend on it
   const CancelFlag* cancel = nullptr;  // polled per view; not owned (common/core/cancel.h)

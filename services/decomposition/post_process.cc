@@ -585,7 +585,7 @@ size_t LabelOrphanGaussians(const TrackerSet& set, const GaussianCloud& cloud, f
   std::vector<uint32_t> joins(orphans.size(), 0);
   std::vector<uint32_t> order(pending.size());  // position in `near` of each pending orphan
   std::iota(order.begin(), order.end(), 0u);
-  while (!pending.empty()) {
+  while (!pending.empty() && !IsCancelled(options.cancel)) {  // Decompose reports the cancel
     std::vector<uint32_t> found(pending.size(), 0);
     RunWithThreads(options.num_threads, [&] {
       tbb::parallel_for(size_t{0}, pending.size(), [&](size_t j) {

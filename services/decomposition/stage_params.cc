@@ -83,8 +83,9 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
               "A Gaussian no view traces joins the instance of the nearest traced Gaussian "
               "within this share of the robust scene diagonal (0 = off, the released code)")
         .Real("orphan_min_held", &O::orphan_min_held, 0.0, 2.0,
-              "A traced Gaussian in no instance joins the nearest instance that its masks hold "
-              "in at least this share of the frames tracing it (> 1 = off, the released code)")
+              "A traced Gaussian in no instance joins an instance that its masks hold in at "
+              "least this share of the frames tracing it, grown in untraced_radius steps (> 1 "
+              "or untraced_radius 0 = off, the released code)")
         .Check([](const O& o) { return o.Validate(); });
     return c;
   }();
