@@ -366,6 +366,36 @@ TEST(PostProcess, GaussiansOnlyMergedMasksHoldJoinTheNearestHeldInstance) {
   EXPECT_EQ(label(0.5, 0.0015f, 2), label(0.5, 0.0015f, 1));
 }
 
+TEST(PostProcess, FramesThatMissedAnInstanceDoNotCountAgainstItsOrphans) {
+  // Object C: instance 0-59, orphans 60-99 (its thin rim: traced, outside the masks of views 4
+  // and 5). 100-109: table beside it, covered by one bleeding mask. Views 0 and 1 missed C
+  // entirely (no mask there), views 2 and 3 mask it whole, views 4 and 5 mask its instance part.
+  const TrackerSet set = MakeSetFromLists(6, 110,
+                                          {{2, 1, Range(0, 100)},
+                                           {3, 1, Range(0, 110)},  // bleeding onto the table
+                                           {4, 1, Range(0, 60)},
+                                           {5, 1, Range(0, 60)}});
+  GaussianCloud cloud;
+  cloud.Resize(110);
+  for (int g = 0; g < 110; ++g) {
+    cloud.positions[3 * g] = g < 100 ? 0.001f * g : -0.001f * (g - 99);  // the table before C
+  }
+  auto label = [&](bool skip_missed, int threads) {
+    DecompositionOptions options;
+    options.orphan_skips_missed_frames = skip_missed;
+    options.num_threads = threads;
+    std::vector<Instance> instances(1);
+    instances[0].gaussians = Range(0, 60);
+    LabelOrphanGaussians(set, cloud, 0.0015f, options, &instances);
+    return instances[0].gaussians;
+  };
+  // Every traced frame counted: the rim is held in 2 of 6 frames, too few. Without the two frames
+  // that missed C: 2 of 4. The table: 1 of 6, then 1 of 4, out either way.
+  EXPECT_EQ(label(false, 1), Range(0, 60));
+  EXPECT_EQ(label(true, 1), Range(0, 100));
+  EXPECT_EQ(label(true, 2), label(true, 1));
+}
+
 TEST(PostProcess, UntracedGaussiansJoinTheInstanceOfTheNearestTracedOne) {
   // Gaussians 0-4 traced and in the instance (x = 0 .. 0.4), 5-9 traced and in none (x = 2 ..
   // 2.4); 10-14 untraced: 10-12 beside the instance, 13 beside the unclaimed ones, 14 beyond the

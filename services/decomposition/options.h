@@ -69,6 +69,11 @@ struct DecompositionOptions {
   // frames that trace it; instances grow through such Gaussians in steps of untraced_radius, so
   // the nearest along them wins when several qualify. > 1 (or untraced_radius 0) = off.
   double orphan_min_held = 0.5;
+  // ... counting, per candidate instance, only the frames where the segmenter did not miss that
+  // instance (at least min_tracker_gaussians of it traced there and more than
+  // mask_visible_threshold of those in no kept mask): a missed frame says nothing about which
+  // object a Gaussian belongs to. false = every traced frame counts.
+  bool orphan_skips_missed_frames = true;
   int num_threads = 0;                 // 0 = all cores; results never depend on it
   const CancelFlag* cancel = nullptr;  // polled per view; not owned (common/core/cancel.h)
 

@@ -406,6 +406,32 @@ std::vector<std::vector<int64_t>> HoldersPerFrame(const TrackerSet& set,
   return holders;
 }
 
+// Per frame v, per instance k (labelled 1..n in instance_of): missed[v * n + k - 1] = 1 when at
+// least min_tracker_gaussians of its Gaussians are traced in v and more than
+// mask_visible_threshold of those lie in no kept mask there (the judgement's "not visible").
+std::vector<uint8_t> MissedPerFrame(const TrackerSet& set, const std::vector<uint32_t>& instance_of,
+                                    size_t n, const DecompositionOptions& options) {
+  const size_t cells = size_t(set.num_views) * n;
+  std::vector<uint32_t> traced(cells, 0), masked(cells, 0);
+  for (uint32_t g = 0; g < set.num_gaussians; ++g) {
+    const uint32_t k = instance_of[g];
+    if (k == 0) continue;
+    const uint16_t* frames = nullptr;
+    const size_t count = set.FramesOf(g, &frames);
+    for (size_t f = 0; f < count; ++f) ++traced[size_t(frames[f]) * n + k - 1];
+    for (uint64_t m = set.mask_offsets[g]; m < set.mask_offsets[g + 1]; ++m) {
+      ++masked[size_t(set.trackers[set.masks[m]].view) * n + k - 1];
+    }
+  }
+  std::vector<uint8_t> missed(cells, 0);
+  for (size_t c = 0; c < cells; ++c) {
+    missed[c] =
+        traced[c] >= static_cast<uint32_t>(options.min_tracker_gaussians) &&
+        traced[c] - std::min(masked[c], traced[c]) > options.mask_visible_threshold * traced[c];
+  }
+  return missed;
+}
+
 }  // namespace
 
 int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions& options,
@@ -536,7 +562,12 @@ size_t LabelOrphanGaussians(const TrackerSet& set, const GaussianCloud& cloud, f
       if (holder[a] >= 0) held_by[holder[a]].push_back(static_cast<uint32_t>(a + 1));
     }
   }
-  // Per orphan (traced, in no instance): the instances its masks hold in enough of its frames.
+  // Per frame v and instance k: missed[v * n + k - 1] when the segmenter missed it there.
+  const std::vector<uint8_t> missed = options.orphan_skips_missed_frames
+                                          ? MissedPerFrame(set, label, n, options)
+                                          : std::vector<uint8_t>(size_t(set.num_views) * n, 0);
+  // Per orphan (traced, in no instance): the instances its masks hold in enough of its frames
+  // (those where the instance was not missed).
   std::vector<uint32_t> orphans;
   for (uint32_t g = 0; g < set.num_gaussians; ++g) {
     if (label[g] == 0 && set.frame_offsets[g + 1] > set.frame_offsets[g]) orphans.push_back(g);
@@ -545,13 +576,17 @@ size_t LabelOrphanGaussians(const TrackerSet& set, const GaussianCloud& cloud, f
   RunWithThreads(options.num_threads, [&] {
     tbb::parallel_for(size_t{0}, orphans.size(), [&](size_t i) {
       const uint32_t g = orphans[i];
-      const uint64_t traced = set.frame_offsets[g + 1] - set.frame_offsets[g];
       std::map<uint32_t, uint32_t> votes;  // label -> frames whose mask holds that instance
       for (uint64_t m = set.mask_offsets[g]; m < set.mask_offsets[g + 1]; ++m) {
-        for (uint32_t k : held_by[set.masks[m]]) ++votes[k];
+        const size_t row = size_t(set.trackers[set.masks[m]].view) * n;
+        for (uint32_t k : held_by[set.masks[m]]) votes[k] += missed[row + k - 1] == 0;
       }
+      const uint16_t* frames = nullptr;
+      const size_t traced = set.FramesOf(g, &frames);
       for (const auto& [k, count] : votes) {
-        if (count >= min_held * traced) allowed[i].push_back(k);
+        size_t counted = 0;  // traced frames where instance k was not missed
+        for (size_t f = 0; f < traced; ++f) counted += missed[size_t(frames[f]) * n + k - 1] == 0;
+        if (count > 0 && count >= min_held * counted) allowed[i].push_back(k);
       }
     });
   });

@@ -86,6 +86,9 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
               "A traced Gaussian in no instance joins an instance that its masks hold in at "
               "least this share of the frames tracing it, grown in untraced_radius steps (> 1 "
               "or untraced_radius 0 = off, the released code)")
+        .Bool("orphan_skips_missed_frames", &O::orphan_skips_missed_frames,
+              "The orphan share does not count frames where the segmenter missed the candidate "
+              "instance (most of it traced there in no mask); false = every traced frame counts")
         .Check([](const O& o) { return o.Validate(); });
     return c;
   }();
