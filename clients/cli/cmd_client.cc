@@ -161,10 +161,9 @@ void AddClientCommands(CLI::App& app, Action* action) {
   CLI::Option* iterations =
       s->add_option("--iterations", submit->iterations,
                     "Shortcut for train.iterations (validated by the server like any parameter)");
-  s->add_option(
-       "--stages", submit->stages,
-       "Only these stages, comma-separated (their inputs included), e.g. "
-       "decompose,train,segment; default: every stage but export (add it: ...,complete,export)")
+  s->add_option("--stages", submit->stages,
+                "Only these stages, comma-separated (their inputs included), e.g. "
+                "decompose,train,segment; default: every stage, export included")
       ->delimiter(',');
   s->add_option("--priority", submit->priority, "Higher runs first (interactive requests)");
   s->add_flag("--wait", submit->wait, "Watch the jobs until they finish");

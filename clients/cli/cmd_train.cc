@@ -160,17 +160,17 @@ void AddTrainCommands(CLI::App& app, Action* action) {
   CLI::App* r = app.add_subcommand(
       "run",
       "All stages offline, the same stage code the services run: decompose, train, segment, "
-      "complete (results under --out: decomposition/, training/, segmentation/, objects/<item>/)");
+      "complete, export (results under --out: decomposition/, training/, segmentation/, "
+      "objects/<item>/, export/)");
   r->add_option("--scene", run->scene, "Scene directory (images, masks, gaussians.ply)")
       ->required();
   r->add_option("--out", run->out,
                 "Output directory: one folder per stage (decomposition/, training/, "
-                "segmentation/, objects/)")
+                "segmentation/, objects/, export/)")
       ->required();
   r->add_option("--stages", run->stages,
                 "Run only these stages (comma-separated, each with its inputs: e.g. "
-                "decompose,train,segment skips completion; add export for robot-ready objects); "
-                "default: every stage but export")
+                "decompose,train,segment skips completion and export); default: every stage")
       ->delimiter(',');
   auto registry = std::make_shared<pipeline::StageRegistry>();
   if (absl::Status s = stages::RegisterStages(registry.get()); !s.ok())
