@@ -640,6 +640,39 @@ TEST(GeometricPrior, TheAxisCapLeavesATorusHoleOpen) {
   EXPECT_GT(out->report["rejected"].value("axis_cap_open_above", 0), 0);
 }
 
+// A mug (handle at +x) seen from the front: the body's axis is accepted with a mirror plane
+// through it. The plane's turn about the axis rests on the handle alone; the handle lends it no
+// images (they would stand centimetres beside the handle when the turn is a few degrees off), so
+// nothing is added beyond the body's radius.
+TEST(GeometricPrior, AMirrorPlaneThroughTheAxisLendsNoImagesOfTheHandle) {
+  ShapeSpec spec;
+  spec.kind = ShapeKind::kMug;
+  spec.size = {0.05f, 0, 0.1f};
+  for (uint64_t seed : {11u, 12u, 13u}) {
+    const PartialObject scene = MakePartialObject(MakeShapeMesh(spec, 48), 4000, seed, 100);
+    const PriorFixture fixture(scene);
+    ASSERT_TRUE(fixture.ok());
+    auto beyond_body = [&](bool skip) {
+      GeometricPriorOptions options;
+      options.support_cap = false;  // the cap fills the footprint, handle included
+      options.mirror_skips_axis_asymmetric = skip;
+      auto out = GeometricPrior(options).Complete(fixture.input);
+      EXPECT_TRUE(out.ok()) << out.status();
+      size_t count = 0;
+      for (size_t g = 0; g < out->added.size(); ++g) {
+        const Eigen::Vector3f p(&out->added.positions[3 * g]);
+        count += Eigen::Vector2f(p.x(), p.y()).norm() > 0.05f + 0.01f;
+      }
+      return count;
+    };
+    // Planes 3-8 degrees off the handle's: 14-25 surfels a centimetre or more beyond the body
+    // when the handle is mirrored, 0-7 (revolved and mirrored images of the body's rim) when not.
+    const size_t mirrored = beyond_body(false), skipped = beyond_body(true);
+    EXPECT_GE(mirrored, 10u) << seed;
+    EXPECT_LT(2 * skipped, mirrored) << seed;
+  }
+}
+
 // The joint refinement inside the completion: real views cropped and rendered in situ (their
 // images here are renders of the scene itself), the ring's generated views; the object keeps its
 // surfel count and provenance, and views without an image are skipped and counted.

@@ -189,28 +189,66 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     added.push_back(c);
   };
   nlohmann::json tried = nlohmann::json::array();
-  int skipped_sources = 0;
+  int skipped_sources = 0, axis_skipped = 0;
   int accepted = 0;
   std::map<std::string, int> added_by;
+  // A part a hypothesis does not hold for (a mug's handle under the body's axis) has images in
+  // seen-empty space: such a surfel lends that hypothesis no images at all.
+  auto asymmetric_sources = [&](const SymmetryHypothesis& h) {
+    std::vector<uint8_t> asymmetric(instance.size(), 0);
+    for (uint32_t g = 0; g < instance.size(); ++g) {
+      int contradicted = 0;
+      for (int k = 0; k < h.copies; ++k)
+        contradicted += input.free_space->IsFree(h.MapPoint(points[g], k));
+      asymmetric[g] = contradicted > std::max(0, h.copies / 4);
+    }
+    return asymmetric;
+  };
+  constexpr double kMaxAxisAsymmetricShare = 0.3;
+  // Sources some accepted revolution axis contained in a plane does not hold for, per plane.
+  auto axis_asymmetric_in = [&](const SymmetryHypothesis& plane) {
+    std::vector<uint8_t> skip(instance.size(), 0);
+    if (!options_.mirror_skips_axis_asymmetric || plane.kind != SymmetryKind::kPlane) return skip;
+    const float sin_tolerance = std::sin(10.0f * static_cast<float>(M_PI) / 180.0f);
+    for (const SymmetryHypothesis& axis : hypotheses) {
+      if (!axis.accepted || axis.kind != SymmetryKind::kAxis) continue;
+      if (std::abs(axis.direction.dot(plane.direction)) > sin_tolerance ||
+          std::abs(plane.direction.dot(axis.point - plane.point)) > 2.0f * frame.spacing) {
+        continue;  // the plane does not contain this axis
+      }
+      // Only what sticks out beyond the body the axis holds for (a handle, not the body's own
+      // surfels that a slightly offset axis revolves into seen-empty space).
+      const std::vector<uint8_t> off = asymmetric_sources(axis);
+      auto radial = [&](uint32_t g) {
+        const Eigen::Vector3f d = points[g] - axis.point;
+        return (d - d.dot(axis.direction) * axis.direction).norm();
+      };
+      std::vector<float> body;
+      for (uint32_t g = 0; g < off.size(); ++g) {
+        if (!off[g]) body.push_back(radial(g));
+      }
+      // An axis that most of the object contradicts (a tilted or offset fit) tells no handle
+      // from its own error.
+      if (body.empty() || body.size() < (1.0 - kMaxAxisAsymmetricShare) * off.size()) continue;
+      const size_t q = body.size() * 95 / 100;
+      std::nth_element(body.begin(), body.begin() + q, body.end());
+      const float reach = body[std::min(q, body.size() - 1)] + frame.spacing;
+      for (uint32_t g = 0; g < skip.size(); ++g) skip[g] |= off[g] && radial(g) > reach;
+    }
+    return skip;
+  };
   for (const SymmetryHypothesis& h : hypotheses) {
     tried.push_back(h.Describe());
     if (!h.accepted) continue;
     ++accepted;
     const size_t before = added.size();
-    // A part the hypothesis does not hold for (a mug's handle under the body's axis) has images
-    // in seen-empty space: such a surfel lends no images at all.
-    std::vector<uint8_t> asymmetric(instance.size(), 0);
-    int asymmetric_count = 0;
-    for (uint32_t g = 0; g < instance.size(); ++g) {
-      int contradicted = 0;
-      for (int k = 0; k < h.copies; ++k)
-        contradicted += input.free_space->IsFree(h.MapPoint(points[g], k));
-      if (contradicted > std::max(0, h.copies / 4)) {
-        asymmetric[g] = 1;
-        ++asymmetric_count;
-      }
+    std::vector<uint8_t> asymmetric = asymmetric_sources(h);
+    const std::vector<uint8_t> axis_asymmetric = axis_asymmetric_in(h);
+    for (size_t g = 0; g < asymmetric.size(); ++g) {
+      skipped_sources += asymmetric[g];
+      axis_skipped += axis_asymmetric[g] && !asymmetric[g];
+      asymmetric[g] |= axis_asymmetric[g];
     }
-    skipped_sources += asymmetric_count;
     for (int k = 0; k < h.copies; ++k) {
       const Eigen::Matrix3f linear = h.Linear(k);
       for (uint32_t g = 0; g < instance.size(); ++g) {
@@ -302,6 +340,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   out.report["added"] = added.size();
   out.report["added_by"] = added_by;
   out.report["asymmetric_sources"] = skipped_sources;
+  out.report["mirror_axis_asymmetric_sources"] = axis_skipped;
   out.report["rejected"] = {{"observed_free", rejected_free},
                             {"already_covered", rejected_covered},
                             {"below_support", rejected_below},

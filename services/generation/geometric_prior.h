@@ -28,6 +28,11 @@ struct GeometricPriorOptions {
   // RESULTS.md ("Free-space violations").
   int candidate_free_views = 1;
   float max_support_gap_radii = 1.0f;  // no support completion when it is farther below
+  // A mirror plane that contains an accepted revolution axis is oriented about that axis only by
+  // the parts the axis does not hold for (a mug's handle), weakly: a plane a few degrees off
+  // mirrors the handle centimetres beside itself. Such a plane lends no images of those parts.
+  // Measured in RESULTS.md ("Free-space violations: mirrored handles").
+  bool mirror_skips_axis_asymmetric = true;
   // Refuse a candidate standing off the observed surface beside it (observed_surface.h).
   // Measured in RESULTS.md ("Free-space violations: candidates off the observed surface").
   ObservedSurfaceOptions observed_surface;
