@@ -37,6 +37,11 @@ check "every exported object lies on a ground-truth object" python3 -c "
 import json, sys
 d = json.loads(open('$WORK/out.txt').read().strip().splitlines()[-1])
 sys.exit(0 if d['count'] == $n and d['mean']['chamfer_m'] < 0.02 else 1)"
+# The offline export command runs the same stage code on the completed objects: the same bytes.
+check "export again from the completed objects" "$BIN" export --scene "$WORK/scene" --objects "$WORK/run/objects" --out "$WORK/export"
+check "the offline export equals the pipeline's, byte for byte" diff -r "$WORK/run/export" "$WORK/export"
+check_fails "export of a folder without completed objects" "no completed object" "$BIN" export --scene "$WORK/scene" --objects "$WORK/scene" --out "$WORK/none"
+check "and it wrote nothing" test ! -e "$WORK/none"
 for urdf in "$WORK"/run/export/*/object.urdf; do
   check "check_urdf $(basename "$(dirname "$urdf")")" check_urdf "$urdf"
 done

@@ -28,6 +28,7 @@ void AddDecomposeCommand(CLI::App& app, Action* action);
 void AddTrainCommands(CLI::App& app, Action* action);  // train, segment, run
 void AddQueryCommand(CLI::App& app, Action* action);
 void AddCompleteCommand(CLI::App& app, Action* action);
+void AddExportCommand(CLI::App& app, Action* action);
 void AddServeCommand(CLI::App& app, Action* action);
 void AddClientCommands(CLI::App& app, Action* action);  // submit, watch, jobs, fetch, cancel
 void AddObjectCommands(CLI::App& app, Action* action);  // object, objects

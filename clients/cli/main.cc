@@ -48,6 +48,7 @@ int Run(int argc, char** argv) {
   AddTrainCommands(app, &action);
   AddQueryCommand(app, &action);
   AddCompleteCommand(app, &action);
+  AddExportCommand(app, &action);
   AddEvalCommand(app, &action);
   AddBenchCommand(app, &action);
   AddServeCommand(app, &action);
