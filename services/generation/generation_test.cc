@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 #include <random>
 
 #include <gtest/gtest.h>
@@ -670,6 +671,65 @@ TEST(GeometricPrior, AMirrorPlaneThroughTheAxisLendsNoImagesOfTheHandle) {
     const size_t mirrored = beyond_body(false), skipped = beyond_body(true);
     EXPECT_GE(mirrored, 10u) << seed;
     EXPECT_LT(2 * skipped, mirrored) << seed;
+  }
+}
+
+// A partly seen bottle whose segmentation also holds three surfels of a neighbour, 1.5-2 cm
+// beside its base, inside a tray's rim that hides the space around the base from every view
+// (their images are not in seen-empty space, so the axis holds for them): revolved and mirrored
+// they would ring the bottle's base. They lie beyond the body's profile at their height, and lend
+// the axis and the plane through it nothing.
+TEST(GeometricPrior, ANeighboursSurfelsBesideTheBaseAreNotRevolvedIntoARing) {
+  for (uint64_t seed : {21u, 22u, 23u}) {
+    PartialObject scene = MakePartialObject(Bottle(), 4000, seed);
+    // A tray's rim around the base hides the space beside it from every view.
+    ShapeSpec rim;
+    rim.kind = ShapeKind::kCylinder;
+    rim.size = {0.1f, 0, 0.06f};
+    std::mt19937_64 rng(seed);
+    AppendSurfels(MakeShapeMesh(rim, 48), 3000, Appearance{}, SurfelSampling{}, rng, &scene.cloud);
+    scene.labels.resize(scene.cloud.size(), 0);
+    // Copies of the bottle's surfel nearest each target, moved there (a neighbour's fragment).
+    const float bottle_radius = 0.05f;
+    const std::vector<Eigen::Vector3f> targets = {Eigen::Vector3f(-0.068f, 0.004f, 0.012f),
+                                                  Eigen::Vector3f(-0.066f, -0.006f, 0.018f),
+                                                  Eigen::Vector3f(-0.070f, 0.010f, 0.024f)};
+    std::vector<uint32_t> keep(scene.cloud.size());
+    std::iota(keep.begin(), keep.end(), 0u);
+    for (const Eigen::Vector3f& target : targets) {
+      uint32_t nearest = 0;
+      float best = std::numeric_limits<float>::max();
+      for (uint32_t g = 0; g < scene.cloud.size(); ++g) {
+        const float d = (Eigen::Vector3f(&scene.cloud.positions[3 * g]) - target).norm();
+        if (scene.labels[g] == 1 && d < best) best = d, nearest = g;
+      }
+      keep.push_back(nearest);
+    }
+    scene.cloud = scene.cloud.Subset(keep);
+    for (size_t i = 0; i < targets.size(); ++i) {
+      const size_t g = scene.labels.size() + i;
+      for (int k = 0; k < 3; ++k) scene.cloud.positions[3 * g + k] = targets[i][k];
+    }
+    scene.labels.resize(scene.cloud.size(), 1);
+    const PriorFixture fixture(scene);
+    ASSERT_TRUE(fixture.ok());
+    auto ringed = [&](bool skip) {
+      GeometricPriorOptions options;
+      options.support_cap = false;  // the cap fills the footprint under the strays too
+      options.skip_beyond_axis_profile = skip;
+      auto out = GeometricPrior(options).Complete(fixture.input);
+      EXPECT_TRUE(out.ok()) << out.status();
+      size_t count = 0;
+      for (size_t g = 0; g < out->added.size(); ++g) {
+        const Eigen::Vector3f p(&out->added.positions[3 * g]);
+        count += p.z() < 0.04f && Eigen::Vector2f(p.x(), p.y()).norm() > bottle_radius + 0.008f;
+      }
+      return count;
+    };
+    // 35-36 surfels of a ring beyond the base with the strays revolved and mirrored, 0 without.
+    const size_t revolved = ringed(false), skipped = ringed(true);
+    EXPECT_GE(revolved, 20u) << seed;
+    EXPECT_LE(skipped, 2u) << seed;
   }
 }
 

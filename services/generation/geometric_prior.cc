@@ -189,7 +189,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     added.push_back(c);
   };
   nlohmann::json tried = nlohmann::json::array();
-  int skipped_sources = 0, axis_skipped = 0;
+  int skipped_sources = 0, axis_skipped = 0, profile_skipped = 0;
   int accepted = 0;
   std::map<std::string, int> added_by;
   // A part a hypothesis does not hold for (a mug's handle under the body's axis) has images in
@@ -204,36 +204,98 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     }
     return asymmetric;
   };
+  // What each accepted revolution axis holds for, computed once per axis.
   constexpr double kMaxAxisAsymmetricShare = 0.3;
-  // Sources some accepted revolution axis contained in a plane does not hold for, per plane.
-  auto axis_asymmetric_in = [&](const SymmetryHypothesis& plane) {
+  struct AxisBody {
+    const SymmetryHypothesis* axis = nullptr;
+    // Sources it does not hold for that stick out beyond the body it holds for (a handle).
+    std::vector<uint8_t> off_beyond_body;
+    // Sources it holds for (their images are not in seen-empty space) that lie beyond the body's
+    // profile at their own height: a neighbour's surfels the segmentation gave the object, where
+    // no view saw the space around them. (Those it does not hold for within the body's reach
+    // are the body's own surfels under a slightly offset axis: a plane may still mirror them.)
+    std::vector<uint8_t> beyond_profile;
+  };
+  std::vector<AxisBody> bodies;
+  for (const SymmetryHypothesis& axis : hypotheses) {
+    if (!axis.accepted || axis.kind != SymmetryKind::kAxis) continue;
+    AxisBody b;
+    b.axis = &axis;
+    b.off_beyond_body.assign(instance.size(), 0);
+    b.beyond_profile.assign(instance.size(), 0);
+    const std::vector<uint8_t> off = asymmetric_sources(axis);
+    std::vector<float> radial(instance.size()), height(instance.size()), body;
+    for (uint32_t g = 0; g < instance.size(); ++g) {
+      const Eigen::Vector3f d = points[g] - axis.point;
+      height[g] = d.dot(axis.direction);
+      radial[g] = (d - height[g] * axis.direction).norm();
+      if (!off[g]) body.push_back(radial[g]);
+    }
+    // An axis that most of the object contradicts (a tilted or offset fit) tells no handle from
+    // its own error.
+    if (body.empty() || body.size() < (1.0 - kMaxAxisAsymmetricShare) * off.size()) continue;
+    // Only what sticks out beyond the body the axis holds for (a handle, not the body's own
+    // surfels that a slightly offset axis revolves into seen-empty space).
+    const size_t q = body.size() * 95 / 100;
+    std::nth_element(body.begin(), body.begin() + q, body.end());
+    const float step = std::max(frame.spacing, 1e-6f);
+    const float reach = body[std::min(q, body.size() - 1)] + step;
+    for (uint32_t g = 0; g < instance.size(); ++g)
+      b.off_beyond_body[g] = off[g] && radial[g] > reach;
+    // The profile: the 90th percentile of the body's radii over the heights around each height
+    // (at least 2 spacings either side, more until the window holds 40 body surfels, so that a
+    // few strays there stay above the percentile; fewer in the whole object claim nothing).
+    if (options_.skip_beyond_axis_profile && body.size() >= 40) {
+      const float low = *std::min_element(height.begin(), height.end());
+      const int bins =
+          static_cast<int>((*std::max_element(height.begin(), height.end()) - low) / step) + 1;
+      std::vector<std::vector<float>> by_bin(bins);
+      auto bin_of = [&](uint32_t g) {
+        return std::clamp(static_cast<int>((height[g] - low) / step), 0, bins - 1);
+      };
+      for (uint32_t g = 0; g < instance.size(); ++g) {
+        if (!off[g]) by_bin[bin_of(g)].push_back(radial[g]);
+      }
+      std::vector<size_t> below(bins + 1, 0);  // body surfels in bins [0, i)
+      for (int i = 0; i < bins; ++i) below[i + 1] = below[i] + by_bin[i].size();
+      std::vector<float> profile(bins), window;
+      for (int i = 0; i < bins; ++i) {
+        int k = 2;
+        auto count = [&](int half) {
+          return below[std::min(bins, i + half + 1)] - below[std::max(0, i - half)];
+        };
+        while (count(k) < 40) ++k;  // ends: the whole object holds 40
+        window.clear();
+        for (int j = std::max(0, i - k); j <= std::min(bins - 1, i + k); ++j)
+          window.insert(window.end(), by_bin[j].begin(), by_bin[j].end());
+        const size_t q90 = window.size() * 9 / 10;
+        std::nth_element(window.begin(), window.begin() + q90, window.end());
+        profile[i] = window[q90] + step;
+      }
+      for (uint32_t g = 0; g < instance.size(); ++g)
+        b.beyond_profile[g] = !off[g] && radial[g] > profile[bin_of(g)];
+    }
+    bodies.push_back(std::move(b));
+  }
+  // Sources a hypothesis lends no images of beyond its own asymmetric ones: an axis, those beyond
+  // its profile; a plane containing an axis (oriented about it only by the parts the axis does
+  // not hold for), those and the parts beyond the body that the axis does not hold for.
+  auto skipped_for = [&](const SymmetryHypothesis& h) {
     std::vector<uint8_t> skip(instance.size(), 0);
-    if (!options_.mirror_skips_axis_asymmetric || plane.kind != SymmetryKind::kPlane) return skip;
     const float sin_tolerance = std::sin(10.0f * static_cast<float>(M_PI) / 180.0f);
-    for (const SymmetryHypothesis& axis : hypotheses) {
-      if (!axis.accepted || axis.kind != SymmetryKind::kAxis) continue;
-      if (std::abs(axis.direction.dot(plane.direction)) > sin_tolerance ||
-          std::abs(plane.direction.dot(axis.point - plane.point)) > 2.0f * frame.spacing) {
+    for (const AxisBody& b : bodies) {
+      const SymmetryHypothesis& axis = *b.axis;
+      if (&h == &axis) {
+        for (uint32_t g = 0; g < skip.size(); ++g) skip[g] |= b.beyond_profile[g];
+        continue;
+      }
+      if (h.kind != SymmetryKind::kPlane || !options_.mirror_skips_axis_asymmetric) continue;
+      if (std::abs(axis.direction.dot(h.direction)) > sin_tolerance ||
+          std::abs(h.direction.dot(axis.point - h.point)) > 2.0f * frame.spacing) {
         continue;  // the plane does not contain this axis
       }
-      // Only what sticks out beyond the body the axis holds for (a handle, not the body's own
-      // surfels that a slightly offset axis revolves into seen-empty space).
-      const std::vector<uint8_t> off = asymmetric_sources(axis);
-      auto radial = [&](uint32_t g) {
-        const Eigen::Vector3f d = points[g] - axis.point;
-        return (d - d.dot(axis.direction) * axis.direction).norm();
-      };
-      std::vector<float> body;
-      for (uint32_t g = 0; g < off.size(); ++g) {
-        if (!off[g]) body.push_back(radial(g));
-      }
-      // An axis that most of the object contradicts (a tilted or offset fit) tells no handle
-      // from its own error.
-      if (body.empty() || body.size() < (1.0 - kMaxAxisAsymmetricShare) * off.size()) continue;
-      const size_t q = body.size() * 95 / 100;
-      std::nth_element(body.begin(), body.begin() + q, body.end());
-      const float reach = body[std::min(q, body.size() - 1)] + frame.spacing;
-      for (uint32_t g = 0; g < skip.size(); ++g) skip[g] |= off[g] && radial(g) > reach;
+      for (uint32_t g = 0; g < skip.size(); ++g)
+        skip[g] |= b.off_beyond_body[g] | b.beyond_profile[g];
     }
     return skip;
   };
@@ -243,11 +305,12 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     ++accepted;
     const size_t before = added.size();
     std::vector<uint8_t> asymmetric = asymmetric_sources(h);
-    const std::vector<uint8_t> axis_asymmetric = axis_asymmetric_in(h);
+    const std::vector<uint8_t> axis_skip = skipped_for(h);
     for (size_t g = 0; g < asymmetric.size(); ++g) {
       skipped_sources += asymmetric[g];
-      axis_skipped += axis_asymmetric[g] && !asymmetric[g];
-      asymmetric[g] |= axis_asymmetric[g];
+      (h.kind == SymmetryKind::kAxis ? profile_skipped : axis_skipped) +=
+          axis_skip[g] && !asymmetric[g];
+      asymmetric[g] |= axis_skip[g];
     }
     for (int k = 0; k < h.copies; ++k) {
       const Eigen::Matrix3f linear = h.Linear(k);
@@ -341,6 +404,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   out.report["added_by"] = added_by;
   out.report["asymmetric_sources"] = skipped_sources;
   out.report["mirror_axis_asymmetric_sources"] = axis_skipped;
+  out.report["beyond_axis_profile_sources"] = profile_skipped;
   out.report["rejected"] = {{"observed_free", rejected_free},
                             {"already_covered", rejected_covered},
                             {"below_support", rejected_below},

@@ -33,6 +33,13 @@ struct GeometricPriorOptions {
   // mirrors the handle centimetres beside itself. Such a plane lends no images of those parts.
   // Measured in RESULTS.md ("Free-space violations: mirrored handles").
   bool mirror_skips_axis_asymmetric = true;
+  // An accepted revolution axis (holding for at least 70 % of the surfels) lends no images of
+  // sources beyond the body's profile at their height (more than a spacing beyond the 90th
+  // percentile of the radii around that height, over at least 40 surfels): a few surfels of a
+  // neighbour that the segmentation gave the object would otherwise come back as a ring around it;
+  // nor does a mirror plane containing that axis. Measured in RESULTS.md ("Completion: neighbours'
+  // surfels revolved").
+  bool skip_beyond_axis_profile = true;
   // Refuse a candidate standing off the observed surface beside it (observed_surface.h).
   // Measured in RESULTS.md ("Free-space violations: candidates off the observed surface").
   ObservedSurfaceOptions observed_surface;
