@@ -280,6 +280,26 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
   }
   report("completing", 4, 7);
   ASSIGN_OR_RETURN(out.prior, prior->Complete(input));
+  if (!out.prior.foreign.empty()) {  // a neighbour's surfels: occluders, like the strays
+    std::vector<uint8_t> drop(split.instance.size(), 0);
+    for (uint32_t g : out.prior.foreign) {
+      if (g < drop.size()) drop[g] = 1;
+    }
+    std::vector<uint32_t> kept, instance;
+    for (uint32_t g = 0; g < drop.size(); ++g) {
+      if (drop[g]) {
+        split.occluders.push_back(split.instance[g]);
+        continue;
+      }
+      kept.push_back(g);
+      instance.push_back(split.instance[g]);
+    }
+    std::sort(split.occluders.begin(), split.occluders.end());
+    split.outliers += split.instance.size() - instance.size();
+    split.instance = std::move(instance);
+    out.raw = out.raw.Subset(kept);
+    out.stray_removed = split.outliers;
+  }
   out.object = MergeWithProvenance(out.raw, out.prior.added);
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
   report("refining", 5, 7);

@@ -244,8 +244,9 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
       b.off_beyond_body[g] = off[g] && radial[g] > reach;
     // The profile: the 90th percentile of the body's radii over the heights around each height
     // (at least 2 spacings either side, more until the window holds 40 body surfels, so that a
-    // few strays there stay above the percentile; fewer in the whole object claim nothing).
-    if (options_.skip_beyond_axis_profile && body.size() >= 40) {
+    // few strays there stay above the percentile; fewer in the whole object claim nothing). Only
+    // for a solid of revolution: an n-fold axis's radius varies around it (a box's corners).
+    if (options_.skip_beyond_axis_profile && axis.order == 0 && body.size() >= 40) {
       const float low = *std::min_element(height.begin(), height.end());
       const int bins =
           static_cast<int>((*std::max_element(height.begin(), height.end()) - low) / step) + 1;
@@ -276,6 +277,13 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
         b.beyond_profile[g] = !off[g] && radial[g] > profile[bin_of(g)];
     }
     bodies.push_back(std::move(b));
+  }
+  std::vector<uint8_t> foreign(instance.size(), 0);
+  std::vector<uint32_t> own;  // the instance surfels that are the object's
+  for (uint32_t g = 0; g < instance.size(); ++g) {
+    for (const AxisBody& b : bodies)
+      foreign[g] |= options_.drop_beyond_axis_profile && b.beyond_profile[g];
+    if (!foreign[g]) own.push_back(g);
   }
   // Sources a hypothesis lends no images of beyond its own asymmetric ones: an axis, those beyond
   // its profile; a plane containing an axis (oriented about it only by the parts the axis does
@@ -334,9 +342,9 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     for (const SymmetryHypothesis& h : hypotheses) {
       // An n-fold axis (a box) has no round lower ring: the support cap closes its bottom.
       if (!h.accepted || h.kind != SymmetryKind::kAxis || h.order > 0) continue;
-      std::vector<Eigen::Vector3f> positions = points;
-      std::vector<uint32_t> sources(points.size());
-      for (uint32_t g = 0; g < sources.size(); ++g) sources[g] = g;
+      std::vector<Eigen::Vector3f> positions;
+      std::vector<uint32_t> sources = own;
+      for (uint32_t g : own) positions.push_back(points[g]);
       for (const Candidate& c : added) {
         positions.push_back(c.position);
         sources.push_back(c.source);
@@ -371,17 +379,18 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   // The support: walls extended down to it, then the underside closed on it.
   if (options_.support_cap && frame.has_support &&
       frame.bottom_height - frame.support_height <= options_.max_support_gap_radii * frame.radius) {
-    std::vector<Eigen::Vector3f> positions = points;
+    std::vector<Eigen::Vector3f> positions;
     std::vector<Eigen::Matrix3f> rotations;
     std::vector<uint32_t> sources;
-    for (uint32_t g = 0; g < instance.size(); ++g) {
+    for (uint32_t g : own) {
+      positions.push_back(points[g]);
       rotations.push_back(SurfelRotation(instance, g));
       sources.push_back(g);
     }
     auto gather = [&] {
-      positions.resize(points.size());
-      rotations.resize(points.size());
-      sources.resize(points.size());
+      positions.resize(own.size());
+      rotations.resize(own.size());
+      sources.resize(own.size());
       for (const Candidate& c : added) {
         positions.push_back(c.position);
         rotations.push_back(c.rotation);
@@ -405,6 +414,10 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   out.report["asymmetric_sources"] = skipped_sources;
   out.report["mirror_axis_asymmetric_sources"] = axis_skipped;
   out.report["beyond_axis_profile_sources"] = profile_skipped;
+  for (uint32_t g = 0; g < instance.size(); ++g) {
+    if (foreign[g]) out.foreign.push_back(g);
+  }
+  out.report["foreign_observed"] = out.foreign.size();
   out.report["rejected"] = {{"observed_free", rejected_free},
                             {"already_covered", rejected_covered},
                             {"below_support", rejected_below},

@@ -33,13 +33,17 @@ struct GeometricPriorOptions {
   // mirrors the handle centimetres beside itself. Such a plane lends no images of those parts.
   // Measured in RESULTS.md ("Free-space violations: mirrored handles").
   bool mirror_skips_axis_asymmetric = true;
-  // An accepted revolution axis (holding for at least 70 % of the surfels) lends no images of
-  // sources beyond the body's profile at their height (more than a spacing beyond the 90th
-  // percentile of the radii around that height, over at least 40 surfels): a few surfels of a
-  // neighbour that the segmentation gave the object would otherwise come back as a ring around it;
-  // nor does a mirror plane containing that axis. Measured in RESULTS.md ("Completion: neighbours'
-  // surfels revolved").
+  // An accepted continuous revolution axis (not an n-fold one) that holds for at least 70 % of
+  // the surfels lends no images of the surfels it holds for that stand more than a spacing
+  // beyond the body's profile at their height (the 90th percentile of the radii around that
+  // height, over at least 40 surfels), nor does a mirror plane containing it: a few surfels of a
+  // neighbour that the segmentation gave the object would otherwise come back as a ring around
+  // it. Measured in RESULTS.md ("Neighbours' surfels revolved").
   bool skip_beyond_axis_profile = true;
+  // ... and such surfels are not the object's: they leave it for the occluders (reported as
+  // PriorOutput::foreign) and hold out no support wall or cap. Measured in RESULTS.md
+  // ("Neighbours' surfels revolved").
+  bool drop_beyond_axis_profile = true;
   // Refuse a candidate standing off the observed surface beside it (observed_surface.h).
   // Measured in RESULTS.md ("Free-space violations: candidates off the observed surface").
   ObservedSurfaceOptions observed_surface;

@@ -52,6 +52,9 @@ struct PriorOutput {
   bool abstained = false;             // no hypothesis passed: the object stays a closed crop
   std::string reason;                 // why it abstained, or what it did
   nlohmann::json report = nlohmann::json::object();  // prior-specific details for the manifest
+  // Instance surfels (indices into PriorInput::instance) the prior found not to be the object's
+  // (a neighbour's surfels the segmentation gave it): the caller moves them to the occluders.
+  std::vector<uint32_t> foreign;
 };
 
 class CompletionPrior {
