@@ -129,6 +129,42 @@ std::vector<Candidate> AxisCap(const SymmetryHypothesis& h, const ObjectFrame& f
   return out;
 }
 
+// Per surfel, the body's outer radius about an axis at the surfel's height: the 90th percentile
+// of the radii of the `body` surfels over the heights around it (at least 2 `step`s either side,
+// more until the window holds `min_count` of them, so that a few strays there stay above the
+// percentile), plus one `step`. Infinite everywhere when the body holds fewer than `min_count`.
+std::vector<float> RadialProfile(const std::vector<float>& height, const std::vector<float>& radial,
+                                 const std::vector<uint8_t>& body, float step,
+                                 size_t min_count = 40) {
+  std::vector<float> out(height.size(), std::numeric_limits<float>::infinity());
+  if (static_cast<size_t>(std::count(body.begin(), body.end(), 1)) < min_count) return out;
+  const float low = *std::min_element(height.begin(), height.end());
+  const int bins =
+      static_cast<int>((*std::max_element(height.begin(), height.end()) - low) / step) + 1;
+  auto bin_of = [&](size_t g) {
+    return std::clamp(static_cast<int>((height[g] - low) / step), 0, bins - 1);
+  };
+  std::vector<std::vector<float>> by_bin(bins);
+  for (size_t g = 0; g < height.size(); ++g) {
+    if (body[g]) by_bin[bin_of(g)].push_back(radial[g]);
+  }
+  std::vector<size_t> below(bins + 1, 0);  // body surfels in bins [0, i)
+  for (int i = 0; i < bins; ++i) below[i + 1] = below[i] + by_bin[i].size();
+  std::vector<float> profile(bins), window;
+  for (int i = 0; i < bins; ++i) {
+    int half = 2;
+    while (below[std::min(bins, i + half + 1)] - below[std::max(0, i - half)] < min_count) ++half;
+    window.clear();
+    for (int j = std::max(0, i - half); j <= std::min(bins - 1, i + half); ++j)
+      window.insert(window.end(), by_bin[j].begin(), by_bin[j].end());
+    const size_t q90 = window.size() * 9 / 10;
+    std::nth_element(window.begin(), window.begin() + q90, window.end());
+    profile[i] = window[q90] + step;
+  }
+  for (size_t g = 0; g < height.size(); ++g) out[g] = profile[bin_of(g)];
+  return out;
+}
+
 }  // namespace
 
 absl::StatusOr<PriorOutput> NoPrior::Complete(const PriorInput& input) const {
@@ -208,6 +244,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   constexpr double kMaxAxisAsymmetricShare = 0.3;
   struct AxisBody {
     const SymmetryHypothesis* axis = nullptr;
+    std::vector<uint8_t> off;  // asymmetric_sources(*axis)
     // Sources it does not hold for that stick out beyond the body it holds for (a handle).
     std::vector<uint8_t> off_beyond_body;
     // Sources it holds for (their images are not in seen-empty space) that lie beyond the body's
@@ -223,7 +260,8 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     b.axis = &axis;
     b.off_beyond_body.assign(instance.size(), 0);
     b.beyond_profile.assign(instance.size(), 0);
-    const std::vector<uint8_t> off = asymmetric_sources(axis);
+    b.off = asymmetric_sources(axis);
+    const std::vector<uint8_t>& off = b.off;
     std::vector<float> radial(instance.size()), height(instance.size()), body;
     for (uint32_t g = 0; g < instance.size(); ++g) {
       const Eigen::Vector3f d = points[g] - axis.point;
@@ -242,39 +280,14 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     const float reach = body[std::min(q, body.size() - 1)] + step;
     for (uint32_t g = 0; g < instance.size(); ++g)
       b.off_beyond_body[g] = off[g] && radial[g] > reach;
-    // The profile: the 90th percentile of the body's radii over the heights around each height
-    // (at least 2 spacings either side, more until the window holds 40 body surfels, so that a
-    // few strays there stay above the percentile; fewer in the whole object claim nothing). Only
-    // for a solid of revolution: an n-fold axis's radius varies around it (a box's corners).
-    if (options_.skip_beyond_axis_profile && axis.order == 0 && body.size() >= 40) {
-      const float low = *std::min_element(height.begin(), height.end());
-      const int bins =
-          static_cast<int>((*std::max_element(height.begin(), height.end()) - low) / step) + 1;
-      std::vector<std::vector<float>> by_bin(bins);
-      auto bin_of = [&](uint32_t g) {
-        return std::clamp(static_cast<int>((height[g] - low) / step), 0, bins - 1);
-      };
-      for (uint32_t g = 0; g < instance.size(); ++g) {
-        if (!off[g]) by_bin[bin_of(g)].push_back(radial[g]);
-      }
-      std::vector<size_t> below(bins + 1, 0);  // body surfels in bins [0, i)
-      for (int i = 0; i < bins; ++i) below[i + 1] = below[i] + by_bin[i].size();
-      std::vector<float> profile(bins), window;
-      for (int i = 0; i < bins; ++i) {
-        int k = 2;
-        auto count = [&](int half) {
-          return below[std::min(bins, i + half + 1)] - below[std::max(0, i - half)];
-        };
-        while (count(k) < 40) ++k;  // ends: the whole object holds 40
-        window.clear();
-        for (int j = std::max(0, i - k); j <= std::min(bins - 1, i + k); ++j)
-          window.insert(window.end(), by_bin[j].begin(), by_bin[j].end());
-        const size_t q90 = window.size() * 9 / 10;
-        std::nth_element(window.begin(), window.begin() + q90, window.end());
-        profile[i] = window[q90] + step;
-      }
+    // Beyond the profile: only about a solid of revolution (an n-fold axis's radius varies
+    // around it: a box's corners).
+    if (options_.skip_beyond_axis_profile && axis.order == 0) {
+      std::vector<uint8_t> holds(instance.size());
+      for (uint32_t g = 0; g < instance.size(); ++g) holds[g] = !off[g];
+      const std::vector<float> profile = RadialProfile(height, radial, holds, step);
       for (uint32_t g = 0; g < instance.size(); ++g)
-        b.beyond_profile[g] = !off[g] && radial[g] > profile[bin_of(g)];
+        b.beyond_profile[g] = !off[g] && radial[g] > profile[g];
     }
     bodies.push_back(std::move(b));
   }
@@ -312,13 +325,15 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     if (!h.accepted) continue;
     ++accepted;
     const size_t before = added.size();
-    std::vector<uint8_t> asymmetric = asymmetric_sources(h);
+    auto body =
+        std::find_if(bodies.begin(), bodies.end(), [&](const AxisBody& b) { return b.axis == &h; });
+    std::vector<uint8_t> asymmetric = body != bodies.end() ? body->off : asymmetric_sources(h);
     const std::vector<uint8_t> axis_skip = skipped_for(h);
     for (size_t g = 0; g < asymmetric.size(); ++g) {
       skipped_sources += asymmetric[g];
       (h.kind == SymmetryKind::kAxis ? profile_skipped : axis_skipped) +=
           axis_skip[g] && !asymmetric[g];
-      asymmetric[g] |= axis_skip[g];
+      asymmetric[g] |= axis_skip[g] | foreign[g];  // not the object's: no images by any hypothesis
     }
     for (int k = 0; k < h.copies; ++k) {
       const Eigen::Matrix3f linear = h.Linear(k);
