@@ -267,6 +267,9 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
   input.frame = out.frame;
   input.free_space = &free_space;
   input.seen_through = seen_through ? &*seen_through : nullptr;
+  const std::vector<uint8_t> neighbour_labelled =
+      NeighbourLabelled(surfels, labels, split, out.frame);
+  input.neighbour_labelled = &neighbour_labelled;
   input.seed = options.seed;
   input.cancel = options.cancel;
   for (size_t k = 0; k < out.ring.size(); ++k) {

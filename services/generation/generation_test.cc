@@ -384,6 +384,45 @@ TEST(ObjectFrame, UpFromTheSupportAndSupportHeight) {
   EXPECT_GT(frame.spacing, 0);
 }
 
+// A bottle with a box (label 2) standing 2 mm beside it at +x: the bottle's surfels facing the box
+// are surrounded by its label, those on the far side and those over the bare table are not.
+TEST(ObjectFrame, NeighbourLabelledMarksTheSurfelsFacingATouchingNeighbour) {
+  PartialObject scene = MakePartialObject(Bottle(), 4000, 5);
+  ShapeSpec box;
+  box.kind = ShapeKind::kBox;
+  box.size = {0.04f, 0.04f, 0.1f};
+  TriangleMesh mesh = MakeShapeMesh(box);
+  Rigid3d shift;
+  shift.translation = {0.072, 0.0, 0.0};
+  mesh.Transform(shift);
+  std::mt19937_64 rng(5);
+  const size_t before = scene.cloud.size();
+  AppendSurfels(mesh, 3000, Appearance{}, SurfelSampling{}, rng, &scene.cloud);
+  scene.labels.resize(before, 0);
+  scene.labels.resize(scene.cloud.size(), 2);
+  auto split = SplitInstance(scene.labels, 1, 50);
+  ASSERT_TRUE(split.ok());
+  const ObjectFrame frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
+  const std::vector<uint8_t> marked = NeighbourLabelled(scene.cloud, scene.labels, *split, frame);
+  ASSERT_EQ(marked.size(), split->instance.size());
+  size_t facing = 0, facing_marked = 0, far_marked = 0;
+  for (size_t i = 0; i < marked.size(); ++i) {
+    const Eigen::Vector3f p(&scene.cloud.positions[3 * split->instance[i]]);
+    if (p.x() > 0.045f && std::abs(p.y()) < 0.01f && p.z() > 0.01f && p.z() < 0.09f) {
+      ++facing;
+      facing_marked += marked[i];
+    }
+    if (p.x() < 0.02f) far_marked += marked[i];
+  }
+  ASSERT_GT(facing, 10u);
+  EXPECT_GT(facing_marked, 0.9 * facing);
+  EXPECT_EQ(far_marked, 0u);
+  // Without the neighbour's label (background), nothing is marked.
+  std::fill(scene.labels.begin() + before, scene.labels.end(), 0u);
+  const std::vector<uint8_t> none = NeighbourLabelled(scene.cloud, scene.labels, *split, frame);
+  EXPECT_EQ(std::count(none.begin(), none.end(), 1), 0);
+}
+
 // A segmentation that gave the bottle the table's surfels around its base: they leave the
 // instance (the bottle's own surfels all stay), and the support and bottom are the table's.
 TEST(ObjectFrame, TheSupportsSurfelsAroundTheBaseLeaveTheInstance) {
@@ -744,6 +783,41 @@ TEST(GeometricPrior, ANeighboursSurfelsBesideTheBaseAreNotRevolvedIntoARing) {
     const uint32_t n = static_cast<uint32_t>(fixture.instance.size());
     EXPECT_EQ(out->foreign, (std::vector<uint32_t>{n - 3, n - 2, n - 1})) << seed;
     EXPECT_EQ(out->report["foreign_observed"], 3) << seed;
+  }
+}
+
+// Strays beside the base where the views saw the space around them (no tray's rim): their
+// images lie in seen-empty space, as a handle's do, so the axis lends them nothing and keeps them;
+// where a touching neighbour's label surrounds them, they are not the bottle's.
+TEST(GeometricPrior, StraysANeighboursLabelSurroundsAreNotTheObjects) {
+  // Seeds whose fitted axis holds for at least 70 % of the bottle (on others it is offset and
+  // claims nothing beyond its profile: the guard of geometric_prior.h).
+  for (uint64_t seed : {3u, 22u, 23u}) {
+    PartialObject scene = MakePartialObject(Bottle(), 4000, seed);
+    const size_t n_scene = scene.cloud.size();
+    std::vector<uint32_t> keep(n_scene);
+    std::iota(keep.begin(), keep.end(), 0u);
+    const std::vector<Eigen::Vector3f> targets = {Eigen::Vector3f(0.061f, 0.004f, 0.012f),
+                                                  Eigen::Vector3f(0.060f, -0.006f, 0.018f),
+                                                  Eigen::Vector3f(0.062f, 0.010f, 0.024f)};
+    for (size_t i = 0; i < targets.size(); ++i) keep.push_back(keep[n_scene - 1 - i]);
+    scene.cloud = scene.cloud.Subset(keep);
+    for (size_t i = 0; i < targets.size(); ++i) {
+      for (int k = 0; k < 3; ++k) scene.cloud.positions[3 * (n_scene + i) + k] = targets[i][k];
+    }
+    scene.labels.resize(scene.cloud.size(), 1);
+    PriorFixture fixture(scene);
+    ASSERT_TRUE(fixture.ok());
+    const uint32_t n = static_cast<uint32_t>(fixture.instance.size());
+    auto out = GeometricPrior().Complete(fixture.input);
+    ASSERT_TRUE(out.ok()) << out.status();
+    EXPECT_TRUE(out->foreign.empty()) << seed;  // a handle's case: kept
+    std::vector<uint8_t> labelled(n, 0);
+    labelled[n - 1] = labelled[n - 2] = labelled[n - 3] = 1;
+    fixture.input.neighbour_labelled = &labelled;
+    out = GeometricPrior().Complete(fixture.input);
+    ASSERT_TRUE(out.ok()) << out.status();
+    EXPECT_EQ(out->foreign, (std::vector<uint32_t>{n - 3, n - 2, n - 1})) << seed;
   }
 }
 

@@ -252,6 +252,9 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     // no view saw the space around them. (Those it does not hold for within the body's reach
     // are the body's own surfels under a slightly offset axis: a plane may still mirror them.)
     std::vector<uint8_t> beyond_profile;
+    // Sources it does not hold for beyond the profile that a touching neighbour's label
+    // surrounds: that neighbour's surfels (a handle stands clear of other instances).
+    std::vector<uint8_t> neighbours_beyond_profile;
   };
   std::vector<AxisBody> bodies;
   for (const SymmetryHypothesis& axis : hypotheses) {
@@ -288,14 +291,23 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
       const std::vector<float> profile = RadialProfile(height, radial, holds, step);
       for (uint32_t g = 0; g < instance.size(); ++g)
         b.beyond_profile[g] = !off[g] && radial[g] > profile[g];
+      if (options_.drop_neighbours_beyond_axis_profile && input.neighbour_labelled != nullptr &&
+          input.neighbour_labelled->size() == instance.size()) {
+        b.neighbours_beyond_profile.assign(instance.size(), 0);
+        for (uint32_t g = 0; g < instance.size(); ++g)
+          b.neighbours_beyond_profile[g] =
+              off[g] && radial[g] > profile[g] && (*input.neighbour_labelled)[g];
+      }
     }
     bodies.push_back(std::move(b));
   }
   std::vector<uint8_t> foreign(instance.size(), 0);
   std::vector<uint32_t> own;  // the instance surfels that are the object's
   for (uint32_t g = 0; g < instance.size(); ++g) {
-    for (const AxisBody& b : bodies)
+    for (const AxisBody& b : bodies) {
       foreign[g] |= options_.drop_beyond_axis_profile && b.beyond_profile[g];
+      foreign[g] |= !b.neighbours_beyond_profile.empty() && b.neighbours_beyond_profile[g];
+    }
     if (!foreign[g]) own.push_back(g);
   }
   // Sources a hypothesis lends no images of beyond its own asymmetric ones: an axis, those beyond

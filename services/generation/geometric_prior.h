@@ -44,6 +44,10 @@ struct GeometricPriorOptions {
   // PriorOutput::foreign) and hold out no support wall or cap. Measured in RESULTS.md
   // ("Neighbours' surfels revolved").
   bool drop_beyond_axis_profile = true;
+  // Surfels such an axis does not hold for (their images lie in seen-empty space, as a handle's
+  // do) beyond its profile are not the object's either where a touching neighbour's label
+  // surrounds them (PriorInput::neighbour_labelled): they leave it too.
+  bool drop_neighbours_beyond_axis_profile = true;
   // Refuse a candidate standing off the observed surface beside it (observed_surface.h).
   // Measured in RESULTS.md ("Free-space violations: candidates off the observed surface").
   ObservedSurfaceOptions observed_surface;

@@ -129,6 +129,42 @@ void RemoveStrayGaussians(const GaussianCloud& cloud, InstanceSplit* split, floa
   std::sort(split->occluders.begin(), split->occluders.end());
 }
 
+std::vector<uint8_t> NeighbourLabelled(const GaussianCloud& cloud,
+                                       const std::vector<uint32_t>& labels,
+                                       const InstanceSplit& split, const ObjectFrame& frame, int k,
+                                       float reach_spacings) {
+  std::vector<uint8_t> out(split.instance.size(), 0);
+  const float reach = reach_spacings * frame.spacing;
+  if (split.instance.empty() || !(reach > 0) || k <= 0) return out;
+  auto position = [&](uint32_t g) { return Eigen::Vector3f(&cloud.positions[3 * g]); };
+  // Only the occluders that can be near the instance.
+  const float near = frame.radius + reach;
+  std::vector<Eigen::Vector3f> points;
+  std::vector<uint32_t> owners;
+  for (uint32_t g : split.occluders) {
+    if ((position(g) - frame.center).squaredNorm() > near * near) continue;
+    points.push_back(position(g));
+    owners.push_back(g < labels.size() ? labels[g] : 0);
+  }
+  if (points.empty()) return out;
+  const PointIndex3 index(std::move(points));
+  std::vector<uint32_t> seen;
+  for (size_t i = 0; i < split.instance.size(); ++i) {
+    seen.clear();
+    for (const auto& [j, d2] : index.KNearest(position(split.instance[i]), k)) {
+      if (d2 <= reach * reach && owners[j] != 0) seen.push_back(owners[j]);
+    }
+    std::sort(seen.begin(), seen.end());
+    for (size_t a = 0; a < seen.size();) {
+      size_t b = a;
+      while (b < seen.size() && seen[b] == seen[a]) ++b;
+      if (2 * (b - a) >= static_cast<size_t>(k)) out[i] = 1;
+      a = b;
+    }
+  }
+  return out;
+}
+
 size_t RemoveSupportSurfels(const GaussianCloud& cloud, const ObjectFrame& frame,
                             InstanceSplit* split, float band_spacings) {
   if (!frame.has_support || !(frame.spacing > 0) || cloud.num_scales != 2) return 0;

@@ -55,6 +55,16 @@ void RemoveStrayGaussians(const GaussianCloud& cloud, InstanceSplit* split,
 size_t RemoveSupportSurfels(const GaussianCloud& cloud, const ObjectFrame& frame,
                             InstanceSplit* split, float band_spacings = 0.5f);
 
+// Per instance surfel (in `split.instance` order): whether at least half of its `k` nearest
+// surfels outside the instance, counting those within `reach_spacings` frame spacings, carry one
+// other instance's label (background, label 0, never counts): a touching neighbour's surfel that the segmentation
+// gave this object, or the object's own surfel at the contact. Alone it cannot tell the two apart;
+// the geometric prior uses it only for surfels beyond the body's profile (geometric_prior.h).
+std::vector<uint8_t> NeighbourLabelled(const GaussianCloud& cloud,
+                                       const std::vector<uint32_t>& labels,
+                                       const InstanceSplit& split, const ObjectFrame& frame,
+                                       int k = 8, float reach_spacings = 6.0f);
+
 // The frame of `split.instance` in `cloud` (surfels). Support: occluder surfels facing up within
 // the object's footprint, just below its lowest point (median of their heights).
 ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& split,

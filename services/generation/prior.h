@@ -40,8 +40,11 @@ struct PriorInput {
   const FreeSpaceGrid* free_space = nullptr;  // not owned
   // The exact free-space test (did a real view see through a point?); may be null.
   const SeenThroughTest* seen_through = nullptr;  // not owned
-  std::vector<ViewImages> conditions;             // known ring views
-  std::vector<PinholeCamera> targets;             // unknown ring views
+  // Per instance surfel, whether a touching neighbour's label surrounds it
+  // (object_frame.h NeighbourLabelled); may be null.
+  const std::vector<uint8_t>* neighbour_labelled = nullptr;  // not owned
+  std::vector<ViewImages> conditions;                        // known ring views
+  std::vector<PinholeCamera> targets;                        // unknown ring views
   uint64_t seed = 1;
   const CancelFlag* cancel = nullptr;
 };
