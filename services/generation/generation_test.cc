@@ -421,6 +421,11 @@ TEST(ObjectFrame, NeighbourLabelledMarksTheSurfelsFacingATouchingNeighbour) {
   std::fill(scene.labels.begin() + before, scene.labels.end(), 0u);
   const std::vector<uint8_t> none = NeighbourLabelled(scene.cloud, scene.labels, *split, frame);
   EXPECT_EQ(std::count(none.begin(), none.end(), 1), 0);
+  // Nor when the box carries the bottle's own label outside the instance (as strays that left it
+  // do): the split above already holds the box's surfels as occluders.
+  std::fill(scene.labels.begin() + before, scene.labels.end(), 1u);
+  const std::vector<uint8_t> own = NeighbourLabelled(scene.cloud, scene.labels, *split, frame);
+  EXPECT_EQ(std::count(own.begin(), own.end(), 1), 0);
 }
 
 // A segmentation that gave the bottle the table's surfels around its base: they leave the

@@ -137,7 +137,9 @@ std::vector<uint8_t> NeighbourLabelled(const GaussianCloud& cloud,
   const float reach = reach_spacings * frame.spacing;
   if (split.instance.empty() || !(reach > 0) || k <= 0) return out;
   auto position = [&](uint32_t g) { return Eigen::Vector3f(&cloud.positions[3 * g]); };
-  // Only the occluders that can be near the instance.
+  // Only the occluders that can be near the instance, and not the instance's own surfels that
+  // left it (strays, the support's surfels): they still carry its label.
+  const uint32_t own = split.instance[0] < labels.size() ? labels[split.instance[0]] : 0;
   const float near = frame.radius + reach;
   std::vector<Eigen::Vector3f> points;
   std::vector<uint32_t> owners;
@@ -152,7 +154,7 @@ std::vector<uint8_t> NeighbourLabelled(const GaussianCloud& cloud,
   for (size_t i = 0; i < split.instance.size(); ++i) {
     seen.clear();
     for (const auto& [j, d2] : index.KNearest(position(split.instance[i]), k)) {
-      if (d2 <= reach * reach && owners[j] != 0) seen.push_back(owners[j]);
+      if (d2 <= reach * reach && owners[j] != 0 && owners[j] != own) seen.push_back(owners[j]);
     }
     std::sort(seen.begin(), seen.end());
     for (size_t a = 0; a < seen.size();) {

@@ -57,7 +57,8 @@ size_t RemoveSupportSurfels(const GaussianCloud& cloud, const ObjectFrame& frame
 
 // Per instance surfel (in `split.instance` order): whether at least half of its `k` nearest
 // surfels outside the instance, counting those within `reach_spacings` frame spacings, carry one
-// other instance's label (background, label 0, never counts): a touching neighbour's surfel that the segmentation
+// other instance's label (background, label 0, and the instance's own label on the surfels that
+// left it never count): a touching neighbour's surfel that the segmentation
 // gave this object, or the object's own surfel at the contact. Alone it cannot tell the two apart;
 // the geometric prior uses it only for surfels beyond the body's profile (geometric_prior.h).
 std::vector<uint8_t> NeighbourLabelled(const GaussianCloud& cloud,
