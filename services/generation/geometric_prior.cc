@@ -234,8 +234,14 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     std::vector<uint8_t> asymmetric(instance.size(), 0);
     for (uint32_t g = 0; g < instance.size(); ++g) {
       int contradicted = 0;
-      for (int k = 0; k < h.copies; ++k)
-        contradicted += input.free_space->IsFree(h.MapPoint(points[g], k));
+      for (int k = 0; k < h.copies; ++k) {
+        const Eigen::Vector3f image = h.MapPoint(points[g], k);
+        // The grid's voxels straddle a thin object's surface where views graze it: the exact
+        // test tells seen-empty space from the surface at the surfel's own scale.
+        contradicted += input.free_space->IsFree(image) &&
+                        (!options_.exact_asymmetry || input.seen_through == nullptr ||
+                         input.seen_through->ViewsSeeingThrough(image) > 0);
+      }
       asymmetric[g] = contradicted > std::max(0, h.copies / 4);
     }
     return asymmetric;

@@ -23,6 +23,9 @@ struct GeometricPriorOptions {
   // Also refuse a candidate some real view saw through at its pixel resolution
   // (PriorInput::seen_through, seen_through.h). Measured in RESULTS.md ("Free-space violations").
   bool exact_free_space = true;
+  // A surfel's image counts as contradicting a hypothesis only where the exact test (one real
+  // view through the 1-sigma discs) agrees with the grid that the space is seen empty.
+  bool exact_asymmetry = true;
   // A candidate is refused in a voxel this many real views saw empty (one view suffices: space a
   // single view saw through is free; symmetry scoring keeps the grid's min_views). Measured in
   // RESULTS.md ("Free-space violations").
