@@ -500,6 +500,28 @@ TEST(Symmetry, RecoversTheAxisOfAPartlySeenBottle) {
   }
 }
 
+// A mug's handle pulls the circle fit towards itself, and agreement (images within the match
+// distance) is flat over millimetres; the alignment cost places the axis on the body's.
+TEST(Symmetry, AMugsAxisIsTheBodysNotPulledByTheHandle) {
+  ShapeSpec spec;
+  spec.kind = ShapeKind::kMug;
+  spec.size = {0.05f, 0, 0.1f};
+  for (uint64_t seed : {11u, 12u, 13u, 14u}) {
+    const PartialObject scene = MakePartialObject(MakeShapeMesh(spec, 48), 4000, seed, 100);
+    auto offset = [&](bool refine) {
+      SymmetryOptions options;
+      options.refine_axis = refine;
+      for (const SymmetryHypothesis& h : Detect(scene, options).hypotheses) {
+        if (h.kind == SymmetryKind::kAxis) return Eigen::Vector2f(h.point.x(), h.point.y()).norm();
+      }
+      return 1.0f;
+    };
+    // The body's axis is the z axis: 4.0-4.3 mm off by agreement alone, 0.6-1.1 mm refined.
+    EXPECT_GT(offset(false), 0.003f) << seed;
+    EXPECT_LT(offset(true), 0.0015f) << seed;
+  }
+}
+
 // A box turned by anything but its own turns puts its corners into space the views saw empty: its
 // axis is n-fold (4 for a square footprint, 2 for a rectangle, also a nearly square one whose
 // quarter turns overhang by less than the match distance) through its centre, not a solid of
@@ -858,7 +880,7 @@ TEST(GeometricPrior, AThinBottlesBodyIsSymmetricWhereViewsGrazeIt) {
   bottle.kind = ShapeKind::kBottle;
   bottle.size = {0.035f, 0, 0.22f};
   for (uint64_t seed : {31u, 32u, 33u}) {
-    // 2439 surfels: 582-638 by the grid, 0-1 with the exact test.
+    // 2439 surfels: 575-624 by the grid, 0-1 with the exact test.
     const auto [grid, exact] =
         AsymmetricSources(MakePartialObject(MakeShapeMesh(bottle, 48), 3000, seed));
     EXPECT_GE(grid, 400) << seed;
@@ -868,11 +890,12 @@ TEST(GeometricPrior, AThinBottlesBodyIsSymmetricWhereViewsGrazeIt) {
   mug.kind = ShapeKind::kMug;
   mug.size = {0.05f, 0, 0.1f};
   for (uint64_t seed : {11u, 12u, 13u}) {
-    // 3597 surfels: 654-768 by the grid, 563-689 with the exact test (the handle's).
+    // 3597 surfels, 308-316 of them the handle's: 318-398 by the grid, 292-367 with the exact
+    // test (the axis's sources are the handle; the plane's a few more).
     const auto [grid, exact] =
         AsymmetricSources(MakePartialObject(MakeShapeMesh(mug, 48), 4000, seed, 100));
-    EXPECT_GE(exact, 400) << seed;
-    EXPECT_GE(exact, grid * 8 / 10) << seed;
+    EXPECT_GE(exact, 250) << seed;
+    EXPECT_GE(exact, grid * 85 / 100) << seed;
   }
 }
 

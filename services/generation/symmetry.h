@@ -60,6 +60,8 @@ struct SymmetryOptions {
   // The best plane is refined over +- refine_steps finer steps (a refine_steps-th of the grid's
   // angle and offset steps) by the alignment cost (symmetry.cc); 0 = the grid's plane.
   int refine_steps = 8;
+  // The axis point found by agreement is moved to the least alignment cost nearby (symmetry.cc).
+  bool refine_axis = true;
 };
 
 // The best plane and the best axis found (each reported even when rejected, so the manifest can
