@@ -88,7 +88,9 @@ void Integrate(const DepthView& view, float depth_trunc,
 // Silhouette carving (DepthFusionOptions::carve_views): raises each voxel to the
 // `carve_views`-th largest outside distance the views' empty pixels give it.
 void CarveSilhouettes(const std::vector<DepthView>& views, int carve_views, double sdf_trunc,
-                      open3d::pipelines::integration::UniformTSDFVolume* volume) {
+                      open3d::pipelines::integration::UniformTSDFVolume* volume,
+                      const std::function<bool(const Eigen::Vector3f&)>& seen_empty,
+                      std::vector<uint8_t>* in_hull) {
   const int n = volume->resolution_;
   const double voxel = volume->voxel_length_;
   // Per carving view: pixel-homogeneous coordinates (u z, v z, z) = K (R p + t), affine in p.
@@ -106,6 +108,7 @@ void CarveSilhouettes(const std::vector<DepthView>& views, int carve_views, doub
     projections.push_back(m);
   }
   if (static_cast<int>(carving.size()) < carve_views) return;
+  if (in_hull != nullptr) in_hull->assign(volume->voxels_.size(), 0);
   // Each voxel is independent: parallel over x slabs, the same result for any thread count.
   tbb::parallel_for(0, n, [&](int x) {
     std::vector<float> distances;
@@ -121,6 +124,7 @@ void CarveSilhouettes(const std::vector<DepthView>& views, int carve_views, doub
         // Observed free space (the views' truncated +1) cannot be raised further.
         if (voxel_value.weight_ > 0 && voxel_value.tsdf_ >= 1.0f) continue;
         distances.clear();
+        size_t shown = 0;
         for (size_t i = 0; i < carving.size(); ++i) {
           const Eigen::Vector3d q = start[i] + (z * voxel) * projections[i].col(2);
           if (!(q.z() > 0)) continue;
@@ -130,7 +134,16 @@ void CarveSilhouettes(const std::vector<DepthView>& views, int carve_views, doub
           const float d =
               carving[i]
                   ->empty_distance_px[static_cast<size_t>(v) * c.width + static_cast<size_t>(u)];
-          if (d > 0) distances.push_back(static_cast<float>(d * q.z() / c.fx / sdf_trunc));
+          if (d > 0) {
+            distances.push_back(static_cast<float>(d * q.z() / c.fx / sdf_trunc));
+          } else {
+            ++shown;
+          }
+        }
+        // Unobserved, shown by every view, not seen empty by the capture: inside.
+        if (in_hull != nullptr && shown == carving.size() && voxel_value.weight_ <= 0 &&
+            !seen_empty((p0 + (z * voxel) * Eigen::Vector3d::UnitZ()).cast<float>())) {
+          (*in_hull)[volume->IndexOf(x, y, z)] = 1;
         }
         if (static_cast<int>(distances.size()) < carve_views) continue;
         std::nth_element(distances.begin(), distances.begin() + (carve_views - 1), distances.end(),
@@ -155,11 +168,15 @@ void CarveSilhouettes(const std::vector<DepthView>& views, int carve_views, doub
 // voxels outside become +1 when unobserved; the rest of the passable voxels are enclosed (the
 // unobserved inside, pockets seen from within through a hole) and become -1; the border is +1.
 // Filled voxels take the colour of the nearest observed one (breadth first).
-void CloseVolume(int gap, open3d::pipelines::integration::UniformTSDFVolume* volume) {
+void CloseVolume(int gap, const std::vector<uint8_t>& in_hull,
+                 open3d::pipelines::integration::UniformTSDFVolume* volume) {
   const int n = volume->resolution_;
   std::vector<open3d::geometry::TSDFVoxel>& voxels = volume->voxels_;
   const size_t count = voxels.size();
-  auto blocked = [&](size_t i) { return voxels[i].weight_ > 0 && voxels[i].tsdf_ <= 0; };
+  // Behind an observed surface, or unobserved inside the renders' visual hull.
+  auto blocked = [&](size_t i) {
+    return (voxels[i].weight_ > 0 && voxels[i].tsdf_ <= 0) || (!in_hull.empty() && in_hull[i]);
+  };
   auto for_neighbours = [&](int i, auto&& visit) {
     const int x = i / (n * n), y = (i / n) % n, z = i % n;
     if (x > 0) visit(i - n * n);
@@ -224,8 +241,8 @@ void CloseVolume(int gap, open3d::pipelines::integration::UniformTSDFVolume* vol
     if (on_border(static_cast<int>(i))) {
       voxels[i].tsdf_ = 1.0f;
       voxels[i].weight_ = 1.0f;
-    } else if (!blocked(i) && !outside[i]) {
-      voxels[i].tsdf_ = -1.0f;  // enclosed
+    } else if ((!blocked(i) || !observed) && !outside[i]) {
+      voxels[i].tsdf_ = -1.0f;  // enclosed (or unobserved inside the visual hull)
       voxels[i].weight_ = 1.0f;
     } else if (!observed) {
       voxels[i].tsdf_ = 1.0f;  // the outside no view looked into
@@ -266,7 +283,11 @@ std::shared_ptr<open3d::geometry::TriangleMesh> FuseClosed(const std::vector<Dep
       length, resolution, sdf_trunc, open3d::pipelines::integration::TSDFVolumeColorType::RGB8,
       center - Eigen::Vector3d::Constant(0.5 * length));
   for (const DepthView& view : views) Integrate(view, options.depth_trunc, &volume);
-  if (options.carve_views > 0) CarveSilhouettes(views, options.carve_views, sdf_trunc, &volume);
+  std::vector<uint8_t> in_hull;
+  if (options.carve_views > 0) {
+    CarveSilhouettes(views, options.carve_views, sdf_trunc, &volume, options.seen_empty,
+                     options.seen_empty ? &in_hull : nullptr);
+  }
   if (!options.outside_below.isZero()) {
     const Eigen::Vector3d normal = options.outside_below.head<3>().cast<double>();
     const Eigen::Vector3d origin = volume.origin_;
@@ -282,7 +303,7 @@ std::shared_ptr<open3d::geometry::TriangleMesh> FuseClosed(const std::vector<Dep
       }
     }
   }
-  CloseVolume(options.closed_gap_voxels, &volume);
+  CloseVolume(options.closed_gap_voxels, in_hull, &volume);
   // The inset shifts the zero level: the fused TSDF is projective (distances along each view's
   // rays), steeper across the surface than 1 / sdf_trunc wherever views met it obliquely, so the
   // surface moves by `inset` where views met it head-on and less elsewhere.

@@ -6,6 +6,7 @@
 // Stateless, thread-safe.
 #pragma once
 
+#include <functional>
 #include <vector>
 
 #include <Eigen/Geometry>
@@ -58,6 +59,13 @@ struct DepthFusionOptions {
   // do not show as surface (a cap's rim seen from above); the views that see past the edge
   // empty remove it. 0 = no carving.
   int carve_views = 0;
+  // Closed fusion with carving only, when set: a voxel no depth map reached (unobserved) that
+  // projects onto a shown pixel (empty distance 0) of every carving view, and whose centre
+  // `seen_empty` does not report (the capture's real views saw empty space there), is inside:
+  // the outside does not flow through it. A gap in a completed shell (a face the completion left
+  // open) otherwise lets the outside flood the object's unobserved inside, which then meshes as
+  // a hollow shell. Called from several threads.
+  std::function<bool(const Eigen::Vector3f&)> seen_empty;
 };
 
 // Fuses the views into one mesh with vertex colours (closed when options.closed_bounds is set).

@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 #include <random>
 
@@ -391,6 +392,50 @@ TEST(DepthFusion, SilhouetteCarvingRemovesALipTheSideViewsSeePast) {
   options.carve_views = 2;
   views[3].empty_distance_px.pop_back();
   EXPECT_EQ(FuseDepthMaps(views, options).status().code(), absl::StatusCode::kInvalidArgument);
+}
+
+// A hole of radius 0.3 (15 voxels) turns the closed sphere hollow at closed_gap_voxels 4, carving,
+// when no depth comes from the inner side seen through it. With `seen_empty` the space no depth map
+// reached inside the renders' visual hull is inside: solid again; where the capture saw it empty (a
+// cup's cavity) it stays open.
+TEST(DepthFusion, TheVisualHullKeepsAHoledShellSolid) {
+  const TriangleMesh holed = SphereWithHole(0.5f, 0.3f);
+  std::vector<DepthView> views = RingDepthMaps(holed, {-40.0, 0.0, 40.0, 80.0});
+  AddEmptyDistances(&views);
+  // As the meshing renders do (MeshingOptions::cull_inner_sides): no depth from the inner side
+  // seen through the hole; the pixel still shows the object.
+  auto shell = RayCaster::Create(holed);
+  ASSERT_TRUE(shell.ok());
+  for (DepthView& view : views) {
+    const Eigen::Vector3f eye = view.camera.CenterInWorld().cast<float>();
+    for (int i = 0; i < 64 * 64; ++i) {
+      const Eigen::Vector3f ray = view.camera.PixelRayInWorld(i % 64, i / 64).cast<float>();
+      const RayHit hit = (*shell)->Cast(eye, ray);
+      if (hit.hit && hit.normal.dot(ray) > 0) view.depth[i] = 0.0f;
+    }
+  }
+  DepthFusionOptions options = ClosedAroundUnitSphere();
+  options.closed_gap_voxels = 4;
+  options.carve_views = 2;
+  auto crossings = [&](std::function<bool(const Eigen::Vector3f&)> seen_empty) {
+    options.seen_empty = std::move(seen_empty);
+    auto mesh = FuseDepthMaps(views, options);
+    EXPECT_TRUE(mesh.ok()) << mesh.status();
+    if (!mesh.ok()) return -1;
+    EXPECT_TRUE(IsClosedManifold(*mesh));
+    auto caster = RayCaster::Create(*mesh);
+    EXPECT_TRUE(caster.ok());
+    return caster.ok() ? (*caster)->CountCrossings(Eigen::Vector3f(-2.0f, 0.01f, 0.02f),
+                                                   Eigen::Vector3f(1, 0, 0))
+                       : -1;
+  };
+  EXPECT_GT(crossings({}), 2);
+  EXPECT_EQ(crossings([](const Eigen::Vector3f&) { return false; }), 2);
+  // The capture saw the inside and the opening above it empty: open (a cup's cavity).
+  EXPECT_GT(crossings([](const Eigen::Vector3f& p) {
+              return p.norm() < 0.4f || (p.z() > 0 && p.head<2>().norm() < 0.25f);
+            }),
+            2);
 }
 
 TEST(DepthFusion, ReconstructsASphereFromRingDepthMaps) {

@@ -106,6 +106,7 @@ nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& optio
         {"snap_max_voxels", options.meshing.snap_max_voxels},
         {"snap_reach_spacings", options.meshing.snap_reach_spacings},
         {"carve_views", options.meshing.carve_views},
+        {"enclose_hull", options.meshing.enclose_hull},
         {"empty_alpha", options.meshing.empty_alpha},
         {"empty_close_px", options.meshing.empty_close_px}}},
       {"ring_camera",
@@ -119,7 +120,8 @@ nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& optio
        {{"file", "mesh.ply"},
         {"vertices", o.mesh.vertices.size()},
         {"triangles", o.mesh.triangles.size()},
-        {"closed", IsClosedManifold(o.mesh)}}},
+        {"closed", IsClosedManifold(o.mesh)},
+        {"hull_enclosed", o.hull_enclosed}}},
       {"refinement", o.refinement},
       {"seed", options.seed},
   };
@@ -310,8 +312,16 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
                    Refine(&out, cameras, surfels, split.instance, options, progress));
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
   report("meshing", 6, 7);
-  ASSIGN_OR_RETURN(out.mesh,
-                   MeshObject(out.object, out.frame, options.meshing, options.num_threads));
+  // About an accepted rotation axis the completion went all round and the inside (a cup's
+  // cavity) is the axis's to shape; any other object's unknown inside is solid
+  // (MeshingOptions::enclose_hull).
+  out.hull_enclosed =
+      options.meshing.closed && options.meshing.enclose_hull && !out.prior.rotation_axis;
+  ASSIGN_OR_RETURN(
+      out.mesh,
+      MeshObject(out.object, out.frame, options.meshing, options.num_threads,
+                 out.hull_enclosed ? [&](const Eigen::Vector3f& p) { return free_space.IsFree(p); }
+                                   : std::function<bool(const Eigen::Vector3f&)>{}));
   out.manifest = Manifest(out, options);
   report("done", 7, 7);
   return out;

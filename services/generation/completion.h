@@ -64,8 +64,9 @@ struct CompletedObject {
   ObjectFrame frame;
   GaussianCloud raw;  // the observed instance (the raw crop), stray Gaussians removed
   size_t stray_removed = 0;
-  GaussianCloud object;  // observed + completed, with the provenance channel
-  TriangleMesh mesh;     // closed mesh of `object`
+  GaussianCloud object;        // observed + completed, with the provenance channel
+  TriangleMesh mesh;           // closed mesh of `object`
+  bool hull_enclosed = false;  // the mesh enclosed the renders' visual hull (enclose_hull)
   std::vector<PinholeCamera> ring;
   std::vector<ViewVisibility> ring_visibility;
   std::vector<int> training_views;  // indices into the scene's views, best first

@@ -102,7 +102,8 @@ std::vector<PinholeCamera> MeshingCameras(const ObjectFrame& frame, const Meshin
 }
 
 absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const ObjectFrame& frame,
-                                        const MeshingOptions& options, int num_threads) {
+                                        const MeshingOptions& options, int num_threads,
+                                        std::function<bool(const Eigen::Vector3f&)> seen_empty) {
   GaussianCloud clamped;
   const bool clamp = options.max_scale_spacings > 0 && frame.spacing > 0;
   if (clamp) {
@@ -168,6 +169,7 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
   fusion.min_component_triangles = 50;
   fusion.closed_gap_voxels = options.closed_gap_voxels;
   fusion.carve_views = options.closed ? options.carve_views : 0;
+  if (options.closed) fusion.seen_empty = std::move(seen_empty);
   if (options.closed) {
     // The box of the surfel centres, widened by the largest footprint the meshing renders show.
     float widest = 0;

@@ -5,6 +5,7 @@
 // meshed the same way is the "closed crop" baseline. Thread-safe.
 #pragma once
 
+#include <functional>
 #include <vector>
 
 #include "absl/status/statusor.h"
@@ -54,6 +55,15 @@ struct MeshingOptions {
   // through a hole in a completed shell (a refused patch) then fuses nothing there instead of
   // the far walls' inner sides, which would mark the object's inside as empty.
   bool cull_inner_sides = true;
+  // Closed meshing with carving, given the capture's seen-empty space (MeshObject's
+  // `seen_empty`): voxels no render's depth reached that every render shows, and the real views
+  // did not see empty, are inside (DepthFusionOptions::seen_empty). Without it a gap the
+  // completion left in the shell (a face seen only edge-on, an asymmetric object's unseen back)
+  // lets the closing flood the inside: a hollow shell (irregular blocks 0.36-0.51 volume IoU).
+  // The completion does not apply it about an accepted rotation axis (a cup's cavity would
+  // fill; a box's n-fold axis already closes its shell). Measured in docs/RESULTS.md ("Meshing: the
+  // renders' visual hull").
+  bool enclose_hull = true;
   // Closed meshing only: the surface is moved this many of the object's median surfel sigma
   // inward (DepthFusionOptions::inset, at most half the truncation band). A surfel's footprint
   // keeps alpha > min_alpha up to about half a sigma past the true silhouette, so the fused
@@ -89,7 +99,11 @@ struct MeshingOptions {
 // The meshing cameras: elevations -60, -30, 0, 30, 60 degrees x `azimuths`, plus both poles.
 std::vector<PinholeCamera> MeshingCameras(const ObjectFrame& frame, const MeshingOptions& options);
 
-absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& object, const ObjectFrame& frame,
-                                        const MeshingOptions& options, int num_threads);
+// `seen_empty` (optional): the capture's seen-empty space; with it the closed surface encloses
+// what the meshing renders' visual hull holds and no depth map reached, except that space
+// (DepthFusionOptions::seen_empty).
+absl::StatusOr<TriangleMesh> MeshObject(
+    const GaussianCloud& object, const ObjectFrame& frame, const MeshingOptions& options,
+    int num_threads, std::function<bool(const Eigen::Vector3f&)> seen_empty = {});
 
 }  // namespace instascene::generation

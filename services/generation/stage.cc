@@ -50,6 +50,7 @@ CompletionOptions ToCompletionOptions(const CompleteStageOptions& o) {
   options.meshing.inset_sigmas = static_cast<float>(o.mesh_inset_sigmas);
   options.meshing.carve_views = o.mesh_carve_views;
   options.meshing.cull_inner_sides = o.mesh_cull_inner_sides;
+  options.meshing.enclose_hull = o.mesh_enclose_hull;
   options.meshing.snap_radius_spacings = static_cast<float>(o.mesh_snap_spacings);
   options.min_gaussians = static_cast<size_t>(o.min_gaussians);
   options.seed = o.seed;

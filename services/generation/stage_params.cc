@@ -38,6 +38,10 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
               "Meshing: each render fuses depth only from the surfels whose outer side (the side "
               "the meshing renders see most) faces it, so a view through a hole in a completed "
               "shell does not empty the object's inside")
+        .Bool("mesh_enclose_hull", &O::mesh_enclose_hull,
+              "Meshing: space no render's depth reached, shown by every render and not seen "
+              "empty by the capture, is inside the closed surface (not about an accepted "
+              "rotation axis: a cup's cavity stays open)")
         .Int("min_gaussians", &O::min_gaussians, 1, 1000000,
              "Instances with fewer Gaussians fail as degenerate")
         .Int("refine_iterations", &O::refine_iterations, 0, 20000,

@@ -23,6 +23,7 @@ struct CompleteStageOptions {
   double mesh_inset_sigmas = 0.4;     // meshing: surface moved inward, in median surfel sigmas
   int mesh_carve_views = 2;           // meshing: renders that must see past a voxel to carve it
   bool mesh_cull_inner_sides = true;  // meshing: depth only from surfels facing each view
+  bool mesh_enclose_hull = true;      // meshing: the renders' visual hull is inside
   double mesh_snap_spacings = 3.0;  // meshing: vertices snapped to surfels this many spacings near
   int min_gaussians = 50;           // fewer: a degenerate object (fails permanently)
   // Joint refinement (ALGORITHM.md 7.9); 0 = not run. Off by default: with the geometric prior it
