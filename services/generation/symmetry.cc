@@ -312,58 +312,51 @@ std::vector<SymmetryHypothesis> DetectSymmetries(const std::vector<Eigen::Vector
     coarse_normals.push_back(normals[i]);
   }
   const PointIndex3 coarse_index(coarse_points);
-  // The axis point maximising the coarse score among shifts of the fit by reach x step radii.
-  auto search = [&](const Eigen::Vector3f& start, int order, int reach, float step_radii) {
+  // The shift of `start` by (dx, dy) x step_radii radii, |dx|, |dy| <= reach, with the highest
+  // `value` (scored in parallel into fixed slots; the first maximum, the start winning ties) on
+  // the coarse sample with `steps` turns.
+  auto best_shift = [&](const Eigen::Vector3f& start, int steps, int reach, float step_radii,
+                        auto&& value) {
     SymmetryOptions coarse = options;
-    coarse.axis_steps = order > 0 ? order : 6;
-    std::vector<SymmetryHypothesis> shifted((2 * reach + 1) * (2 * reach + 1));
+    coarse.axis_steps = steps;
+    const int side = 2 * reach + 1;
+    std::vector<SymmetryHypothesis> shifted(static_cast<size_t>(side) * side);
+    std::vector<double> values(shifted.size());
     tbb::parallel_for(size_t{0}, shifted.size(), [&](size_t slot) {
-      const int dx = static_cast<int>(slot) % (2 * reach + 1) - reach;
-      const int dy = static_cast<int>(slot) / (2 * reach + 1) - reach;
+      const int dx = static_cast<int>(slot) % side - reach;
+      const int dy = static_cast<int>(slot) / side - reach;
       SymmetryHypothesis& h = shifted[slot];
       h.kind = SymmetryKind::kAxis;
       h.direction = frame.up;
       h.point = start + step_radii * frame.radius * (dx * basis.col(0) + dy * basis.col(1));
       h.copies = coarse.axis_steps - 1;
-      ScoreWithIndex(coarse_points, coarse_normals, coarse_index, frame, free_space, coarse, &h);
+      values[slot] = value(coarse, &h);
     });
     size_t best = shifted.size() / 2;  // the start itself
     for (size_t k = 0; k < shifted.size(); ++k) {
-      const SymmetryHypothesis& a = shifted[k];
-      const SymmetryHypothesis& b = shifted[best];
-      if (a.agreement * std::min(1.0, 2 * a.evidence) >
-          b.agreement * std::min(1.0, 2 * b.evidence)) {
-        best = k;
-      }
+      if (values[k] > values[best]) best = k;
     }
     return shifted[best].point;
+  };
+  // The axis point maximising the coarse score among shifts of the fit.
+  auto search = [&](const Eigen::Vector3f& start, int order, int reach, float step_radii) {
+    return best_shift(start, order > 0 ? order : 6, reach, step_radii,
+                      [&](const SymmetryOptions& coarse, SymmetryHypothesis* h) {
+                        ScoreWithIndex(coarse_points, coarse_normals, coarse_index, frame,
+                                       free_space, coarse, h);
+                        return h->agreement * std::min(1.0, 2 * h->evidence);
+                      });
   };
   // Agreement counts images within the match distance and is flat over millimetres: a mug's
   // handle pulls the circle fit towards itself and the search keeps it there (a body revolved
   // about an axis 3 mm off stands 6 mm proud of itself on the far side). The point with the
   // least alignment cost (as for the planes) over the coarse sample, coarse then fine.
   auto refine = [&](const Eigen::Vector3f& start, int reach, float step_radii) {
-    SymmetryOptions coarse = options;
-    coarse.axis_steps = 6;
-    std::vector<SymmetryHypothesis> shifted((2 * reach + 1) * (2 * reach + 1));
-    std::vector<double> cost(shifted.size());
-    tbb::parallel_for(size_t{0}, shifted.size(), [&](size_t slot) {
-      const int dx = static_cast<int>(slot) % (2 * reach + 1) - reach;
-      const int dy = static_cast<int>(slot) / (2 * reach + 1) - reach;
-      SymmetryHypothesis& h = shifted[slot];
-      h.kind = SymmetryKind::kAxis;
-      h.direction = frame.up;
-      h.point = start + step_radii * frame.radius * (dx * basis.col(0) + dy * basis.col(1));
-      h.copies = coarse.axis_steps - 1;
-      cost[slot] =
-          AlignmentCost(coarse_points, coarse_normals, coarse_index, frame, free_space, coarse, h);
-    });
-    // The first minimum (deterministic); the start wins ties.
-    size_t best = shifted.size() / 2;
-    for (size_t k = 0; k < shifted.size(); ++k) {
-      if (cost[k] < cost[best]) best = k;
-    }
-    return shifted[best].point;
+    return best_shift(start, 6, reach, step_radii,
+                      [&](const SymmetryOptions& coarse, SymmetryHypothesis* h) {
+                        return -AlignmentCost(coarse_points, coarse_normals, coarse_index, frame,
+                                              free_space, coarse, *h);
+                      });
   };
   SymmetryHypothesis axis;
   axis.kind = SymmetryKind::kAxis;
