@@ -54,6 +54,12 @@ assert ms and all(m['status'] == 'done' and m['iterations'] == 20 and m['generat
 assert sum(m['real_views'] for m in ms) > 0, ms  # small objects at 96x72 may show < 64 px"
 check "eval --completion" "$BIN" eval --scene "$WORK/u" --completion "$WORK/u/objects" --json
 check "eval --completion reports three versions" bash -c "tail -n 1 '$WORK/out.txt' | python3 -c \"import json,sys; d=json.load(sys.stdin); assert d['matched'] > 0 and set(d['mean']) == {'raw','closed','completed'}\""
+# Without a prior and without refinement the completed object is the raw crop, so the evaluation's
+# closed crop (meshed again from the manifest, the visual hull carved from the scene's splats) must
+# be the very same mesh.
+check "complete without a prior or refinement" "$BIN" complete --scene "$WORK/u" --result "$WORK/u/gt" --out "$WORK/u/none" --mesh-size 64 --refine-iterations 0 --prior none
+check "eval --completion of the closed crops" "$BIN" eval --scene "$WORK/u" --completion "$WORK/u/none" --json
+check "the closed crop is meshed exactly as the completion meshed it" bash -c "tail -n 1 '$WORK/out.txt' | python3 -c \"import json,sys; os=json.load(sys.stdin)['objects']; assert os and all(o['closed']['volume_iou'] == o['completed']['volume_iou'] for o in os), [(o['closed']['volume_iou'], o['completed']['volume_iou']) for o in os]\""
 mkdir -p "$WORK/u/broken" && cp -r "$(ls -d "$WORK"/u/objects/*/ | head -n 1)" "$WORK/u/broken/1" && echo '{"id": 1}' > "$WORK/u/broken/1/manifest.json"
 check_fails "eval --completion on a malformed manifest" "malformed JSON field" "$BIN" eval --scene "$WORK/u" --completion "$WORK/u/broken"
 check_fails "complete with an unknown prior" "magic" "$BIN" complete --scene "$WORK/u" --result "$WORK/u/gt" --out "$WORK/u/x" --prior magic

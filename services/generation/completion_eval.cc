@@ -6,7 +6,10 @@
 #include <array>
 #include <cmath>
 #include <filesystem>
+#include <functional>
+#include <limits>
 #include <map>
+#include <optional>
 
 #include "absl/strings/str_cat.h"
 #include "common/core/file_io.h"
@@ -19,10 +22,12 @@
 #include "common/mesh/mesh_volume.h"
 #include "common/mesh/ray_caster.h"
 #include "common/mesh/surface_distance.h"
+#include "common/mesh/surfel_mesh.h"
 #include "common/scene/image_io.h"
 #include "common/scene/scene.h"
 #include "common/splat/gaussian_ply.h"
 #include "services/generation/completion.h"
+#include "services/generation/free_space.h"
 #include "services/generation/object_mesh.h"
 #include "services/generation/seen_through.h"
 #include "services/generation/viewpoints.h"
@@ -177,8 +182,23 @@ ObjectFrame FrameFromManifest(const nlohmann::json& m) {
   f.up = Vec3(j.at("up"));
   f.radius = j.at("radius").get<float>();
   f.spacing = j.at("spacing").get<float>();
+  if (j.contains("bottom")) f.bottom_height = j["bottom"].get<float>();
   f.has_support = !j.at("support").is_null();
   if (f.has_support) f.support_height = j.at("support").get<float>();
+  return f;
+}
+
+FreeSpaceOptions FreeSpaceFromManifest(const nlohmann::json& m) {
+  FreeSpaceOptions f;
+  if (!m.contains("free_space")) return f;  // manifests before 2026-12-05 ran the defaults
+  const nlohmann::json& j = m["free_space"];
+  f.resolution = j.value("resolution", f.resolution);
+  f.extent_radii = j.value("extent_radii", f.extent_radii);
+  f.min_views = j.value("min_views", f.min_views);
+  f.margin_voxels = j.value("margin_voxels", f.margin_voxels);
+  f.max_rays_per_view = j.value("max_rays_per_view", f.max_rays_per_view);
+  f.hole_rays = j.value("hole_rays", f.hole_rays);
+  f.hole_slack = j.value("hole_slack", f.hole_slack);
   return f;
 }
 
@@ -261,6 +281,7 @@ absl::StatusOr<std::vector<ObjectCompletionEval>> Evaluate(const std::string& sc
     return na.size() != nb.size() ? na.size() < nb.size() : na < nb;
   });
   std::vector<ObjectCompletionEval> results;
+  std::unique_ptr<RayCaster> scene_caster;  // the scene's splats, read at the first hull closing
   for (const std::string& dir : dirs) {
     ObjectCompletionEval e;
     e.directory = dir;
@@ -282,7 +303,13 @@ absl::StatusOr<std::vector<ObjectCompletionEval>> Evaluate(const std::string& sc
     e.id = m.at("id").get<uint32_t>();
     e.abstained = m.value("abstained", false);
     e.completed_share = object.size() ? static_cast<double>(added.size()) / object.size() : 0;
-    const ObjectFrame frame = FrameFromManifest(m);
+    ObjectFrame frame = FrameFromManifest(m);
+    if (!m["frame"].contains("bottom")) {  // manifests before 2026-12-05: the raw crop's lowest
+      frame.bottom_height = std::numeric_limits<float>::infinity();
+      for (const Eigen::Vector3f& p : raw_points) {
+        frame.bottom_height = std::min(frame.bottom_height, frame.up.dot(p));
+      }
+    }
     // The ground-truth object most of the raw crop lies on.
     size_t best = truth.size(), best_count = 0;
     for (size_t t = 0; t < truth.size(); ++t) {
@@ -323,8 +350,29 @@ absl::StatusOr<std::vector<ObjectCompletionEval>> Evaluate(const std::string& sc
           m["meshing"].value("snap_layer_spacings", meshing.snap_layer_spacings);
       meshing.snap_max_voxels = m["meshing"].value("snap_max_voxels", meshing.snap_max_voxels);
       meshing.snap_reach_spacings = m["meshing"].value("snap_reach_spacings", 0.0f);
+      // And before the visual hull without it.
+      meshing.enclose_hull = m["meshing"].value("enclose_hull", false);
     }
-    ASSIGN_OR_RETURN(TriangleMesh closed_mesh, MeshObject(raw, frame, meshing, o.num_threads));
+    // The closed crop has no prior, so no rotation axis: its closing keeps the renders' visual hull
+    // inside wherever the completion's would (completion.cc), against the same free space of the
+    // capture (the scene's splats carved by the real views, as the completion carved it).
+    std::function<bool(const Eigen::Vector3f&)> seen_empty;
+    std::optional<FreeSpaceGrid> free_space;
+    if (meshing.closed && meshing.enclose_hull) {
+      if (scene_caster == nullptr) {
+        ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
+        cloud = ToSurfels(cloud);
+        std::vector<uint32_t> everything(cloud.size());
+        for (uint32_t g = 0; g < everything.size(); ++g) everything[g] = g;
+        ASSIGN_OR_RETURN(scene_caster,
+                         RayCaster::Create(SurfelDiscs(cloud, everything, SurfelDiscOptions{})));
+      }
+      ASSIGN_OR_RETURN(free_space, FreeSpaceGrid::Carve(cameras, *scene_caster, frame,
+                                                        FreeSpaceFromManifest(m)));
+      seen_empty = [&](const Eigen::Vector3f& p) { return free_space->IsFree(p); };
+    }
+    ASSIGN_OR_RETURN(TriangleMesh closed_mesh,
+                     MeshObject(raw, frame, meshing, o.num_threads, seen_empty));
     const std::vector<Eigen::Vector3f> closed_points =
         SampleSurface(closed_mesh, o.samples, o.seed + 1);
     const std::vector<Eigen::Vector3f> completed_points =
