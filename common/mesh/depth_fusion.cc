@@ -296,9 +296,13 @@ std::shared_ptr<open3d::geometry::TriangleMesh> FuseClosed(const std::vector<Dep
         for (int z = 0; z < resolution; ++z) {
           const Eigen::Vector3d p = origin + voxel * Eigen::Vector3d(x + 0.5, y + 0.5, z + 0.5);
           if (normal.dot(p) >= options.outside_below[3]) continue;
-          open3d::geometry::TSDFVoxel& v = volume.voxels_[volume.IndexOf(x, y, z)];
+          const int i = volume.IndexOf(x, y, z);
+          open3d::geometry::TSDFVoxel& v = volume.voxels_[i];
           v.tsdf_ = 1.0f;
           v.weight_ = std::max(v.weight_, 1.0f);
+          // Below the support is outside whatever the visual hull says (the renders show the
+          // object's underside there, and the capture could not see under the table).
+          if (!in_hull.empty()) in_hull[i] = 0;
         }
       }
     }

@@ -44,7 +44,8 @@ struct DepthFusionOptions {
   int max_closed_resolution = 160;  // 160^3 Open3D voxels: about 230 MB
   int closed_gap_voxels = 4;        // the outside does not flow through holes up to twice this wide
   // Closed fusion only: when not zero, voxels with outside_below.head<3>() . x < outside_below[3]
-  // are outside (an object's support plane: a truncation band reaching past it is no surface).
+  // are outside (an object's support plane: a truncation band reaching past it is no surface),
+  // the renders' visual hull (seen_empty) included.
   Eigen::Vector4f outside_below = Eigen::Vector4f::Zero();
   // Closed fusion only: the surface is extracted where the fused TSDF's projective distance is
   // `inset` (scene units) inside (the TSDF shifted by inset / sdf_trunc before marching cubes);

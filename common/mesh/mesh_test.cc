@@ -438,6 +438,31 @@ TEST(DepthFusion, TheVisualHullKeepsAHoledShellSolid) {
             2);
 }
 
+// An object standing on its support: nothing lies below the support plane (outside_below), even
+// where the renders' visual hull reaches under it (the renders show the object's underside there,
+// and the capture saw nothing under the table). The hull once kept those voxels blocked, the
+// closing's flood could not reach the space under the object, and a slab below the plane meshed
+// as inside (a box 7 mm too tall).
+TEST(DepthFusion, NothingBelowTheSupportWhateverTheVisualHull) {
+  std::vector<DepthView> views = RingDepthMaps(Sphere(0.5f), {0.0, 40.0, 80.0});
+  AddEmptyDistances(&views);
+  DepthFusionOptions options = ClosedAroundUnitSphere();
+  options.closed_gap_voxels = 4;
+  options.carve_views = 2;
+  options.outside_below << 0, 0, 1, -0.1f;
+  for (bool hull : {false, true}) {
+    options.seen_empty = hull ? [](const Eigen::Vector3f&) { return false; }
+                              : std::function<bool(const Eigen::Vector3f&)>{};
+    auto mesh = FuseDepthMaps(views, options);
+    ASSERT_TRUE(mesh.ok()) << mesh.status();
+    EXPECT_TRUE(IsClosedManifold(*mesh)) << "hull " << hull;
+    float lowest = 1;
+    for (const Eigen::Vector3f& v : mesh->vertices) lowest = std::min(lowest, v.z());
+    EXPECT_GT(lowest, -0.1f - options.voxel) << "hull " << hull;
+    EXPECT_LT(lowest, -0.1f + options.voxel) << "hull " << hull;
+  }
+}
+
 TEST(DepthFusion, ReconstructsASphereFromRingDepthMaps) {
   const float radius = 0.5f;
   std::vector<DepthView> views = RingDepthMaps(Sphere(radius), {-40.0, 0.0, 40.0});
