@@ -321,11 +321,11 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
                    Refine(&out, cameras, surfels, split.instance, options, progress));
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
   report("meshing", 6, 7);
-  // About an accepted rotation axis the completion went all round and the inside (a cup's
-  // cavity) is the axis's to shape; any other object's unknown inside is solid
-  // (MeshingOptions::enclose_hull).
+  // About an accepted axis of revolution the completion went all round and the inside (a cup's
+  // cavity) is the axis's to shape; any other object's unknown inside is solid, a box's too
+  // (MeshingOptions::enclose_hull, PriorOutput::revolution_axis).
   out.hull_enclosed =
-      options.meshing.closed && options.meshing.enclose_hull && !out.prior.rotation_axis;
+      options.meshing.closed && options.meshing.enclose_hull && !out.prior.revolution_axis;
   ASSIGN_OR_RETURN(
       out.mesh,
       MeshObject(out.object, out.frame, options.meshing, options.num_threads,

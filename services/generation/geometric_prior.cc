@@ -448,7 +448,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   out.report["mirror_axis_asymmetric_sources"] = axis_skipped;
   out.report["beyond_axis_profile_sources"] = profile_skipped;
   for (const SymmetryHypothesis& h : hypotheses) {
-    out.rotation_axis |= h.accepted && h.kind == SymmetryKind::kAxis;
+    out.revolution_axis |= h.accepted && h.kind == SymmetryKind::kAxis && h.order == 0;
   }
   for (uint32_t g = 0; g < instance.size(); ++g) {
     if (foreign[g]) out.foreign.push_back(g);

@@ -19,12 +19,14 @@ Eigen::Vector3f MeanUp(const std::vector<PinholeCamera>& cameras) {
   return sum.normalized().cast<float>();
 }
 
-// The mean of the directions within 10 degrees of the most supported one (the mode, searched
-// over at most 400 of them); nullopt for fewer than `min_count` directions.
+// The mean of the directions within 3 degrees of the most supported one (the mode, searched over
+// at most 400 of them); nullopt for fewer than `min_count` directions. (10 degrees mixed a table's
+// normals with a neighbour's top slanted 7 degrees: RESULTS.md "Object frames: the object's own
+// footprint".)
 std::optional<Eigen::Vector3f> ModeDirection(const std::vector<Eigen::Vector3f>& directions,
                                              size_t min_count) {
   if (directions.size() < min_count) return std::nullopt;
-  constexpr float kModeCos = 0.985f;  // 10 degrees
+  constexpr float kModeCos = 0.99863f;  // 3 degrees
   const size_t stride = std::max<size_t>(1, directions.size() / 400);
   size_t best = 0, best_count = 0;
   for (size_t i = 0; i < directions.size(); i += stride) {
@@ -238,12 +240,25 @@ ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& 
     facing(split.occluders[k], frame.up, 0.82f, &scene_normals);
   }
   const Eigen::Vector3f scene_up = ModeDirection(scene_normals, 20).value_or(frame.up);
+  // Around the object's own footprint (twice its horizontal radius, not its radius: a tall
+  // bottle's radius is its half-height, and 2 radii reached a neighbour's slanted top 15 cm away),
+  // below its bottom, both about the scene's up (the cameras' is rough).
+  frame.up = scene_up;
+  frame.bottom_height = std::numeric_limits<float>::infinity();
+  float horizontal_radius = 0;
+  for (const Eigen::Vector3f& p : points) {
+    const Eigen::Vector3f offset = p - frame.center;
+    frame.bottom_height = std::min(frame.bottom_height, frame.up.dot(p));
+    horizontal_radius =
+        std::max(horizontal_radius, (offset - offset.dot(frame.up) * frame.up).norm());
+  }
+  const float footprint_reach = 2.0f * horizontal_radius;
   std::vector<Eigen::Vector3f> candidates;
   for (uint32_t g : split.occluders) {
     const Eigen::Vector3f p(&cloud.positions[3 * g]);
     const float h = frame.up.dot(p);
     if (h > frame.bottom_height + 0.1f * frame.radius || h < frame.bottom_height - frame.radius ||
-        !in_footprint(p, 2.0f * frame.radius)) {
+        !in_footprint(p, footprint_reach)) {
       continue;
     }
     facing(g, scene_up, 0.966f, &candidates);

@@ -60,9 +60,9 @@ struct MeshingOptions {
   // did not see empty, are inside (DepthFusionOptions::seen_empty). Without it a gap the
   // completion left in the shell (a face seen only edge-on, an asymmetric object's unseen back)
   // lets the closing flood the inside: a hollow shell (irregular blocks 0.36-0.51 volume IoU).
-  // The completion does not apply it about an accepted rotation axis (a cup's cavity would
-  // fill; a box's n-fold axis already closes its shell). Measured in docs/RESULTS.md ("Meshing: the
-  // renders' visual hull").
+  // The completion does not apply it about an accepted axis of revolution (a cup's cavity would
+  // fill); a box's n-fold axis gets it (a face seen only edge-on leaves a gap). Measured in
+  // docs/RESULTS.md ("Meshing: the renders' visual hull").
   bool enclose_hull = true;
   // Closed meshing only: the surface is moved this many of the object's median surfel sigma
   // inward (DepthFusionOptions::inset, at most half the truncation band). A surfel's footprint

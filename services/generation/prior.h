@@ -58,10 +58,11 @@ struct PriorOutput {
   // Instance surfels (indices into PriorInput::instance) the prior found not to be the object's
   // (a neighbour's surfels the segmentation gave it): the caller moves them to the occluders.
   std::vector<uint32_t> foreign;
-  // An accepted rotation axis (continuous or n-fold) shaped the completion: it revolved the
-  // observed part all round, and what is inside (a cup's cavity) is the axis's (the meshing does
-  // not fill it, MeshingOptions::enclose_hull).
-  bool rotation_axis = false;
+  // An accepted axis of revolution (continuous, not n-fold) shaped the completion: it revolved
+  // the observed part all round, and what is inside (a cup's cavity) is the axis's (the meshing
+  // does not fill it, MeshingOptions::enclose_hull). A box's n-fold axis leaves the inside to the
+  // hull: a face seen only edge-on stays a gap its copies do not fill, and the box meshed hollow.
+  bool revolution_axis = false;
 };
 
 class CompletionPrior {
