@@ -305,6 +305,15 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
               off[g] && radial[g] > profile[g] && (*input.neighbour_labelled)[g];
       }
     }
+    // About an n-fold axis (no profile: a box's radius varies around it), those beyond the body's
+    // reach (its corners) that the axis does not hold for and a neighbour's label surrounds.
+    if (axis.order != 0 && options_.drop_neighbours_beyond_axis_profile &&
+        input.neighbour_labelled != nullptr &&
+        input.neighbour_labelled->size() == instance.size()) {
+      b.neighbours_beyond_profile.assign(instance.size(), 0);
+      for (uint32_t g = 0; g < instance.size(); ++g)
+        b.neighbours_beyond_profile[g] = b.off_beyond_body[g] && (*input.neighbour_labelled)[g];
+    }
     bodies.push_back(std::move(b));
   }
   std::vector<uint8_t> foreign(instance.size(), 0);

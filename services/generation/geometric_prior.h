@@ -49,7 +49,8 @@ struct GeometricPriorOptions {
   bool drop_beyond_axis_profile = true;
   // Surfels such an axis does not hold for (their images lie in seen-empty space, as a handle's
   // do) beyond its profile are not the object's either where a touching neighbour's label
-  // surrounds them (PriorInput::neighbour_labelled): they leave it too.
+  // surrounds them (PriorInput::neighbour_labelled): they leave it too; about an n-fold axis
+  // (a box), those beyond the body's reach, its corners.
   bool drop_neighbours_beyond_axis_profile = true;
   // Refuse a candidate standing off the observed surface beside it (observed_surface.h).
   // Measured in RESULTS.md ("Free-space violations: candidates off the observed surface").
