@@ -208,6 +208,70 @@ TEST(FreeSpace, RaysThroughSmallHolesDoNotCarve) {
   EXPECT_GT(carved(1, beside_wall), 0);  // past the wall's edge rays still carve
 }
 
+// The lowest band seen of a sphere resting on its support (latitudes -50 to -35 degrees, normals
+// leaning down 35-50 degrees): straight down, its walls stand a skirt up to 11 mm outside the
+// sphere; down their own slope (a tangent, so within 4 mm of it) they never move
+// outwards. A cylinder's walls (horizontal normals) go straight down either way.
+TEST(SupportCompletion, WallsLeaningDownFollowTheirSlope) {
+  ObjectFrame frame;
+  frame.center = Eigen::Vector3f(0, 0, 0.05f);
+  frame.radius = 0.05f;
+  frame.has_support = true;
+  frame.support_height = 0.0f;
+  frame.spacing = 0.003f;
+  auto band = [&](bool sphere) {
+    std::vector<Eigen::Vector3f> positions;
+    std::vector<Eigen::Matrix3f> rotations;
+    std::vector<uint32_t> sources;
+    for (float latitude = -50; latitude <= -35; latitude += 3) {
+      const float phi = latitude * kPi / 180;
+      for (int k = 0; k < 60; ++k) {
+        const float a = 2 * kPi * k / 60;
+        const Eigen::Vector3f radial(std::cos(a), std::sin(a), 0);
+        const Eigen::Vector3f n =
+            sphere
+                ? Eigen::Vector3f(std::cos(phi) * radial + std::sin(phi) * Eigen::Vector3f::UnitZ())
+                : radial;
+        const Eigen::Vector3f p =
+            sphere ? Eigen::Vector3f(frame.center + frame.radius * n)
+                   : Eigen::Vector3f(0.03f * radial + Eigen::Vector3f(0, 0, 0.05f + 0.02f * phi));
+        Eigen::Matrix3f r;
+        const Eigen::Vector3f u = Eigen::Vector3f::UnitZ().cross(n).normalized();
+        r << u, n.cross(u), n;
+        positions.push_back(p);
+        rotations.push_back(r);
+        sources.push_back(static_cast<uint32_t>(sources.size()));
+      }
+    }
+    return std::make_tuple(positions, rotations, sources);
+  };
+  const auto [positions, rotations, sources] = band(true);
+  const std::vector<SurfelCandidate> straight = WallExtension(positions, rotations, sources, frame);
+  const std::vector<SurfelCandidate> sloped =
+      WallExtension(positions, rotations, sources, frame, 0.26f);
+  ASSERT_FALSE(straight.empty());
+  ASSERT_EQ(sloped.size(), straight.size());
+  auto off_sphere = [&](const SurfelCandidate& c) {
+    return (c.position - frame.center).norm() - frame.radius;
+  };
+  auto horizontal = [](const Eigen::Vector3f& p) { return std::hypot(p.x(), p.y()); };
+  float worst_straight = 0, worst_sloped = 0;
+  for (size_t i = 0; i < straight.size(); ++i) {
+    worst_straight = std::max(worst_straight, std::abs(off_sphere(straight[i])));
+    worst_sloped = std::max(worst_sloped, std::abs(off_sphere(sloped[i])));
+    EXPECT_LE(horizontal(sloped[i].position), horizontal(positions[sloped[i].source]) + 1e-6f);
+  }
+  EXPECT_GT(worst_straight, 0.010f);
+  EXPECT_LT(worst_sloped, 0.005f);
+  const auto [walls, wall_rotations, wall_sources] = band(false);
+  const std::vector<SurfelCandidate> a = WallExtension(walls, wall_rotations, wall_sources, frame);
+  const std::vector<SurfelCandidate> b =
+      WallExtension(walls, wall_rotations, wall_sources, frame, 0.26f);
+  ASSERT_EQ(a.size(), b.size());
+  ASSERT_FALSE(a.empty());
+  for (size_t i = 0; i < a.size(); ++i) EXPECT_TRUE(a[i].position.isApprox(b[i].position));
+}
+
 // The support cap fills the footprint of the lower walls and stops at them: a cylinder's wall of
 // surfels (radius 5 cm, 4 mm apart) gets a cap no wider than the wall plus half a grid cell (the
 // cap's cells are 1.5 spacings; the dilation that keeps the outside from leaking in between the

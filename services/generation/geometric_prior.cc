@@ -441,7 +441,10 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     };
     gather();
     size_t before = added.size();
-    for (const Candidate& c : WallExtension(positions, rotations, sources, frame)) consider(c);
+    for (const Candidate& c :
+         WallExtension(positions, rotations, sources, frame, options_.wall_slope_min_sin)) {
+      consider(c);
+    }
     added_by["support_walls"] = static_cast<int>(added.size() - before);
     gather();
     before = added.size();

@@ -12,7 +12,7 @@ namespace instascene::generation {
 std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& positions,
                                            const std::vector<Eigen::Matrix3f>& rotations,
                                            const std::vector<uint32_t>& sources,
-                                           const ObjectFrame& frame) {
+                                           const ObjectFrame& frame, float slope_min_sin) {
   std::vector<SurfelCandidate> out;
   if (!frame.has_support || positions.empty()) return out;
   // The lowest surfel per azimuth sector around the centre: how far down each side was seen.
@@ -36,10 +36,22 @@ std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& p
     const float h = frame.up.dot(positions[i]);
     const float sector_lowest = lowest[sector_of(positions[i])];
     if (h > sector_lowest + band || sector_lowest - floor < step) continue;
-    if (std::abs(rotations[i].col(2).dot(frame.up)) > 0.7f) continue;  // not wall-like
+    const Eigen::Vector3f normal = rotations[i].col(2);
+    const float lean = normal.dot(frame.up);
+    if (std::abs(lean) > 0.7f) continue;  // not wall-like
+    // Per unit of height dropped: straight down, or, where the surface leans down towards the
+    // support (narrowing: a sphere's or a bowl's underside), down the surfel's slope (the steepest
+    // descent in its tangent plane, at most 45 degrees off vertical here, so inwards by at most
+    // the drop). A surface widening downwards (a shoulder) goes straight down: outwards, a tall
+    // drop from a bottle's shoulder ran 4 cm past its body.
+    Eigen::Vector3f down = -frame.up;
+    if (slope_min_sin > 0 && lean < -slope_min_sin) {
+      const Eigen::Vector3f descent = -(frame.up - lean * normal);
+      down = descent / -descent.dot(frame.up);
+    }
     for (float drop = step; h - drop >= floor; drop += step) {
       SurfelCandidate c;
-      c.position = positions[i] - drop * frame.up;
+      c.position = positions[i] + drop * down;
       c.rotation = rotations[i];
       c.source = sources[i];
       out.push_back(c);

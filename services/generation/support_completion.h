@@ -5,7 +5,8 @@
 //   - wall extension: in each azimuth sector around the object, the surfels of the lowest band
 //     seen there whose normal is roughly horizontal are repeated straight down, one spacing at a
 //     time, to the support (a vertical-wall prior: exact
-//     for cylinders, bottles, boxes; it adds a skirt under a sphere, which the docs report);
+//     for cylinders, bottles, boxes), or down their own slope where they lean (a sphere's
+//     lower band: straight down it added a skirt);
 //   - cap: surfels on the support plane inside the footprint of the object's lower quarter seen
 //     from above (its convex hull, so gaps left in completed walls do not open the bottom),
 //     except where the space just above was seen empty (a torus' hole is table, not underside).
@@ -35,10 +36,15 @@ struct SurfelCandidate {
 
 // `positions` / `rotations` / `sources`: every surfel so far (observed and added), with the
 // observed surfel each one takes its appearance from.
+// `slope_min_sin` > 0: a surfel whose normal leans down more than asin(slope_min_sin) off the
+// horizontal (a sphere's or a bowl's lower band) is repeated down its own slope (the steepest
+// descent in its tangent plane, inwards) instead of straight down; walls within that of vertical
+// (a bottle's, a box's with noisy normals) and surfaces facing up (a shoulder: outwards) still go
+// straight down.
 std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& positions,
                                            const std::vector<Eigen::Matrix3f>& rotations,
                                            const std::vector<uint32_t>& sources,
-                                           const ObjectFrame& frame);
+                                           const ObjectFrame& frame, float slope_min_sin = 0);
 
 std::vector<SurfelCandidate> SupportCap(const std::vector<Eigen::Vector3f>& positions,
                                         const std::vector<uint32_t>& sources,
