@@ -157,6 +157,20 @@ struct PriorFixture {
   PriorInput input;
 };
 
+// Copies of the scene's last surfels (the object's), moved to `targets` and labelled as the
+// object: a neighbour's surfels the segmentation gave it. They come last in the instance.
+void AppendObjectSurfelsAt(const std::vector<Eigen::Vector3f>& targets, PartialObject* scene) {
+  const size_t n_scene = scene->cloud.size();
+  std::vector<uint32_t> keep(n_scene);
+  std::iota(keep.begin(), keep.end(), 0u);
+  for (size_t i = 0; i < targets.size(); ++i) keep.push_back(keep[n_scene - 1 - i]);
+  scene->cloud = scene->cloud.Subset(keep);
+  for (size_t i = 0; i < targets.size(); ++i) {
+    for (int k = 0; k < 3; ++k) scene->cloud.positions[3 * (n_scene + i) + k] = targets[i][k];
+  }
+  scene->labels.resize(scene->cloud.size(), 1);
+}
+
 Detected Detect(const PartialObject& scene, const SymmetryOptions& options = {}) {
   auto split = SplitInstance(scene.labels, 1, 50);
   EXPECT_TRUE(split.ok());
@@ -905,18 +919,10 @@ TEST(GeometricPrior, StraysANeighboursLabelSurroundsAreNotTheObjects) {
   // claims nothing beyond its profile: the guard of geometric_prior.h).
   for (uint64_t seed : {3u, 22u, 23u}) {
     PartialObject scene = MakePartialObject(Bottle(), 4000, seed);
-    const size_t n_scene = scene.cloud.size();
-    std::vector<uint32_t> keep(n_scene);
-    std::iota(keep.begin(), keep.end(), 0u);
-    const std::vector<Eigen::Vector3f> targets = {Eigen::Vector3f(0.061f, 0.004f, 0.012f),
-                                                  Eigen::Vector3f(0.060f, -0.006f, 0.018f),
-                                                  Eigen::Vector3f(0.062f, 0.010f, 0.024f)};
-    for (size_t i = 0; i < targets.size(); ++i) keep.push_back(keep[n_scene - 1 - i]);
-    scene.cloud = scene.cloud.Subset(keep);
-    for (size_t i = 0; i < targets.size(); ++i) {
-      for (int k = 0; k < 3; ++k) scene.cloud.positions[3 * (n_scene + i) + k] = targets[i][k];
-    }
-    scene.labels.resize(scene.cloud.size(), 1);
+    AppendObjectSurfelsAt(
+        {Eigen::Vector3f(0.061f, 0.004f, 0.012f), Eigen::Vector3f(0.060f, -0.006f, 0.018f),
+         Eigen::Vector3f(0.062f, 0.010f, 0.024f)},
+        &scene);
     PriorFixture fixture(scene);
     ASSERT_TRUE(fixture.ok());
     const uint32_t n = static_cast<uint32_t>(fixture.instance.size());
@@ -971,21 +977,12 @@ TEST(GeometricPrior, ANeighboursSurfelsPastABoxsCornerAreNotTheBoxs) {
   box.Transform({yaw, Eigen::Vector3d::Zero()});
   // Views all round: the corner's image under the 2-fold axis is in space they saw empty.
   PartialObject scene = MakePartialObject(box, 5000, 9, 160);
-  const size_t n_scene = scene.cloud.size();
-  std::vector<uint32_t> keep(n_scene);
-  std::iota(keep.begin(), keep.end(), 0u);
   // The corner at local (+x, -y), pushed 9 mm further out along its diagonal.
   const Eigen::Vector3f corner = yaw.cast<float>() * Eigen::Vector3f(0.055f, -0.0375f, 0);
   const Eigen::Vector3f out = corner.normalized() * (corner.norm() + 0.009f);
-  const std::vector<Eigen::Vector3f> targets = {out + Eigen::Vector3f(0, 0, 0.10f),
-                                                out + Eigen::Vector3f(0, 0, 0.11f),
-                                                out + Eigen::Vector3f(0, 0, 0.12f)};
-  for (size_t i = 0; i < targets.size(); ++i) keep.push_back(keep[n_scene - 1 - i]);
-  scene.cloud = scene.cloud.Subset(keep);
-  for (size_t i = 0; i < targets.size(); ++i) {
-    for (int k = 0; k < 3; ++k) scene.cloud.positions[3 * (n_scene + i) + k] = targets[i][k];
-  }
-  scene.labels.resize(scene.cloud.size(), 1);
+  AppendObjectSurfelsAt({out + Eigen::Vector3f(0, 0, 0.10f), out + Eigen::Vector3f(0, 0, 0.11f),
+                         out + Eigen::Vector3f(0, 0, 0.12f)},
+                        &scene);
   PriorFixture fixture(scene);
   ASSERT_TRUE(fixture.ok());
   const uint32_t n = static_cast<uint32_t>(fixture.instance.size());
