@@ -225,7 +225,8 @@ TEST(FreeSpace, RaysThroughSmallHolesDoNotCarve) {
 // The lowest band seen of a sphere resting on its support (latitudes -50 to -35 degrees, normals
 // leaning down 35-50 degrees): straight down, its walls stand a skirt up to 11 mm outside the
 // sphere; down their own slope (a tangent, so within 4 mm of it) they never move
-// outwards. A cylinder's walls (horizontal normals) go straight down either way.
+// outwards, whichever way the normals point. The upper band (widening downwards) and a
+// cylinder's walls (horizontal normals) go straight down either way.
 TEST(SupportCompletion, WallsLeaningDownFollowTheirSlope) {
   ObjectFrame frame;
   frame.center = Eigen::Vector3f(0, 0, 0.05f);
@@ -277,6 +278,30 @@ TEST(SupportCompletion, WallsLeaningDownFollowTheirSlope) {
   }
   EXPECT_GT(worst_straight, 0.010f);
   EXPECT_LT(worst_sloped, 0.005f);
+  // Whichever way the normals point (2DGS surfels carry no outside): the same candidates.
+  std::vector<Eigen::Matrix3f> flipped = rotations;
+  for (Eigen::Matrix3f& r : flipped) r.col(2) = -r.col(2);
+  const std::vector<SurfelCandidate> flipped_sloped =
+      WallExtension(positions, flipped, sources, frame, 0.26f);
+  ASSERT_EQ(flipped_sloped.size(), sloped.size());
+  for (size_t i = 0; i < sloped.size(); ++i) {
+    EXPECT_TRUE(flipped_sloped[i].position.isApprox(sloped[i].position));
+  }
+  // The upper band of the same sphere as the lowest seen (a shoulder: it widens downwards) goes
+  // straight down, either sign of normal.
+  std::vector<Eigen::Vector3f> upper = positions;
+  std::vector<Eigen::Matrix3f> upper_rotations = rotations, upper_flipped = flipped;
+  for (size_t i = 0; i < upper.size(); ++i) {
+    upper[i].z() = 2 * frame.center.z() - upper[i].z();
+    for (Eigen::Matrix3f* r : {&upper_rotations[i], &upper_flipped[i]}) r->row(2) = -r->row(2);
+  }
+  const std::vector<SurfelCandidate> shoulder =
+      WallExtension(upper, upper_rotations, sources, frame);
+  for (const auto& rs : {upper_rotations, upper_flipped}) {
+    const std::vector<SurfelCandidate> c = WallExtension(upper, rs, sources, frame, 0.26f);
+    ASSERT_EQ(c.size(), shoulder.size());
+    for (size_t i = 0; i < c.size(); ++i) EXPECT_TRUE(c[i].position.isApprox(shoulder[i].position));
+  }
   const auto [walls, wall_rotations, wall_sources] = band(false);
   const std::vector<SurfelCandidate> a = WallExtension(walls, wall_rotations, wall_sources, frame);
   const std::vector<SurfelCandidate> b =

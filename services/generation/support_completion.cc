@@ -39,14 +39,17 @@ std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& p
     const Eigen::Vector3f normal = rotations[i].col(2);
     const float lean = normal.dot(frame.up);
     if (std::abs(lean) > 0.7f) continue;  // not wall-like
-    // Per unit of height dropped: straight down, or, where the surface leans down towards the
-    // support (narrowing: a sphere's or a bowl's underside), down the surfel's slope (the steepest
-    // descent in its tangent plane, at most 45 degrees off vertical here, so inwards by at most
-    // the drop). A surface widening downwards (a shoulder) goes straight down: outwards, a tall
-    // drop from a bottle's shoulder ran 4 cm past its body.
+    // Per unit of height dropped: straight down, or, where the surface narrows towards the
+    // support (a sphere's or a bowl's underside), down the surfel's slope (the steepest descent
+    // in its tangent plane, at most 45 degrees off vertical here, so inwards by at most the
+    // drop). A surface widening downwards (a shoulder) goes straight down: outwards, a tall drop
+    // from a bottle's shoulder ran 4 cm past its body. Inwards or outwards is the descent's
+    // against the surfel's offset from the axis, whichever way its normal points.
     Eigen::Vector3f down = -frame.up;
-    if (slope_min_sin > 0 && lean < -slope_min_sin) {
-      const Eigen::Vector3f descent = -(frame.up - lean * normal);
+    const Eigen::Vector3f descent = -(frame.up - lean * normal);
+    const Eigen::Vector3f offset = positions[i] - frame.center;
+    if (slope_min_sin > 0 && std::abs(lean) > slope_min_sin &&
+        descent.dot(offset - offset.dot(frame.up) * frame.up) < 0) {
       down = descent / -descent.dot(frame.up);
     }
     for (float drop = step; h - drop >= floor; drop += step) {

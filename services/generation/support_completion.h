@@ -36,11 +36,11 @@ struct SurfelCandidate {
 
 // `positions` / `rotations` / `sources`: every surfel so far (observed and added), with the
 // observed surfel each one takes its appearance from.
-// `slope_min_sin` > 0: a surfel whose normal leans down more than asin(slope_min_sin) off the
-// horizontal (a sphere's or a bowl's lower band) is repeated down its own slope (the steepest
-// descent in its tangent plane, inwards) instead of straight down; walls within that of vertical
-// (a bottle's, a box's with noisy normals) and surfaces facing up (a shoulder: outwards) still go
-// straight down.
+// `slope_min_sin` > 0: a surfel whose normal leans more than asin(slope_min_sin) off the
+// horizontal where the surface narrows downwards (a sphere's or a bowl's lower band) is repeated
+// down its own slope (the steepest descent in its tangent plane, inwards) instead of straight
+// down; walls within that of vertical (a bottle's, a box's with noisy normals) and surfaces that
+// widen downwards (a shoulder: outwards) still go straight down. Either sign of normal.
 std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& positions,
                                            const std::vector<Eigen::Matrix3f>& rotations,
                                            const std::vector<uint32_t>& sources,
