@@ -31,9 +31,10 @@ struct GeometricPriorOptions {
   // RESULTS.md ("Free-space violations").
   int candidate_free_views = 1;
   float max_support_gap_radii = 1.0f;  // no support completion when it is farther below
-  // Support walls: a lowest-band surfel whose normal leans down more than asin(this) (15 degrees)
-  // is extended down its own slope, inwards, not straight down (support_completion.h; 0 = always
-  // straight down). Measured in RESULTS.md ("Support walls down their slope").
+  // Support walls: a lowest-band surfel more than asin(this) (15 degrees) off vertical on a
+  // surface that narrows downwards is extended down its own slope, inwards, not straight down
+  // (support_completion.h; 0 = always straight down). Measured in RESULTS.md ("Support walls
+  // down their slope").
   float wall_slope_min_sin = 0.26f;
   // A mirror plane that contains an accepted revolution axis is oriented about that axis only by
   // the parts the axis does not hold for (a mug's handle), weakly: a plane a few degrees off
