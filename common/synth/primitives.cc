@@ -95,8 +95,8 @@ float ShapeSpec::FootprintRadius() const {
       return 0.5f * std::hypot(1.3f * size.x(), 1.3f * size.y());
     case ShapeKind::kTorus:
       return size.x() + size.y();
-    case ShapeKind::kMug:
-      return size.x() + 0.45f * size.z();
+    case ShapeKind::kMug:  // the handle reaches 0.56 h beyond the wall
+      return size.x() + 0.56f * size.z();
     default:
       return size.x();
   }
@@ -236,14 +236,17 @@ TriangleMesh MakeShapeMesh(const ShapeSpec& spec, int segments) {
       return MakeLathe(profile, segments, false);
     }
     case ShapeKind::kMug: {
-      // The cup, and a handle: a torus standing in the x-z plane touching the wall at +x.
+      // The cup, and a handle: a torus standing in the x-z plane at +x whose tube touches the
+      // wall, sunk half the wall's thickness into it. (Until 2026-12-06 the torus stood 2 tubes
+      // into the cup: its inner arc hung inside the cavity, a surface no mug has.) The handle
+      // reaches 0.56 h beyond the wall, its hole 0.2 h across.
       TriangleMesh mesh = MakeShapeMesh({ShapeKind::kCup, spec.size}, segments);
-      const float tube = 0.09f * h, major = 0.28f * h;
+      const float wall = 0.08f * r, tube = 0.09f * h, major = 0.28f * h - tube + 0.25f * wall;
       TriangleMesh handle =
           MakeShapeMesh({ShapeKind::kTorus, Eigen::Vector3f(major, tube, 0)}, segments / 2);
       Rigid3d stand;  // torus axis z -> y, centred beside the wall at mid height
       stand.rotation = Eigen::AngleAxisd(0.5 * kPi, Eigen::Vector3d::UnitX()).toRotationMatrix();
-      stand.translation = Eigen::Vector3d(r + major - tube, 0, 0.5 * h - tube);
+      stand.translation = Eigen::Vector3d(r - 0.5f * wall + major + tube, 0, 0.5 * h - tube);
       handle.Transform(stand);
       mesh.Append(handle);
       return mesh;

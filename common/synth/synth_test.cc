@@ -62,6 +62,13 @@ TEST(Primitives, AsymmetricShapesAreClosedPartsWithTheirVolumes) {
   const TriangleMesh mug = MakeShapeMesh({ShapeKind::kMug, {0.05f, 0, 0.1f}}, 96);
   EXPECT_GT(SignedVolume(mug), SignedVolume(cup));
   EXPECT_GT(mug.Bounds().max().x(), cup.Bounds().max().x() + 0.03f);  // the handle sticks out
+  // Nothing of the handle hangs inside the cavity (above the floor, within the inner wall).
+  const float inner = 0.05f * (1.0f - 0.08f), floor = 0.08f * 0.05f;
+  int in_cavity = 0;
+  for (const Eigen::Vector3f& v : mug.vertices) {
+    in_cavity += v.z() > floor + 1e-5f && std::hypot(v.x(), v.y()) < inner - 1e-5f;
+  }
+  EXPECT_EQ(in_cavity, 0);
   // The irregular block keeps its base and is closed with a positive volume.
   const TriangleMesh rock = MakeShapeMesh({ShapeKind::kIrregular, {0.15f, 0.1f, 0.1f}});
   EXPECT_GT(SignedVolume(rock), 0.15 * 0.1 * 0.1);

@@ -855,10 +855,11 @@ TEST(GeometricPrior, AMirrorPlaneThroughTheAxisLendsNoImagesOfTheHandle) {
       }
       return count;
     };
-    // Planes 3-8 degrees off the handle's: 14-25 surfels a centimetre or more beyond the body
-    // when the handle is mirrored, 0-7 (revolved and mirrored images of the body's rim) when not.
+    // Planes a few degrees off the handle's: 9-18 surfels a centimetre or more beyond the body
+    // when the handle is mirrored, 0 when not (0-7, revolved and mirrored images of the body's
+    // rim, with the handle of before 2026-12-06 that hung into the cavity).
     const size_t mirrored = beyond_body(false), skipped = beyond_body(true);
-    EXPECT_GE(mirrored, 10u) << seed;
+    EXPECT_GE(mirrored, 8u) << seed;
     EXPECT_LT(2 * skipped, mirrored) << seed;
   }
 }
