@@ -606,6 +606,23 @@ TEST(ObjectFrame, ANeighboursSlantedTopBeyondTheFootprintDoesNotTiltTheUp) {
   EXPECT_GT(frame.up.z(), std::cos(0.5f * kPi / 180)) << frame.up.transpose();
 }
 
+// A neighbour's inner floor (a bowl's, 6 mm above the table, labelled 2) dense beside the bottle:
+// more surfels per bin than a quarter of the table's around it, and higher. The support surrounds
+// the object; the floor lies to one side.
+TEST(ObjectFrame, TheSupportSurroundsTheObjectNotANeighboursFloorBesideIt) {
+  PartialObject scene = MakePartialObject(Bottle(), 12000, 3);
+  TriangleMesh floor = MakeRectangle(0.06f, 0.06f, 2, 2);
+  for (Eigen::Vector3f& v : floor.vertices) v += Eigen::Vector3f(0.12f, 0.0f, 0.006f);
+  std::mt19937_64 rng(7);
+  AppendSurfels(floor, 800, Appearance{}, SurfelSampling{}, rng, &scene.cloud);
+  scene.labels.resize(scene.cloud.size(), 2);
+  auto split = SplitInstance(scene.labels, 1, 50);
+  ASSERT_TRUE(split.ok());
+  const ObjectFrame frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
+  ASSERT_TRUE(frame.has_support);
+  EXPECT_NEAR(frame.support_height, 0.0f, 0.002f);
+}
+
 TEST(Symmetry, RecoversTheAxisOfAPartlySeenBottle) {
   // 10-70 % occlusion: cameras over 140, 100 and 60 degrees of azimuth.
   for (double half_angle : {70.0, 50.0, 30.0}) {

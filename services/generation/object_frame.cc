@@ -1,7 +1,9 @@
 #include "services/generation/object_frame.h"
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
+#include <numbers>
 #include <optional>
 
 #include "absl/strings/str_cat.h"
@@ -271,36 +273,55 @@ ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& 
   // 2. Support: occluder surfels that face up, within four radii (what lies right under the
   // object is rarely reconstructed), below the bottom by at most one radius (the object's lower
   // part may be hidden).
-  std::vector<float> heights;
+  struct Candidate {
+    float height;
+    int sector;  // of 8 around the object's centre
+  };
+  std::vector<Candidate> heights;
   const float below = frame.radius, above = 0.05f * frame.radius;
+  const Eigen::Matrix3f basis = frame.Basis();
   for (uint32_t g : split.occluders) {
     const Eigen::Vector3f p(&cloud.positions[3 * g]);
     const float h = frame.up.dot(p);
     if (h < frame.bottom_height - below || h > frame.bottom_height + above) continue;
     if (!in_footprint(p, 4.0f * frame.radius)) continue;
     if (std::abs(normal_of(g).dot(frame.up)) < 0.9f) continue;
-    heights.push_back(h);
+    const Eigen::Vector3f q = basis.transpose() * (p - frame.center);
+    constexpr float kPi = std::numbers::pi_v<float>;
+    const int sector = static_cast<int>(std::floor((std::atan2(q.y(), q.x()) + kPi) / (kPi / 4)));
+    heights.push_back({h, std::clamp(sector, 0, 7)});
   }
   // Counts per one-bin window starting at each height (descending); the highest window holding
   // at least a quarter of the fullest one's count (and 10) wins: the plane right under the object,
-  // not the underside of the table top some rays leak through to.
+  // not the underside of the table top some rays leak through to. And a plane the object stands
+  // on surrounds it: the window's surfels lie in at least half of the 8 sectors around it (a
+  // neighbouring bowl's inner floor, a few millimetres above the table and dense beside a mug,
+  // lies to one side; RESULTS.md "Object frames: the support surrounds the object"). Without
+  // such a window, the highest by count alone.
   const float bin = std::max(2.0f * frame.spacing, 0.02f * frame.radius);
-  std::sort(heights.begin(), heights.end(), std::greater<float>());
+  std::sort(heights.begin(), heights.end(),
+            [](const Candidate& a, const Candidate& b) { return a.height > b.height; });
   std::vector<size_t> window_end(heights.size());
   size_t fullest = 0;
   for (size_t i = 0, j = 0; i < heights.size(); ++i) {
     j = std::max(j, i);
-    while (j < heights.size() && heights[j] >= heights[i] - bin) ++j;
+    while (j < heights.size() && heights[j].height >= heights[i].height - bin) ++j;
     window_end[i] = j;
     fullest = std::max(fullest, j - i);
   }
-  for (size_t i = 0; i < heights.size(); ++i) {
-    const size_t count = window_end[i] - i;
-    if (count >= 10 && 4 * count >= fullest) {
+  auto surrounds = [&](size_t i) {
+    uint8_t sectors = 0;
+    for (size_t k = i; k < window_end[i]; ++k) sectors |= uint8_t{1} << heights[k].sector;
+    return std::popcount(sectors) >= 4;
+  };
+  for (const bool need_surround : {true, false}) {
+    for (size_t i = 0; i < heights.size() && !frame.has_support; ++i) {
+      const size_t count = window_end[i] - i;
+      if (count < 10 || 4 * count < fullest || (need_surround && !surrounds(i))) continue;
+      std::vector<float> window;
+      for (size_t k = i; k < window_end[i]; ++k) window.push_back(heights[k].height);
       frame.has_support = true;
-      frame.support_height =
-          Median(std::vector<float>(heights.begin() + i, heights.begin() + window_end[i]));
-      break;
+      frame.support_height = Median(std::move(window));
     }
   }
   return frame;
