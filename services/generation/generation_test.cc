@@ -278,6 +278,19 @@ TEST(SupportCompletion, WallsLeaningDownFollowTheirSlope) {
   }
   EXPECT_GT(worst_straight, 0.010f);
   EXPECT_LT(worst_sloped, 0.005f);
+  // About the ball's vertical axis: along its curvature, on the ball, down to the support.
+  const std::vector<SurfelCandidate> curved = WallExtension(
+      positions, rotations, sources, frame, 0.26f, Eigen::Vector3f(0.0f, 0.0f, 0.02f));
+  ASSERT_FALSE(curved.empty());
+  float worst_curved = 0, lowest = 1;
+  for (const SurfelCandidate& c : curved) {
+    worst_curved = std::max(worst_curved, std::abs(off_sphere(c)));
+    lowest = std::min(lowest, c.position.z());
+    // The candidate's normal is the ball's.
+    EXPECT_GT(std::abs(c.rotation.col(2).dot((c.position - frame.center).normalized())), 0.999f);
+  }
+  EXPECT_LT(worst_curved, 1e-4f);
+  EXPECT_LT(lowest, 0.004f);
   // Whichever way the normals point (2DGS surfels carry no outside): the same candidates.
   std::vector<Eigen::Matrix3f> flipped = rotations;
   for (Eigen::Matrix3f& r : flipped) r.col(2) = -r.col(2);

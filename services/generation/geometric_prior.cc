@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <numbers>
+#include <optional>
 #include <unordered_map>
 
 #include "absl/strings/str_cat.h"
@@ -441,8 +443,18 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     };
     gather();
     size_t before = added.size();
-    for (const Candidate& c :
-         WallExtension(positions, rotations, sources, frame, options_.wall_slope_min_sin)) {
+    // A vertical axis of revolution: sloped walls follow the profile's curvature about it.
+    std::optional<Eigen::Vector3f> vertical_axis;
+    for (const SymmetryHypothesis& h : hypotheses) {
+      if (options_.walls_follow_curvature && h.accepted && h.kind == SymmetryKind::kAxis &&
+          h.order == 0 &&
+          std::abs(h.direction.dot(frame.up)) > std::cos(5.0f * std::numbers::pi_v<float> / 180)) {
+        vertical_axis = h.point;
+        break;
+      }
+    }
+    for (const Candidate& c : WallExtension(positions, rotations, sources, frame,
+                                            options_.wall_slope_min_sin, vertical_axis)) {
       consider(c);
     }
     added_by["support_walls"] = static_cast<int>(added.size() - before);

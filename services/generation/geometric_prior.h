@@ -36,6 +36,10 @@ struct GeometricPriorOptions {
   // (support_completion.h; 0 = always straight down). Measured in RESULTS.md ("Support walls
   // down their slope").
   float wall_slope_min_sin = 0.26f;
+  // About an accepted vertical axis of revolution those sloped walls follow the sphere about the
+  // point where the surfel's normal meets the axis, not its tangent (which ran outside a ball's
+  // underside). Measured in RESULTS.md ("Support walls along the profile's curvature").
+  bool walls_follow_curvature = true;
   // A mirror plane that contains an accepted revolution axis is oriented about that axis only by
   // the parts the axis does not hold for (a mug's handle), weakly: a plane a few degrees off
   // mirrors the handle centimetres beside itself. Such a plane lends no images of those parts.

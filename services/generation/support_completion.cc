@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include <Eigen/Geometry>
 #include <opencv2/imgproc.hpp>
 
 #include "common/geometry/point_index.h"
@@ -12,7 +13,8 @@ namespace instascene::generation {
 std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& positions,
                                            const std::vector<Eigen::Matrix3f>& rotations,
                                            const std::vector<uint32_t>& sources,
-                                           const ObjectFrame& frame, float slope_min_sin) {
+                                           const ObjectFrame& frame, float slope_min_sin,
+                                           const std::optional<Eigen::Vector3f>& vertical_axis) {
   std::vector<SurfelCandidate> out;
   if (!frame.has_support || positions.empty()) return out;
   // The lowest surfel per azimuth sector around the centre: how far down each side was seen.
@@ -47,11 +49,43 @@ std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& p
     // against the surfel's offset from the axis, whichever way its normal points.
     Eigen::Vector3f down = -frame.up;
     const Eigen::Vector3f descent = -(frame.up - lean * normal);
-    const Eigen::Vector3f offset = positions[i] - frame.center;
-    if (slope_min_sin > 0 && std::abs(lean) > slope_min_sin &&
-        descent.dot(offset - offset.dot(frame.up) * frame.up) < 0) {
-      down = descent / -descent.dot(frame.up);
+    const Eigen::Vector3f offset = positions[i] - vertical_axis.value_or(frame.center);
+    const bool narrowing = slope_min_sin > 0 && std::abs(lean) > slope_min_sin &&
+                           descent.dot(offset - offset.dot(frame.up) * frame.up) < 0;
+    if (narrowing && vertical_axis.has_value()) {
+      // About a vertical axis of revolution the surface's normal line meets the axis; the sphere
+      // about that point through the surfel is the sphere itself on a ball and curves inwards of
+      // the tangent elsewhere (the tangent ran 4 mm outside a ball's underside).
+      const Eigen::Vector3f from_axis = positions[i] - *vertical_axis;
+      const Eigen::Vector3f radial_offset = from_axis - from_axis.dot(frame.up) * frame.up;
+      const float r0 = radial_offset.norm();
+      const Eigen::Vector3f e_r =
+          r0 > 0 ? Eigen::Vector3f(radial_offset / r0) : Eigen::Vector3f::Zero();
+      const float n_r = normal.dot(e_r);
+      if (r0 > step && std::abs(n_r) > 1e-3f) {
+        // Heights relative to the surfel: the normal line reaches the axis at rise = -r0 n_h / n_r
+        // (above the surfel where the surface narrows downwards).
+        const float rise = -r0 * lean / n_r;
+        if (rise > 0) {
+          const float rho = std::hypot(r0, rise);
+          const float alpha0 = std::atan2(r0, rise);  // from straight down about the centre
+          const Eigen::Vector3f n0 = std::sin(alpha0) * e_r - std::cos(alpha0) * frame.up;
+          for (float alpha = alpha0 - step / rho; alpha > 0; alpha -= step / rho) {
+            const float r = rho * std::sin(alpha), dh = rise - rho * std::cos(alpha);
+            if (h + dh < floor) break;
+            const Eigen::Vector3f n1 = std::sin(alpha) * e_r - std::cos(alpha) * frame.up;
+            SurfelCandidate c;
+            c.position = positions[i] + (r - r0) * e_r + dh * frame.up;
+            c.rotation =
+                Eigen::Quaternionf::FromTwoVectors(n0, n1).toRotationMatrix() * rotations[i];
+            c.source = sources[i];
+            out.push_back(c);
+          }
+          continue;
+        }
+      }
     }
+    if (narrowing) down = descent / -descent.dot(frame.up);
     for (float drop = step; h - drop >= floor; drop += step) {
       SurfelCandidate c;
       c.position = positions[i] + drop * down;

@@ -6,7 +6,8 @@
 //     seen there whose normal is roughly horizontal are repeated straight down, one spacing at a
 //     time, to the support (a vertical-wall prior: exact
 //     for cylinders, bottles, boxes), or down their own slope where they lean (a sphere's
-//     lower band: straight down it added a skirt);
+//     lower band: straight down it added a skirt), along the profile's curvature about a
+//     vertical axis of revolution (the tangent ran outside a ball's underside);
 //   - cap: surfels on the support plane inside the footprint of the object's lower quarter seen
 //     from above (its convex hull, so gaps left in completed walls do not open the bottom),
 //     except where the space just above was seen empty (a torus' hole is table, not underside).
@@ -15,6 +16,7 @@
 #pragma once
 
 #include <cstdint>
+#include <optional>
 #include <vector>
 
 #include <Eigen/Core>
@@ -41,10 +43,14 @@ struct SurfelCandidate {
 // down its own slope (the steepest descent in its tangent plane, inwards) instead of straight
 // down; walls within that of vertical (a bottle's, a box's with noisy normals) and surfaces that
 // widen downwards (a shoulder: outwards) still go straight down. Either sign of normal.
-std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& positions,
-                                           const std::vector<Eigen::Matrix3f>& rotations,
-                                           const std::vector<uint32_t>& sources,
-                                           const ObjectFrame& frame, float slope_min_sin = 0);
+// `vertical_axis`: a point on the object's axis of revolution when it is vertical (along
+// frame.up); such sloped walls then follow the sphere about the point where the surfel's normal
+// line meets the axis (a ball's underside exactly; inwards of the tangent on other shapes), one
+// spacing of arc at a time, down to the support or the axis.
+std::vector<SurfelCandidate> WallExtension(
+    const std::vector<Eigen::Vector3f>& positions, const std::vector<Eigen::Matrix3f>& rotations,
+    const std::vector<uint32_t>& sources, const ObjectFrame& frame, float slope_min_sin = 0,
+    const std::optional<Eigen::Vector3f>& vertical_axis = std::nullopt);
 
 std::vector<SurfelCandidate> SupportCap(const std::vector<Eigen::Vector3f>& positions,
                                         const std::vector<uint32_t>& sources,
