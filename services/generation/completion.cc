@@ -108,6 +108,7 @@ nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& optio
         {"snap_reach_spacings", options.meshing.snap_reach_spacings},
         {"carve_views", options.meshing.carve_views},
         {"enclose_hull", options.meshing.enclose_hull},
+        {"top_at_highest_surfel", options.meshing.top_at_highest_surfel},
         {"empty_alpha", options.meshing.empty_alpha},
         {"empty_close_px", options.meshing.empty_close_px}}},
       {"free_space",

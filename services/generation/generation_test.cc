@@ -464,6 +464,28 @@ TEST(ObjectMesh, CarvingSeesNoEmptinessInTheGapsBetweenSparseSurfels) {
   EXPECT_LT(open, closed - 0.1);       // carving through the gaps cuts the box (to nothing)
 }
 
+// A surfel's footprint reaches past the edges of a box's top face: the fused top stands above the
+// highest surfel centre (on the true top) unless it is lowered onto it.
+TEST(ObjectMesh, NothingStandsAboveTheHighestSurfel) {
+  const SurfelBox box(4000, SurfelSampling{}, 5);
+  float highest = -1;
+  for (uint32_t g = 0; g < box.surfels.size(); ++g) {
+    highest = std::max(highest, box.surfels.positions[3 * g + 2]);
+  }
+  auto top = [&](bool clamp) {
+    MeshingOptions options;
+    options.top_at_highest_surfel = clamp;
+    auto mesh = MeshObject(box.surfels, box.frame, options, 2);
+    EXPECT_TRUE(mesh.ok()) << mesh.status();
+    float z = -1;
+    for (const Eigen::Vector3f& v : mesh->vertices) z = std::max(z, v.z());
+    return z;
+  };
+  EXPECT_GT(top(false), highest + 0.001f);
+  EXPECT_LE(top(true), highest + 1e-6f);
+  EXPECT_NEAR(highest, box.bounds.max().z(), 1e-4f);
+}
+
 // A completed shell with a refused patch: a hole in a box's top, wider than the closing's gap
 // rule passes. Views looking into it see the inner sides of the far walls; fused, those depths
 // mark the inside as empty and the box comes out hollow. Fusing only the surfels whose outer

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include <opencv2/imgproc.hpp>
 
@@ -215,6 +216,16 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
       }
     }
     SnapToSurfels(points, normals, snap, &mesh, fixed);
+  }
+  if (options.closed && options.top_at_highest_surfel && object.size() > 0) {
+    float top = -std::numeric_limits<float>::infinity();
+    for (size_t g = 0; g < object.size(); ++g) {
+      top = std::max(top, frame.up.dot(Eigen::Vector3f(&object.positions[3 * g])));
+    }
+    for (Eigen::Vector3f& v : mesh.vertices) {
+      const float above = frame.up.dot(v) - top;
+      if (above > 0) v -= above * frame.up;
+    }
   }
   return mesh;
 }
