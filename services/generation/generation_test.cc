@@ -627,17 +627,24 @@ TEST(ObjectFrame, UpIsTheScenesSupportNotANeighboursTiltedFace) {
 // with more surfels than the table shows there: the bottle's support is still the table. With the
 // radius as the reach and a 10-degree mode the two mixed and the up came out 5 degrees off (as seed
 // 44's touching bottles were tilted; RESULTS.md "Object frames: the object's own footprint").
+// The frame of a partly seen bottle (instance 1) beside `count` surfels of `surface` labelled
+// `label`.
+ObjectFrame BottleFrameBeside(const TriangleMesh& surface, size_t count, uint32_t label,
+                              size_t bottle_count, uint64_t seed) {
+  PartialObject scene = MakePartialObject(Bottle(), bottle_count, 3);
+  std::mt19937_64 rng(seed);
+  AppendSurfels(surface, count, Appearance{}, SurfelSampling{}, rng, &scene.cloud);
+  scene.labels.resize(scene.cloud.size(), label);
+  auto split = SplitInstance(scene.labels, 1, 50);
+  EXPECT_TRUE(split.ok());
+  return split.ok() ? ComputeObjectFrame(scene.cloud, *split, scene.cameras) : ObjectFrame{};
+}
+
 TEST(ObjectFrame, ANeighboursSlantedTopBeyondTheFootprintDoesNotTiltTheUp) {
-  PartialObject scene = MakePartialObject(Bottle(), 4000, 3);
   TriangleMesh top = MakeRectangle(0.15f, 0.15f, 4, 4);
   const Eigen::Matrix3f tilt = Eigen::AngleAxisf(7 * kPi / 180, Eigen::Vector3f::UnitY()).matrix();
   for (Eigen::Vector3f& v : top.vertices) v = tilt * v + Eigen::Vector3f(-0.22f, 0, 0.004f);
-  std::mt19937_64 rng(5);
-  AppendSurfels(top, 2500, Appearance{}, SurfelSampling{}, rng, &scene.cloud);
-  scene.labels.resize(scene.cloud.size(), 0);
-  auto split = SplitInstance(scene.labels, 1, 50);
-  ASSERT_TRUE(split.ok());
-  const ObjectFrame frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
+  const ObjectFrame frame = BottleFrameBeside(top, 2500, 0, 4000, 5);
   EXPECT_GT(frame.up.z(), std::cos(0.5f * kPi / 180)) << frame.up.transpose();
 }
 
@@ -645,15 +652,9 @@ TEST(ObjectFrame, ANeighboursSlantedTopBeyondTheFootprintDoesNotTiltTheUp) {
 // more surfels per bin than a quarter of the table's around it, and higher. The support surrounds
 // the object; the floor lies to one side.
 TEST(ObjectFrame, TheSupportSurroundsTheObjectNotANeighboursFloorBesideIt) {
-  PartialObject scene = MakePartialObject(Bottle(), 12000, 3);
   TriangleMesh floor = MakeRectangle(0.06f, 0.06f, 2, 2);
   for (Eigen::Vector3f& v : floor.vertices) v += Eigen::Vector3f(0.12f, 0.0f, 0.006f);
-  std::mt19937_64 rng(7);
-  AppendSurfels(floor, 800, Appearance{}, SurfelSampling{}, rng, &scene.cloud);
-  scene.labels.resize(scene.cloud.size(), 2);
-  auto split = SplitInstance(scene.labels, 1, 50);
-  ASSERT_TRUE(split.ok());
-  const ObjectFrame frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
+  const ObjectFrame frame = BottleFrameBeside(floor, 800, 2, 12000, 7);
   ASSERT_TRUE(frame.has_support);
   EXPECT_NEAR(frame.support_height, 0.0f, 0.002f);
 }
