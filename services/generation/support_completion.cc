@@ -10,6 +10,50 @@
 
 namespace instascene::generation {
 
+namespace {
+
+// About a vertical axis of revolution the surface's normal line meets the axis; the sphere about
+// that point through the surfel is the sphere itself on a ball and curves inwards of the tangent
+// elsewhere (the tangent ran 4 mm outside a ball's underside). Appends the candidates down that
+// sphere to `out` (to the support's floor) and returns true, or returns false where the normal
+// line does not meet the axis above the surfel (the caller goes down the tangent instead).
+bool CurvedWallCandidates(const Eigen::Vector3f& position, const Eigen::Matrix3f& rotation,
+                          uint32_t source, const Eigen::Vector3f& axis_point,
+                          const ObjectFrame& frame, float floor,
+                          std::vector<SurfelCandidate>& out) {
+  const float step = std::max(frame.spacing, 1e-6f);
+  const Eigen::Vector3f normal = rotation.col(2);
+  const float lean = normal.dot(frame.up);
+  const float h = frame.up.dot(position);
+  const Eigen::Vector3f from_axis = position - axis_point;
+  const Eigen::Vector3f radial_offset = from_axis - from_axis.dot(frame.up) * frame.up;
+  const float r0 = radial_offset.norm();
+  if (r0 <= step) return false;
+  const Eigen::Vector3f e_r = radial_offset / r0;
+  const float n_r = normal.dot(e_r);
+  if (std::abs(n_r) <= 1e-3f) return false;
+  // Heights relative to the surfel: the normal line reaches the axis at rise = -r0 n_h / n_r
+  // (above the surfel where the surface narrows downwards).
+  const float rise = -r0 * lean / n_r;
+  if (rise <= 0) return false;
+  const float rho = std::hypot(r0, rise);
+  const float alpha0 = std::atan2(r0, rise);  // from straight down about the centre
+  const Eigen::Vector3f n0 = std::sin(alpha0) * e_r - std::cos(alpha0) * frame.up;
+  for (float alpha = alpha0 - step / rho; alpha > 0; alpha -= step / rho) {
+    const float r = rho * std::sin(alpha), dh = rise - rho * std::cos(alpha);
+    if (h + dh < floor) break;
+    const Eigen::Vector3f n1 = std::sin(alpha) * e_r - std::cos(alpha) * frame.up;
+    SurfelCandidate c;
+    c.position = position + (r - r0) * e_r + dh * frame.up;
+    c.rotation = Eigen::Quaternionf::FromTwoVectors(n0, n1).toRotationMatrix() * rotation;
+    c.source = source;
+    out.push_back(c);
+  }
+  return true;
+}
+
+}  // namespace
+
 std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& positions,
                                            const std::vector<Eigen::Matrix3f>& rotations,
                                            const std::vector<uint32_t>& sources,
@@ -52,38 +96,10 @@ std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& p
     const Eigen::Vector3f offset = positions[i] - vertical_axis.value_or(frame.center);
     const bool narrowing = slope_min_sin > 0 && std::abs(lean) > slope_min_sin &&
                            descent.dot(offset - offset.dot(frame.up) * frame.up) < 0;
-    if (narrowing && vertical_axis.has_value()) {
-      // About a vertical axis of revolution the surface's normal line meets the axis; the sphere
-      // about that point through the surfel is the sphere itself on a ball and curves inwards of
-      // the tangent elsewhere (the tangent ran 4 mm outside a ball's underside).
-      const Eigen::Vector3f from_axis = positions[i] - *vertical_axis;
-      const Eigen::Vector3f radial_offset = from_axis - from_axis.dot(frame.up) * frame.up;
-      const float r0 = radial_offset.norm();
-      const Eigen::Vector3f e_r =
-          r0 > 0 ? Eigen::Vector3f(radial_offset / r0) : Eigen::Vector3f::Zero();
-      const float n_r = normal.dot(e_r);
-      if (r0 > step && std::abs(n_r) > 1e-3f) {
-        // Heights relative to the surfel: the normal line reaches the axis at rise = -r0 n_h / n_r
-        // (above the surfel where the surface narrows downwards).
-        const float rise = -r0 * lean / n_r;
-        if (rise > 0) {
-          const float rho = std::hypot(r0, rise);
-          const float alpha0 = std::atan2(r0, rise);  // from straight down about the centre
-          const Eigen::Vector3f n0 = std::sin(alpha0) * e_r - std::cos(alpha0) * frame.up;
-          for (float alpha = alpha0 - step / rho; alpha > 0; alpha -= step / rho) {
-            const float r = rho * std::sin(alpha), dh = rise - rho * std::cos(alpha);
-            if (h + dh < floor) break;
-            const Eigen::Vector3f n1 = std::sin(alpha) * e_r - std::cos(alpha) * frame.up;
-            SurfelCandidate c;
-            c.position = positions[i] + (r - r0) * e_r + dh * frame.up;
-            c.rotation =
-                Eigen::Quaternionf::FromTwoVectors(n0, n1).toRotationMatrix() * rotations[i];
-            c.source = sources[i];
-            out.push_back(c);
-          }
-          continue;
-        }
-      }
+    if (narrowing && vertical_axis.has_value() &&
+        CurvedWallCandidates(positions[i], rotations[i], sources[i], *vertical_axis, frame, floor,
+                             out)) {
+      continue;
     }
     if (narrowing) down = descent / -descent.dot(frame.up);
     for (float drop = step; h - drop >= floor; drop += step) {
