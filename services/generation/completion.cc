@@ -109,6 +109,7 @@ nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& optio
         {"carve_views", options.meshing.carve_views},
         {"enclose_hull", options.meshing.enclose_hull},
         {"top_at_highest_surfel", options.meshing.top_at_highest_surfel},
+        {"sides_within_surfels", options.meshing.sides_within_surfels},
         {"empty_alpha", options.meshing.empty_alpha},
         {"empty_close_px", options.meshing.empty_close_px}}},
       {"free_space",

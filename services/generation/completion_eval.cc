@@ -354,6 +354,7 @@ absl::StatusOr<std::vector<ObjectCompletionEval>> Evaluate(const std::string& sc
       meshing.enclose_hull = m["meshing"].value("enclose_hull", false);
       // And before the top clamp without it.
       meshing.top_at_highest_surfel = m["meshing"].value("top_at_highest_surfel", false);
+      meshing.sides_within_surfels = m["meshing"].value("sides_within_surfels", false);
     }
     // The closed crop has no prior, so no rotation axis: its closing keeps the renders' visual hull
     // inside wherever the completion's would (completion.cc), against the same free space of the

@@ -486,6 +486,36 @@ TEST(ObjectMesh, NothingStandsAboveTheHighestSurfel) {
   EXPECT_NEAR(highest, box.bounds.max().z(), 1e-4f);
 }
 
+// Likewise past the box's side faces: the fused sides stand outside the outermost surfel centres
+// (on the true faces) unless clamped to the centres' polygon. Where the renders' visual hull
+// encloses the object (an unseen side closed past the surfels) the clamp is not applied.
+TEST(ObjectMesh, NoSideStandsPastTheOutermostSurfels) {
+  const SurfelBox box(4000, SurfelSampling{}, 5);
+  Eigen::AlignedBox3f centres;
+  for (uint32_t g = 0; g < box.surfels.size(); ++g) {
+    centres.extend(Eigen::Vector3f(&box.surfels.positions[3 * g]));
+  }
+  auto overhang = [&](bool clamp, bool hull) {  // the most a vertex stands past them sideways
+    MeshingOptions options;
+    options.sides_within_surfels = clamp;
+    auto mesh = MeshObject(box.surfels, box.frame, options, 2,
+                           hull ? [](const Eigen::Vector3f&) { return false; }
+                                : std::function<bool(const Eigen::Vector3f&)>{});
+    EXPECT_TRUE(mesh.ok()) << mesh.status();
+    float out = -1;
+    for (const Eigen::Vector3f& v : mesh->vertices) {
+      const Eigen::Vector2f past =
+          (v - centres.max()).head<2>().cwiseMax(centres.min().head<2>() - v.head<2>());
+      out = std::max(out, past.maxCoeff());
+    }
+    return out;
+  };
+  EXPECT_GT(overhang(false, false), 0.001f);
+  EXPECT_LE(overhang(true, false), 1e-6f);
+  EXPECT_GT(overhang(true, true), 0.001f);
+  EXPECT_NEAR(centres.max().x(), box.bounds.max().x(), 1e-4f);
+}
+
 // A completed shell with a refused patch: a hole in a box's top, wider than the closing's gap
 // rule passes. Views looking into it see the inner sides of the far walls; fused, those depths
 // mark the inside as empty and the box comes out hollow. Fusing only the surfels whose outer

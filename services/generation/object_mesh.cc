@@ -63,6 +63,32 @@ absl::StatusOr<std::vector<Eigen::Vector3f>> OutwardNormals(
   return normal;
 }
 
+// Every vertex is moved inside the polygon of the surfel centres' extremes along 64 horizontal
+// directions of the object's frame (each half-plane in turn, three passes); heights are kept
+// (MeshingOptions::sides_within_surfels).
+void ClampToSurfelPolygon(const std::vector<Eigen::Vector3f>& points, const ObjectFrame& frame,
+                          TriangleMesh* mesh) {
+  constexpr int kDirections = 64;
+  const Eigen::Matrix3f basis = frame.Basis();
+  std::vector<Eigen::Vector3f> directions;
+  std::vector<float> reach;
+  for (int a = 0; a < kDirections; ++a) {
+    const float azimuth = 2 * 3.14159265f * a / kDirections;
+    directions.push_back(basis.col(0) * std::cos(azimuth) + basis.col(1) * std::sin(azimuth));
+    float most = -std::numeric_limits<float>::infinity();
+    for (const Eigen::Vector3f& p : points) most = std::max(most, directions.back().dot(p));
+    reach.push_back(most);
+  }
+  for (Eigen::Vector3f& v : mesh->vertices) {
+    for (int pass = 0; pass < 3; ++pass) {
+      for (int d = 0; d < kDirections; ++d) {
+        const float excess = directions[d].dot(v) - reach[d];
+        if (excess > 0) v -= excess * directions[d];
+      }
+    }
+  }
+}
+
 }  // namespace
 
 absl::StatusOr<ViewImages> RenderObjectView(const GaussianCloud& object,
@@ -216,6 +242,11 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
       }
     }
     SnapToSurfels(points, normals, snap, &mesh, fixed);
+  }
+  // Where the renders' visual hull closed what the surfels leave open (an unseen back), the
+  // surface stands past the surfels by right: the clamp would cut it.
+  if (options.closed && options.sides_within_surfels && !fusion.seen_empty && object.size() > 0) {
+    ClampToSurfelPolygon(points, frame, &mesh);
   }
   if (options.closed && options.top_at_highest_surfel && object.size() > 0) {
     float top = -std::numeric_limits<float>::infinity();

@@ -100,6 +100,13 @@ struct MeshingOptions {
   // above the true one, which the surfel centres reach to within their spacing (docs/RESULTS.md
   // "Meshing: nothing above the highest surfel").
   bool top_at_highest_surfel = true;
+  // Closed meshing only: no vertex stands farther out along any of 64 horizontal directions of
+  // the object's frame than the farthest surfel centre: the sides' counterpart of
+  // `top_at_highest_surfel` (a footprint's lip past a body's widest point made bottles 1-4 mm
+  // wide). Not where the visual hull encloses the object (`enclose_hull` with `seen_empty`
+  // given): there the surface closes an unseen side past the surfels, which the clamp would cut
+  // (docs/RESULTS.md "Meshing: no side past the outermost surfels").
+  bool sides_within_surfels = true;
 };
 
 // The meshing cameras: elevations -60, -30, 0, 30, 60 degrees x `azimuths`, plus both poles.
