@@ -101,6 +101,36 @@ TEST(MaskGraph, TwoViewsOfOneObjectMerge) {
   EXPECT_EQ(nodes[0].masks.size(), 2u);
 }
 
+// A large object masked in views 0-9 (V V^T entries of 10), a small one masked only in views 10
+// and 11 (entries of 2) and a mask seen in one view only (an entry of 1). The schedule's
+// percentiles stop at that 1 below the median after 10: the small object's two masks never
+// cluster (and are dropped as single-mask clusters) unless the schedule ends with a floor of 2
+// (DecompositionOptions::observer_floor).
+TEST(MaskGraph, AnObjectSeenTogetherInTwoViewsClustersAboveTheObserverFloor) {
+  std::vector<HandMask> masks;
+  for (int v = 0; v < 10; ++v) masks.push_back({v, 1, 0, 100});
+  masks.push_back({10, 1, 100, 140});
+  masks.push_back({11, 1, 100, 140});
+  masks.push_back({12, 1, 140, 180});
+  const TrackerSet set = MakeSet(13, 180, masks);
+  auto small_clustered = [&](double floor) {
+    DecompositionOptions options;
+    options.observer_floor = floor;
+    MaskJudgement j = JudgeTrackers(set, options);
+    UndoUndersegmented(set, &j);
+    std::vector<double> schedule;
+    const std::vector<MaskNode> nodes = ClusterMasks(set, j, options, &schedule);
+    EXPECT_GE(schedule.size(), 1u);
+    EXPECT_GT(schedule.front(), 2.0);
+    for (const MaskNode& n : nodes) {
+      if (n.masks == std::vector<uint32_t>{10, 11}) return true;
+    }
+    return false;
+  };
+  EXPECT_FALSE(small_clustered(0));
+  EXPECT_TRUE(small_clustered(2));
+}
+
 TEST(MaskGraph, TouchingObjectsMergedInOneViewAreUndersegmentedAndStaySeparate) {
   // A = Gaussians 0..99, B = 100..199. Views 0 and 1 separate them; view 2 has one mask over both.
   const TrackerSet set = MakeSet(

@@ -170,7 +170,9 @@ std::vector<MaskNode> ClusterMasks(const TrackerSet& set, const MaskJudgement& j
   std::vector<MaskNode> nodes;
   nodes.reserve(initial.size());
   for (uint32_t t : initial) nodes.push_back({{t}, j.visible[t], j.contained[t]});
-  const std::vector<double> schedule = ObserverSchedule(j, initial);
+  std::vector<double> schedule = ObserverSchedule(j, initial);
+  if (options.observer_floor > 1 && !schedule.empty() && schedule.back() > options.observer_floor)
+    schedule.push_back(options.observer_floor);
   if (schedule_out) *schedule_out = schedule;
   for (double threshold : schedule) {
     const size_t n = nodes.size();

@@ -27,6 +27,11 @@ struct DecompositionOptions {
   // where the point lies in a mask judged under-segmented (merged with a neighbour): with frequent
   // merges an object's own points fall below the threshold and leave it.
   bool filter_skips_merged_frames = true;
+  // Not in the released code (docs/DECOMPOSITION.md): the observer schedule ends with this
+  // threshold when it stopped above it (its percentiles stop at the first value <= 1 below the
+  // median), so that the masks of an object seen together in only this many frames (a small
+  // object the segmenter misses in most views) still cluster. <= 1 = off (the released code).
+  double observer_floor = 2;
   double dbscan_eps = 0.1;           // scene units, or a fraction of the scene extent (below)
   bool dbscan_eps_relative = false;  // eps = dbscan_eps * robust scene diagonal
   int dbscan_min_points = 4;         // Open3D convention: the point itself counts

@@ -89,6 +89,9 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
         .Bool("orphan_skips_missed_frames", &O::orphan_skips_missed_frames,
               "The orphan share does not count frames where the segmenter missed the candidate "
               "instance (most of it traced there in no mask); false = every traced frame counts")
+        .Real("observer_floor", &O::observer_floor, 0.0, 1000.0,
+              "The observer schedule ends with this threshold when it stopped above it (<= 1 = "
+              "off, the released code)")
         .Check([](const O& o) { return o.Validate(); });
     return c;
   }();
