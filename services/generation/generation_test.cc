@@ -652,11 +652,6 @@ TEST(ObjectFrame, UpIsTheScenesSupportNotANeighboursTiltedFace) {
   EXPECT_GT(frame.up.z(), std::cos(2 * kPi / 180)) << frame.up.transpose();
 }
 
-// A low block's top slanted 7 degrees 14.5-29.5 cm from a bottle's axis (most of it within two of
-// the bottle's radii, 27 cm: about its half-height; beyond twice its horizontal radius, 10-12 cm),
-// with more surfels than the table shows there: the bottle's support is still the table. With the
-// radius as the reach and a 10-degree mode the two mixed and the up came out 5 degrees off (as seed
-// 44's touching bottles were tilted; RESULTS.md "Object frames: the object's own footprint").
 // The frame of a partly seen bottle (instance 1) beside `count` surfels of `surface` labelled
 // `label`.
 ObjectFrame BottleFrameBeside(const TriangleMesh& surface, size_t count, uint32_t label,
@@ -670,6 +665,11 @@ ObjectFrame BottleFrameBeside(const TriangleMesh& surface, size_t count, uint32_
   return split.ok() ? ComputeObjectFrame(scene.cloud, *split, scene.cameras) : ObjectFrame{};
 }
 
+// A low block's top slanted 7 degrees 14.5-29.5 cm from a bottle's axis (most of it within two of
+// the bottle's radii, 27 cm: about its half-height; beyond twice its horizontal radius, 10-12 cm),
+// with more surfels than the table shows there: the bottle's support is still the table. With the
+// radius as the reach and a 10-degree mode the two mixed and the up came out 5 degrees off (as seed
+// 44's touching bottles were tilted; RESULTS.md "Object frames: the object's own footprint").
 TEST(ObjectFrame, ANeighboursSlantedTopBeyondTheFootprintDoesNotTiltTheUp) {
   TriangleMesh top = MakeRectangle(0.15f, 0.15f, 4, 4);
   const Eigen::Matrix3f tilt = Eigen::AngleAxisf(7 * kPi / 180, Eigen::Vector3f::UnitY()).matrix();
