@@ -140,7 +140,10 @@ absl::StatusOr<TrainingData> PrepareTraining(const Scene& scene, const GaussianC
         }
         for (uint32_t p : pool) {
           out.raw_label.push_back(raw.labels[p]);
-          out.filtered_label.push_back(filtered.labels[p]);
+          // A removed (under-segmented) mask's pixels: left out, or the background class.
+          const bool removed = raw.labels[p] > 0 && filtered.labels[p] == 0;
+          out.filtered_label.push_back(
+              removed && options.ignore_removed_masks ? kIgnoredLabel : filtered.labels[p]);
           out.sorted_label.push_back(sorted.labels[p]);
         }
         for (uint32_t g = 0; g < cloud.size(); ++g) {
@@ -176,7 +179,8 @@ double LossAndGradient(const TrainingData& data, const TrainingOptions& options,
         options.supervision == Supervision::kNoisy2d ? v.raw_label : v.filtered_label;
     std::vector<uint32_t> valid;
     for (uint32_t p = 0; p < labels.size(); ++p) {
-      if (options.consider_negative || labels[p] > 0) valid.push_back(p);
+      if (labels[p] != kIgnoredLabel && (options.consider_negative || labels[p] > 0))
+        valid.push_back(p);
     }
     std::vector<std::pair<int, uint32_t>> samples;
     std::vector<uint32_t> sample_labels;

@@ -31,6 +31,9 @@ struct ViewData {
   std::vector<uint32_t> visible_labelled;  // Gaussians visible in the view with a 3D label
 };
 
+// A single-view label that takes no part in the term (ignore_removed_masks).
+inline constexpr uint32_t kIgnoredLabel = 0xffffffffu;
+
 struct TrainingData {
   size_t num_gaussians = 0;
   std::vector<ViewData> views;

@@ -44,6 +44,9 @@ const pipeline::ParamCodec<TrainStageOptions>& TrainCodec() {
                             {"3d+filtered2d", Supervision::k3dFiltered2d},
                             {"full", Supervision::kFull}},
                            "Loss terms (paper Table 2)")
+        .Bool("ignore_removed_masks", &O::ignore_removed_masks,
+              "Single-view term: pixels of masks judged under-segmented are left out instead of "
+              "joining the background class (the released code)")
         .Choice("method", &O::method, {"contrastive", "vote"},
                 "contrastive (the paper's feature field) or vote (training-free baseline)")
         .Int<uint64_t>("seed", &O::seed, 0, int64_t{1} << 53, "Random seed")

@@ -165,6 +165,76 @@ TEST(Segmentation, AnInstanceWhoseMeanDriftedToTheBackgroundKeepsItsCoarseMask) 
   EXPECT_EQ(SegmentByFeatures(f, 2, coarse, options), expected);
 }
 
+// A removed (under-segmented) mask's pixels take no part in the single-view term: the Gaussians
+// that render only such pixels get no gradient from it, where as background pixels they would.
+TEST(FeatureField, RemovedMasksPixelsAreLeftOutOfTheSingleViewTerm) {
+  const int dim = 4;
+  std::vector<float> features;
+  TrainingData data = HandData(dim, &features);
+  TrainingOptions options;
+  options.feature_dim = dim;
+  options.samples = 256;
+  options.supervision = Supervision::k3dFiltered2d;
+  for (ViewData& view : data.views) view.visible_labelled.clear();  // no 3D term
+  auto class2_gradient = [&](uint32_t removed_label) {
+    TrainingData d = data;
+    for (ViewData& view : d.views) {
+      for (uint32_t& label : view.filtered_label) {
+        if (label == 2) label = removed_label;
+      }
+    }
+    std::vector<double> grad;
+    LossAndGradient(d, options, features, 0, false, 7, &grad);
+    double norm = 0;
+    for (uint32_t g = 1; g < 30; g += 3) {  // class 2's Gaussians render only class 2's pixels
+      for (int k = 0; k < dim; ++k) norm += std::abs(grad[g * dim + k]);
+    }
+    return norm;
+  };
+  EXPECT_GT(class2_gradient(0), 0.0);  // as background (the released code)
+  EXPECT_EQ(class2_gradient(kIgnoredLabel), 0.0);
+}
+
+// The decomposition's removed masks reach the training as background by default (the released
+// code) and as ignored pixels with ignore_removed_masks; read on a high-noise scene with merges.
+TEST(FeatureField, PreparedLabelsMarkTheRemovedMasksPixels) {
+  const instascene::testing::ScopedTempDir temp("removed_masks");
+  const std::string dir = temp.Sub("scene");
+  absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("small"));
+  ASSERT_TRUE(scene.ok());
+  SceneWriteOptions write;
+  write.mask_noise = "high";
+  ASSERT_TRUE(WriteClutterScene(*scene, dir, write).ok());
+  absl::StatusOr<Scene> read = ReadScene(dir);
+  ASSERT_TRUE(read.ok());
+  absl::StatusOr<decomposition::DecompositionResult> coarse =
+      decomposition::Decompose(*read, scene->cloud, decomposition::DecompositionOptions{});
+  ASSERT_TRUE(coarse.ok());
+  const std::string decomposition = dir + "/decomposition";
+  ASSERT_TRUE(decomposition::WriteDecomposition(decomposition, *read, scene->cloud, *coarse).ok());
+  TrainingOptions left_out, background;
+  left_out.pixel_pool = background.pixel_pool = 4096;
+  left_out.ignore_removed_masks = true;
+  absl::StatusOr<TrainingData> a = PrepareTraining(*read, scene->cloud, decomposition, left_out);
+  absl::StatusOr<TrainingData> b = PrepareTraining(*read, scene->cloud, decomposition, background);
+  ASSERT_TRUE(a.ok() && b.ok());
+  int removed = 0;
+  for (size_t v = 0; v < a->views.size(); ++v) {
+    const ViewData& x = a->views[v];
+    const ViewData& y = b->views[v];
+    ASSERT_EQ(x.raw_label, y.raw_label);  // the same pool pixels
+    for (size_t p = 0; p < x.raw_label.size(); ++p) {
+      if (x.raw_label[p] > 0 && y.filtered_label[p] == 0) {
+        EXPECT_EQ(x.filtered_label[p], kIgnoredLabel);
+        ++removed;
+      } else {
+        EXPECT_EQ(x.filtered_label[p], y.filtered_label[p]);
+      }
+    }
+  }
+  EXPECT_GT(removed, 0);  // high noise merges touching objects in some views
+}
+
 TEST(FeatureField, TrainingOnASyntheticSceneSeparatesInstances) {
   const instascene::testing::ScopedTempDir temp("training_scene");
   const std::string dir = temp.Sub("scene");
