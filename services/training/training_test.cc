@@ -5,6 +5,7 @@
 #include <filesystem>
 #include <random>
 
+#include "common/core/status.h"
 #include "common/eval/click_eval.h"
 #include "common/synth/scene_writer.h"
 #include "services/decomposition/decompose.h"
@@ -165,6 +166,25 @@ TEST(Segmentation, AnInstanceWhoseMeanDriftedToTheBackgroundKeepsItsCoarseMask) 
   EXPECT_EQ(SegmentByFeatures(f, 2, coarse, options), expected);
 }
 
+// The small preset written into `dir` with `noise` masks and decomposed into dir/decomposition.
+struct DecomposedScene {
+  Scene scene;
+  GaussianCloud cloud;
+};
+absl::StatusOr<DecomposedScene> WriteDecomposedScene(const std::string& dir,
+                                                     const std::string& noise) {
+  ASSIGN_OR_RETURN(ClutterScene clutter, GenerateClutterScene(*ClutterPreset("small")));
+  SceneWriteOptions write;
+  write.mask_noise = noise;
+  RETURN_IF_ERROR(WriteClutterScene(clutter, dir, write));
+  ASSIGN_OR_RETURN(Scene scene, ReadScene(dir));
+  ASSIGN_OR_RETURN(decomposition::DecompositionResult coarse,
+                   decomposition::Decompose(scene, clutter.cloud, {}));
+  RETURN_IF_ERROR(
+      decomposition::WriteDecomposition(dir + "/decomposition", scene, clutter.cloud, coarse));
+  return DecomposedScene{std::move(scene), std::move(clutter.cloud)};
+}
+
 // A removed (under-segmented) mask's pixels take no part in the single-view term: the Gaussians
 // that render only such pixels get no gradient from it, where as background pixels they would.
 TEST(FeatureField, RemovedMasksPixelsAreLeftOutOfTheSingleViewTerm) {
@@ -200,23 +220,16 @@ TEST(FeatureField, RemovedMasksPixelsAreLeftOutOfTheSingleViewTerm) {
 TEST(FeatureField, PreparedLabelsMarkTheRemovedMasksPixels) {
   const instascene::testing::ScopedTempDir temp("removed_masks");
   const std::string dir = temp.Sub("scene");
-  absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("small"));
-  ASSERT_TRUE(scene.ok());
-  SceneWriteOptions write;
-  write.mask_noise = "high";
-  ASSERT_TRUE(WriteClutterScene(*scene, dir, write).ok());
-  absl::StatusOr<Scene> read = ReadScene(dir);
-  ASSERT_TRUE(read.ok());
-  absl::StatusOr<decomposition::DecompositionResult> coarse =
-      decomposition::Decompose(*read, scene->cloud, decomposition::DecompositionOptions{});
-  ASSERT_TRUE(coarse.ok());
+  absl::StatusOr<DecomposedScene> scene = WriteDecomposedScene(dir, "high");
+  ASSERT_TRUE(scene.ok()) << scene.status();
   const std::string decomposition = dir + "/decomposition";
-  ASSERT_TRUE(decomposition::WriteDecomposition(decomposition, *read, scene->cloud, *coarse).ok());
   TrainingOptions left_out, background;
   left_out.pixel_pool = background.pixel_pool = 4096;
   left_out.ignore_removed_masks = true;
-  absl::StatusOr<TrainingData> a = PrepareTraining(*read, scene->cloud, decomposition, left_out);
-  absl::StatusOr<TrainingData> b = PrepareTraining(*read, scene->cloud, decomposition, background);
+  absl::StatusOr<TrainingData> a =
+      PrepareTraining(scene->scene, scene->cloud, decomposition, left_out);
+  absl::StatusOr<TrainingData> b =
+      PrepareTraining(scene->scene, scene->cloud, decomposition, background);
   ASSERT_TRUE(a.ok() && b.ok());
   int removed = 0;
   for (size_t v = 0; v < a->views.size(); ++v) {
@@ -238,24 +251,14 @@ TEST(FeatureField, PreparedLabelsMarkTheRemovedMasksPixels) {
 TEST(FeatureField, TrainingOnASyntheticSceneSeparatesInstances) {
   const instascene::testing::ScopedTempDir temp("training_scene");
   const std::string dir = temp.Sub("scene");
-  absl::StatusOr<ClutterScene> scene = GenerateClutterScene(*ClutterPreset("small"));
-  ASSERT_TRUE(scene.ok());
-  SceneWriteOptions write;
-  write.mask_noise = "medium";
-  ASSERT_TRUE(WriteClutterScene(*scene, dir, write).ok());
-  absl::StatusOr<Scene> read = ReadScene(dir);
-  ASSERT_TRUE(read.ok());
-  absl::StatusOr<decomposition::DecompositionResult> coarse =
-      decomposition::Decompose(*read, scene->cloud, decomposition::DecompositionOptions{});
-  ASSERT_TRUE(coarse.ok());
-  ASSERT_TRUE(
-      decomposition::WriteDecomposition(dir + "/decomposition", *read, scene->cloud, *coarse).ok());
+  absl::StatusOr<DecomposedScene> scene = WriteDecomposedScene(dir, "medium");
+  ASSERT_TRUE(scene.ok()) << scene.status();
   TrainingOptions options;
   options.iterations = 300;
   options.samples = 2048;
   options.pixel_pool = 4096;
   absl::StatusOr<TrainingData> data =
-      PrepareTraining(*read, scene->cloud, dir + "/decomposition", options);
+      PrepareTraining(scene->scene, scene->cloud, dir + "/decomposition", options);
   ASSERT_TRUE(data.ok()) << data.status();
   absl::StatusOr<TrainingResult> trained = TrainFeatures(*data, options);
   ASSERT_TRUE(trained.ok()) << trained.status();
