@@ -172,6 +172,10 @@ void ScoreWithIndex(const std::vector<Eigen::Vector3f>& points,
   h->agreement = decided > 0 ? static_cast<double>(h->agree) / decided : 0.0;
   h->evidence = h->scored > 0 ? static_cast<double>(decided) / (h->scored * h->copies) : 0.0;
   h->accepted = h->agreement >= options.min_agreement && h->evidence >= options.min_evidence;
+  if (options.revolution_every_turn && h->accepted && h->order == 0 &&
+      h->kind == SymmetryKind::kAxis) {
+    h->accepted = AgreesAtEveryTurn(*h, options);
+  }
 }
 
 // How far a hypothesis maps the observed points from observed points, over the images it decides
@@ -236,6 +240,24 @@ int DiscreteOrder(const SymmetryHypothesis& h, const SymmetryOptions& options) {
 }
 
 }  // namespace
+
+bool AgreesAtEveryTurn(const SymmetryHypothesis& h, const SymmetryOptions& options) {
+  // The one-sided 95 % Wilson score upper bound of agree / decided.
+  auto upper_bound = [](int agree, int decided) {
+    constexpr double z = 1.6449;
+    const double p = static_cast<double>(agree) / decided, z2n = z * z / decided;
+    const double spread = z * std::sqrt(p * (1 - p) / decided + z2n / (4.0 * decided));
+    return (p + z2n / 2 + spread) / (1 + z2n);
+  };
+  for (size_t k = 0; k < h.copy_agree.size() && k < h.copy_contradict.size(); ++k) {
+    const int decided = h.copy_agree[k] + h.copy_contradict[k];
+    if (decided >= options.min_turn_decided &&
+        upper_bound(h.copy_agree[k], decided) < options.min_agreement) {
+      return false;
+    }
+  }
+  return true;
+}
 
 void ScoreHypothesis(const std::vector<Eigen::Vector3f>& points,
                      const std::vector<Eigen::Vector3f>& normals, const ObjectFrame& frame,
