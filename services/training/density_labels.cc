@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <map>
+#include <set>
 #include <tuple>
 
 #include "absl/strings/str_cat.h"
@@ -104,6 +105,34 @@ absl::StatusOr<DensityLabels> LabelByDensity(const GaussianCloud& cloud,
   out.clusters = static_cast<size_t>(*std::max_element(clusters.begin(), clusters.end()) + 1);
   for (size_t g = 0; g < n; ++g) out.labels[g] = static_cast<uint32_t>(clusters[voxel_of[g]] + 1);
   return out;
+}
+
+size_t ReturnCoarseBackground(const std::vector<uint32_t>& coarse, double share,
+                              std::vector<uint32_t>* labels) {
+  if (share <= 0 || coarse.size() != labels->size()) return 0;
+  // Per cluster: its size and how many of its Gaussians each coarse instance holds.
+  std::map<uint32_t, size_t> size;
+  std::map<uint32_t, std::map<uint32_t, size_t>> held;
+  for (size_t g = 0; g < labels->size(); ++g) {
+    const uint32_t c = (*labels)[g];
+    if (c == 0) continue;
+    ++size[c];
+    if (coarse[g] > 0) ++held[c][coarse[g]];
+  }
+  std::set<uint32_t> found;  // clusters mostly one coarse instance
+  for (const auto& [c, counts] : held) {
+    size_t most = 0;
+    for (const auto& [instance, n] : counts) most = std::max(most, n);
+    if (static_cast<double>(most) >= share * static_cast<double>(size[c])) found.insert(c);
+  }
+  size_t returned = 0;
+  for (size_t g = 0; g < labels->size(); ++g) {
+    if (coarse[g] == 0 && found.count((*labels)[g])) {
+      (*labels)[g] = 0;
+      ++returned;
+    }
+  }
+  return returned;
 }
 
 }  // namespace instascene::training

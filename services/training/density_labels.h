@@ -38,4 +38,14 @@ absl::StatusOr<DensityLabels> LabelByDensity(const GaussianCloud& cloud,
                                              const std::vector<float>& features, int dim,
                                              const DensityLabelOptions& options);
 
+// The Gaussians the coarse decomposition left as background (coarse label 0) return to the
+// background where their cluster is mostly one coarse instance (that instance's Gaussians are at
+// least `share` of the cluster): a cluster that is an object the decomposition found keeps its
+// object's Gaussians but not the floor it reached through shared voxels (large background
+// Gaussians whose centres fall in an object's voxels; docs/RESULTS.md "HDBSCAN labels at
+// 320x240"). Clusters of objects the decomposition missed keep everything. share <= 0: nothing
+// changes. Returns how many Gaussians returned. coarse and labels: one per Gaussian.
+size_t ReturnCoarseBackground(const std::vector<uint32_t>& coarse, double share,
+                              std::vector<uint32_t>* labels);
+
 }  // namespace instascene::training

@@ -206,5 +206,22 @@ TEST(DensityLabels, GroupsWithDistinctFeaturesBecomeInstancesForAnyVoxelBudget) 
             absl::StatusCode::kInvalidArgument);
 }
 
+// Clusters 5 and 6 are objects the decomposition found (instances 1 and 2 hold 3 of 5 and 2 of 3
+// of them): their Gaussians the decomposition left as background (floor reached through shared
+// voxels) return to the background. Cluster 7 is an object the decomposition missed, cluster 8
+// one that no single instance holds half of: both keep everything.
+TEST(DensityLabels, ClustersOfFoundObjectsGiveTheCoarseBackgroundBack) {
+  const std::vector<uint32_t> coarse = {1, 1, 1, 0, 0, 2, 2, 0, 0, 0, 0, 1, 2, 0, 0};
+  const std::vector<uint32_t> clusters = {5, 5, 5, 5, 5, 6, 6, 6, 7, 7, 7, 8, 8, 8, 8};
+  std::vector<uint32_t> labels = clusters;
+  EXPECT_EQ(ReturnCoarseBackground(coarse, 0.5, &labels), 3u);
+  EXPECT_EQ(labels, (std::vector<uint32_t>{5, 5, 5, 0, 0, 6, 6, 0, 7, 7, 7, 8, 8, 8, 8}));
+  labels = clusters;
+  EXPECT_EQ(ReturnCoarseBackground(coarse, 0.0, &labels), 0u);  // off: the released code
+  EXPECT_EQ(labels, clusters);
+  labels = clusters;
+  EXPECT_EQ(ReturnCoarseBackground(coarse, 0.25, &labels), 5u);  // cluster 8 too
+}
+
 }  // namespace
 }  // namespace instascene::training

@@ -103,8 +103,13 @@ absl::StatusOr<std::vector<uint32_t>> FinalLabels(const SegmentationResult& trai
   o.max_points = options.max_points;
   ASSIGN_OR_RETURN(DensityLabels labels,
                    LabelByDensity(cloud, trained.features, trained.feature_dim, o));
-  (*metadata)["hdbscan"] = {
-      {"clusters", labels.clusters}, {"points", labels.clustered_points}, {"voxel", labels.voxel}};
+  const size_t returned =
+      ReturnCoarseBackground(trained.labels, options.coarse_background_share, &labels.labels);
+  (*metadata)["hdbscan"] = {{"clusters", labels.clusters},
+                            {"points", labels.clustered_points},
+                            {"voxel", labels.voxel},
+                            {"coarse_background_share", options.coarse_background_share},
+                            {"coarse_background_returned", returned}};
   return labels.labels;
 }
 

@@ -79,6 +79,10 @@ const pipeline::ParamCodec<SegmentStageOptions>& SegmentCodec() {
               "hdbscan: clusters closer than this (feature distance) merge")
         .Real("voxel", &O::voxel, 1e-4, 2.0,
               "hdbscan: voxel side in the scene box normalised to [-1, 1]")
+        .Real("coarse_background_share", &O::coarse_background_share, 0.0, 1.0,
+              "hdbscan: in a cluster of which one coarse instance holds at least this share, the "
+              "Gaussians the decomposition left as background return to the background (0 = off, "
+              "the released code)")
         .Int("max_points", &O::max_points, 2, 40000,
              "hdbscan: most voxels clustered (the voxel doubles until this holds; O(n^2) time)")
         .Check([](const O& o) { return o.Validate(); });

@@ -27,6 +27,9 @@ struct SegmentStageOptions {
   double cluster_selection_epsilon = 0.1;
   double voxel = 0.01;
   int max_points = 12000;
+  // hdbscan: in a cluster of which one coarse instance holds at least this share, the Gaussians the
+  // decomposition left as background return to the background (ReturnCoarseBackground; 0 = off)
+  double coarse_background_share = 0.5;
   absl::Status Validate() const;
 };
 
