@@ -223,8 +223,8 @@ absl::Status BenchTrain(const BenchArgs& args) {
                    training::PrepareTraining(read, scene.cloud, dir + "/decomposition", topt));
   const double prepare_s = prepare.ElapsedSeconds();
   ASSIGN_OR_RETURN(training::TrainingResult trained, training::TrainFeatures(data, topt));
-  const SegmentationResult result =
-      training::TrainedResult(trained, data, topt.feature_dim, training::SegmentOptions{});
+  const SegmentationResult result = training::TrainedResult(
+      trained, data, scene.cloud, topt.feature_dim, training::SegmentOptions{});
   RETURN_IF_ERROR(WriteResult(dir + "/segmentation", result, scene.cloud));
   ASSIGN_OR_RETURN(ClickEvaluation eval,
                    EvaluateResultDirectory(dir, dir + "/segmentation", ClickEvalOptions{}));

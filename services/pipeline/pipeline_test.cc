@@ -208,8 +208,9 @@ TEST(LocalRunner, ThreeStagesGiveTheTauRuleLabelsAndCancelStops) {
   auto segmented = ReadResult(seg, cloud->size());
   ASSERT_TRUE(trained.ok() && segmented.ok());
   EXPECT_EQ(trained->feature_dim, 16);
-  EXPECT_EQ(segmented->labels, training::SegmentByFeatures(trained->features, 16, trained->labels,
-                                                           training::SegmentOptions{0.9}));
+  EXPECT_EQ(segmented->labels,
+            training::SegmentByFeatures(trained->features, 16, trained->labels, cloud->positions,
+                                        training::SegmentOptions{0.9}));
   EXPECT_TRUE(fs::exists(fs::path(seg) / "instances.json"));
   // segment fans out over its instances.
   std::set<uint32_t> ids(segmented->labels.begin(), segmented->labels.end());

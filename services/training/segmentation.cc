@@ -9,14 +9,63 @@
 
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
+#include "common/geometry/point_index.h"
 #include "common/splat/gaussian_ply.h"
 #include "common/splat/ply.h"
 #include "services/training/density_labels.h"
 
 namespace instascene::training {
+namespace {
+
+// SegmentOptions' keep step. Candidates: Gaussians of a coarse instance left unlabelled whose
+// feature matches their own instance's mean at least keep_min_dot. Each pass keeps the candidates
+// of which at least half the nearest Gaussians carry the instance after the previous pass (all
+// decided on the same labels: the result does not depend on the order). Returns how many kept.
+size_t KeepUnclaimed(const std::vector<uint32_t>& coarse, const std::vector<double>& own_dot,
+                     const std::vector<float>& positions, const SegmentOptions& options,
+                     std::vector<uint32_t>* labels) {
+  const size_t n = coarse.size();
+  std::vector<uint32_t> candidates;
+  for (uint32_t g = 0; g < n; ++g) {
+    if ((*labels)[g] == 0 && coarse[g] != 0 && own_dot[g] >= options.keep_min_dot)
+      candidates.push_back(g);
+  }
+  if (candidates.empty()) return 0;
+  std::vector<Eigen::Vector3f> points(n);
+  for (size_t g = 0; g < n; ++g) points[g] = Eigen::Vector3f(&positions[3 * g]);
+  const PointIndex3 index(std::move(points));
+  const size_t k = static_cast<size_t>(options.keep_neighbours);
+  std::vector<std::vector<uint32_t>> neighbours(candidates.size());
+  for (size_t i = 0; i < candidates.size(); ++i) {
+    const uint32_t g = candidates[i];
+    for (const auto& match : index.KNearest(index.points()[g], k + 1)) {
+      if (match.first != g && neighbours[i].size() < k) neighbours[i].push_back(match.first);
+    }
+  }
+  size_t kept = 0;
+  for (size_t changed = 1; changed > 0;) {
+    const std::vector<uint32_t> before = *labels;
+    changed = 0;
+    for (size_t i = 0; i < candidates.size(); ++i) {
+      const uint32_t g = candidates[i];
+      if (before[g] != 0) continue;
+      size_t same = 0;
+      for (uint32_t other : neighbours[i]) same += before[other] == coarse[g];
+      if (2 * same >= k) {
+        (*labels)[g] = coarse[g];
+        ++changed;
+      }
+    }
+    kept += changed;
+  }
+  return kept;
+}
+
+}  // namespace
 
 std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int dim,
                                         const std::vector<uint32_t>& coarse,
+                                        const std::vector<float>& positions,
                                         const SegmentOptions& options) {
   const size_t n = coarse.size();
   std::vector<double> unit(features.size());
@@ -39,7 +88,7 @@ std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int 
     for (double& v : m) v /= count[id];
   }
   std::vector<uint32_t> labels(n, 0);
-  std::map<uint32_t, size_t> selected;
+  std::vector<double> own_dot(n, -1e30);  // with the Gaussian's own coarse instance's mean
   for (size_t g = 0; g < n; ++g) {
     double best = -1e30;
     uint32_t best_id = 0;
@@ -50,11 +99,15 @@ std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int 
         best = dot;
         best_id = id;
       }
+      if (id == coarse[g]) own_dot[g] = dot;
     }
-    if (best >= options.threshold) {
-      labels[g] = best_id;
-      ++selected[best_id];
-    }
+    if (best >= options.threshold) labels[g] = best_id;
+  }
+  if (options.keep_neighbours > 0 && positions.size() == 3 * n)
+    KeepUnclaimed(coarse, own_dot, positions, options, &labels);
+  std::map<uint32_t, size_t> selected;
+  for (uint32_t label : labels) {
+    if (label != 0) ++selected[label];
   }
   // Instances that select (almost) nothing, or far more than their coarse mask, keep that mask.
   std::map<uint32_t, bool> fallback;
@@ -70,11 +123,12 @@ std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int 
   return labels;
 }
 
-SegmentationResult TrainedResult(const TrainingResult& trained, const TrainingData& data, int dim,
+SegmentationResult TrainedResult(const TrainingResult& trained, const TrainingData& data,
+                                 const GaussianCloud& cloud, int dim,
                                  const SegmentOptions& options) {
   SegmentationResult result;
   result.stage = "segment";
-  result.labels = SegmentByFeatures(trained.features, dim, data.labels3d, options);
+  result.labels = SegmentByFeatures(trained.features, dim, data.labels3d, cloud.positions, options);
   result.features = trained.features;
   result.feature_dim = dim;
   return result;
@@ -90,9 +144,12 @@ absl::StatusOr<std::vector<uint32_t>> FinalLabels(const SegmentationResult& trai
     (*metadata)["threshold"] = options.threshold;
     (*metadata)["min_kept_share"] = options.min_kept_share;
     (*metadata)["max_growth"] = options.max_growth;
+    (*metadata)["keep_min_dot"] = options.keep_min_dot;
+    (*metadata)["keep_neighbours"] = options.keep_neighbours;
     return SegmentByFeatures(
-        trained.features, trained.feature_dim, trained.labels,
-        SegmentOptions{options.threshold, options.min_kept_share, options.max_growth});
+        trained.features, trained.feature_dim, trained.labels, cloud.positions,
+        SegmentOptions{options.threshold, options.min_kept_share, options.max_growth,
+                       options.keep_min_dot, options.keep_neighbours});
   }
   DensityLabelOptions o;
   o.hdbscan.min_samples = options.min_samples;

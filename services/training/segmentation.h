@@ -28,17 +28,28 @@ struct SegmentOptions {
   // that drifted towards the background's (a small or spurious coarse instance whose features
   // were not held apart): it keeps its coarse mask instead of spreading over the scene. 0 = off.
   double max_growth = 3.0;
+  // A Gaussian of a coarse instance that no instance's mean claims at tau (it would fall to the
+  // background) keeps its coarse instance when its feature still matches that instance's mean at
+  // least `keep_min_dot` and at least half of its `keep_neighbours` nearest Gaussians (centres)
+  // carry the instance; repeated while it keeps more (a rim or an edge seen in few views, whose
+  // features were trained less, stays with its object; docs/RESULTS.md "Unclaimed Gaussians of a
+  // coarse instance"). keep_neighbours 0 = off (the paper's rule).
+  double keep_min_dot = 0.7;
+  int keep_neighbours = 8;
 };
 
-// labels: per Gaussian, the coarse instance id (0 = none) used to define the instances; returns
-// the final per-Gaussian labels with the same ids.
+// labels: per Gaussian, the coarse instance id (0 = none) used to define the instances;
+// positions: 3 per Gaussian (centres), for the keep step (empty: the step is skipped). Returns the
+// final per-Gaussian labels with the same ids. Deterministic.
 std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int dim,
                                         const std::vector<uint32_t>& coarse,
+                                        const std::vector<float>& positions,
                                         const SegmentOptions& options);
 
 // The segmentation result of a training run: labels by the tau rule over the coarse instances,
 // the raw features kept for click queries and evaluation.
-SegmentationResult TrainedResult(const TrainingResult& trained, const TrainingData& data, int dim,
+SegmentationResult TrainedResult(const TrainingResult& trained, const TrainingData& data,
+                                 const GaussianCloud& cloud, int dim,
                                  const SegmentOptions& options);
 
 // Final labels of a trained result (features + coarse labels) by the segment stage's labelling;

@@ -73,6 +73,12 @@ const pipeline::ParamCodec<SegmentStageOptions>& SegmentCodec() {
               "tau: an instance whose features select more than this many times its coarse "
               "Gaussians (its mean drifted towards the background's) keeps its coarse mask; 0 = "
               "off")
+        .Real("keep_min_dot", &O::keep_min_dot, -1.0, 1.0,
+              "tau: a Gaussian of a coarse instance that no instance claims keeps its instance "
+              "when its feature matches the instance's mean at least this much and half its "
+              "keep_neighbours nearest Gaussians carry the instance")
+        .Int("keep_neighbours", &O::keep_neighbours, 0, 64,
+             "tau: nearest Gaussians asked by the keep step; 0 = off (the paper's rule)")
         .Int("min_samples", &O::min_samples, 1, 1000, "hdbscan: neighbours of a core point")
         .Int("min_cluster_size", &O::min_cluster_size, 2, 100000, "hdbscan: smallest cluster")
         .Real("cluster_selection_epsilon", &O::cluster_selection_epsilon, 0.0, 2.0,

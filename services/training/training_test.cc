@@ -123,7 +123,7 @@ TEST(Segmentation, AssignsByMeanFeatureWithThreshold) {
   // Two coarse instances and one unlabelled Gaussian whose feature matches instance 2.
   const std::vector<float> f = {1, 0, 1, 0.05f, 0, 1, 0.02f, 1, 0, 1, 0.7f, 0.7f};
   const std::vector<uint32_t> coarse = {1, 1, 2, 0, 2, 0};
-  const std::vector<uint32_t> labels = SegmentByFeatures(f, 2, coarse, SegmentOptions{});
+  const std::vector<uint32_t> labels = SegmentByFeatures(f, 2, coarse, {}, SegmentOptions{});
   EXPECT_EQ(labels, (std::vector<uint32_t>{1, 1, 2, 2, 2, 0}));  // (0.7, 0.7) is below 0.9 for both
 }
 
@@ -134,10 +134,10 @@ TEST(Segmentation, AnInstanceItsFeaturesCannotHoldKeepsItsCoarseMask) {
   const std::vector<uint32_t> coarse = {1, 1, 1, 2, 2, 2, 2, 2};
   SegmentOptions options;
   options.threshold = 0.15;
-  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, options),
+  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, {}, options),
             (std::vector<uint32_t>{1, 1, 1, 2, 2, 2, 2, 2}));
   options.min_kept_share = 0.0;  // the plain tau rule: the sliver
-  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, options),
+  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, {}, options),
             (std::vector<uint32_t>{1, 1, 1, 1, 1, 1, 1, 2}));
 }
 
@@ -159,11 +159,41 @@ TEST(Segmentation, AnInstanceWhoseMeanDriftedToTheBackgroundKeepsItsCoarseMask) 
   add(0, 1, 2, 2);
   add(0.1f, 1, 0, 8);
   SegmentOptions options;
-  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, options), coarse);
+  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, {}, options), coarse);
   options.max_growth = 0;  // the plain tau rule: instance 2 spreads over the background
   std::vector<uint32_t> expected(19, 1);
   expected.resize(coarse.size(), 2);
-  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, options), expected);
+  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, {}, options), expected);
+}
+
+TEST(Segmentation, AnUnclaimedGaussianItsNeighboursCarryKeepsItsInstance) {
+  // Instance 1: twenty Gaussians on a line (x = 0..19) with feature (1, 0), then two whose feature
+  // (0.8, 0.6) matches the instance's mean only 0.83 (below tau) at x = 20 and 21, a third such far
+  // away among the background, and one inside the line matching 0.57. Background (0, 1) at x
+  // = 22..40 and 95..105. The one at x = 20 has four of its eight nearest in the instance, the one
+  // at 21 three, then four once 20 is kept; the far one none; the inner one matches too little.
+  std::vector<float> f, positions;
+  std::vector<uint32_t> coarse;
+  auto add = [&](float x, float y, float fx, float fy, uint32_t label) {
+    f.insert(f.end(), {fx, fy});
+    positions.insert(positions.end(), {x, y, 0});
+    coarse.push_back(label);
+  };
+  for (int x = 0; x < 20; ++x) add(x, 0, 1, 0, 1);
+  add(20, 0, 0.8f, 0.6f, 1);
+  add(21, 0, 0.8f, 0.6f, 1);
+  add(100, 0.5f, 0.8f, 0.6f, 1);
+  add(10, 0.5f, 0.5f, 0.866f, 1);
+  for (int x = 22; x <= 40; ++x) add(x, 0, 0, 1, 0);
+  for (int x = 95; x <= 105; ++x) add(x, 0, 0, 1, 0);
+  std::vector<uint32_t> expected(coarse.size(), 0);
+  for (int g = 0; g < 22; ++g) expected[g] = 1;
+  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, positions, SegmentOptions{}), expected);
+  SegmentOptions paper;
+  paper.keep_neighbours = 0;  // the paper's rule: all four fall to the background
+  expected[20] = expected[21] = 0;
+  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, positions, paper), expected);
+  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, {}, SegmentOptions{}), expected);  // no centres
 }
 
 // The small preset written into `dir` with `noise` masks and decomposed into dir/decomposition.
@@ -269,7 +299,7 @@ TEST(FeatureField, TrainingOnASyntheticSceneSeparatesInstances) {
   }
   EXPECT_LT(last, 0.5 * first);  // the loss falls
   const SegmentationResult result =
-      TrainedResult(*trained, *data, options.feature_dim, SegmentOptions{});
+      TrainedResult(*trained, *data, scene->cloud, options.feature_dim, SegmentOptions{});
   EXPECT_EQ(result.feature_dim, options.feature_dim);
   ASSERT_TRUE(WriteResult(dir + "/trained", result, scene->cloud).ok());
   absl::StatusOr<ClickEvaluation> features =
