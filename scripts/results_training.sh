@@ -30,7 +30,7 @@ scene_row() {  # scene_row GROUP LABEL SCENE
     "$BIN" train --scene "$s" --decomposition "$s/dec" --out "$s/train_$sup" --supervision "$sup" >/dev/null 2>&1
     cells="$cells $(miou "$s" "$s/train_$sup")"
   done
-  "$BIN" segment --scene "$s" --features "$s/train_full" --out "$s/full_hdbscan" --labelling hdbscan >/dev/null 2>&1
+  "$BIN" segment --scene "$s" --features "$s/train_full" --decomposition "$s/dec" --out "$s/full_hdbscan" --labelling hdbscan >/dev/null 2>&1
   cells="$cells $(miou "$s" "$s/train_full" --labels-only) $(miou "$s" "$s/full_hdbscan" --labels-only)"
   python3 -c "import json,sys; print(json.dumps({'group': sys.argv[1], 'scene': sys.argv[2], 'cells': [float(c) for c in sys.argv[3:]]}))" \
     "$1" "$2" $cells >> "$rows"

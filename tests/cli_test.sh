@@ -67,6 +67,8 @@ check_fails "the diffusion prior without a denoiser" "needs --denoiser grpc://HO
 check_fails "complete an absent object" "no object could be completed" "$BIN" complete --scene "$WORK/u" --result "$WORK/u/gt" --out "$WORK/u/y" --object 999
 check_fails "eval needs exactly one of --result and --completion" "exactly one" "$BIN" eval --scene "$WORK/u" --result "$WORK/u/gt" --completion "$WORK/u/objects"
 check "segment again" "$BIN" segment --scene "$WORK/s" --features "$WORK/run/segmentation" --out "$WORK/seg2" --threshold 0.8
+check "segment from the coarse instances of the decomposition" "$BIN" segment --scene "$WORK/s" --features "$WORK/run/segmentation" --decomposition "$WORK/run/decomposition" --out "$WORK/seg4"
+check "which reproduces the run's segmentation" cmp "$WORK/seg4/labels.ply" "$WORK/run/segmentation/labels.ply"
 check "run with HDBSCAN labelling" "$BIN" run --scene "$WORK/s" --out "$WORK/runh" --stages decompose,train,segment --iterations 30 --samples 256 --pixel-pool 512 --labelling hdbscan
 check "the segment stage labelled by HDBSCAN" python3 -c "
 import json

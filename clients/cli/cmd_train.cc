@@ -122,16 +122,22 @@ void AddTrainCommands(CLI::App& app, Action* action) {
   });
 
   struct SegmentArgs {
-    std::string scene, features, out;
+    std::string scene, features, decomposition, out;
     StageFlags flags;
   };
   auto segment = std::make_shared<SegmentArgs>();
   CLI::App* seg = app.add_subcommand(
-      "segment", "Re-segment trained features (instances from their coarse labels, tau rule)");
+      "segment",
+      "Re-segment trained features (instances from their coarse labels: tau rule or HDBSCAN)");
   seg->add_option("--scene", segment->scene, "Scene directory")->required();
   seg->add_option("--features", segment->features,
-                  "A result directory with features (instascene train)")
+                  "A result directory with features: `run`'s training/ (its labels are the coarse "
+                  "instances) or `instascene train`'s output (give --decomposition too: its labels "
+                  "are already final)")
       ->required();
+  seg->add_option("--decomposition", segment->decomposition,
+                  "The coarse instances to start from (labels of instascene decompose's output); "
+                  "default: the labels of --features");
   seg->add_option("--out", segment->out, "Result directory")->required();
   segment->flags.Add(seg, training::SegmentSpec());
   seg->callback([segment, action] {
@@ -146,6 +152,11 @@ void AddTrainCommands(CLI::App& app, Action* action) {
       if (in.feature_dim == 0)
         return absl::InvalidArgumentError(
             absl::StrCat(segment->features, ": result has no features"));
+      if (!segment->decomposition.empty()) {
+        ASSIGN_OR_RETURN(SegmentationResult coarse,
+                         ReadResult(segment->decomposition, cloud.size()));
+        in.labels = std::move(coarse.labels);
+      }
       SegmentationResult out = in;
       out.stage = "segment";
       ASSIGN_OR_RETURN(out.labels, training::FinalLabels(in, cloud, options, 0, &out.metadata));
