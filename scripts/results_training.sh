@@ -3,7 +3,8 @@
 # scene, one decomposition, then every supervision variant and the vote baseline, each scored with
 # `instascene eval` (click mIoU with features where the result has them, on labels otherwise); the
 # full variant is also scored on its final labels, from the tau rule (`train`'s default) and from
-# HDBSCAN (`segment --labelling hdbscan`), with `eval --labels-only`. Scenes: the `small` preset
+# HDBSCAN (`segment --labelling hdbscan`, from the decomposition's coarse instances), with `eval
+# --labels-only`. Scenes: the `small` preset
 # under the noise family the constants were developed on (low, medium, high) and under the held-back
 # part-aware family (sam-medium), seeds SEEDS, and the real-capture composite at medium noise.
 # Prints a markdown table and the mean ± std of every column per noise level.
