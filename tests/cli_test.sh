@@ -69,6 +69,8 @@ check_fails "eval needs exactly one of --result and --completion" "exactly one" 
 check "segment again" "$BIN" segment --scene "$WORK/s" --features "$WORK/run/segmentation" --out "$WORK/seg2" --threshold 0.8
 check "segment from the coarse instances of the decomposition" "$BIN" segment --scene "$WORK/s" --features "$WORK/run/segmentation" --decomposition "$WORK/run/decomposition" --out "$WORK/seg4"
 check "which reproduces the run's segmentation" cmp "$WORK/seg4/labels.ply" "$WORK/run/segmentation/labels.ply"
+check_fails "segment from another scene's decomposition" "labels for" "$BIN" segment --scene "$WORK/s" --features "$WORK/run/segmentation" --decomposition "$WORK/u/gt" --out "$WORK/seg5"
+check "and it wrote nothing" test ! -e "$WORK/seg5"
 check "run with HDBSCAN labelling" "$BIN" run --scene "$WORK/s" --out "$WORK/runh" --stages decompose,train,segment --iterations 30 --samples 256 --pixel-pool 512 --labelling hdbscan
 check "the segment stage labelled by HDBSCAN" python3 -c "
 import json
