@@ -3,6 +3,7 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <numeric>
 
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
@@ -42,21 +43,22 @@ size_t KeepUnclaimed(const std::vector<uint32_t>& coarse, const std::vector<doub
       if (match.first != g && neighbours[i].size() < k) neighbours[i].push_back(match.first);
     }
   }
+  // Each pass decides every remaining candidate on the labels as they stood before it.
+  std::vector<size_t> remaining(candidates.size());
+  std::iota(remaining.begin(), remaining.end(), size_t{0});
   size_t kept = 0;
-  for (size_t changed = 1; changed > 0;) {
-    const std::vector<uint32_t> before = *labels;
-    changed = 0;
-    for (size_t i = 0; i < candidates.size(); ++i) {
+  while (!remaining.empty()) {
+    std::vector<size_t> keep, rest;
+    for (size_t i : remaining) {
       const uint32_t g = candidates[i];
-      if (before[g] != 0) continue;
       size_t same = 0;
-      for (uint32_t other : neighbours[i]) same += before[other] == coarse[g];
-      if (2 * same >= k) {
-        (*labels)[g] = coarse[g];
-        ++changed;
-      }
+      for (uint32_t other : neighbours[i]) same += (*labels)[other] == coarse[g];
+      (2 * same >= k ? keep : rest).push_back(i);
     }
-    kept += changed;
+    if (keep.empty()) break;
+    for (size_t i : keep) (*labels)[candidates[i]] = coarse[candidates[i]];
+    kept += keep.size();
+    remaining.swap(rest);
   }
   return kept;
 }
