@@ -3,7 +3,6 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
-#include <numeric>
 
 #include <Eigen/Geometry>
 #include <nlohmann/json.hpp>
@@ -19,46 +18,64 @@ namespace instascene::training {
 namespace {
 
 // SegmentOptions' keep step. Candidates: Gaussians of a coarse instance left unlabelled whose
-// feature matches their own instance's mean at least keep_min_dot. Each pass keeps the candidates
-// of which at least half the nearest Gaussians carry the instance after the previous pass (all
-// decided on the same labels: the result does not depend on the order). Returns how many kept.
+// feature matches their own instance's mean at least keep_min_dot. In rounds, a candidate is kept
+// once at least half its nearest Gaussians carry its instance in the labels the previous round
+// left (each round decided on the same labels: the result does not depend on the order). Each
+// candidate counts its neighbours carrying its instance; a kept one raises the counts of the
+// candidates it neighbours, so the whole step costs O(candidates x neighbours), however many
+// rounds a chain of candidates takes. Returns how many kept.
 size_t KeepUnclaimed(const std::vector<uint32_t>& coarse, const std::vector<double>& own_dot,
                      const std::vector<float>& positions, const SegmentOptions& options,
                      std::vector<uint32_t>* labels) {
   const size_t n = coarse.size();
-  std::vector<uint32_t> candidates;
+  constexpr uint32_t kNone = 0xffffffffu;
+  std::vector<uint32_t> candidates, candidate_of(n, kNone);
   for (uint32_t g = 0; g < n; ++g) {
-    if ((*labels)[g] == 0 && coarse[g] != 0 && own_dot[g] >= options.keep_min_dot)
+    if ((*labels)[g] == 0 && coarse[g] != 0 && own_dot[g] >= options.keep_min_dot) {
+      candidate_of[g] = static_cast<uint32_t>(candidates.size());
       candidates.push_back(g);
+    }
   }
   if (candidates.empty()) return 0;
   std::vector<Eigen::Vector3f> points(n);
   for (size_t g = 0; g < n; ++g) points[g] = Eigen::Vector3f(&positions[3 * g]);
   const PointIndex3 index(std::move(points));
   const size_t k = static_cast<size_t>(options.keep_neighbours);
-  std::vector<std::vector<uint32_t>> neighbours(candidates.size());
-  for (size_t i = 0; i < candidates.size(); ++i) {
+  std::vector<size_t> carrying(candidates.size(), 0);
+  std::vector<std::vector<uint32_t>> watchers(candidates.size());  // candidates neighbouring one
+  for (uint32_t i = 0; i < candidates.size(); ++i) {
     const uint32_t g = candidates[i];
+    size_t taken = 0;
     for (const auto& match : index.KNearest(index.points()[g], k + 1)) {
-      if (match.first != g && neighbours[i].size() < k) neighbours[i].push_back(match.first);
+      if (match.first == g || taken == k) continue;
+      ++taken;
+      carrying[i] += (*labels)[match.first] == coarse[g];
+      if (candidate_of[match.first] != kNone) watchers[candidate_of[match.first]].push_back(i);
     }
   }
-  // Each pass decides every remaining candidate on the labels as they stood before it.
-  std::vector<size_t> remaining(candidates.size());
-  std::iota(remaining.begin(), remaining.end(), size_t{0});
-  size_t kept = 0;
-  while (!remaining.empty()) {
-    std::vector<size_t> keep, rest;
-    for (size_t i : remaining) {
-      const uint32_t g = candidates[i];
-      size_t same = 0;
-      for (uint32_t other : neighbours[i]) same += (*labels)[other] == coarse[g];
-      (2 * same >= k ? keep : rest).push_back(i);
+  std::vector<uint8_t> queued(candidates.size(), 0);
+  std::vector<uint32_t> round;
+  for (uint32_t i = 0; i < candidates.size(); ++i) {
+    if (2 * carrying[i] >= k) {
+      round.push_back(i);
+      queued[i] = 1;
     }
-    if (keep.empty()) break;
-    for (size_t i : keep) (*labels)[candidates[i]] = coarse[candidates[i]];
-    kept += keep.size();
-    remaining.swap(rest);
+  }
+  size_t kept = 0;
+  while (!round.empty()) {
+    for (uint32_t i : round) (*labels)[candidates[i]] = coarse[candidates[i]];
+    kept += round.size();
+    std::vector<uint32_t> next;
+    for (uint32_t i : round) {
+      for (uint32_t j : watchers[i]) {
+        if (queued[j] || coarse[candidates[j]] != coarse[candidates[i]]) continue;
+        if (2 * ++carrying[j] >= k) {
+          next.push_back(j);
+          queued[j] = 1;
+        }
+      }
+    }
+    round.swap(next);
   }
   return kept;
 }
