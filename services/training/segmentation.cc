@@ -23,10 +23,10 @@ namespace {
 // left (each round decided on the same labels: the result does not depend on the order). Each
 // candidate counts its neighbours carrying its instance; a kept one raises the counts of the
 // candidates it neighbours, so the whole step costs O(candidates x neighbours), however many
-// rounds a chain of candidates takes. Returns how many kept.
-size_t KeepUnclaimed(const std::vector<uint32_t>& coarse, const std::vector<double>& own_dot,
-                     const std::vector<float>& positions, const SegmentOptions& options,
-                     std::vector<uint32_t>* labels) {
+// rounds a chain of candidates takes.
+void KeepUnclaimed(const std::vector<uint32_t>& coarse, const std::vector<double>& own_dot,
+                   const std::vector<float>& positions, const SegmentOptions& options,
+                   std::vector<uint32_t>* labels) {
   const size_t n = coarse.size();
   constexpr uint32_t kNone = 0xffffffffu;
   std::vector<uint32_t> candidates, candidate_of(n, kNone);
@@ -36,7 +36,7 @@ size_t KeepUnclaimed(const std::vector<uint32_t>& coarse, const std::vector<doub
       candidates.push_back(g);
     }
   }
-  if (candidates.empty()) return 0;
+  if (candidates.empty()) return;
   std::vector<Eigen::Vector3f> points(n);
   for (size_t g = 0; g < n; ++g) points[g] = Eigen::Vector3f(&positions[3 * g]);
   const PointIndex3 index(std::move(points));
@@ -61,10 +61,8 @@ size_t KeepUnclaimed(const std::vector<uint32_t>& coarse, const std::vector<doub
       queued[i] = 1;
     }
   }
-  size_t kept = 0;
   while (!round.empty()) {
     for (uint32_t i : round) (*labels)[candidates[i]] = coarse[candidates[i]];
-    kept += round.size();
     std::vector<uint32_t> next;
     for (uint32_t i : round) {
       for (uint32_t j : watchers[i]) {
@@ -77,7 +75,6 @@ size_t KeepUnclaimed(const std::vector<uint32_t>& coarse, const std::vector<doub
     }
     round.swap(next);
   }
-  return kept;
 }
 
 }  // namespace
