@@ -976,7 +976,13 @@ TEST(GeometricPrior, AMirrorPlaneThroughTheAxisLendsNoImagesOfTheHandle) {
 // A partly seen bottle (radius 5 cm) inside a tray's rim that hides the space around its base
 // from every view, and three surfels of a neighbour, 1 cm beside its base, that the
 // segmentation gave it: the last three of the instance.
-PartialObject BottleWithANeighboursStrays(uint64_t seed, size_t count = 4000) {
+const std::vector<Eigen::Vector3f> kStraysBesideTheBase = {Eigen::Vector3f(0.061f, 0.004f, 0.012f),
+                                                           Eigen::Vector3f(0.060f, -0.006f, 0.018f),
+                                                           Eigen::Vector3f(0.062f, 0.010f, 0.024f)};
+
+PartialObject BottleWithANeighboursStrays(
+    uint64_t seed, size_t count = 4000,
+    const std::vector<Eigen::Vector3f>& targets = kStraysBesideTheBase) {
   PartialObject scene = MakePartialObject(Bottle(), count, seed);
   // A tray's rim around the base hides the space beside it from every view.
   ShapeSpec rim;
@@ -986,9 +992,6 @@ PartialObject BottleWithANeighboursStrays(uint64_t seed, size_t count = 4000) {
   AppendSurfels(MakeShapeMesh(rim, 48), 3000, Appearance{}, SurfelSampling{}, rng, &scene.cloud);
   scene.labels.resize(scene.cloud.size(), 0);
   // Copies of the bottle's surfel nearest each target, moved there (a neighbour's fragment).
-  const std::vector<Eigen::Vector3f> targets = {Eigen::Vector3f(0.061f, 0.004f, 0.012f),
-                                                Eigen::Vector3f(0.060f, -0.006f, 0.018f),
-                                                Eigen::Vector3f(0.062f, 0.010f, 0.024f)};
   std::vector<uint32_t> keep(scene.cloud.size());
   std::iota(keep.begin(), keep.end(), 0u);
   for (const Eigen::Vector3f& target : targets) {
@@ -1070,6 +1073,82 @@ TEST(GeometricPrior, StraysANeighboursLabelSurroundsAreNotTheObjects) {
     out = GeometricPrior().Complete(fixture.input);
     ASSERT_TRUE(out.ok()) << out.status();
     EXPECT_EQ(out->foreign, (std::vector<uint32_t>{n - 3, n - 2, n - 1})) << seed;
+  }
+}
+
+// Many of a neighbour's surfels at one height (30 at the contact, 6-7 mm beside the bottle,
+// inside the tray's rim: the axis holds for them): a tenth of the profile's window, they lift its
+// percentile over themselves and all stay (seed 53's bottle_2 kept two of six that way, its
+// extent 8 % too large). A neighbour's label surrounds them, so they are not the profile's
+// witnesses: all leave the bottle.
+TEST(GeometricPrior, TheProfileIsTheBodysNotTheNeighboursItJudges) {
+  std::vector<Eigen::Vector3f> crowd;
+  for (int k = 0; k < 30; ++k) {
+    const float angle = 0.015f * static_cast<float>(k % 10 - 5);
+    const float radius = 0.056f + 0.0005f * static_cast<float>(k % 3);
+    crowd.emplace_back(radius * std::cos(angle), radius * std::sin(angle),
+                       0.014f + 0.003f * static_cast<float>(k / 10));
+  }
+  for (uint64_t seed : {21u, 22u, 23u}) {
+    const PartialObject scene = BottleWithANeighboursStrays(seed, 4000, crowd);
+    PriorFixture fixture(scene);
+    ASSERT_TRUE(fixture.ok());
+    const uint32_t n = static_cast<uint32_t>(fixture.instance.size());
+    std::vector<uint8_t> labelled(n, 0);
+    for (uint32_t k = 0; k < crowd.size(); ++k) labelled[n - 1 - k] = 1;
+    fixture.input.neighbour_labelled = &labelled;
+    auto foreign_crowd = [&](bool skip) {
+      GeometricPriorOptions options;
+      options.profile_skips_neighbour_labelled = skip;
+      auto out = GeometricPrior(options).Complete(fixture.input);
+      EXPECT_TRUE(out.ok()) << out.status();
+      return out.ok() ? std::count_if(out->foreign.begin(), out->foreign.end(),
+                                      [&](uint32_t g) { return g + crowd.size() >= n; })
+                      : 0;
+    };
+    EXPECT_EQ(foreign_crowd(true), 30) << seed;
+    EXPECT_LT(foreign_crowd(false), 15) << seed;
+  }
+}
+
+// A touching neighbour's patch at the contact (a 5 x 5 sheet of its surfels, 2.5 mm apart, 8-13
+// mm beside a partly seen bottle, where the views saw the space around it): a neighbour's label
+// surrounds only the patch's rim, the instance's own label its inner part. The rim leaves the
+// bottle by the neighbour-label rule; the inner part, beyond the profile and joined to the rim,
+// leaves with it (seed 51's bottle_2 kept 12 of a neighbour's surfels that way, its extent 13 %
+// too large; RESULTS.md "Neighbours' surfels at the contact"); without the patch rule it stays.
+TEST(GeometricPrior, ANeighboursPatchAtTheContactLeavesWhole) {
+  for (uint64_t seed : {3u, 22u, 23u}) {
+    PartialObject scene = MakePartialObject(Bottle(), 4000, seed);
+    std::vector<Eigen::Vector3f> patch;
+    for (int i = -2; i <= 2; ++i) {
+      for (int j = -2; j <= 2; ++j) {
+        const float y = 0.0025f * static_cast<float>(i);
+        patch.emplace_back(0.058f + 10.0f * y * y, y, 0.10f + 0.0025f * static_cast<float>(j));
+      }
+    }
+    AppendObjectSurfelsAt(patch, &scene);
+    PriorFixture fixture(scene);
+    ASSERT_TRUE(fixture.ok());
+    const uint32_t n = static_cast<uint32_t>(fixture.instance.size());
+    const uint32_t first = n - static_cast<uint32_t>(patch.size());
+    std::vector<uint8_t> labelled(n, 0);
+    std::vector<uint32_t> rim, whole;
+    for (uint32_t k = 0; k < patch.size(); ++k) {
+      const bool on_rim = k / 5 == 0 || k / 5 == 4 || k % 5 == 0 || k % 5 == 4;
+      labelled[first + k] = on_rim;
+      if (on_rim) rim.push_back(first + k);
+      whole.push_back(first + k);
+    }
+    fixture.input.neighbour_labelled = &labelled;
+    GeometricPriorOptions options;
+    auto out = GeometricPrior(options).Complete(fixture.input);
+    ASSERT_TRUE(out.ok()) << out.status();
+    EXPECT_EQ(out->foreign, whole) << seed;
+    options.drop_patches_beyond_axis_profile = false;
+    out = GeometricPrior(options).Complete(fixture.input);
+    ASSERT_TRUE(out.ok()) << out.status();
+    EXPECT_EQ(out->foreign, rim) << seed;
   }
 }
 

@@ -263,6 +263,8 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     // Sources it does not hold for beyond the profile that a touching neighbour's label
     // surrounds: that neighbour's surfels (a handle stands clear of other instances).
     std::vector<uint8_t> neighbours_beyond_profile;
+    // Sources it does not hold for beyond the profile, whatever surrounds them.
+    std::vector<uint8_t> off_beyond_profile;
   };
   std::vector<AxisBody> bodies;
   for (const SymmetryHypothesis& axis : hypotheses) {
@@ -294,17 +296,27 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     // Beyond the profile: only about a solid of revolution (an n-fold axis's radius varies
     // around it: a box's corners).
     if (options_.skip_beyond_axis_profile && axis.order == 0) {
+      // The profile is the body's: a surfel a touching neighbour's label surrounds is a suspect
+      // it is to judge, not a witness (a neighbour's surfels crowding one height can be a tenth
+      // of the window and lift the percentile over themselves).
+      const bool have_neighbours = options_.profile_skips_neighbour_labelled &&
+                                   input.neighbour_labelled != nullptr &&
+                                   input.neighbour_labelled->size() == instance.size();
       std::vector<uint8_t> holds(instance.size());
-      for (uint32_t g = 0; g < instance.size(); ++g) holds[g] = !off[g];
+      for (uint32_t g = 0; g < instance.size(); ++g)
+        holds[g] = !off[g] && !(have_neighbours && (*input.neighbour_labelled)[g]);
       const std::vector<float> profile = RadialProfile(height, radial, holds, step);
       for (uint32_t g = 0; g < instance.size(); ++g)
         b.beyond_profile[g] = !off[g] && radial[g] > profile[g];
       if (options_.drop_neighbours_beyond_axis_profile && input.neighbour_labelled != nullptr &&
           input.neighbour_labelled->size() == instance.size()) {
         b.neighbours_beyond_profile.assign(instance.size(), 0);
-        for (uint32_t g = 0; g < instance.size(); ++g)
+        b.off_beyond_profile.assign(instance.size(), 0);
+        for (uint32_t g = 0; g < instance.size(); ++g) {
+          b.off_beyond_profile[g] = off[g] && radial[g] > profile[g];
           b.neighbours_beyond_profile[g] =
-              off[g] && radial[g] > profile[g] && (*input.neighbour_labelled)[g];
+              b.off_beyond_profile[g] && (*input.neighbour_labelled)[g];
+        }
       }
     }
     // About an n-fold axis (no profile: a box's radius varies around it), those beyond the body's
@@ -325,6 +337,39 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
       foreign[g] |= options_.drop_beyond_axis_profile && b.beyond_profile[g];
       foreign[g] |= !b.neighbours_beyond_profile.empty() && b.neighbours_beyond_profile[g];
     }
+  }
+  // A neighbour's patch at the contact: surfels beyond the profile that the axis does not hold
+  // for and that join a surfel found not to be the object's (within three spacings, repeatedly)
+  // are not the object's either. They are the patch's inner part, too far from every other
+  // instance's surfel for the neighbour-label test (its rim passes it).
+  if (options_.drop_patches_beyond_axis_profile) {
+    std::vector<uint8_t> candidate(instance.size(), 0);
+    bool any = false;
+    for (const AxisBody& b : bodies) {
+      if (b.off_beyond_profile.empty()) continue;
+      for (uint32_t g = 0; g < instance.size(); ++g) {
+        candidate[g] |= b.off_beyond_profile[g] && !foreign[g];
+        any |= candidate[g] != 0;
+      }
+    }
+    if (any) {
+      const PointIndex3 index(std::vector<Eigen::Vector3f>(points.begin(), points.end()));
+      std::vector<uint32_t> queue;
+      for (uint32_t g = 0; g < instance.size(); ++g)
+        if (foreign[g]) queue.push_back(g);
+      const float link = 3.0f * std::max(frame.spacing, 1e-6f);
+      while (!queue.empty()) {
+        const uint32_t g = queue.back();
+        queue.pop_back();
+        for (uint32_t n : index.WithinRadius(points[g], link)) {
+          if (!candidate[n] || foreign[n]) continue;
+          foreign[n] = 1;
+          queue.push_back(n);
+        }
+      }
+    }
+  }
+  for (uint32_t g = 0; g < instance.size(); ++g) {
     if (!foreign[g]) own.push_back(g);
   }
   // Sources a hypothesis lends no images of beyond its own asymmetric ones: an axis, those beyond

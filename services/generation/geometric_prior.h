@@ -52,6 +52,10 @@ struct GeometricPriorOptions {
   // neighbour that the segmentation gave the object would otherwise come back as a ring around
   // it. Measured in RESULTS.md ("Neighbours' surfels revolved").
   bool skip_beyond_axis_profile = true;
+  // The profile leaves out the surfels a touching neighbour's label surrounds
+  // (PriorInput::neighbour_labelled): they are what it judges. Measured in RESULTS.md
+  // ("Neighbours' surfels at the contact").
+  bool profile_skips_neighbour_labelled = true;
   // ... and such surfels are not the object's: they leave it for the occluders (reported as
   // PriorOutput::foreign) and hold out no support wall or cap. Measured in RESULTS.md
   // ("Neighbours' surfels revolved").
@@ -61,6 +65,11 @@ struct GeometricPriorOptions {
   // surrounds them (PriorInput::neighbour_labelled): they leave it too; about an n-fold axis
   // (a box), those beyond the body's reach, its corners.
   bool drop_neighbours_beyond_axis_profile = true;
+  // ... and the surfels beyond the profile that such flagged surfels reach through each other
+  // (within three spacings): the inner part of a neighbour's patch at the contact, where the
+  // instance's own label surrounds them. Measured in RESULTS.md ("Neighbours' surfels at the
+  // contact").
+  bool drop_patches_beyond_axis_profile = true;
   // Refuse a candidate standing off the observed surface beside it (observed_surface.h).
   // Measured in RESULTS.md ("Free-space violations: candidates off the observed surface").
   ObservedSurfaceOptions observed_surface;
