@@ -689,6 +689,18 @@ TEST(ObjectFrame, TheSupportSurroundsTheObjectNotANeighboursFloorBesideIt) {
   EXPECT_NEAR(frame.support_height, 0.0f, 0.002f);
 }
 
+// The object's own inner floor (a mug's, 5 mm above the table, that the segmentation left out
+// of the instance: label 0) inside its footprint, around its centre: it surrounds the centre in
+// every sector, dense and higher than the table. The support surrounds the object outside its
+// footprint (seed 51's mug_7 stood on its own floor, 5.6 mm too short).
+TEST(ObjectFrame, TheSupportIsNotTheObjectsOwnFloor) {
+  TriangleMesh floor = MakeRectangle(0.04f, 0.04f, 2, 2);
+  for (Eigen::Vector3f& v : floor.vertices) v += Eigen::Vector3f(0.0f, 0.0f, 0.005f);
+  const ObjectFrame frame = BottleFrameBeside(floor, 800, 0, 4000, 7);
+  ASSERT_TRUE(frame.has_support);
+  EXPECT_NEAR(frame.support_height, 0.0f, 0.002f);
+}
+
 TEST(Symmetry, RecoversTheAxisOfAPartlySeenBottle) {
   // 10-70 % occlusion: cameras over 140, 100 and 60 degrees of azimuth.
   for (double half_angle : {70.0, 50.0, 30.0}) {

@@ -275,7 +275,8 @@ ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& 
   // part may be hidden).
   struct Candidate {
     float height;
-    int sector;  // of 8 around the object's centre
+    int sector;    // of 8 around the object's centre
+    bool outside;  // beyond the object's horizontal radius
   };
   std::vector<Candidate> heights;
   const float below = frame.radius, above = 0.05f * frame.radius;
@@ -289,15 +290,17 @@ ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& 
     const Eigen::Vector3f q = basis.transpose() * (p - frame.center);
     constexpr float kPi = std::numbers::pi_v<float>;
     const int sector = static_cast<int>(std::floor((std::atan2(q.y(), q.x()) + kPi) / (kPi / 4)));
-    heights.push_back({h, std::clamp(sector, 0, 7)});
+    heights.push_back({h, std::clamp(sector, 0, 7), !in_footprint(p, horizontal_radius)});
   }
   // Counts per one-bin window starting at each height (descending); the highest window holding
   // at least a quarter of the fullest one's count (and 10) wins: the plane right under the object,
   // not the underside of the table top some rays leak through to. And a plane the object stands
   // on surrounds it: the window's surfels lie in at least half of the 8 sectors around it (a
   // neighbouring bowl's inner floor, a few millimetres above the table and dense beside a mug,
-  // lies to one side; RESULTS.md "Object frames: the support surrounds the object"). Without
-  // such a window, the highest by count alone.
+  // lies to one side; RESULTS.md "Object frames: the support surrounds the object"), outside the
+  // object's own footprint (a mug's inner floor, which the segmentation left out, surrounds its
+  // centre 5 mm above the table; RESULTS.md "Object frames: not the object's own floor").
+  // Without such a window, the highest by count alone.
   const float bin = std::max(2.0f * frame.spacing, 0.02f * frame.radius);
   std::sort(heights.begin(), heights.end(),
             [](const Candidate& a, const Candidate& b) { return a.height > b.height; });
@@ -311,7 +314,9 @@ ObjectFrame ComputeObjectFrame(const GaussianCloud& cloud, const InstanceSplit& 
   }
   auto surrounds = [&](size_t i) {
     uint8_t sectors = 0;
-    for (size_t k = i; k < window_end[i]; ++k) sectors |= uint8_t{1} << heights[k].sector;
+    for (size_t k = i; k < window_end[i]; ++k) {
+      if (heights[k].outside) sectors |= uint8_t{1} << heights[k].sector;
+    }
     return std::popcount(sectors) >= 4;
   };
   for (const bool need_surround : {true, false}) {
