@@ -1,5 +1,6 @@
 #include <algorithm>
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <random>
 
@@ -681,12 +682,19 @@ TEST(ObjectFrame, ANeighboursSlantedTopBeyondTheFootprintDoesNotTiltTheUp) {
 // A neighbour's inner floor (a bowl's, 6 mm above the table, labelled 2) dense beside the bottle:
 // more surfels per bin than a quarter of the table's around it, and higher. The support surrounds
 // the object; the floor lies to one side.
+// The support height found beside (or under) a square floor of `side` centred at `at`, 800 of
+// its surfels labelled `label`, and a bottle of `bottle_count` surfels; NaN without a support.
+float SupportWithAFloor(float side, const Eigen::Vector3f& at, uint32_t label,
+                        size_t bottle_count) {
+  TriangleMesh floor = MakeRectangle(side, side, 2, 2);
+  for (Eigen::Vector3f& v : floor.vertices) v += at;
+  const ObjectFrame frame = BottleFrameBeside(floor, 800, label, bottle_count, 7);
+  return frame.has_support ? frame.support_height : std::numeric_limits<float>::quiet_NaN();
+}
+
 TEST(ObjectFrame, TheSupportSurroundsTheObjectNotANeighboursFloorBesideIt) {
-  TriangleMesh floor = MakeRectangle(0.06f, 0.06f, 2, 2);
-  for (Eigen::Vector3f& v : floor.vertices) v += Eigen::Vector3f(0.12f, 0.0f, 0.006f);
-  const ObjectFrame frame = BottleFrameBeside(floor, 800, 2, 12000, 7);
-  ASSERT_TRUE(frame.has_support);
-  EXPECT_NEAR(frame.support_height, 0.0f, 0.002f);
+  EXPECT_NEAR(SupportWithAFloor(0.06f, Eigen::Vector3f(0.12f, 0.0f, 0.006f), 2, 12000), 0.0f,
+              0.002f);
 }
 
 // The object's own inner floor (a mug's, 5 mm above the table, that the segmentation left out
@@ -694,11 +702,7 @@ TEST(ObjectFrame, TheSupportSurroundsTheObjectNotANeighboursFloorBesideIt) {
 // every sector, dense and higher than the table. The support surrounds the object outside its
 // footprint (seed 51's mug_7 stood on its own floor, 5.6 mm too short).
 TEST(ObjectFrame, TheSupportIsNotTheObjectsOwnFloor) {
-  TriangleMesh floor = MakeRectangle(0.04f, 0.04f, 2, 2);
-  for (Eigen::Vector3f& v : floor.vertices) v += Eigen::Vector3f(0.0f, 0.0f, 0.005f);
-  const ObjectFrame frame = BottleFrameBeside(floor, 800, 0, 4000, 7);
-  ASSERT_TRUE(frame.has_support);
-  EXPECT_NEAR(frame.support_height, 0.0f, 0.002f);
+  EXPECT_NEAR(SupportWithAFloor(0.04f, Eigen::Vector3f(0.0f, 0.0f, 0.005f), 0, 4000), 0.0f, 0.002f);
 }
 
 TEST(Symmetry, RecoversTheAxisOfAPartlySeenBottle) {
