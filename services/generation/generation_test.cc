@@ -1127,7 +1127,7 @@ TEST(GeometricPrior, TheProfileIsTheBodysNotTheNeighboursItJudges) {
   }
 }
 
-// A touching neighbour's patch at the contact (a 5 x 5 sheet of its surfels, 2.5 mm apart, 8-13
+// A touching neighbour's patch at the contact (a 5 x 5 sheet of its surfels, 2.5 mm apart, 8-9
 // mm beside a partly seen bottle, where the views saw the space around it): a neighbour's label
 // surrounds only the patch's rim, the instance's own label its inner part. The rim leaves the
 // bottle by the neighbour-label rule; the inner part, beyond the profile and joined to the rim,
