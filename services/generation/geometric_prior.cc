@@ -353,7 +353,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
       }
     }
     if (any) {
-      const PointIndex3 index(std::vector<Eigen::Vector3f>(points.begin(), points.end()));
+      const PointIndex3 index(points);  // a copy: the index keeps its own
       std::vector<uint32_t> queue;
       for (uint32_t g = 0; g < instance.size(); ++g)
         if (foreign[g]) queue.push_back(g);
