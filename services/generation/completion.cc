@@ -232,8 +232,9 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
                                                    " labels for ", surfels.size(), " Gaussians"));
   }
   if (surfels.num_scales != 2) return absl::InvalidArgumentError("completion needs 2DGS surfels");
-  ASSIGN_OR_RETURN(std::unique_ptr<CompletionPrior> prior,
-                   MakePrior(options.prior, options.denoiser, options.diffusion));
+  ASSIGN_OR_RETURN(
+      std::unique_ptr<CompletionPrior> prior,
+      MakePrior(options.prior, options.denoiser, options.diffusion, &options.geometric));
   report("framing", 0, 7);
   ASSIGN_OR_RETURN(InstanceSplit split, SplitInstance(labels, id, options.min_gaussians));
   RemoveStrayGaussians(surfels, &split);

@@ -22,6 +22,7 @@
 #include "common/scene/image_io.h"
 #include "common/splat/gaussian_cloud.h"
 #include "services/generation/free_space.h"
+#include "services/generation/geometric_prior.h"
 #include "services/generation/object_frame.h"
 #include "services/generation/object_mesh.h"
 #include "services/generation/prior.h"
@@ -39,7 +40,8 @@ using ViewImageLoader = std::function<absl::StatusOr<Image>(int view)>;
 struct CompletionOptions {
   std::string prior = "geometric";  // geometric | none | diffusion
   std::string denoiser;  // the diffusion prior's denoiser: grpc://HOST:PORT or onnx:FILE.json
-  DiffusionSettings diffusion;  // the diffusion prior's replacement schedule and warp space
+  DiffusionSettings diffusion;      // the diffusion prior's replacement schedule and warp space
+  GeometricPriorOptions geometric;  // the geometric prior's symmetry tests and rules
   RingOptions ring;
   VisibilityOptions visibility;
   FreeSpaceOptions free_space;

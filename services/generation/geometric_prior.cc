@@ -132,11 +132,12 @@ std::vector<Candidate> AxisCap(const SymmetryHypothesis& h, const ObjectFrame& f
 }
 
 // Per surfel, the body's outer radius about an axis at the surfel's height: the 90th percentile
-// of the radii of the `body` surfels over the heights around it (at least 2 `step`s either side,
-// more until the window holds `min_count` of them, so that a few strays there stay above the
-// percentile), plus one `step`. Infinite everywhere when the body holds fewer than `min_count`.
+// (`percent`) of the radii of the `body` surfels over the heights around it (at least 2 `step`s
+// either side, more until the window holds `min_count` of them, so that a few strays there stay
+// above the percentile), plus one `step`. Infinite everywhere when the body holds fewer than
+// `min_count`.
 std::vector<float> RadialProfile(const std::vector<float>& height, const std::vector<float>& radial,
-                                 const std::vector<uint8_t>& body, float step,
+                                 const std::vector<uint8_t>& body, float step, int percent = 90,
                                  size_t min_count = 40) {
   std::vector<float> out(height.size(), std::numeric_limits<float>::infinity());
   if (static_cast<size_t>(std::count(body.begin(), body.end(), 1)) < min_count) return out;
@@ -159,9 +160,9 @@ std::vector<float> RadialProfile(const std::vector<float>& height, const std::ve
     window.clear();
     for (int j = std::max(0, i - half); j <= std::min(bins - 1, i + half); ++j)
       window.insert(window.end(), by_bin[j].begin(), by_bin[j].end());
-    const size_t q90 = window.size() * 9 / 10;
-    std::nth_element(window.begin(), window.begin() + q90, window.end());
-    profile[i] = window[q90] + step;
+    const size_t q = window.size() * percent / 100;
+    std::nth_element(window.begin(), window.begin() + q, window.end());
+    profile[i] = window[q] + step;
   }
   for (size_t g = 0; g < height.size(); ++g) out[g] = profile[bin_of(g)];
   return out;
@@ -227,7 +228,8 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     added.push_back(c);
   };
   nlohmann::json tried = nlohmann::json::array();
-  int skipped_sources = 0, axis_skipped = 0, profile_skipped = 0;
+  int skipped_sources = 0, axis_skipped = 0, profile_skipped = 0, handle_joined = 0;
+  std::vector<uint8_t> handle(instance.size(), 0);  // parts of the object an axis does not hold for
   int accepted = 0;
   std::map<std::string, int> added_by;
   // A part a hypothesis does not hold for (a mug's handle under the body's axis) has images in
@@ -293,6 +295,50 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     const float reach = body[std::min(q, body.size() - 1)] + step;
     for (uint32_t g = 0; g < instance.size(); ++g)
       b.off_beyond_body[g] = off[g] && radial[g] > reach;
+    if (options_.handle_joins_its_part) {
+      // Clear of the body: more than 3 spacings beyond its median radius at the surfel's height
+      // (the 95th percentile above, and the profile's 90th, stand on the handle's lower end
+      // where it is a tenth of the surfels).
+      std::vector<uint8_t> held(instance.size());
+      for (uint32_t g = 0; g < instance.size(); ++g) held[g] = !off[g];
+      const std::vector<float> median = RadialProfile(height, radial, held, step, 50);
+      auto neighbours = [&](uint32_t g) {
+        return input.neighbour_labelled != nullptr &&
+               input.neighbour_labelled->size() == instance.size() &&
+               (*input.neighbour_labelled)[g] != 0;
+      };
+      // Per part (a component grown from the sources the axis does not hold for), within 3
+      // spacings, repeatedly. A part that reaches a surfel a neighbour's label surrounds is that
+      // neighbour's patch at the contact, not a handle: the rules below judge it.
+      const float link = 3.0f * step;
+      std::vector<uint8_t> seen(instance.size(), 0);
+      std::vector<uint32_t> part, queue;
+      for (uint32_t seed = 0; seed < instance.size(); ++seed) {
+        if (!b.off_beyond_body[seed] || seen[seed] || neighbours(seed)) continue;
+        part.assign(1, seed);
+        queue.assign(1, seed);
+        seen[seed] = 1;
+        bool touches = false;
+        while (!queue.empty()) {
+          const uint32_t g = queue.back();
+          queue.pop_back();
+          for (uint32_t n : observed.WithinRadius(points[g], link)) {
+            touches |= neighbours(n);
+            if (seen[n] || neighbours(n) || radial[n] <= median[n] + 2.0f * step) continue;
+            seen[n] = 1;  // each surfel enters one part once
+            part.push_back(n);
+            queue.push_back(n);
+          }
+        }
+        if (touches) continue;
+        for (uint32_t g : part) {
+          handle_joined += !b.off[g];
+          b.off[g] = 1;
+          b.off_beyond_body[g] = 1;
+          handle[g] = 1;
+        }
+      }
+    }
     // Beyond the profile: only about a solid of revolution (an n-fold axis's radius varies
     // around it: a box's corners).
     if (options_.skip_beyond_axis_profile && axis.order == 0) {
@@ -348,7 +394,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     for (const AxisBody& b : bodies) {
       if (b.off_beyond_profile.empty()) continue;
       for (uint32_t g = 0; g < instance.size(); ++g) {
-        candidate[g] |= b.off_beyond_profile[g] && !foreign[g];
+        candidate[g] |= b.off_beyond_profile[g] && !foreign[g] && !handle[g];
         any |= candidate[g] != 0;
       }
     }
@@ -516,6 +562,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   out.report["asymmetric_sources"] = skipped_sources;
   out.report["mirror_axis_asymmetric_sources"] = axis_skipped;
   out.report["beyond_axis_profile_sources"] = profile_skipped;
+  out.report["handle_joined_sources"] = handle_joined;
   for (const SymmetryHypothesis& h : hypotheses) {
     out.revolution_axis |= h.accepted && h.kind == SymmetryKind::kAxis && h.order == 0;
   }

@@ -8,8 +8,12 @@ namespace instascene::generation {
 
 absl::StatusOr<std::unique_ptr<CompletionPrior>> MakePrior(const std::string& name,
                                                            const std::string& denoiser,
-                                                           const DiffusionSettings& diffusion) {
-  if (name == "geometric") return std::make_unique<GeometricPrior>();
+                                                           const DiffusionSettings& diffusion,
+                                                           const GeometricPriorOptions* geometric) {
+  if (name == "geometric") {
+    return std::make_unique<GeometricPrior>(geometric != nullptr ? *geometric
+                                                                 : GeometricPriorOptions{});
+  }
   if (name == "none") return std::make_unique<NoPrior>();
   if (name == "diffusion") return diffusion::MakeDiffusionPrior(denoiser, diffusion);
   return absl::InvalidArgumentError(

@@ -88,11 +88,14 @@ struct DiffusionSettings {
   std::shared_ptr<const diffusion::LatentCodec> codec;
 };
 
-// The prior named `name`: "geometric", "none", or "diffusion" (which needs `denoiser`, a
-// Denoiser service as grpc://HOST:PORT; diffusion/diffusion_prior.h). InvalidArgument for an
-// unknown name or a missing / malformed denoiser.
-absl::StatusOr<std::unique_ptr<CompletionPrior>> MakePrior(const std::string& name,
-                                                           const std::string& denoiser = "",
-                                                           const DiffusionSettings& diffusion = {});
+struct GeometricPriorOptions;  // geometric_prior.h
+
+// The prior named `name`: "geometric" (with `geometric`'s options; nullptr = the defaults),
+// "none", or "diffusion" (which needs `denoiser`, a Denoiser service as grpc://HOST:PORT;
+// diffusion/diffusion_prior.h). InvalidArgument for an unknown name or a missing / malformed
+// denoiser.
+absl::StatusOr<std::unique_ptr<CompletionPrior>> MakePrior(
+    const std::string& name, const std::string& denoiser = "",
+    const DiffusionSettings& diffusion = {}, const GeometricPriorOptions* geometric = nullptr);
 
 }  // namespace instascene::generation

@@ -45,6 +45,8 @@ CompletionOptions ToCompletionOptions(const CompleteStageOptions& o) {
   options.ring.focal_px = 280.0 * o.ring_size / 256.0;
   options.top_training_views = o.top_training_views;
   options.free_space.resolution = o.free_space_resolution;
+  options.geometric.symmetry.min_agreement = o.min_agreement;
+  options.geometric.symmetry.min_plane_agreement = o.min_plane_agreement;
   options.meshing.size_px = o.mesh_size;
   options.meshing.min_alpha = static_cast<float>(o.mesh_min_alpha);
   options.meshing.inset_sigmas = static_cast<float>(o.mesh_inset_sigmas);

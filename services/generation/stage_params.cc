@@ -20,6 +20,9 @@ const pipeline::ParamCodec<CompleteStageOptions>& CompleteCodec() {
              "Free-space grid voxels per axis")
         .Real("min_agreement", &O::min_agreement, 0.5, 1.0,
               "Symmetry hypotheses need this share of decided points to agree")
+        .Real("min_plane_agreement", &O::min_plane_agreement, 0.5, 1.0,
+              "A mirror plane needs this share as well (symmetric shapes agree 0.95 and more; "
+              "an L-block's bar with its arm mirrored where no view looked, 0.86-0.91)")
         .Int("mesh_size", &O::mesh_size, 32, 1024, "Meshing view size, px")
         .Real("mesh_min_alpha", &O::mesh_min_alpha, 0.5, 0.99,
               "Meshing: pixels fused into the TSDF need this much alpha (higher: less silhouette "

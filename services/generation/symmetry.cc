@@ -171,7 +171,10 @@ void ScoreWithIndex(const std::vector<Eigen::Vector3f>& points,
   const int decided = h->agree + h->contradict;
   h->agreement = decided > 0 ? static_cast<double>(h->agree) / decided : 0.0;
   h->evidence = h->scored > 0 ? static_cast<double>(decided) / (h->scored * h->copies) : 0.0;
-  h->accepted = h->agreement >= options.min_agreement && h->evidence >= options.min_evidence;
+  const double needed = h->kind == SymmetryKind::kPlane
+                            ? std::max(options.min_agreement, options.min_plane_agreement)
+                            : options.min_agreement;
+  h->accepted = h->agreement >= needed && h->evidence >= options.min_evidence;
   if (options.revolution_every_turn && h->accepted && h->order == 0 &&
       h->kind == SymmetryKind::kAxis) {
     h->accepted = AgreesAtEveryTurn(*h, options);
