@@ -295,7 +295,9 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     const float reach = body[std::min(q, body.size() - 1)] + step;
     for (uint32_t g = 0; g < instance.size(); ++g)
       b.off_beyond_body[g] = off[g] && radial[g] > reach;
-    if (options_.handle_joins_its_part) {
+    // About a solid of revolution only (an n-fold axis's radius varies around it: a box's
+    // corners stand clear of its median radius).
+    if (options_.handle_joins_its_part && axis.order == 0) {
       // Clear of the body: more than 3 spacings beyond its median radius at the surfel's height
       // (the 95th percentile above, and the profile's 90th, stand on the handle's lower end
       // where it is a tenth of the surfels).

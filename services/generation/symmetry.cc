@@ -207,11 +207,8 @@ double AlignmentCost(const std::vector<Eigen::Vector3f>& points,
   return decided ? cost / (decided * static_cast<double>(match) * match) : 1.0;
 }
 
-// The largest n (a divisor of the axis's steps) whose images at 360 k / n degrees agree while the
-// other images do not; 0 when there is none (a solid of revolution, or no symmetry). Every turn of
-// the group must agree on its own, within kTurnSpread of the group's best: a nearly square box's
-// quarter turns overhang its shorter faces by less than the match distance and agree at 0.83-0.86
-// while its half turn agrees at 1.00; completed by quarter turns it stands past its faces.
+}  // namespace
+
 int DiscreteOrder(const SymmetryHypothesis& h, const SymmetryOptions& options) {
   constexpr double kTurnSpread = 0.1;
   const int steps = h.copies + 1;
@@ -222,7 +219,7 @@ int DiscreteOrder(const SymmetryHypothesis& h, const SymmetryOptions& options) {
   for (int n = steps / 2; n >= 2; --n) {
     if (steps % n != 0) continue;
     int group_decided = 0, rest_agree = 0, rest_decided = 0;
-    double worst = 1, best = 0;
+    double worst = 1, best = 0, rest_best = 0;
     for (int k = 0; k < h.copies; ++k) {
       const int decided = h.copy_agree[k] + h.copy_contradict[k];
       if ((k + 1) % (steps / n) == 0) {
@@ -232,17 +229,19 @@ int DiscreteOrder(const SymmetryHypothesis& h, const SymmetryOptions& options) {
       } else {
         rest_agree += h.copy_agree[k];
         rest_decided += decided;
+        if (decided >= options.min_turn_decided) rest_best = std::max(rest_best, turn_agreement(k));
       }
     }
     if (group_decided == 0 || rest_decided == 0) continue;
     const bool group_holds = worst >= options.min_agreement && worst >= best - kTurnSpread &&
                              group_decided >= options.min_evidence * h.scored * (n - 1);
-    if (group_holds && rest_agree < options.min_agreement * rest_decided) return n;
+    if (group_holds && rest_agree < options.min_agreement * rest_decided &&
+        (!options.order_outagrees_other_turns || rest_best < worst)) {
+      return n;
+    }
   }
   return 0;
 }
-
-}  // namespace
 
 bool AgreesAtEveryTurn(const SymmetryHypothesis& h, const SymmetryOptions& options) {
   // The one-sided 95 % Wilson score upper bound of agree / decided.
