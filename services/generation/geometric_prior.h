@@ -70,12 +70,14 @@ struct GeometricPriorOptions {
   // instance's own label surrounds them. Measured in RESULTS.md ("Neighbours' surfels at the
   // contact").
   bool drop_patches_beyond_axis_profile = true;
-  // A handle is one part: the surfels beyond the body's reach that join the part of it an
-  // accepted axis does not hold for (within three spacings, repeatedly; none a touching
-  // neighbour's label surrounds) are that part's too. Near the support no view saw the space the
-  // handle's lower end would revolve into, so the axis held for it for lack of evidence, revolved
-  // it into a ring and lifted the body's profile with it. Measured in RESULTS.md ("A handle's
-  // lower end is the handle's").
+  // About an accepted axis of revolution a handle is one part: the surfels more than three
+  // spacings beyond the body's median radius at their height that join the part the axis does
+  // not hold for (within three spacings, repeatedly) are that part's too: no images, no witness
+  // of the profile, never a neighbour's (a part reaching a surfel a touching neighbour's label
+  // surrounds is that neighbour's patch and is left to the rules above). Near the support no view
+  // saw the space the handle's lower end would revolve into, so the axis held for it for lack of
+  // evidence, revolved it into a ring and lifted the body's profile with it. Measured in
+  // RESULTS.md ("A handle's lower end is the handle's").
   bool handle_joins_its_part = true;
   // Refuse a candidate standing off the observed surface beside it (observed_surface.h).
   // Measured in RESULTS.md ("Free-space violations: candidates off the observed surface").
