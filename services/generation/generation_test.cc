@@ -780,13 +780,20 @@ TEST(Symmetry, ABoxHasAnNFoldAxisThroughItsCentre) {
 // 94.9 % over 234 decided, so the whole alone accepted a revolution and its completion stood 5-13
 // mm off the box in space views saw empty. A mug's handle costs every turn alike (89 %), and a turn
 // decided for a few images only says too little.
+// A vertical axis scored at 11 turns of 30 degrees: agree / decided images per turn.
+SymmetryHypothesis AxisScoredPerTurn(const std::vector<int>& agree,
+                                     const std::vector<int>& decided) {
+  SymmetryHypothesis axis;
+  axis.kind = SymmetryKind::kAxis;
+  axis.copies = 11;
+  axis.copy_agree = agree;
+  for (int k = 0; k < 11; ++k) axis.copy_contradict.push_back(decided[k] - agree[k]);
+  return axis;
+}
+
 TEST(Symmetry, ASolidOfRevolutionAgreesAtEveryTurn) {
-  SymmetryHypothesis box;
-  box.kind = SymmetryKind::kAxis;
-  box.copies = 11;
-  box.copy_agree = {52, 17, 11, 14, 15, 9, 17, 15, 11, 14, 47};
-  const std::vector<int> box_decided = {54, 18, 12, 14, 15, 9, 17, 15, 16, 17, 47};
-  for (int k = 0; k < 11; ++k) box.copy_contradict.push_back(box_decided[k] - box.copy_agree[k]);
+  const SymmetryHypothesis box = AxisScoredPerTurn({52, 17, 11, 14, 15, 9, 17, 15, 11, 14, 47},
+                                                   {54, 18, 12, 14, 15, 9, 17, 15, 16, 17, 47});
   const SymmetryOptions options;
   EXPECT_FALSE(AgreesAtEveryTurn(box, options));
   SymmetryHypothesis mug = box;
@@ -806,12 +813,9 @@ TEST(Symmetry, ASolidOfRevolutionAgreesAtEveryTurn) {
 // 0.88 and the other turns on the whole 0.69, so it passed as 3-fold and was completed as a
 // six-sided block 12 % too wide; its half turn agrees 0.99, better than either: 2-fold.
 TEST(Symmetry, AnNFoldAxisAgreesBetterThanEveryOtherTurn) {
-  SymmetryHypothesis box;
-  box.kind = SymmetryKind::kAxis;
-  box.copies = 11;
-  box.copy_agree = {220, 150, 81, 214, 155, 191, 154, 195, 87, 165, 237};
-  const std::vector<int> decided = {314, 272, 185, 241, 168, 193, 197, 221, 170, 261, 339};
-  for (int k = 0; k < 11; ++k) box.copy_contradict.push_back(decided[k] - box.copy_agree[k]);
+  SymmetryHypothesis box =
+      AxisScoredPerTurn({220, 150, 81, 214, 155, 191, 154, 195, 87, 165, 237},
+                        {314, 272, 185, 241, 168, 193, 197, 221, 170, 261, 339});
   box.scored = 300;
   SymmetryOptions options;
   EXPECT_EQ(DiscreteOrder(box, options), 2);
