@@ -268,6 +268,14 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
     // Sources it does not hold for beyond the profile, whatever surrounds them.
     std::vector<uint8_t> off_beyond_profile;
   };
+  // Per instance surfel: a touching neighbour's label surrounds it (null when not given).
+  const std::vector<uint8_t>* neighbour_labelled =
+      input.neighbour_labelled != nullptr && input.neighbour_labelled->size() == instance.size()
+          ? input.neighbour_labelled
+          : nullptr;
+  auto neighbours = [&](uint32_t g) {
+    return neighbour_labelled != nullptr && (*neighbour_labelled)[g] != 0;
+  };
   std::vector<AxisBody> bodies;
   for (const SymmetryHypothesis& axis : hypotheses) {
     if (!axis.accepted || axis.kind != SymmetryKind::kAxis) continue;
@@ -297,18 +305,15 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
       b.off_beyond_body[g] = off[g] && radial[g] > reach;
     // About a solid of revolution only (an n-fold axis's radius varies around it: a box's
     // corners stand clear of its median radius).
-    if (options_.handle_joins_its_part && axis.order == 0) {
+    if (options_.handle_joins_its_part && axis.order == 0 &&
+        std::find(b.off_beyond_body.begin(), b.off_beyond_body.end(), 1) !=
+            b.off_beyond_body.end()) {
       // Clear of the body: more than 3 spacings beyond its median radius at the surfel's height
       // (the 95th percentile above, and the profile's 90th, stand on the handle's lower end
       // where it is a tenth of the surfels).
       std::vector<uint8_t> held(instance.size());
       for (uint32_t g = 0; g < instance.size(); ++g) held[g] = !off[g];
       const std::vector<float> median = RadialProfile(height, radial, held, step, 50);
-      auto neighbours = [&](uint32_t g) {
-        return input.neighbour_labelled != nullptr &&
-               input.neighbour_labelled->size() == instance.size() &&
-               (*input.neighbour_labelled)[g] != 0;
-      };
       // Per part (a component grown from the sources the axis does not hold for), within 3
       // spacings, repeatedly. A part that reaches a surfel a neighbour's label surrounds is that
       // neighbour's patch at the contact, not a handle: the rules below judge it.
@@ -347,34 +352,28 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
       // The profile is the body's: a surfel a touching neighbour's label surrounds is a suspect
       // it is to judge, not a witness (a neighbour's surfels crowding one height can be a tenth
       // of the window and lift the percentile over themselves).
-      const bool have_neighbours = options_.profile_skips_neighbour_labelled &&
-                                   input.neighbour_labelled != nullptr &&
-                                   input.neighbour_labelled->size() == instance.size();
       std::vector<uint8_t> holds(instance.size());
       for (uint32_t g = 0; g < instance.size(); ++g)
-        holds[g] = !off[g] && !(have_neighbours && (*input.neighbour_labelled)[g]);
+        holds[g] = !off[g] && !(options_.profile_skips_neighbour_labelled && neighbours(g));
       const std::vector<float> profile = RadialProfile(height, radial, holds, step);
       for (uint32_t g = 0; g < instance.size(); ++g)
         b.beyond_profile[g] = !off[g] && radial[g] > profile[g];
-      if (options_.drop_neighbours_beyond_axis_profile && input.neighbour_labelled != nullptr &&
-          input.neighbour_labelled->size() == instance.size()) {
+      if (options_.drop_neighbours_beyond_axis_profile && neighbour_labelled != nullptr) {
         b.neighbours_beyond_profile.assign(instance.size(), 0);
         b.off_beyond_profile.assign(instance.size(), 0);
         for (uint32_t g = 0; g < instance.size(); ++g) {
           b.off_beyond_profile[g] = off[g] && radial[g] > profile[g];
-          b.neighbours_beyond_profile[g] =
-              b.off_beyond_profile[g] && (*input.neighbour_labelled)[g];
+          b.neighbours_beyond_profile[g] = b.off_beyond_profile[g] && neighbours(g);
         }
       }
     }
     // About an n-fold axis (no profile: a box's radius varies around it), those beyond the body's
     // reach (its corners) that the axis does not hold for and a neighbour's label surrounds.
     if (axis.order != 0 && options_.drop_neighbours_beyond_axis_profile &&
-        input.neighbour_labelled != nullptr &&
-        input.neighbour_labelled->size() == instance.size()) {
+        neighbour_labelled != nullptr) {
       b.neighbours_beyond_profile.assign(instance.size(), 0);
       for (uint32_t g = 0; g < instance.size(); ++g)
-        b.neighbours_beyond_profile[g] = b.off_beyond_body[g] && (*input.neighbour_labelled)[g];
+        b.neighbours_beyond_profile[g] = b.off_beyond_body[g] && neighbours(g);
     }
     bodies.push_back(std::move(b));
   }
