@@ -29,18 +29,29 @@ void KeepUnclaimed(const std::vector<uint32_t>& coarse, const std::vector<double
                    std::vector<uint32_t>* labels) {
   const size_t n = coarse.size();
   constexpr uint32_t kNone = 0xffffffffu;
+  const size_t k = static_cast<size_t>(options.keep_neighbours);
+  // Neighbours a candidate needs carrying its instance: half, or (its feature below
+  // keep_min_dot) keep_surrounded of them.
+  const size_t surrounded =
+      static_cast<size_t>(std::ceil(options.keep_surrounded * static_cast<double>(k) - 1e-9));
   std::vector<uint32_t> candidates, candidate_of(n, kNone);
+  std::vector<size_t> need;
   for (uint32_t g = 0; g < n; ++g) {
-    if ((*labels)[g] == 0 && coarse[g] != 0 && own_dot[g] >= options.keep_min_dot) {
-      candidate_of[g] = static_cast<uint32_t>(candidates.size());
-      candidates.push_back(g);
+    if ((*labels)[g] != 0 || coarse[g] == 0) continue;
+    if (own_dot[g] >= options.keep_min_dot) {
+      need.push_back((k + 1) / 2);
+    } else if (surrounded <= k) {
+      need.push_back(surrounded);
+    } else {
+      continue;
     }
+    candidate_of[g] = static_cast<uint32_t>(candidates.size());
+    candidates.push_back(g);
   }
   if (candidates.empty()) return;
   std::vector<Eigen::Vector3f> points(n);
   for (size_t g = 0; g < n; ++g) points[g] = Eigen::Vector3f(&positions[3 * g]);
   const PointIndex3 index(std::move(points));
-  const size_t k = static_cast<size_t>(options.keep_neighbours);
   std::vector<size_t> carrying(candidates.size(), 0);
   std::vector<std::vector<uint32_t>> watchers(candidates.size());  // candidates neighbouring one
   for (uint32_t i = 0; i < candidates.size(); ++i) {
@@ -56,7 +67,7 @@ void KeepUnclaimed(const std::vector<uint32_t>& coarse, const std::vector<double
   std::vector<uint8_t> queued(candidates.size(), 0);
   std::vector<uint32_t> round;
   for (uint32_t i = 0; i < candidates.size(); ++i) {
-    if (2 * carrying[i] >= k) {
+    if (carrying[i] >= need[i]) {
       round.push_back(i);
       queued[i] = 1;
     }
@@ -67,7 +78,7 @@ void KeepUnclaimed(const std::vector<uint32_t>& coarse, const std::vector<double
     for (uint32_t i : round) {
       for (uint32_t j : watchers[i]) {
         if (queued[j] || coarse[candidates[j]] != coarse[candidates[i]]) continue;
-        if (2 * ++carrying[j] >= k) {
+        if (++carrying[j] >= need[j]) {
           next.push_back(j);
           queued[j] = 1;
         }
@@ -162,10 +173,11 @@ absl::StatusOr<std::vector<uint32_t>> FinalLabels(const SegmentationResult& trai
     (*metadata)["max_growth"] = options.max_growth;
     (*metadata)["keep_min_dot"] = options.keep_min_dot;
     (*metadata)["keep_neighbours"] = options.keep_neighbours;
+    (*metadata)["keep_surrounded"] = options.keep_surrounded;
     return SegmentByFeatures(
         trained.features, trained.feature_dim, trained.labels, cloud.positions,
         SegmentOptions{options.threshold, options.min_kept_share, options.max_growth,
-                       options.keep_min_dot, options.keep_neighbours});
+                       options.keep_min_dot, options.keep_neighbours, options.keep_surrounded});
   }
   DensityLabelOptions o;
   o.hdbscan.min_samples = options.min_samples;

@@ -36,6 +36,10 @@ struct SegmentOptions {
   // coarse instance"). keep_neighbours 0 = off (the paper's rule).
   double keep_min_dot = 0.7;
   int keep_neighbours = 8;
+  // Below keep_min_dot, a Gaussian of a coarse instance still keeps it when at least this share
+  // of its keep_neighbours nearest Gaussians carry the instance (surrounded by its object: a
+  // cone's tip); > 1 = off.
+  double keep_surrounded = 0.875;
 };
 
 // labels: per Gaussian, the coarse instance id (0 = none) used to define the instances;

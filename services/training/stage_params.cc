@@ -79,6 +79,10 @@ const pipeline::ParamCodec<SegmentStageOptions>& SegmentCodec() {
               "keep_neighbours nearest Gaussians carry the instance")
         .Int("keep_neighbours", &O::keep_neighbours, 0, 64,
              "tau: nearest Gaussians asked by the keep step; 0 = off (the paper's rule)")
+        .Real("keep_surrounded", &O::keep_surrounded, 0.0, 2.0,
+              "tau: below keep_min_dot, the keep step still keeps a Gaussian when at least this "
+              "share of its keep_neighbours nearest Gaussians carry its instance (a tip its "
+              "object surrounds); above 1 = off")
         .Int("min_samples", &O::min_samples, 1, 1000, "hdbscan: neighbours of a core point")
         .Int("min_cluster_size", &O::min_cluster_size, 2, 100000, "hdbscan: smallest cluster")
         .Real("cluster_selection_epsilon", &O::cluster_selection_epsilon, 0.0, 2.0,

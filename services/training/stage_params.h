@@ -18,11 +18,12 @@ struct SegmentStageOptions {
   // "tau": each coarse instance selects the Gaussians whose feature matches its mean (paper);
   // "hdbscan": density clustering of the features (the released code's final labelling).
   std::string labelling = "tau";
-  double threshold = 0.9;        // tau_seg (paper), against the un-normalised mean
-  double min_kept_share = 0.25;  // tau: below this share of its coarse mask, an instance keeps it
-  double max_growth = 3.0;       // tau: above this many times its coarse mask, likewise (0 = off)
-  double keep_min_dot = 0.7;     // tau: SegmentOptions' keep step (an unclaimed Gaussian of a
-  int keep_neighbours = 8;       // coarse instance its neighbours carry keeps it; 0 = off)
+  double threshold = 0.9;          // tau_seg (paper), against the un-normalised mean
+  double min_kept_share = 0.25;    // tau: below this share of its coarse mask, an instance keeps it
+  double max_growth = 3.0;         // tau: above this many times its coarse mask, likewise (0 = off)
+  double keep_min_dot = 0.7;       // tau: SegmentOptions' keep step (an unclaimed Gaussian of a
+  int keep_neighbours = 8;         // coarse instance its neighbours carry keeps it; 0 = off)
+  double keep_surrounded = 0.875;  // tau: ... whatever its feature, when this share carry it
   // hdbscan (ALGORITHM.md 5.5; max_points bounds the O(n^2) clustering on CPU)
   int min_samples = 30;
   int min_cluster_size = 30;

@@ -169,9 +169,11 @@ TEST(Segmentation, AnInstanceWhoseMeanDriftedToTheBackgroundKeepsItsCoarseMask) 
 TEST(Segmentation, AnUnclaimedGaussianItsNeighboursCarryKeepsItsInstance) {
   // Instance 1: twenty Gaussians on a line (x = 0..19) with feature (1, 0), then two whose feature
   // (0.8, 0.6) matches the instance's mean only 0.83 (below tau) at x = 20 and 21, a third such far
-  // away among the background, and one inside the line matching 0.57. Background (0, 1) at x
-  // = 22..40 and 95..105. The one at x = 20 has four of its eight nearest in the instance, the one
-  // at 21 three, then four once 20 is kept; the far one none; the inner one matches too little.
+  // away among the background, one inside the line matching 0.57 and one such off the line's end,
+  // 5 above it. Background (0, 1) at x = 22..40 and 95..105. The one at x = 20 has four of its
+  // eight nearest in the instance, the one at 21 three, then four once 20 is kept; the far one
+  // none. The inner one matches too little for half its neighbours to keep it, but all eight carry
+  // the instance (surrounded by its object: kept); the one off the end has five of eight.
   std::vector<float> f, positions;
   std::vector<uint32_t> coarse;
   auto add = [&](float x, float y, float fx, float fy, uint32_t label) {
@@ -184,13 +186,19 @@ TEST(Segmentation, AnUnclaimedGaussianItsNeighboursCarryKeepsItsInstance) {
   add(21, 0, 0.8f, 0.6f, 1);
   add(100, 0.5f, 0.8f, 0.6f, 1);
   add(10, 0.5f, 0.5f, 0.866f, 1);
+  add(20.5f, 5, 0.5f, 0.866f, 1);
   for (int x = 22; x <= 40; ++x) add(x, 0, 0, 1, 0);
   for (int x = 95; x <= 105; ++x) add(x, 0, 0, 1, 0);
   std::vector<uint32_t> expected(coarse.size(), 0);
   for (int g = 0; g < 22; ++g) expected[g] = 1;
+  expected[23] = 1;  // surrounded
   EXPECT_EQ(SegmentByFeatures(f, 2, coarse, positions, SegmentOptions{}), expected);
+  SegmentOptions half_only;
+  half_only.keep_surrounded = 2;  // off: the inner one falls to the background
+  expected[23] = 0;
+  EXPECT_EQ(SegmentByFeatures(f, 2, coarse, positions, half_only), expected);
   SegmentOptions paper;
-  paper.keep_neighbours = 0;  // the paper's rule: all four fall to the background
+  paper.keep_neighbours = 0;  // the paper's rule: all five fall to the background
   expected[20] = expected[21] = 0;
   EXPECT_EQ(SegmentByFeatures(f, 2, coarse, positions, paper), expected);
   EXPECT_EQ(SegmentByFeatures(f, 2, coarse, {}, SegmentOptions{}), expected);  // no centres
