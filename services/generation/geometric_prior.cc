@@ -355,7 +355,9 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
       std::vector<uint8_t> holds(instance.size());
       for (uint32_t g = 0; g < instance.size(); ++g)
         holds[g] = !off[g] && !(options_.profile_skips_neighbour_labelled && neighbours(g));
-      const std::vector<float> profile = RadialProfile(height, radial, holds, step);
+      std::vector<float> profile = RadialProfile(height, radial, holds, step);
+      for (uint32_t g = 0; g < instance.size(); ++g)
+        if (neighbours(g)) profile[g] -= (1.0f - options_.neighbour_profile_spacings) * step;
       for (uint32_t g = 0; g < instance.size(); ++g)
         b.beyond_profile[g] = !off[g] && radial[g] > profile[g];
       if (options_.drop_neighbours_beyond_axis_profile && neighbour_labelled != nullptr) {

@@ -56,6 +56,12 @@ struct GeometricPriorOptions {
   // (PriorInput::neighbour_labelled): they are what it judges. Measured in RESULTS.md
   // ("Neighbours' surfels at the contact").
   bool profile_skips_neighbour_labelled = true;
+  // How far beyond the profile's percentile such a surfel may stand and still be judged the
+  // object's, in spacings (every other surfel: one). Revolved, one that is a neighbour's rings the
+  // object with a wider band; dropped, one that is the object's costs nothing, the axis revolves
+  // the others at its height into its place. Measured in RESULTS.md ("Neighbours' surfels within
+  // the profile's tolerance").
+  float neighbour_profile_spacings = 0.0f;
   // ... and such surfels are not the object's: they leave it for the occluders (reported as
   // PriorOutput::foreign) and hold out no support wall or cap. Measured in RESULTS.md
   // ("Neighbours' surfels revolved").
