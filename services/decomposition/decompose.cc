@@ -11,15 +11,14 @@
 #include "common/eval/result.h"
 #include "common/scene/image_io.h"
 #include "common/splat/ply.h"
+#include "services/decomposition/instance_merging.h"
+#include "services/decomposition/mask_holding.h"
+#include "services/decomposition/unlabelled_gaussians.h"
 
 namespace instascene::decomposition {
 
 std::vector<uint32_t> DecompositionResult::Labels() const {
-  std::vector<uint32_t> labels(trackers.num_gaussians, 0);
-  for (size_t k = 0; k < instances.size(); ++k) {
-    for (uint32_t g : instances[k].gaussians) labels[g] = static_cast<uint32_t>(k + 1);
-  }
-  return labels;
+  return InstanceOf(instances, trackers.num_gaussians);
 }
 
 absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const GaussianCloud& cloud,

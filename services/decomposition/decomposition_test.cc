@@ -10,8 +10,10 @@
 #include "common/eval/click_eval.h"
 #include "common/synth/scene_writer.h"
 #include "services/decomposition/decompose.h"
+#include "services/decomposition/instance_merging.h"
 #include "services/decomposition/mask_graph.h"
 #include "services/decomposition/post_process.h"
+#include "services/decomposition/unlabelled_gaussians.h"
 
 namespace instascene::decomposition {
 namespace {

@@ -36,37 +36,6 @@ std::vector<Instance> BuildInstances(const TrackerSet& trackers, const std::vect
                                      const DecompositionOptions& options,
                                      const std::vector<uint8_t>* undersegmented = nullptr);
 
-// Re-judgement: clears the under-segmented flag of every flagged tracker whose Gaussians lie
-// mostly in one instance (see DecompositionOptions::rejudge_passes) and, given the judgement's
-// per-tracker frame counts, of every flagged tracker mostly outside all instances that the
-// masks hold consistently and split rarely (DecompositionOptions::uncovered_min_labelled);
-// returns how many changed.
-int RejudgeUndersegmented(const TrackerSet& trackers, const std::vector<Instance>& instances,
-                          const DecompositionOptions& options, std::vector<uint8_t>* undersegmented,
-                          const std::vector<TrackerFrames>* frames = nullptr);
-
-// Merging of unseparated instances: per frame, an instance is held by a mask when at least
-// min_tracker_gaussians of its Gaussians lie in the frame's masks and one mask holds more than
-// contained_threshold of them. Pairs held by one mask count a join, by two masks a separation;
-// pairs with >= merge_min_joins joins and separations <= merge_max_separation of their frames
-// merge (transitively). Returns the number of merges.
-int MergeUnseparatedInstances(const TrackerSet& trackers, const DecompositionOptions& options,
-                              std::vector<Instance>* instances);
-
-// Gaussians that no view traces (weight above the tracker threshold at no pixel: the surfels
-// between and behind the ones carrying a view's weight) join the instance of the nearest traced
-// Gaussian within `radius` (scene units), if that one is in an instance (see
-// DecompositionOptions::untraced_radius). Returns how many joined an instance.
-size_t LabelUntracedGaussians(const TrackerSet& trackers, const GaussianCloud& cloud, float radius,
-                              int num_threads, std::vector<Instance>* instances);
-
-// Traced Gaussians in no instance join an instance that their masks hold in at least
-// orphan_min_held of the frames tracing them, grown from the instances through such Gaussians in
-// steps of at most `radius` (scene units): the nearest along them when several qualify. Returns
-// how many joined an instance.
-size_t LabelOrphanGaussians(const TrackerSet& trackers, const GaussianCloud& cloud, float radius,
-                            const DecompositionOptions& options, std::vector<Instance>* instances);
-
 // 4.8: under-segmented masks whose tracker lies > remedy_ratio inside one instance join that
 // instance's 2D cluster; returns the masks that remain under-segmented.
 std::vector<uint32_t> RemedyUndersegmented(const TrackerSet& trackers,
