@@ -3,11 +3,7 @@
 // store needs: objects (HEAD/GET with ranges/PUT/DELETE/copy), multipart uploads (create, part,
 // part-copy, list parts, complete, abort, list uploads) and ListObjectsV2.
 //
-// Where: `S3Location` parses
-// `s3://BUCKET[/PREFIX][?endpoint=URL&region=R&addressing=path|virtual]`. Credentials:
-// `S3Credentials::Load` reads AWS_ACCESS_KEY_ID / AWS_SECRET_ACCESS_KEY / AWS_SESSION_TOKEN, else
-// the shared credentials file (AWS_SHARED_CREDENTIALS_FILE or
-// ~/.aws/credentials, profile AWS_PROFILE or "default"); never from flags, never logged.
+// Where the bucket is, the credentials and the SigV4 signing rules: s3_location.h.
 //
 // Every request carries `x-amz-content-sha256` (the payload's SHA-256, which AWS checks against the
 // body), uploads also `Content-MD5` (which every S3 implementation checks before storing), and each
@@ -28,47 +24,9 @@
 
 #include "absl/status/statusor.h"
 #include "absl/strings/string_view.h"
+#include "common/store/s3_location.h"
 
 namespace instascene::store {
-
-struct S3Location {
-  std::string endpoint;  // scheme://host[:port], no trailing slash
-  std::string bucket;
-  std::string prefix;  // "" or "a/b/" (always ends with '/')
-  std::string region = "us-east-1";
-  bool path_style = true;  // endpoint/bucket/key; false: bucket.host/key (virtual-hosted)
-  // '/' in query values (list prefixes) is sent and signed as %2F, as SigV4 specifies (AWS, MinIO,
-  // Ceph RGW). `query_slash=literal` sends it unencoded, for servers that canonicalise it so
-  // (moto, whose signature check rejects even AWS's own SDK on %2F).
-  bool query_slash_literal = false;
-
-  // Defaults: endpoint https://s3.REGION.amazonaws.com with virtual-hosted addressing; any other
-  // endpoint (MinIO, Ceph RGW, a test server) path-style unless `addressing=virtual`.
-  static absl::StatusOr<S3Location> Parse(absl::string_view uri);
-  std::string ToString() const;  // the canonical s3:// form (holds no secret)
-  // The URL of a key ("" = the bucket itself), without a query string.
-  std::string Url(absl::string_view key) const;
-};
-
-struct S3Credentials {
-  std::string access_key_id;
-  std::string secret_access_key;
-  std::string session_token;  // optional (temporary credentials)
-
-  static absl::StatusOr<S3Credentials> Load();
-  // Reads one profile of an AWS shared credentials file (INI).
-  static absl::StatusOr<S3Credentials> FromFile(const std::string& path,
-                                                const std::string& profile);
-};
-
-// The SigV4 Authorization header of an S3 request (own signer, OpenSSL HMAC): curl 7.88's signer
-// sorts header names wrongly when one is a prefix of another (x-amz-copy-source and
-// x-amz-copy-source-range; fixed in curl 8), so such requests are signed here. `headers` are
-// lower-case names with trimmed values and must include host, x-amz-content-sha256, x-amz-date.
-std::string SignS3RequestV4(const std::string& method, const std::string& canonical_uri,
-                            const std::string& canonical_query,
-                            const std::map<std::string, std::string>& headers,
-                            const std::string& region, const S3Credentials& credentials);
 
 struct S3ClientOptions {
   int connect_timeout_ms = 10000;
@@ -79,9 +37,6 @@ struct S3ClientOptions {
   // virtual-hosted addressing against a local server.
   std::vector<std::string> resolve;
 };
-
-// Percent-encodes per the SigV4 rules (unreserved characters kept; '/' kept when `keep_slash`).
-std::string AwsUriEncode(absl::string_view text, bool keep_slash);
 
 struct S3Request {
   std::string method = "GET";                              // GET HEAD PUT POST DELETE
