@@ -8,6 +8,10 @@
 #include <numbers>
 #include <random>
 
+#include <Eigen/Core>
+#include <nlohmann/json.hpp>
+
+#include "common/core/file_io.h"
 #include "common/eval/click_eval.h"
 #include "common/eval/geometry_metrics.h"
 #include "common/eval/metrics.h"
@@ -282,6 +286,47 @@ TEST_F(ClickProtocol, MergedObjectScoresWhatItShould) {
   // matches that one, never both.
   EXPECT_EQ(eval->instances.matched, 4);
   EXPECT_DOUBLE_EQ(eval->instances.recall, 0.8);
+}
+
+// result.json summarises each instance: its Gaussian count, the centroid and the box of their
+// centres. The heap is first filled with freed map nodes holding NaN, where the writer once
+// accumulated its centroids into default-constructed (uninitialised) Eigen vectors.
+TEST(Result, InstancesSummariseTheirGaussians) {
+  {
+    std::map<uint32_t, Eigen::Vector3d> garbage;
+    for (uint32_t k = 0; k < 4096; ++k) garbage[k].setConstant(std::nan(""));
+  }
+  const instascene::testing::ScopedTempDir temp("result_summary");
+  const std::string dir = temp.Sub("result");
+  constexpr uint32_t kInstances = 300;
+  GaussianCloud cloud;
+  cloud.Resize(3 * kInstances + 1);
+  SegmentationResult r;
+  r.labels.assign(cloud.size(), 0);  // the last Gaussian is background
+  for (uint32_t k = 0; k < kInstances; ++k) {
+    for (uint32_t j = 0; j < 3; ++j) {
+      const uint32_t g = 3 * k + j;
+      r.labels[g] = k + 1;
+      cloud.positions[3 * g] = static_cast<float>(k);       // x: the instance
+      cloud.positions[3 * g + 1] = static_cast<float>(j);   // y: 0, 1, 2
+      cloud.positions[3 * g + 2] = -static_cast<float>(j);  // z: 0, -1, -2
+    }
+  }
+  ASSERT_TRUE(WriteResult(dir, r, cloud).ok());
+  const nlohmann::json j =
+      nlohmann::json::parse(*ReadFileBounded(dir + "/result.json", size_t{64} << 20));
+  ASSERT_EQ(j["instances"].size(), kInstances);
+  for (uint32_t k = 0; k < kInstances; ++k) {
+    const nlohmann::json& instance = j["instances"][k];
+    ASSERT_EQ(instance["id"], k + 1);
+    EXPECT_EQ(instance["gaussians"], 3);
+    const std::vector<double> centroid = instance["centroid"];
+    EXPECT_NEAR(centroid[0], k, 1e-9) << k;
+    EXPECT_NEAR(centroid[1], 1.0, 1e-9) << k;
+    EXPECT_NEAR(centroid[2], -1.0, 1e-9) << k;
+    EXPECT_EQ(instance["bounds_min"], nlohmann::json({double(k), 0.0, -2.0}));
+    EXPECT_EQ(instance["bounds_max"], nlohmann::json({double(k), 2.0, 0.0}));
+  }
 }
 
 TEST(Result, RejectsWrongSizesAndMalformedFiles) {

@@ -62,25 +62,30 @@ absl::Status WriteResult(const std::string& directory, const SegmentationResult&
         WriteFileAtomically((dir / "features.ply").string(), EncodePlyBinary("vertex", features)));
     j["features"] = "features.ply";
   }
-  std::map<uint32_t, std::pair<size_t, Eigen::AlignedBox3f>> instances;
-  std::map<uint32_t, Eigen::Vector3d> sums;
+  // Eigen's vectors are not zeroed by their default constructor: every member starts explicitly.
+  struct Summary {
+    size_t count = 0;
+    Eigen::AlignedBox3f box;  // empty
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  };
+  std::map<uint32_t, Summary> instances;
   for (size_t i = 0; i < n; ++i) {
     if (result.labels[i] == 0) continue;
     const Eigen::Vector3f p(&cloud.positions[3 * i]);
-    auto& entry = instances[result.labels[i]];
-    ++entry.first;
-    entry.second.extend(p);
-    sums[result.labels[i]] += p.cast<double>();
+    Summary& entry = instances[result.labels[i]];
+    ++entry.count;
+    entry.box.extend(p);
+    entry.sum += p.cast<double>();
   }
   nlohmann::json list = nlohmann::json::array();
   for (const auto& [id, entry] : instances) {
-    const Eigen::Vector3d c = sums[id] / static_cast<double>(entry.first);
+    const Eigen::Vector3d c = entry.sum / static_cast<double>(entry.count);
     list.push_back(
         {{"id", id},
-         {"gaussians", entry.first},
+         {"gaussians", entry.count},
          {"centroid", {c.x(), c.y(), c.z()}},
-         {"bounds_min", {entry.second.min().x(), entry.second.min().y(), entry.second.min().z()}},
-         {"bounds_max", {entry.second.max().x(), entry.second.max().y(), entry.second.max().z()}}});
+         {"bounds_min", {entry.box.min().x(), entry.box.min().y(), entry.box.min().z()}},
+         {"bounds_max", {entry.box.max().x(), entry.box.max().y(), entry.box.max().z()}}});
   }
   j["instances"] = list;
   return WriteFileAtomically((dir / "result.json").string(), j.dump(1));
