@@ -7,8 +7,10 @@
 # --labels-only`. Scenes: the `small` preset
 # under the noise family the constants were developed on (low, medium, high) and under the held-back
 # part-aware family (sam-medium), seeds SEEDS, and the real-capture composite at medium noise.
-# Prints a markdown table and the mean ± std of every column per noise level.
-# Usage: scripts/results_training.sh [BUILD_DIR] [WORK_DIR] [SEEDS]
+# Prints a markdown table and the mean ± std of every column per noise level. SYNTH_ARGS adds
+# arguments to the synthetic scenes' `synth` (e.g. "--width 320 --height 240"; default: the
+# preset's 160×120).
+# Usage: [SYNTH_ARGS=...] scripts/results_training.sh [BUILD_DIR] [WORK_DIR] [SEEDS]
 set -euo pipefail
 BUILD_DIR=${1:-build}
 WORK=${2:-$(mktemp -d)}
@@ -38,7 +40,7 @@ scene_row() {  # scene_row GROUP LABEL SCENE
 }
 for noise in low medium high sam-medium; do
   for seed in $SEEDS; do
-    "$BIN" synth --out "$WORK/s_${noise}_$seed" --preset small --seed "$seed" --mask-noise "$noise" >/dev/null 2>&1
+    "$BIN" synth --out "$WORK/s_${noise}_$seed" --preset small --seed "$seed" --mask-noise "$noise" ${SYNTH_ARGS:-} >/dev/null 2>&1
     scene_row "$noise" "small, $noise, seed $seed" "$WORK/s_${noise}_$seed"
   done
 done
