@@ -181,6 +181,139 @@ int CodecChannels(const std::shared_ptr<const LatentCodec>& codec, int n) {
   return codec ? codec->latent_values() / (n * n) : 3;
 }
 
+// The known ring views as the sampler sees them: what the denoiser conditions on (colour latent
+// + depth channel per view) and what the warper copies (the colour latent on the latent grid, or
+// the image itself with a pixel warp).
+struct KnownViews {
+  std::vector<KnownView> warp_sources;
+  std::vector<std::vector<float>> condition_latents;
+};
+
+absl::StatusOr<KnownViews> EncodeKnownViews(const PriorInput& input, const LatentCodec& codec,
+                                            int n, int channels, bool pixel_warp) {
+  const int cells = n * n;
+  KnownViews out;
+  for (const ViewImages& v : input.conditions) {
+    ASSIGN_OR_RETURN(std::vector<float> latent,
+                     codec.Encode(v.rgb, v.camera.width, v.camera.height));
+    if (pixel_warp) {
+      out.warp_sources.push_back(KnownView{v.camera, v.rgb});  // [0, 1], HxWx3
+    } else {
+      KnownView k{LatentCamera(v.camera, n),
+                  std::vector<float>(static_cast<size_t>(channels) * cells)};
+      for (int c = 0; c < channels; ++c) {
+        for (int cell = 0; cell < cells; ++cell)
+          k.values[cell * channels + c] = latent[c * cells + cell];
+      }
+      out.warp_sources.push_back(std::move(k));
+    }
+    const std::vector<float> depth = DepthChannel(v, input.frame, n);
+    latent.insert(latent.end(), depth.begin(), depth.end());
+    out.condition_latents.push_back(std::move(latent));
+  }
+  return out;
+}
+
+// One target view's plan: the known views warped into it (nearest first, by the angle between
+// viewing directions), their depth codes, and with the unseen mask the cells pinned to the
+// background (neither known, nor looking at unseen space, nor at the object).
+absl::StatusOr<TargetPlan> PlanTarget(const PinholeCamera& target,
+                                      const std::vector<KnownView>& known, const RayCaster& mesh,
+                                      const LatentCodec& codec, const PriorInput& input, int n,
+                                      int channels, bool pixel_warp, bool unseen_mask) {
+  const int cells = n * n;
+  std::vector<KnownView> order = known;
+  const Eigen::Vector3d dir_t = target.camera_from_world.rotation.row(2).transpose();
+  std::stable_sort(order.begin(), order.end(), [&](const KnownView& a, const KnownView& b) {
+    return a.camera.camera_from_world.rotation.row(2).dot(dir_t.transpose()) >
+           b.camera.camera_from_world.rotation.row(2).dot(dir_t.transpose());
+  });
+  const PinholeCamera grid = LatentCamera(target, n);
+  TargetPlan plan;
+  WarpOptions warp_options;
+  warp_options.channels = pixel_warp ? 3 : channels;
+  ASSIGN_OR_RETURN(plan.warp,
+                   WarpIntoTarget(mesh, order, pixel_warp ? target : grid, warp_options));
+  if (pixel_warp) {
+    ASSIGN_OR_RETURN(plan.warp, EncodeWarp(plan.warp, codec, target.width, target.height, n));
+  }
+  const std::vector<float> hits = InstanceDepth(mesh, grid);
+  const DepthCode code(target, input.frame);
+  plan.depth_code.assign(cells, kBackgroundDepthCode);
+  for (int cell = 0; cell < cells; ++cell) {
+    if (plan.warp.known[cell]) plan.depth_code[cell] = code.Encode(plan.warp.depth[cell]);
+  }
+  plan.background.assign(cells, 0);
+  if (unseen_mask) {
+    const std::vector<uint8_t> unseen =
+        UnseenRegion(*input.free_space, input.frame, grid, hits, target.width);
+    for (int cell = 0; cell < cells; ++cell)
+      plan.background[cell] = !plan.warp.known[cell] && !unseen[cell] && !(hits[cell] > 0);
+  }
+  for (int cell = 0; cell < cells; ++cell)
+    plan.generated += !plan.warp.known[cell] && !plan.background[cell];
+  return plan;
+}
+
+// The clean value of every pinned channel of a target's cell (colour latent, then depth code):
+// the warped known content, or the background; false when the sampler generates the cell.
+class PinnedCells {
+ public:
+  PinnedCells(const std::vector<TargetPlan>& plans, const std::vector<float>& background_latent,
+              int channels, int cells)
+      : plans_(plans), background_(background_latent), channels_(channels), cells_(cells) {}
+  bool operator()(size_t t, int cell, float* x0) const {
+    const TargetPlan& plan = plans_[t];
+    if (plan.warp.known[cell]) {
+      for (int c = 0; c < channels_; ++c) x0[c] = plan.warp.values[cell * channels_ + c];
+      x0[channels_] = plan.depth_code[cell];
+      return true;
+    }
+    if (!plan.background[cell]) return false;
+    for (int c = 0; c < channels_; ++c) x0[c] = background_[c * cells_ + cell];
+    x0[channels_] = kBackgroundDepthCode;
+    return true;
+  }
+
+ private:
+  const std::vector<TargetPlan>& plans_;
+  const std::vector<float>& background_;
+  int channels_, cells_;
+};
+
+// A sampled target latent decoded: colour through the codec; depth and mask from the depth
+// channel (object pixels counted into `object_pixels`).
+absl::StatusOr<ViewImages> DecodeTarget(const std::vector<float>& latent, const PinholeCamera& cam,
+                                        const LatentCodec& codec, const ObjectFrame& frame, int n,
+                                        int channels, int64_t* object_pixels) {
+  const int cells = n * n;
+  ViewImages v;
+  v.camera = cam;
+  const size_t pixels = static_cast<size_t>(cam.width) * cam.height;
+  const std::vector<float> colour(latent.begin(), latent.begin() + channels * cells);
+  ASSIGN_OR_RETURN(v.rgb, codec.Decode(colour, cam.width, cam.height));
+  if (v.rgb.size() != 3 * pixels)
+    return absl::InternalError(absl::StrCat("diffusion prior: the codec ", codec.name(),
+                                            " decoded ", v.rgb.size(), " values for ", cam.width,
+                                            "x", cam.height, "x3"));
+  const DepthCode code(cam, frame);
+  v.alpha.assign(pixels, 0.0f);
+  v.mask.assign(pixels, 0);
+  v.depth.assign(pixels, 0.0f);
+  for (int y = 0; y < cam.height; ++y) {
+    for (int x = 0; x < cam.width; ++x) {
+      const size_t i = static_cast<size_t>(y) * cam.width + x;
+      const float d = latent[channels * cells + (y * n / cam.height) * n + x * n / cam.width];
+      if (!(d < kSurfaceDepthCode)) continue;
+      v.mask[i] = 1;
+      v.alpha[i] = 1.0f;
+      v.depth[i] = static_cast<float>(std::max(code.Decode(d), 1e-6));
+      ++*object_pixels;
+    }
+  }
+  return v;
+}
+
 }  // namespace
 
 DiffusionPrior::DiffusionPrior(std::shared_ptr<const Denoiser> denoiser, std::string where,
@@ -207,29 +340,9 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
         "diffusion prior: the codec ", codec->name(), " makes latents of ", codec->latent_values(),
         " values; the warping needs C x ", n, " x ", n, " with C in [1, ", kMaxCodecChannels, "]"));
   const int latent_values = (channels + 1) * cells;  // colour latent + depth channel
-  // Known views: their latents (colour + depth, what the denoiser conditions on), and what the
-  // warper copies (the colour latent on the latent grid, or the image itself).
   const bool pixel_warp = options_.warp == "pixel";
-  std::vector<KnownView> known;
-  std::vector<std::vector<float>> condition_latents;
-  for (const ViewImages& v : input.conditions) {
-    ASSIGN_OR_RETURN(std::vector<float> latent,
-                     codec->Encode(v.rgb, v.camera.width, v.camera.height));
-    if (pixel_warp) {
-      known.push_back(KnownView{v.camera, v.rgb});  // [0, 1], HxWx3
-    } else {
-      KnownView k{LatentCamera(v.camera, n),
-                  std::vector<float>(static_cast<size_t>(channels) * cells)};
-      for (int c = 0; c < channels; ++c) {
-        for (int cell = 0; cell < cells; ++cell)
-          k.values[cell * channels + c] = latent[c * cells + cell];
-      }
-      known.push_back(std::move(k));
-    }
-    const std::vector<float> depth = DepthChannel(v, input.frame, n);
-    latent.insert(latent.end(), depth.begin(), depth.end());
-    condition_latents.push_back(std::move(latent));
-  }
+  ASSIGN_OR_RETURN(const KnownViews known,
+                   EncodeKnownViews(input, *codec, n, channels, pixel_warp));
   ASSIGN_OR_RETURN(
       const std::vector<float> background_latent,
       codec->Encode(
@@ -242,39 +355,9 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   std::vector<TargetPlan> plans;
   int64_t warped_cells = 0, background_cells = 0, generated_cells = 0;
   for (const PinholeCamera& target : input.targets) {
-    // Nearest known views first (by the angle between viewing directions).
-    std::vector<KnownView> order = known;
-    const Eigen::Vector3d dir_t = target.camera_from_world.rotation.row(2).transpose();
-    std::stable_sort(order.begin(), order.end(), [&](const KnownView& a, const KnownView& b) {
-      return a.camera.camera_from_world.rotation.row(2).dot(dir_t.transpose()) >
-             b.camera.camera_from_world.rotation.row(2).dot(dir_t.transpose());
-    });
-    const PinholeCamera grid = LatentCamera(target, n);
-    TargetPlan plan;
-    WarpOptions warp_options;
-    warp_options.channels = pixel_warp ? 3 : channels;
-    ASSIGN_OR_RETURN(plan.warp,
-                     WarpIntoTarget(*mesh, order, pixel_warp ? target : grid, warp_options));
-    if (pixel_warp) {
-      ASSIGN_OR_RETURN(plan.warp, EncodeWarp(plan.warp, *codec, target.width, target.height, n));
-    }
-    const std::vector<float> hits = InstanceDepth(*mesh, grid);
-    const DepthCode code(target, input.frame);
-    plan.depth_code.assign(cells, kBackgroundDepthCode);
-    for (int cell = 0; cell < cells; ++cell) {
-      if (plan.warp.known[cell]) plan.depth_code[cell] = code.Encode(plan.warp.depth[cell]);
-    }
-    plan.background.assign(cells, 0);
-    if (unseen_mask) {
-      const std::vector<uint8_t> unseen =
-          UnseenRegion(*input.free_space, input.frame, grid, hits, target.width);
-      for (int cell = 0; cell < cells; ++cell)
-        plan.background[cell] = !plan.warp.known[cell] && !unseen[cell] && !(hits[cell] > 0);
-    }
-    for (int cell = 0; cell < cells; ++cell) {
-      background_cells += plan.background[cell];
-      plan.generated += !plan.warp.known[cell] && !plan.background[cell];
-    }
+    ASSIGN_OR_RETURN(TargetPlan plan, PlanTarget(target, known.warp_sources, *mesh, *codec, input,
+                                                 n, channels, pixel_warp, unseen_mask));
+    for (int cell = 0; cell < cells; ++cell) background_cells += plan.background[cell];
     warped_cells += plan.warp.written;
     generated_cells += plan.generated;
     plans.push_back(std::move(plan));
@@ -286,20 +369,7 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   ddim.seed = input.seed;
   std::vector<int> conditions(input.conditions.size());
   for (size_t k = 0; k < conditions.size(); ++k) conditions[k] = static_cast<int>(k);
-  // The clean value of every pinned channel of a cell (colour latent, then depth code), or false
-  // when the sampler generates the cell.
-  auto pinned = [&](size_t t, int cell, float* x0) {
-    const TargetPlan& plan = plans[t];
-    if (plan.warp.known[cell]) {
-      for (int c = 0; c < channels; ++c) x0[c] = plan.warp.values[cell * channels + c];
-      x0[channels] = plan.depth_code[cell];
-      return true;
-    }
-    if (!plan.background[cell]) return false;
-    for (int c = 0; c < channels; ++c) x0[c] = background_latent[c * cells + cell];
-    x0[channels] = kBackgroundDepthCode;
-    return true;
-  };
+  const PinnedCells pinned(plans, background_latent, channels, cells);
   std::mt19937_64 replace_rng(input.seed ^ 0x5eedULL);
   std::normal_distribution<double> normal(0.0, 1.0);
   // RePaint: after each step of the first replace_fraction of the steps (from the noisiest),
@@ -326,7 +396,7 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   };
   std::vector<PinholeCamera> condition_cameras;
   for (const ViewImages& v : input.conditions) condition_cameras.push_back(v.camera);
-  const ConditionedDenoiser conditioned(*denoiser_, condition_latents, condition_cameras,
+  const ConditionedDenoiser conditioned(*denoiser_, known.condition_latents, condition_cameras,
                                         input.targets);
   absl::StatusOr<std::vector<std::vector<float>>> latents =
       SampleDdim(conditioned, schedule, static_cast<int>(input.targets.size()), latent_values,
@@ -348,36 +418,10 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
         drift += std::abs((*latents)[t][c * cells + cell] - x0[c]) / (channels + 1);
     }
   }
-  // Decode each target: colour through the codec; depth and mask from the depth channel.
   int64_t object_pixels = 0;
   for (size_t t = 0; t < input.targets.size(); ++t) {
-    const PinholeCamera& cam = input.targets[t];
-    ViewImages v;
-    v.camera = cam;
-    const size_t pixels = static_cast<size_t>(cam.width) * cam.height;
-    const std::vector<float> colour((*latents)[t].begin(),
-                                    (*latents)[t].begin() + channels * cells);
-    ASSIGN_OR_RETURN(v.rgb, codec->Decode(colour, cam.width, cam.height));
-    if (v.rgb.size() != 3 * pixels)
-      return absl::InternalError(absl::StrCat("diffusion prior: the codec ", codec->name(),
-                                              " decoded ", v.rgb.size(), " values for ", cam.width,
-                                              "x", cam.height, "x3"));
-    const DepthCode code(cam, input.frame);
-    v.alpha.assign(pixels, 0.0f);
-    v.mask.assign(pixels, 0);
-    v.depth.assign(pixels, 0.0f);
-    for (int y = 0; y < cam.height; ++y) {
-      for (int x = 0; x < cam.width; ++x) {
-        const size_t i = static_cast<size_t>(y) * cam.width + x;
-        const float d =
-            (*latents)[t][channels * cells + (y * n / cam.height) * n + x * n / cam.width];
-        if (!(d < kSurfaceDepthCode)) continue;
-        v.mask[i] = 1;
-        v.alpha[i] = 1.0f;
-        v.depth[i] = static_cast<float>(std::max(code.Decode(d), 1e-6));
-        ++object_pixels;
-      }
-    }
+    ASSIGN_OR_RETURN(ViewImages v, DecodeTarget((*latents)[t], input.targets[t], *codec,
+                                                input.frame, n, channels, &object_pixels));
     out.generated.push_back(std::move(v));
   }
   out.reason = absl::StrCat("generated ", input.targets.size(), " unknown views from ",
