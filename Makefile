@@ -7,7 +7,7 @@ SANITIZE_DIR ?= build-sanitize
 JOBS         ?= $(shell nproc)
 CMAKE_FLAGS  ?=
 
-.PHONY: all deps configure build test test-sanitize fuzz load chaos bench bench-web demo format tidy clean
+.PHONY: all deps configure build test test-sanitize fuzz load chaos memcheck bench bench-web demo format tidy clean
 
 all: build
 
@@ -46,6 +46,9 @@ load: build
 
 chaos: build
 	scripts/chaos.sh $(BUILD_DIR)
+
+memcheck: build
+	scripts/memcheck.sh $(BUILD_DIR)
 
 bench: build
 	scripts/bench.sh $(BUILD_DIR)
