@@ -24,11 +24,9 @@ namespace instascene::gateway {
 namespace {
 
 constexpr int64_t kDownloadChunk = 1 << 20;
-void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
-  http.Get("/api/v1/health", [](const httplib::Request&, httplib::Response& res) {
-    res.set_content("{\"status\": \"SERVING\"}\n", "application/json");
-  });
-  // --- the scheduler ---
+
+// Jobs, scenes, pipelines, the queue and its live events: the Scheduler service.
+void AddSchedulerRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) {
   http.Get("/api/v1/stages", [stubs](const httplib::Request& req, httplib::Response& res) {
     Unary<v1::ListStagesRequest, v1::ListStagesResponse>(
         req, res, v1::ListStagesRequest(),
@@ -139,7 +137,10 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
       return true;
     });
   });
-  // --- the store ---
+}
+
+// Blobs: which are missing, resumable uploads, ranged downloads: the Store service.
+void AddStoreRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) {
   http.Post("/api/v1/blobs/missing", [stubs](const httplib::Request& req, httplib::Response& res) {
     v1::FindMissingBlobsRequest request;
     if (!ParseBody(req, res, &request)) return;
@@ -223,7 +224,10 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
           return reader->Finish().ok();
         });
   });
-  // --- objects ---
+}
+
+// A scene's objects, and one object by id, point, click or ray: the Objects service.
+void AddObjectRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) {
   http.Get(R"(/api/v1/scenes/([^/]+)/objects)",
            [stubs](const httplib::Request& req, httplib::Response& res) {
              v1::ListObjectsRequest request;
@@ -291,6 +295,15 @@ void AddRoutes(httplib::Server& http, std::shared_ptr<Stubs> stubs) {
   };
   http.Get(R"(/api/v1/scenes/([^/]+)/objects/([0-9]+))", get_object);
   http.Get(R"(/api/v1/scenes/([^/]+)/object)", get_object);
+}
+
+void AddRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) {
+  http.Get("/api/v1/health", [](const httplib::Request&, httplib::Response& res) {
+    res.set_content("{\"status\": \"SERVING\"}\n", "application/json");
+  });
+  AddSchedulerRoutes(http, stubs);
+  AddStoreRoutes(http, stubs);
+  AddObjectRoutes(http, stubs);
 }
 
 }  // namespace
