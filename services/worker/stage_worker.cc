@@ -83,6 +83,67 @@ class ProgressTracker {
   Stopwatch phase_watch_;
 };
 
+// Renews a running job's lease every `interval` with the stage's progress, on its own thread from
+// construction until Stop() or destruction. A lease the scheduler no longer knows
+// (FAILED_PRECONDITION, NOT_FOUND) and a cancellation request both set `cancel`, which the stage
+// polls. Stop() waits for a heartbeat in flight (its deadline is 10 s).
+class LeaseHeartbeat {
+ public:
+  LeaseHeartbeat(v1::Scheduler::Stub* scheduler, const v1::LeaseJobResponse& lease,
+                 std::chrono::milliseconds interval, const std::string& worker_id,
+                 const ProgressTracker& progress, CancelFlag* cancel)
+      : thread_([this, scheduler, &lease, interval, worker_id, &progress, cancel] {
+          Run(scheduler, lease, interval, worker_id, progress, cancel);
+        }) {}
+  ~LeaseHeartbeat() { Stop(); }
+  LeaseHeartbeat(const LeaseHeartbeat&) = delete;
+  LeaseHeartbeat& operator=(const LeaseHeartbeat&) = delete;
+
+  void Stop() {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      stop_ = true;
+    }
+    wake_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+  bool lease_lost() const { return lease_lost_; }
+  bool cancel_requested() const { return cancel_requested_; }
+
+ private:
+  void Run(v1::Scheduler::Stub* scheduler, const v1::LeaseJobResponse& lease,
+           std::chrono::milliseconds interval, const std::string& worker_id,
+           const ProgressTracker& progress, CancelFlag* cancel) {
+    const v1::Job& job = lease.job();
+    std::unique_lock<std::mutex> lock(mutex_);
+    while (!wake_.wait_for(lock, interval, [&] { return stop_; })) {
+      v1::HeartbeatRequest request;
+      request.set_job_id(job.id());
+      request.set_lease_token(lease.lease_token());
+      *request.mutable_progress() = progress.Get();
+      v1::HeartbeatResponse response;
+      grpc::ClientContext context;
+      context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
+      const grpc::Status s = scheduler->Heartbeat(&context, request, &response);
+      if (s.error_code() == grpc::StatusCode::FAILED_PRECONDITION ||
+          s.error_code() == grpc::StatusCode::NOT_FOUND) {
+        spdlog::warn("worker {}: job {}: {}; stopping it", worker_id, job.id(), s.error_message());
+        lease_lost_ = true;
+        *cancel = true;
+      } else if (s.ok() && response.cancel_requested()) {
+        cancel_requested_ = true;
+        *cancel = true;
+      }
+    }
+  }
+
+  std::mutex mutex_;
+  std::condition_variable wake_;
+  bool stop_ = false;  // under mutex_
+  std::atomic<bool> lease_lost_{false}, cancel_requested_{false};
+  std::thread thread_;  // last: starts once every other member is constructed
+};
+
 }  // namespace
 
 absl::Status WorkerOptions::Validate(const pipeline::StageRegistry& stages) const {
@@ -259,64 +320,53 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
   Stopwatch watch;
   JobsRunning().Add({{"stage", job.kind()}}).Increment();
   ProgressTracker progress;
-  std::atomic<bool> cancel_requested{false}, lease_lost{false}, stop_heartbeat{false};
-  std::mutex hb_mutex;
-  std::condition_variable hb_wake;
-  std::thread heartbeat([&] {
-    std::unique_lock<std::mutex> lock(hb_mutex);
-    while (!hb_wake.wait_for(lock, std::chrono::milliseconds(options_.heartbeat_interval_ms),
-                             [&] { return stop_heartbeat.load(); })) {
-      v1::HeartbeatRequest request;
-      request.set_job_id(job.id());
-      request.set_lease_token(lease.lease_token());
-      *request.mutable_progress() = progress.Get();
-      v1::HeartbeatResponse response;
-      grpc::ClientContext context;
-      context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
-      const grpc::Status s = scheduler_->Heartbeat(&context, request, &response);
-      if (s.error_code() == grpc::StatusCode::FAILED_PRECONDITION ||
-          s.error_code() == grpc::StatusCode::NOT_FOUND) {
-        spdlog::warn("worker {}: job {}: {}; stopping it", options_.worker_id, job.id(),
-                     s.error_message());
-        lease_lost = true;
-        cancel = true;
-      } else if (s.ok() && response.cancel_requested()) {
-        cancel_requested = true;
-        cancel = true;
-      }
-    }
-  });
-
+  LeaseHeartbeat heartbeat(scheduler_.get(), lease,
+                           std::chrono::milliseconds(options_.heartbeat_interval_ms),
+                           options_.worker_id, progress, &cancel);
   std::error_code ec;
   fs::remove_all(job_dir, ec);
-  store::Digest output;
-  int64_t items = -1;
-  const absl::Status status = Execute(
+  JobOutcome outcome;
+  outcome.status = Execute(
       lease, job_dir, &cancel, [&](const pipeline::StageProgress& p) { progress.Update(p); },
-      &output, &items);
-  {
-    std::lock_guard<std::mutex> lock(hb_mutex);
-    stop_heartbeat = true;
-  }
-  hb_wake.notify_all();
-  heartbeat.join();
-  bool handed_back;
+      &outcome.output, &outcome.items);
+  heartbeat.Stop();
+  outcome.lease_lost = heartbeat.lease_lost();
+  outcome.cancel_requested = heartbeat.cancel_requested();
   {
     std::lock_guard<std::mutex> lock(mutex_);
-    handed_back = handed_back_;
+    outcome.handed_back = handed_back_;
   }
+  const char* label = ReportOutcome(lease, outcome, watch.ElapsedSeconds());
+  JobsRunning().Add({{"stage", job.kind()}}).Decrement();
+  JobDurations()
+      .Add({{"stage", job.kind()}, {"outcome", label}}, metrics::JobBuckets())
+      .Observe(watch.ElapsedSeconds());
+  fs::remove_all(job_dir, ec);  // outputs live in the store now
+  {
+    std::lock_guard<std::mutex> lock(mutex_);
+    current_job_.clear();
+    current_cancel_ = nullptr;
+  }
+  wake_.notify_all();
+}
 
+const char* StageWorker::ReportOutcome(const v1::LeaseJobResponse& lease, const JobOutcome& outcome,
+                                       double seconds) {
+  const v1::Job& job = lease.job();
+  if (outcome.lease_lost) {
+    spdlog::warn("worker {}: job {} abandoned (lease lost)", options_.worker_id, job.id());
+    return "lease_lost";
+  }
   grpc::ClientContext context;
   context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(30));
   grpc::Status reply;
-  if (lease_lost) {
-    spdlog::warn("worker {}: job {} abandoned (lease lost)", options_.worker_id, job.id());
-  } else if (status.ok()) {
+  const char* label = "succeeded";
+  if (outcome.status.ok()) {
     v1::CompleteJobRequest request;
     request.set_job_id(job.id());
     request.set_lease_token(lease.lease_token());
-    rpc::ToProto(output, request.mutable_output_manifest());
-    request.set_items(items);
+    rpc::ToProto(outcome.output, request.mutable_output_manifest());
+    request.set_items(outcome.items);
     v1::CompleteJobResponse response;
     reply = scheduler_->CompleteJob(&context, request, &response);
     if (reply.ok()) {
@@ -325,20 +375,23 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
       counted_.notify_all();
     }
     spdlog::info("worker {}: job {} succeeded in {:.1f} s -> {}", options_.worker_id, job.id(),
-                 watch.ElapsedSeconds(), output.ToString());
+                 seconds, outcome.output.ToString());
   } else {
     v1::FailJobRequest request;
     request.set_job_id(job.id());
     request.set_lease_token(lease.lease_token());
-    if (cancel_requested) {
+    if (outcome.cancel_requested) {
+      label = "cancelled";
       request.set_kind(v1::FAILURE_KIND_CANCELLED);
       request.set_error("cancelled by request");
-    } else if (handed_back) {
+    } else if (outcome.handed_back) {
+      label = "handed_back";
       request.set_kind(v1::FAILURE_KIND_RELEASED);
       request.set_error(absl::StrCat("handed back by worker ", options_.worker_id, " (draining)"));
     } else {
-      request.set_kind(FailureFor(status.code()));
-      request.set_error(rpc::ScrubPaths(status.ToString()));  // read by clients
+      label = "failed";
+      request.set_kind(FailureFor(outcome.status.code()));
+      request.set_error(rpc::ScrubPaths(outcome.status.ToString()));  // read by clients
     }
     v1::FailJobResponse response;
     reply = scheduler_->FailJob(&context, request, &response);
@@ -348,22 +401,7 @@ void StageWorker::RunJob(const v1::LeaseJobResponse& lease) {
   if (!reply.ok())
     spdlog::warn("worker {}: reporting job {}: {}", options_.worker_id, job.id(),
                  reply.error_message());
-  JobsRunning().Add({{"stage", job.kind()}}).Decrement();
-  const char* outcome = lease_lost         ? "lease_lost"
-                        : status.ok()      ? "succeeded"
-                        : cancel_requested ? "cancelled"
-                        : handed_back      ? "handed_back"
-                                           : "failed";
-  JobDurations()
-      .Add({{"stage", job.kind()}, {"outcome", outcome}}, metrics::JobBuckets())
-      .Observe(watch.ElapsedSeconds());
-  fs::remove_all(job_dir, ec);  // outputs live in the store now
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    current_job_.clear();
-    current_cancel_ = nullptr;
-  }
-  wake_.notify_all();
+  return label;
 }
 
 bool StageWorker::AwaitSucceeded(int64_t count, std::chrono::milliseconds timeout) const {

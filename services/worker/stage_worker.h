@@ -68,6 +68,19 @@ class StageWorker {
  private:
   void Loop();
   void RunJob(const v1::LeaseJobResponse& lease);
+  // How a job ended on this worker.
+  struct JobOutcome {
+    absl::Status status;      // the stage's
+    store::Digest output;     // its output manifest (status ok)
+    int64_t items = -1;       // per-item stages: how many items it made
+    bool lease_lost = false;  // the scheduler no longer knew the lease
+    bool cancel_requested = false;
+    bool handed_back = false;  // cancelled by Drain
+  };
+  // Completes or fails the job at the scheduler (nothing when its lease was lost); returns the
+  // outcome's metric label.
+  const char* ReportOutcome(const v1::LeaseJobResponse& lease, const JobOutcome& outcome,
+                            double seconds);
   using ProgressFn = std::function<void(const pipeline::StageProgress&)>;
   // Fetches inputs, runs the stage, uploads the output manifest.
   absl::Status Execute(const v1::LeaseJobResponse& lease, const std::string& job_dir,
