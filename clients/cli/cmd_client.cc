@@ -133,10 +133,8 @@ absl::StatusOr<std::map<std::string, v1::Job>> Watch(client::Client& c,
   return last;
 }
 
-}  // namespace
-
-void AddClientCommands(CLI::App& app, Action* action) {
-  // submit
+// `submit`: uploads a scene and submits its pipeline.
+void AddSubmitCommand(CLI::App& app, Action* action) {
   struct SubmitArgs {
     std::string server = kDefaultServer, store, scene, name, params;
     ConnectionFlags connection;
@@ -229,8 +227,10 @@ void AddClientCommands(CLI::App& app, Action* action) {
       return absl::OkStatus();
     };
   });
+}
 
-  // watch
+// `watch`: follows jobs live until they finish.
+void AddWatchCommand(CLI::App& app, Action* action) {
   struct WatchArgs {
     std::string server = kDefaultServer, scene;
     ConnectionFlags connection;
@@ -268,8 +268,10 @@ void AddClientCommands(CLI::App& app, Action* action) {
       return absl::OkStatus();
     };
   });
+}
 
-  // jobs
+// `jobs`: the job queue as a table, with queue statistics.
+void AddJobsCommand(CLI::App& app, Action* action) {
   struct JobsArgs {
     std::string server = kDefaultServer, scene, state, page_token;
     ConnectionFlags connection;
@@ -364,8 +366,10 @@ void AddClientCommands(CLI::App& app, Action* action) {
       return absl::OkStatus();
     };
   });
+}
 
-  // fetch
+// `fetch`: downloads a scene's latest outputs or one job's.
+void AddFetchCommand(CLI::App& app, Action* action) {
   struct FetchArgs {
     std::string server = kDefaultServer, store, id, scene, out;
     ConnectionFlags connection;
@@ -443,8 +447,10 @@ void AddClientCommands(CLI::App& app, Action* action) {
       return absl::OkStatus();
     };
   });
+}
 
-  // cancel
+// `cancel`: cancels a job and its dependants, or a scene's unfinished jobs.
+void AddCancelCommand(CLI::App& app, Action* action) {
   struct CancelArgs {
     std::string server = kDefaultServer, id, scene;
     ConnectionFlags connection;
@@ -494,6 +500,16 @@ void AddClientCommands(CLI::App& app, Action* action) {
       return absl::OkStatus();
     };
   });
+}
+
+}  // namespace
+
+void AddClientCommands(CLI::App& app, Action* action) {
+  AddSubmitCommand(app, action);
+  AddWatchCommand(app, action);
+  AddJobsCommand(app, action);
+  AddFetchCommand(app, action);
+  AddCancelCommand(app, action);
 }
 
 }  // namespace instascene::cli
