@@ -96,9 +96,8 @@ absl::Status TrainAndSegment(const TrainArgs& args, const Scene& scene, const Ga
   return absl::OkStatus();
 }
 
-}  // namespace
-
-void AddTrainCommands(CLI::App& app, Action* action) {
+// `train`: trains the feature field on a decomposition, then segments.
+void AddTrainCommand(CLI::App& app, Action* action) {
   auto train = std::make_shared<TrainArgs>();
   CLI::App* cmd = app.add_subcommand(
       "train", "Train the spatial contrastive feature field on a decomposition, then segment");
@@ -120,7 +119,10 @@ void AddTrainCommands(CLI::App& app, Action* action) {
       return absl::OkStatus();
     };
   });
+}
 
+// `segment`: labels trained features again (tau rule or HDBSCAN).
+void AddSegmentCommand(CLI::App& app, Action* action) {
   struct SegmentArgs {
     std::string scene, features, decomposition, out;
     StageFlags flags;
@@ -166,7 +168,10 @@ void AddTrainCommands(CLI::App& app, Action* action) {
       return absl::OkStatus();
     };
   });
+}
 
+// `run`: every stage offline, the stage code the services run.
+void AddRunCommand(CLI::App& app, Action* action) {
   auto run = std::make_shared<TrainArgs>();
   CLI::App* r = app.add_subcommand(
       "run",
@@ -246,6 +251,14 @@ void AddTrainCommands(CLI::App& app, Action* action) {
       return absl::OkStatus();
     };
   });
+}
+
+}  // namespace
+
+void AddTrainCommands(CLI::App& app, Action* action) {
+  AddTrainCommand(app, action);
+  AddSegmentCommand(app, action);
+  AddRunCommand(app, action);
 }
 
 }  // namespace instascene::cli
