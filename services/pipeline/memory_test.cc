@@ -45,6 +45,11 @@ Measured RunMeasured(const StageRegistry& r, const std::string& kind, const Stag
 }
 
 TEST(MemoryEstimate, EveryStageStaysWithinItsEstimate) {
+#if defined(__SANITIZE_ADDRESS__)
+  // The resident set of an AddressSanitizer build holds its shadow memory and the quarantine of
+  // freed blocks (train's peak 315 MiB there against 213 estimated): no measure of the stage.
+  GTEST_SKIP() << "peak RSS is not the stage's own under AddressSanitizer";
+#endif
   const testing::ScopedTempDir temp("memory_estimate");
   const std::string root = temp.str(), scene = root + "/scene";
   ASSERT_TRUE(WriteClutterScene(*GenerateClutterScene(*ClutterPreset("small")), scene).ok());
