@@ -39,7 +39,9 @@ void AddSynthCommand(CLI::App& app, Action* action) {
   cmd->add_option("--views", args->views, "Number of camera views");
   cmd->add_option("--width", args->width, "Image width, px");
   cmd->add_option("--height", args->height, "Image height, px");
-  cmd->add_option("--gaussians", args->gaussians, "Total number of surfels");
+  cmd->add_option("--gaussians", args->gaussians,
+                  "Surfels sampled on the objects and the room (the table's refinement near "
+                  "objects and one surfel per cone apex come on top)");
   cmd->add_option("--mask-noise", args->mask_noise,
                   "Simulated 2D segmenter noise: none, low, medium (default), high; the "
                   "independent part-aware family: sam-low, sam-medium, sam-high")

@@ -373,9 +373,18 @@ absl::StatusOr<ClutterScene> GenerateClutterScene(const ClutterOptions& options)
         k + 1 == scene.objects.size()
             ? object_budget - object_used
             : static_cast<size_t>(object_budget * obj.mesh.SurfaceArea() / object_area);
+    // A cone's apex carries a surfel: area sampling leaves it bare (until 2026-12-06 cones had
+    // none, their highest surfel 4-13 % of the height below the apex; docs/SYNTHETIC.md).
+    std::vector<SurfelApex> apices;
+    for (const ShapeTip& tip : ShapeTips(obj.shape)) {
+      apices.push_back({(obj.world_from_object * tip.position.cast<double>()).cast<float>(),
+                        (obj.world_from_object.rotation * Eigen::Vector3d::UnitZ()).cast<float>(),
+                        tip.uv});
+    }
     obj.first_gaussian = scene.cloud.size();
-    obj.num_gaussians = count;
-    AppendSurfels(obj.mesh, count, obj.appearance, sampling, rng.engine, &scene.cloud);
+    obj.num_gaussians = count + apices.size();
+    AppendSurfels(obj.mesh, count, obj.appearance, sampling, rng.engine, &scene.cloud, 0.0f,
+                  apices);
     object_used += count;
     scene.instance_ids.resize(scene.cloud.size(), static_cast<uint16_t>(obj.id));
   }

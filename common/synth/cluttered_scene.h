@@ -26,7 +26,8 @@ struct ClutterOptions {
   int views = 24;   // number of cameras
   int width = 160;  // image size, px
   int height = 120;
-  size_t gaussians = 20000;     // surfels (objects + stuff) before the table refinement
+  size_t gaussians = 20000;     // surfels (objects + stuff) before the table refinement and
+                                // the cones' apex surfels
   float stuff_fraction = 0.3f;  // share of surfels on floor, wall and table
   int duplicates = 3;           // identical objects side by side (0 or 1 = none)
   int sh_degree = 1;            // 0 or 1

@@ -153,6 +153,12 @@ TriangleMesh MakeLathe(const std::vector<Eigen::Vector2f>& profile, int segments
   return mesh;
 }
 
+std::vector<ShapeTip> ShapeTips(const ShapeSpec& spec) {
+  // The lathe's last profile point: arc-length fraction 1, angle 0.
+  if (spec.kind == ShapeKind::kCone) return {{Eigen::Vector3f(0, 0, spec.size.z()), {0, 1}}};
+  return {};
+}
+
 TriangleMesh MakeCenteredSphere(float radius, int segments) {
   ShapeSpec spec;
   spec.kind = ShapeKind::kSphere;

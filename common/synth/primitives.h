@@ -49,6 +49,14 @@ struct ShapeSpec {
 // A closed mesh of the shape; `segments` is the angular resolution of revolution shapes.
 TriangleMesh MakeShapeMesh(const ShapeSpec& spec, int segments = 48);
 
+// The points where the shape's surface closes to a sharp tip (a cone's apex), in the shape's frame
+// (MakeShapeMesh's), each with the mesh's UV there. Empty for shapes without one.
+struct ShapeTip {
+  Eigen::Vector3f position;
+  Eigen::Vector2f uv;
+};
+std::vector<ShapeTip> ShapeTips(const ShapeSpec& spec);
+
 // A sphere of `radius` centred at the origin (MakeShapeMesh's rests on z = 0).
 TriangleMesh MakeCenteredSphere(float radius, int segments = 48);
 

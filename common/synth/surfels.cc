@@ -58,7 +58,7 @@ Eigen::Vector3f ShadeUv(const Appearance& ap, const Eigen::Vector2f& uv) {
 
 void AppendSurfels(const TriangleMesh& mesh, size_t count, const Appearance& appearance,
                    const SurfelSampling& sampling, std::mt19937_64& rng, GaussianCloud* cloud,
-                   float extra_value) {
+                   float extra_value, const std::vector<SurfelApex>& apices) {
   const size_t num_tris = mesh.triangles.size();
   if (num_tris == 0 || count == 0) return;
   std::vector<double> cdf(num_tris);
@@ -72,14 +72,30 @@ void AppendSurfels(const TriangleMesh& mesh, size_t count, const Appearance& app
   std::uniform_real_distribution<double> uni(0.0, 1.0);
   std::normal_distribution<float> normal(0.0f, 1.0f);
   const size_t base = cloud->size();
+  const size_t added = count + apices.size();
   const int stride = cloud->sh_stride();
-  // Grow every array by `count` (extras keep their values; new entries get extra_value).
-  cloud->positions.resize(3 * (base + count));
-  cloud->log_scales.resize(2 * (base + count));
-  cloud->rotations.resize(4 * (base + count));
-  cloud->opacity_logits.resize(base + count);
-  cloud->sh.resize(static_cast<size_t>(stride) * (base + count), 0.0f);
-  for (ExtraChannel& e : cloud->extras) e.values.resize(base + count, extra_value);
+  // Grow every array by `added` (extras keep their values; new entries get extra_value).
+  cloud->positions.resize(3 * (base + added));
+  cloud->log_scales.resize(2 * (base + added));
+  cloud->rotations.resize(4 * (base + added));
+  cloud->opacity_logits.resize(base + added);
+  cloud->sh.resize(static_cast<size_t>(stride) * (base + added), 0.0f);
+  for (ExtraChannel& e : cloud->extras) e.values.resize(base + added, extra_value);
+  // Surfel i at p, tangent tu, unit normal n; its colour from the texture at uv, lit.
+  auto put = [&](size_t i, const Eigen::Vector3f& p, const Eigen::Vector3f& tu,
+                 const Eigen::Vector3f& n, const Eigen::Vector2f& uv) {
+    const Eigen::Vector3f tv = n.cross(tu);
+    Eigen::Matrix3d frame;
+    frame << tu.cast<double>(), tv.cast<double>(), n.cast<double>();
+    const Eigen::Vector4d q = QuaternionWxyzFromRotation(frame);
+    const float shade = 0.45f + 0.55f * std::abs(n.dot(light));
+    const Eigen::Vector3f rgb = (ShadeUv(appearance, uv) * shade).cwiseMin(1.0f);
+    for (int a = 0; a < 3; ++a) cloud->positions[3 * i + a] = p[a];
+    cloud->log_scales[2 * i] = cloud->log_scales[2 * i + 1] = log_sigma;
+    for (int a = 0; a < 4; ++a) cloud->rotations[4 * i + a] = static_cast<float>(q[a]);
+    cloud->opacity_logits[i] = opacity_logit;
+    for (int c = 0; c < 3; ++c) cloud->sh[static_cast<size_t>(stride) * i + c] = RgbToSh0(rgb[c]);
+  };
   for (size_t s = 0; s < count; ++s) {
     // Stratified: sample s draws from the s-th equal slice of the area CDF.
     const double target = (static_cast<double>(s) + uni(rng)) / count * total;
@@ -96,26 +112,18 @@ void AppendSurfels(const TriangleMesh& mesh, size_t count, const Appearance& app
         b0 * mesh.vertices[tri[0]] + b1 * mesh.vertices[tri[1]] + b2 * mesh.vertices[tri[2]];
     const Eigen::Vector3f e1 = mesh.vertices[tri[1]] - mesh.vertices[tri[0]];
     const Eigen::Vector3f n = e1.cross(mesh.vertices[tri[2]] - mesh.vertices[tri[0]]).normalized();
-    const Eigen::Vector3f tu = e1.normalized();
-    const Eigen::Vector3f tv = n.cross(tu);
-    Eigen::Matrix3d frame;
-    frame << tu.cast<double>(), tv.cast<double>(), n.cast<double>();
-    const Eigen::Vector4d q = QuaternionWxyzFromRotation(frame);
     Eigen::Vector2f uv = Eigen::Vector2f::Zero();
     if (mesh.uvs.size() == mesh.vertices.size())
       uv = b0 * mesh.uvs[tri[0]] + b1 * mesh.uvs[tri[1]] + b2 * mesh.uvs[tri[2]];
-    const float shade = 0.45f + 0.55f * std::abs(n.dot(light));
-    const Eigen::Vector3f rgb = (ShadeUv(appearance, uv) * shade).cwiseMin(1.0f);
-    const size_t i = base + s;
-    for (int a = 0; a < 3; ++a) cloud->positions[3 * i + a] = p[a];
-    cloud->log_scales[2 * i] = cloud->log_scales[2 * i + 1] = log_sigma;
-    for (int a = 0; a < 4; ++a) cloud->rotations[4 * i + a] = static_cast<float>(q[a]);
-    cloud->opacity_logits[i] = opacity_logit;
-    float* sh = &cloud->sh[static_cast<size_t>(stride) * i];
-    for (int c = 0; c < 3; ++c) sh[c] = RgbToSh0(rgb[c]);
+    put(base + s, p, e1.normalized(), n, uv);
     if (appearance.specular > 0.0f && cloud->sh_degree >= 1) {
+      float* sh = &cloud->sh[static_cast<size_t>(stride) * (base + s)];
       for (int k = 3; k < 12; ++k) sh[k] = appearance.specular * normal(rng);
     }
+  }
+  for (size_t a = 0; a < apices.size(); ++a) {
+    const Eigen::Vector3f n = apices[a].normal.normalized();
+    put(base + count + a, apices[a].position, n.unitOrthogonal(), n, apices[a].uv);
   }
 }
 

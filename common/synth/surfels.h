@@ -8,6 +8,7 @@
 
 #include <cstdint>
 #include <random>
+#include <vector>
 
 #include <Eigen/Core>
 
@@ -36,10 +37,21 @@ struct SurfelSampling {
   Eigen::Vector3f light_dir = Eigen::Vector3f(0.3f, -0.4f, 0.87f);  // baked diffuse light (world)
 };
 
+// A point where the surface closes to a tip (a cone's apex), with the surfel's normal there and
+// the mesh's UV at it.
+struct SurfelApex {
+  Eigen::Vector3f position = Eigen::Vector3f::Zero();
+  Eigen::Vector3f normal = Eigen::Vector3f::UnitZ();
+  Eigen::Vector2f uv = Eigen::Vector2f::Zero();
+};
+
 // Appends `count` surfels on `mesh` (world frame) to `cloud` (must be a 2-scale cloud of SH degree
-// >= 1 when appearance.specular > 0). Extra channels of `cloud` get `extra_value` for new surfels.
+// >= 1 when appearance.specular > 0), then one surfel of the same size on each of `apices`. Area
+// sampling leaves a sharp tip bare (the nearest of N surfels stands about 1 / sqrt(N) of the slant
+// below a cone's apex), where a model trained on photographs places surfels to draw it. Extra
+// channels of `cloud` get `extra_value` for new surfels. The apices draw nothing from `rng`.
 void AppendSurfels(const TriangleMesh& mesh, size_t count, const Appearance& appearance,
                    const SurfelSampling& sampling, std::mt19937_64& rng, GaussianCloud* cloud,
-                   float extra_value = 0.0f);
+                   float extra_value = 0.0f, const std::vector<SurfelApex>& apices = {});
 
 }  // namespace instascene
