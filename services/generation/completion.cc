@@ -110,6 +110,7 @@ nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& optio
         {"enclose_hull", options.meshing.enclose_hull},
         {"top_at_highest_surfel", options.meshing.top_at_highest_surfel},
         {"sides_within_surfels", options.meshing.sides_within_surfels},
+        {"sides_within_order_axis_copies", options.meshing.sides_within_order_axis_copies},
         {"empty_alpha", options.meshing.empty_alpha},
         {"empty_close_px", options.meshing.empty_close_px}}},
       {"free_space",
@@ -333,7 +334,8 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
       out.mesh,
       MeshObject(out.object, out.frame, options.meshing, options.num_threads,
                  out.hull_enclosed ? [&](const Eigen::Vector3f& p) { return free_space.IsFree(p); }
-                                   : std::function<bool(const Eigen::Vector3f&)>{}));
+                                   : std::function<bool(const Eigen::Vector3f&)>{},
+                 options.meshing.sides_within_order_axis_copies && out.prior.order_axis));
   out.manifest = Manifest(out, options);
   report("done", 7, 7);
   return out;

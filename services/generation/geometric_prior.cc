@@ -310,6 +310,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   out.report["handle_joined_sources"] = bodies.handle_joined;
   for (const SymmetryHypothesis& h : hypotheses) {
     out.revolution_axis |= h.accepted && h.kind == SymmetryKind::kAxis && h.order == 0;
+    out.order_axis |= h.accepted && h.kind == SymmetryKind::kAxis && h.order > 0;
   }
   for (uint32_t g = 0; g < instance.size(); ++g) {
     if (foreign[g]) out.foreign.push_back(g);

@@ -130,7 +130,8 @@ std::vector<PinholeCamera> MeshingCameras(const ObjectFrame& frame, const Meshin
 
 absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const ObjectFrame& frame,
                                         const MeshingOptions& options, int num_threads,
-                                        std::function<bool(const Eigen::Vector3f&)> seen_empty) {
+                                        std::function<bool(const Eigen::Vector3f&)> seen_empty,
+                                        bool surfels_all_round) {
   GaussianCloud clamped;
   const bool clamp = options.max_scale_spacings > 0 && frame.spacing > 0;
   if (clamp) {
@@ -244,8 +245,10 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
     SnapToSurfels(points, normals, snap, &mesh, fixed);
   }
   // Where the renders' visual hull closed what the surfels leave open (an unseen back), the
-  // surface stands past the surfels by right: the clamp would cut it.
-  if (options.closed && options.sides_within_surfels && !fusion.seen_empty && object.size() > 0) {
+  // surface stands past the surfels by right: the clamp would cut it. Not where the surfels stand
+  // all round the object.
+  if (options.closed && options.sides_within_surfels && (!fusion.seen_empty || surfels_all_round) &&
+      object.size() > 0) {
     ClampToSurfelPolygon(points, frame, &mesh);
   }
   if (options.closed && options.top_at_highest_surfel && object.size() > 0) {

@@ -105,8 +105,12 @@ struct MeshingOptions {
   // `top_at_highest_surfel` (a footprint's lip past a body's widest point made bottles 1-4 mm
   // wide). Not where the visual hull encloses the object (`enclose_hull` with `seen_empty`
   // given): there the surface closes an unseen side past the surfels, which the clamp would cut
-  // (docs/RESULTS.md "Meshing: no side past the outermost surfels").
+  // (docs/RESULTS.md "Meshing: no side past the outermost surfels"); unless the surfels stand all
+  // round it (MeshObject's `surfels_all_round`: a box's n-fold copies).
   bool sides_within_surfels = true;
+  // The completion meshes an object an accepted n-fold axis completed (a box) with
+  // `surfels_all_round`: the copies stand on every side.
+  bool sides_within_order_axis_copies = true;
 };
 
 // The meshing cameras: elevations -60, -30, 0, 30, 60 degrees x `azimuths`, plus both poles.
@@ -114,9 +118,12 @@ std::vector<PinholeCamera> MeshingCameras(const ObjectFrame& frame, const Meshin
 
 // `seen_empty` (optional): the capture's seen-empty space; with it the closed surface encloses
 // what the meshing renders' visual hull holds and no depth map reached, except that space
-// (DepthFusionOptions::seen_empty).
-absl::StatusOr<TriangleMesh> MeshObject(
-    const GaussianCloud& object, const ObjectFrame& frame, const MeshingOptions& options,
-    int num_threads, std::function<bool(const Eigen::Vector3f&)> seen_empty = {});
+// (DepthFusionOptions::seen_empty). `surfels_all_round`: the object's surfels stand on every side
+// of it (an n-fold axis's copies, a box's), so `sides_within_surfels` applies with `seen_empty`
+// too: the hull closes gaps between them, not an unseen side beyond them.
+absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& object, const ObjectFrame& frame,
+                                        const MeshingOptions& options, int num_threads,
+                                        std::function<bool(const Eigen::Vector3f&)> seen_empty = {},
+                                        bool surfels_all_round = false);
 
 }  // namespace instascene::generation

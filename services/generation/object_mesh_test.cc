@@ -135,19 +135,22 @@ TEST(ObjectMesh, NothingStandsAboveTheHighestSurfel) {
 
 // Likewise past the box's side faces: the fused sides stand outside the outermost surfel centres
 // (on the true faces) unless clamped to the centres' polygon. Where the renders' visual hull
-// encloses the object (an unseen side closed past the surfels) the clamp is not applied.
+// encloses the object (an unseen side closed past the surfels) the clamp is not applied, unless
+// the surfels stand all round the object (a box an n-fold axis completed).
 TEST(ObjectMesh, NoSideStandsPastTheOutermostSurfels) {
   const SurfelBox box(4000, SurfelSampling{}, 5);
   Eigen::AlignedBox3f centres;
   for (uint32_t g = 0; g < box.surfels.size(); ++g) {
     centres.extend(Eigen::Vector3f(&box.surfels.positions[3 * g]));
   }
-  auto overhang = [&](bool clamp, bool hull) {  // the most a vertex stands past them sideways
+  // The most a vertex stands past them sideways.
+  auto overhang = [&](bool clamp, bool hull, bool all_round = false) {
     MeshingOptions options;
     options.sides_within_surfels = clamp;
     auto mesh = MeshObject(box.surfels, box.frame, options, 2,
                            hull ? [](const Eigen::Vector3f&) { return false; }
-                                : std::function<bool(const Eigen::Vector3f&)>{});
+                                : std::function<bool(const Eigen::Vector3f&)>{},
+                           all_round);
     EXPECT_TRUE(mesh.ok()) << mesh.status();
     float out = -1;
     for (const Eigen::Vector3f& v : mesh->vertices) {
@@ -160,6 +163,8 @@ TEST(ObjectMesh, NoSideStandsPastTheOutermostSurfels) {
   EXPECT_GT(overhang(false, false), 0.001f);
   EXPECT_LE(overhang(true, false), 1e-6f);
   EXPECT_GT(overhang(true, true), 0.001f);
+  EXPECT_LE(overhang(true, true, true), 1e-6f);
+  EXPECT_GT(overhang(false, true, true), 0.001f);
   EXPECT_NEAR(centres.max().x(), box.bounds.max().x(), 1e-4f);
 }
 

@@ -63,6 +63,9 @@ struct PriorOutput {
   // does not fill it, MeshingOptions::enclose_hull). A box's n-fold axis leaves the inside to the
   // hull: a face seen only edge-on stays a gap its copies do not fill, and the box meshed hollow.
   bool revolution_axis = false;
+  // An accepted n-fold axis (a box's) shaped the completion: its copies stand on every side of
+  // the object, whose sides the meshing keeps within them (MeshObject's `surfels_all_round`).
+  bool order_axis = false;
 };
 
 class CompletionPrior {
