@@ -82,15 +82,13 @@ int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions&
   }
   if (merges == 0) return 0;
   std::vector<Instance> merged;
-  std::vector<int64_t> slot(n, -1);
+  const std::vector<uint32_t> component = sets.Components();
   for (uint32_t a = 0; a < n; ++a) {
-    const uint32_t root = sets.Find(a);
-    if (slot[root] < 0) {
-      slot[root] = static_cast<int64_t>(merged.size());
+    if (component[a] == merged.size()) {  // its set's first member
       merged.push_back(std::move((*instances)[a]));
       continue;
     }
-    Instance& target = merged[slot[root]];
+    Instance& target = merged[component[a]];
     Instance& source = (*instances)[a];
     std::vector<uint32_t> uni;
     std::set_union(target.gaussians.begin(), target.gaussians.end(), source.gaussians.begin(),

@@ -213,14 +213,10 @@ std::vector<MaskNode> ClusterMasks(const TrackerSet& set, const MaskJudgement& j
       for (uint32_t b : partners[a]) sets.Union(a, b);
     }
     std::vector<MaskNode> merged;
-    std::vector<int64_t> slot(n, -1);
+    const std::vector<uint32_t> component = sets.Components();
     for (uint32_t a = 0; a < n; ++a) {
-      const uint32_t root = sets.Find(a);
-      if (slot[root] < 0) {
-        slot[root] = static_cast<int64_t>(merged.size());
-        merged.push_back({{}, ViewSet(set.num_views), {}});
-      }
-      MaskNode& target = merged[slot[root]];
+      if (component[a] == merged.size()) merged.push_back({{}, ViewSet(set.num_views), {}});
+      MaskNode& target = merged[component[a]];
       target.masks.insert(target.masks.end(), nodes[a].masks.begin(), nodes[a].masks.end());
       target.visible.Or(nodes[a].visible);
       std::vector<uint32_t> uni;

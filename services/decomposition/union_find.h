@@ -25,6 +25,18 @@ class UnionFind {
     parent_[std::max(ra, rb)] = std::min(ra, rb);
     return true;
   }
+  // Per element, its set's number: the sets numbered 0, 1, ... in the order of their smallest
+  // members, so an element whose number equals the count of sets seen so far (in index order)
+  // is its set's first.
+  std::vector<uint32_t> Components() {
+    std::vector<uint32_t> out(parent_.size());
+    uint32_t next = 0;
+    for (uint32_t x = 0; x < parent_.size(); ++x) {
+      const uint32_t root = Find(x);  // the smallest member: numbered before x unless x is it
+      out[x] = root == x ? next++ : out[root];
+    }
+    return out;
+  }
 
  private:
   std::vector<uint32_t> parent_;
