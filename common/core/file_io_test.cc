@@ -6,6 +6,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "common/core/json_file.h"
 #include "common/core/testing/temp_dir.h"
 
 namespace instascene {
@@ -53,6 +54,22 @@ TEST(FileIo, ScopedTempDirRemovesItself) {
     EXPECT_TRUE(std::filesystem::exists(dir.Sub("f")));
   }
   EXPECT_FALSE(std::filesystem::exists(kept));
+}
+
+TEST(JsonFile, ParsesOrSaysWhichFileIsNotJson) {
+  testing::ScopedTempDir dir("json_file");
+  ASSERT_TRUE(WriteFileAtomically(dir.Sub("good.json"), R"({"a": [1, 2]})").ok());
+  ASSERT_TRUE(WriteFileAtomically(dir.Sub("bad.json"), "{\"a\": ").ok());
+  const absl::StatusOr<nlohmann::json> good = ReadJsonFile(dir.Sub("good.json"), 1024);
+  ASSERT_TRUE(good.ok()) << good.status();
+  EXPECT_EQ((*good)["a"][1], 2);
+  const absl::StatusOr<nlohmann::json> bad = ReadJsonFile(dir.Sub("bad.json"), 1024);
+  EXPECT_EQ(bad.status().code(), absl::StatusCode::kDataLoss);
+  EXPECT_NE(bad.status().message().find("bad.json: not JSON"), std::string::npos) << bad.status();
+  EXPECT_EQ(ReadJsonFile(dir.Sub("missing.json"), 1024).status().code(),
+            absl::StatusCode::kNotFound);
+  EXPECT_EQ(ReadJsonFile(dir.Sub("good.json"), 4).status().code(),
+            absl::StatusCode::kResourceExhausted);
 }
 
 }  // namespace

@@ -5,7 +5,7 @@
 #include <Eigen/Geometry>
 
 #include "absl/strings/str_cat.h"
-#include "common/core/file_io.h"
+#include "common/core/json_file.h"
 #include "common/core/status.h"
 #include "common/eval/geometry_metrics.h"
 #include "common/mesh/mesh_ply.h"
@@ -15,13 +15,6 @@ namespace instascene::objects {
 namespace {
 namespace fs = std::filesystem;
 using nlohmann::json;
-
-absl::StatusOr<json> ReadJson(const std::string& path) {
-  ASSIGN_OR_RETURN(std::string text, ReadFileBounded(path, 64 << 20));
-  json j = json::parse(text, nullptr, false);
-  if (j.is_discarded()) return absl::DataLossError(absl::StrCat(path, ": not JSON"));
-  return j;
-}
 
 struct GtObject {
   uint32_t id = 0;
@@ -38,7 +31,7 @@ absl::StatusOr<std::vector<ExportObjectEval>> EvaluateExport(const std::string& 
   if (!scene.meters_per_unit)
     return absl::FailedPreconditionError(absl::StrCat(scene_dir, ": no meters_per_unit"));
   const double mpu = *scene.meters_per_unit;
-  ASSIGN_OR_RETURN(json gt_list, ReadJson(scene.Path("gt/objects.json")));
+  ASSIGN_OR_RETURN(json gt_list, ReadJsonFile(scene.Path("gt/objects.json"), 64 << 20));
   if (!gt_list.is_array())
     return absl::FailedPreconditionError(absl::StrCat(scene_dir, ": no ground truth objects"));
   std::vector<GtObject> gts;
@@ -53,11 +46,12 @@ absl::StatusOr<std::vector<ExportObjectEval>> EvaluateExport(const std::string& 
     g.vertices = mesh.vertices;
     gts.push_back(std::move(g));
   }
-  ASSIGN_OR_RETURN(json catalogue, ReadJson((fs::path(export_dir) / "objects.json").string()));
+  ASSIGN_OR_RETURN(json catalogue,
+                   ReadJsonFile((fs::path(export_dir) / "objects.json").string(), 64 << 20));
   std::vector<ExportObjectEval> out;
   for (const json& entry : catalogue.value("objects", json::array())) {
     const std::string dir = (fs::path(export_dir) / entry.value("dir", "")).string();
-    ASSIGN_OR_RETURN(json m, ReadJson(dir + "/manifest.json"));
+    ASSIGN_OR_RETURN(json m, ReadJsonFile(dir + "/manifest.json", 64 << 20));
     ASSIGN_OR_RETURN(TriangleMesh mesh, ReadMeshPly(dir + "/mesh.ply"));
     const json& pose = m["world_from_object"];
     const json& q = pose["quaternion_xyzw"];

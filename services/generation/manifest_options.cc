@@ -1,0 +1,80 @@
+#include "services/generation/manifest_options.h"
+
+namespace instascene::generation {
+namespace {
+
+Eigen::Vector3f Vec3(const nlohmann::json& j) {
+  return {j.at(0).get<float>(), j.at(1).get<float>(), j.at(2).get<float>()};
+}
+
+}  // namespace
+
+ObjectFrame FrameFromManifest(const nlohmann::json& m) {
+  ObjectFrame f;
+  const nlohmann::json& j = m.at("frame");
+  f.center = Vec3(j.at("center"));
+  f.up = Vec3(j.at("up"));
+  f.radius = j.at("radius").get<float>();
+  f.spacing = j.at("spacing").get<float>();
+  if (j.contains("bottom")) f.bottom_height = j["bottom"].get<float>();
+  f.has_support = !j.at("support").is_null();
+  if (f.has_support) f.support_height = j.at("support").get<float>();
+  return f;
+}
+
+FreeSpaceOptions FreeSpaceFromManifest(const nlohmann::json& m) {
+  FreeSpaceOptions f;
+  if (!m.contains("free_space")) return f;  // manifests before 2026-12-05 ran the defaults
+  const nlohmann::json& j = m["free_space"];
+  f.resolution = j.value("resolution", f.resolution);
+  f.extent_radii = j.value("extent_radii", f.extent_radii);
+  f.min_views = j.value("min_views", f.min_views);
+  f.margin_voxels = j.value("margin_voxels", f.margin_voxels);
+  f.max_rays_per_view = j.value("max_rays_per_view", f.max_rays_per_view);
+  f.hole_rays = j.value("hole_rays", f.hole_rays);
+  f.hole_slack = j.value("hole_slack", f.hole_slack);
+  return f;
+}
+
+MeshingOptions MeshingFromManifest(const nlohmann::json& m) {
+  MeshingOptions meshing;
+  if (!m.contains("meshing")) return meshing;
+  const nlohmann::json& j = m["meshing"];
+  meshing.size_px = j.value("size_px", meshing.size_px);
+  meshing.min_alpha = j.value("min_alpha", meshing.min_alpha);
+  // Manifests written before the inset meshed without it.
+  meshing.inset_sigmas = j.value("inset_sigmas", 0.0f);
+  // And before the silhouette carving without it.
+  meshing.carve_views = j.value("carve_views", 0);
+  meshing.empty_alpha = j.value("empty_alpha", meshing.empty_alpha);
+  meshing.empty_close_px = j.value("empty_close_px", 0.0f);
+  // And before the snap without it.
+  meshing.snap_radius_spacings = j.value("snap_radius_spacings", 0.0f);
+  meshing.snap_layer_spacings = j.value("snap_layer_spacings", meshing.snap_layer_spacings);
+  meshing.snap_max_voxels = j.value("snap_max_voxels", meshing.snap_max_voxels);
+  meshing.snap_reach_spacings = j.value("snap_reach_spacings", 0.0f);
+  // And before the visual hull without it.
+  meshing.enclose_hull = j.value("enclose_hull", false);
+  // And before the top and side clamps without them.
+  meshing.top_at_highest_surfel = j.value("top_at_highest_surfel", false);
+  meshing.sides_within_surfels = j.value("sides_within_surfels", false);
+  meshing.sides_within_order_axis_copies = j.value("sides_within_order_axis_copies", false);
+  return meshing;
+}
+
+RingOptions RingFromManifest(const nlohmann::json& m, std::vector<bool>* known) {
+  const nlohmann::json& views = m.at("ring");
+  RingOptions ring;
+  ring.views = static_cast<int>(views.size());
+  if (!views.empty()) ring.elevation_deg = views[0].value("elevation_deg", 30.0);
+  if (m.contains("ring_camera")) {
+    ring.size_px = m["ring_camera"].value("size_px", ring.size_px);
+    ring.focal_px = m["ring_camera"].value("focal_px", ring.focal_px);
+    ring.distance_radii = m["ring_camera"].value("distance_radii", ring.distance_radii);
+  }
+  known->clear();
+  for (const nlohmann::json& v : views) known->push_back(v.value("known", false));
+  return ring;
+}
+
+}  // namespace instascene::generation
