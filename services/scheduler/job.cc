@@ -55,6 +55,8 @@ bool IsFinal(JobState state) {
          state == JobState::kCancelled;
 }
 
+bool IsHeld(JobState state) { return state == JobState::kLeased || state == JobState::kRunning; }
+
 absl::StatusOr<JobState> Transition(JobState from, JobEvent event) {
   const bool held = from == JobState::kLeased || from == JobState::kRunning;
   switch (event) {

@@ -43,6 +43,7 @@ absl::StatusOr<JobState> ParseJobState(absl::string_view name);
 const char* JobEventName(JobEvent event);
 const char* FailureKindName(FailureKind kind);
 bool IsFinal(JobState state);
+bool IsHeld(JobState state);  // leased or running: a worker holds it
 
 // The single transition function. FailedPrecondition names the illegal move.
 absl::StatusOr<JobState> Transition(JobState from, JobEvent event);

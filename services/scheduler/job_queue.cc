@@ -12,10 +12,6 @@
 namespace instascene::scheduler {
 namespace {
 
-constexpr int kMaxScanJobs = 100000;  // jobs of one scene read by CancelScene / GetScene
-
-bool IsHeld(JobState s) { return s == JobState::kLeased || s == JobState::kRunning; }
-
 // A deferred stage of a plan, as stored on its fan-out source.
 struct PlanStage {
   std::string kind, mode, over;  // mode "each" (per item) or "all" (join over per-item `over`)
@@ -360,40 +356,6 @@ absl::Status JobQueue::Complete(const std::string& id, const std::string& token,
   });
 }
 
-bool JobQueue::MayLeaveOut(const Job& job, const std::string& name) const {
-  return options_.partial_join_kinds.count(job.kind) > 0 && name.find('/') != std::string::npos;
-}
-
-absl::Status JobQueue::CancelDependents(QueueTx& tx, const std::string& id,
-                                        const std::string& why) {
-  ASSIGN_OR_RETURN(std::vector<std::string> dependents, tx.Dependents(id));
-  for (const std::string& d : dependents) {
-    ASSIGN_OR_RETURN(Job job, Load(tx, d));
-    bool left_out = false;
-    for (const JobDependency& dep : job.dependencies)
-      left_out |= dep.job_id == id && MayLeaveOut(job, dep.name);
-    if (left_out && job.state == JobState::kQueued) {
-      if (job.pending > 0) --job.pending;  // runs over the items that succeeded
-      RETURN_IF_ERROR(tx.Update(job));
-    } else if (job.state == JobState::kQueued) {
-      RETURN_IF_ERROR(EndCancelled(tx, &job, why));
-    } else if (IsHeld(job.state) && !job.cancel_requested) {
-      job.cancel_requested = true;  // cannot happen (held jobs wait for success); kept safe
-      RETURN_IF_ERROR(tx.Update(job));
-    }
-  }
-  return absl::OkStatus();
-}
-
-absl::Status JobQueue::EndCancelled(QueueTx& tx, Job* job, const std::string& why) {
-  RETURN_IF_ERROR(Apply(job, JobEvent::kCancel));
-  job->error = why;
-  job->lease_token.clear();
-  job->lease_expires_ms = 0;
-  RETURN_IF_ERROR(tx.Update(*job));
-  return CancelDependents(tx, job->id, absl::StrCat("dependency ", job->id, " was cancelled"));
-}
-
 absl::Status JobQueue::RetryOrFail(QueueTx& tx, Job* job, const std::string& error,
                                    bool retryable) {
   if (job->cancel_requested) return EndCancelled(tx, job, error);
@@ -435,122 +397,6 @@ absl::Status JobQueue::Fail(const std::string& id, const std::string& token, Fai
     }
     return absl::InvalidArgumentError("unknown failure kind");
   });
-}
-
-absl::StatusOr<Job> JobQueue::Cancel(const std::string& id) {
-  Job result;
-  RETURN_IF_ERROR(store_->Transact(false, [&](QueueTx& tx) -> absl::Status {
-    ASSIGN_OR_RETURN(result, Load(tx, id));
-    if (result.state == JobState::kCancelled) return absl::OkStatus();
-    if (IsFinal(result.state))
-      return absl::FailedPreconditionError(
-          absl::StrCat("job ", id, " is already ", JobStateName(result.state)));
-    if (result.state == JobState::kQueued) return EndCancelled(tx, &result, "cancelled by request");
-    // Held: the worker sees the request in its next heartbeat and acknowledges it.
-    result.cancel_requested = true;
-    result.updated_ms = clock_->NowMs();
-    return tx.Update(result);
-  }));
-  return result;
-}
-
-absl::StatusOr<std::vector<Job>> JobQueue::CancelScene(const std::string& scene) {
-  if (scene.empty()) return absl::InvalidArgumentError("cancel: scene is empty");
-  std::vector<Job> affected;
-  RETURN_IF_ERROR(store_->Transact(false, [&](QueueTx& tx) -> absl::Status {
-    affected.clear();
-    JobFilter filter;
-    filter.scene = scene;
-    filter.limit = kMaxScanJobs;
-    ASSIGN_OR_RETURN(std::vector<Job> jobs, tx.List(filter));
-    if (jobs.empty()) return absl::NotFoundError(absl::StrCat("no jobs for scene ", scene));
-    std::vector<std::string> unfinished;
-    for (auto it = jobs.rbegin(); it != jobs.rend(); ++it)  // oldest first: roots cascade
-      if (!IsFinal(it->state)) unfinished.push_back(it->id);
-    for (const std::string& id : unfinished) {
-      ASSIGN_OR_RETURN(Job job, Load(tx, id));  // fresh: an earlier cascade may have ended it
-      if (IsFinal(job.state)) continue;
-      if (job.state == JobState::kQueued) {
-        RETURN_IF_ERROR(EndCancelled(tx, &job, "scene cancelled by request"));
-      } else if (!job.cancel_requested) {
-        job.cancel_requested = true;
-        job.updated_ms = clock_->NowMs();
-        RETURN_IF_ERROR(tx.Update(job));
-      }
-    }
-    for (const std::string& id : unfinished) {
-      ASSIGN_OR_RETURN(Job job, Load(tx, id));
-      affected.push_back(std::move(job));
-    }
-    return absl::OkStatus();
-  }));
-  return affected;
-}
-
-absl::StatusOr<Job> JobQueue::Get(const std::string& id) {
-  Job job;
-  RETURN_IF_ERROR(store_->Transact(true, [&](QueueTx& tx) -> absl::Status {
-    ASSIGN_OR_RETURN(job, Load(tx, id));
-    return absl::OkStatus();
-  }));
-  return job;
-}
-
-absl::StatusOr<std::vector<Job>> JobQueue::List(const JobFilter& filter) {
-  std::vector<Job> jobs;
-  RETURN_IF_ERROR(store_->Transact(true, [&](QueueTx& tx) -> absl::Status {
-    ASSIGN_OR_RETURN(jobs, tx.List(filter));
-    return absl::OkStatus();
-  }));
-  return jobs;
-}
-
-absl::StatusOr<QueueStats> JobQueue::Stats() {
-  QueueStats stats;
-  RETURN_IF_ERROR(store_->Transact(true, [&](QueueTx& tx) -> absl::Status {
-    ASSIGN_OR_RETURN(stats, tx.Stats(clock_->NowMs()));
-    return absl::OkStatus();
-  }));
-  return stats;
-}
-
-absl::StatusOr<SceneSummary> JobQueue::GetScene(const std::string& scene) {
-  if (scene.empty()) return absl::InvalidArgumentError("scene name is empty");
-  JobFilter filter;
-  filter.scene = scene;
-  filter.limit = kMaxScanJobs;
-  ASSIGN_OR_RETURN(std::vector<Job> jobs, List(filter));  // newest first
-  if (jobs.empty()) return absl::NotFoundError(absl::StrCat("no jobs for scene ", scene));
-  SceneSummary summary;
-  summary.scene = scene;
-  summary.scene_manifest = jobs.front().scene_manifest;
-  std::map<std::string, int64_t> by_state;
-  std::map<std::string, const Job*> latest;  // kind -> latest succeeded job that is not per item
-  std::map<std::string, std::string> kind_of;
-  for (const Job& j : jobs) {
-    ++by_state[JobStateName(j.state)];
-    kind_of[j.id] = j.kind;
-    if (j.state != JobState::kSucceeded || j.item >= 0) continue;
-    const Job*& best = latest[j.kind];
-    if (best == nullptr || j.updated_ms > best->updated_ms) best = &j;
-  }
-  std::map<std::pair<std::string, int64_t>, const Job*> chosen;
-  for (const auto& [kind, job] : latest) chosen[{kind, -1}] = job;
-  for (const Job& j : jobs) {  // per-item outputs of the chosen run of their fan-out source
-    if (j.state != JobState::kSucceeded || j.item < 0) continue;
-    auto parent_kind = kind_of.find(j.parent);
-    if (parent_kind == kind_of.end()) continue;
-    auto source = latest.find(parent_kind->second);
-    if (source == latest.end() || source->second->id != j.parent) continue;
-    const Job*& best = chosen[{j.kind, j.item}];
-    if (best == nullptr || j.updated_ms > best->updated_ms) best = &j;
-  }
-  for (const auto& [key, job] : chosen) {
-    summary.outputs.push_back({job->kind, job->item, job->id, job->output_manifest,
-                               job->scene_manifest, job->updated_ms});
-  }
-  for (const auto& [state, n] : by_state) summary.jobs_by_state.emplace_back(state, n);
-  return summary;
 }
 
 absl::StatusOr<int> JobQueue::PruneFinished(int64_t retention_ms) {

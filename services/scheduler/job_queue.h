@@ -138,6 +138,8 @@ class JobQueue {
   int64_t BackoffMs(int attempts);
   std::string NewToken(int attempt);
 
+  static constexpr int kMaxSceneJobs = 100000;  // jobs of one scene read by CancelScene, GetScene
+
   std::unique_ptr<QueueStore> store_;
   QueueOptions options_;
   Clock* clock_;
