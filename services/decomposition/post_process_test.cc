@@ -1,0 +1,241 @@
+#include <gtest/gtest.h>
+
+#include <numeric>
+#include <random>
+#include <tuple>
+
+#include "services/decomposition/decompose.h"
+#include "services/decomposition/instance_merging.h"
+#include "services/decomposition/mask_graph.h"
+#include "services/decomposition/post_process.h"
+#include "services/decomposition/testing/hand_trackers.h"
+#include "services/decomposition/unlabelled_gaussians.h"
+
+namespace instascene::decomposition {
+namespace {
+
+// A (0..99) and B (100..199) are the two sides of one object, C (200..299) its neighbour. Masks
+// hold A and B together in 3 frames and apart in 1 (a part split); B and C together in 2 frames
+// (merged masks) and apart in 2; A and C together in 1, apart in 3. Only A and B merge.
+TEST(MergeUnseparated, TwoSidesOfOneObjectMergeNeighboursDoNot) {
+  const TrackerSet set = MakeSet(4, 300,
+                                 {{0, 1, 0, 200},
+                                  {0, 2, 200, 300},
+                                  {1, 1, 0, 200},
+                                  {1, 2, 200, 300},
+                                  {2, 1, 0, 100},
+                                  {2, 2, 100, 300},
+                                  {3, 1, 0, 300}});
+  std::vector<Instance> instances(3);
+  for (uint32_t k = 0; k < 3; ++k) {
+    for (uint32_t g = 100 * k; g < 100 * (k + 1); ++g) instances[k].gaussians.push_back(g);
+    instances[k].masks.push_back(k);
+    instances[k].coverage.push_back(1.0f);
+  }
+  DecompositionOptions options;
+  options.merge_min_joins = 0;  // off
+  std::vector<Instance> unchanged = instances;
+  EXPECT_EQ(MergeUnseparatedInstances(set, options, &unchanged), 0);
+  EXPECT_EQ(unchanged.size(), 3u);
+  options.merge_min_joins = 2;
+  ASSERT_EQ(MergeUnseparatedInstances(set, options, &instances), 1);
+  ASSERT_EQ(instances.size(), 2u);
+  EXPECT_EQ(instances[0].gaussians.size(), 200u);
+  EXPECT_EQ(instances[0].gaussians.front(), 0u);
+  EXPECT_EQ(instances[0].gaussians.back(), 199u);
+  EXPECT_EQ(instances[0].masks, (std::vector<uint32_t>{0, 1}));
+  EXPECT_EQ(instances[1].gaussians.front(), 200u);
+  options.merge_max_separation = 0.2;  // A and B's 1 of 4 is now too many
+  std::vector<Instance> strict(3);
+  for (uint32_t k = 0; k < 3; ++k) {
+    for (uint32_t g = 100 * k; g < 100 * (k + 1); ++g) strict[k].gaussians.push_back(g);
+  }
+  EXPECT_EQ(MergeUnseparatedInstances(set, options, &strict), 0);
+}
+
+TEST(PostProcess, GaussiansOnlyMergedMasksHoldJoinTheNearestHeldInstance) {
+  // Object A: instance 0 holds 0-59, its Gaussians 60-99 lie in no instance (only masks merging
+  // it with B hold them, or whole masks of A the clustering did not keep). B: instance 1, 100-199.
+  // 200-209: table beside A that one bleeding mask of A covers. 210-249: an object the
+  // clustering missed, held by its own masks only.
+  auto join = [](std::vector<uint32_t> a, const std::vector<uint32_t>& b) {
+    a.insert(a.end(), b.begin(), b.end());
+    return a;
+  };
+  const TrackerSet set = MakeSetFromLists(
+      4, 250,
+      {{0, 1, join(Range(0, 100), Range(200, 210))},  // A whole, bleeding onto the table
+       {0, 2, Range(100, 200)},
+       {0, 3, Range(210, 250)},
+       {1, 1, Range(0, 200)},  // A and B merged
+       {1, 3, Range(210, 250)},
+       {2, 1, Range(0, 60)},  // a part of A, the rest unmasked
+       {2, 2, Range(100, 200)},
+       {3, 1, Range(0, 200)},  // merged again
+       {3, 3, Range(210, 250)}});
+  GaussianCloud cloud;
+  cloud.Resize(250);
+  for (int g = 0; g < 250; ++g) {
+    float x = 0.001f * g;                              // A, its orphans, B: 1 mm apart on a line
+    if (g >= 200 && g < 210) x = -0.001f * (g - 199);  // the table, before A
+    if (g >= 210) x = 5.0f + 0.001f * g;               // far away
+    cloud.positions[3 * g] = x;
+  }
+  // Runs the step on fresh instances (A: 0-59, B: 100-199); returns (joined, A, B).
+  auto label = [&](double min_held, float step, int threads) {
+    DecompositionOptions options;
+    options.orphan_min_held = min_held;
+    options.num_threads = threads;
+    std::vector<Instance> instances(2);
+    instances[0].gaussians = Range(0, 60);
+    instances[1].gaussians = Range(100, 200);
+    const size_t joined = LabelOrphanGaussians(set, cloud, step, options, &instances);
+    return std::make_tuple(joined, instances[0].gaussians, instances[1].gaussians);
+  };
+  // Orphans 60-99: A held by their masks in frames 0, 1, 3 (3 of 4), B in 1 and 3 (2 of 4): both
+  // qualify at 0.5, and each grows from its end of the line in 1 mm steps: they meet halfway. The
+  // table: A in 1 of 4. The missed object: none.
+  EXPECT_EQ(label(0.5, 0.0015f, 1),
+            std::make_tuple(size_t{40}, Range(0, 80), join(Range(80, 100), Range(100, 200))));
+  // Above 0.5 only A qualifies; above 0.75 none does; above 1 the step is off.
+  EXPECT_EQ(label(0.7, 0.0015f, 1), std::make_tuple(size_t{40}, Range(0, 100), Range(100, 200)));
+  EXPECT_EQ(label(0.8, 0.0015f, 1), std::make_tuple(size_t{0}, Range(0, 60), Range(100, 200)));
+  EXPECT_EQ(label(2.0, 0.0015f, 1), std::make_tuple(size_t{0}, Range(0, 60), Range(100, 200)));
+  // Steps shorter than the 1 mm spacing reach no orphan.
+  EXPECT_EQ(std::get<0>(label(0.5, 0.0005f, 1)), 0u);
+  // The answer does not depend on the thread count.
+  EXPECT_EQ(label(0.5, 0.0015f, 2), label(0.5, 0.0015f, 1));
+}
+
+TEST(PostProcess, FramesThatMissedAnInstanceDoNotCountAgainstItsOrphans) {
+  // Object C: instance 0-59, orphans 60-99 (its thin rim: traced, outside the masks of views 4
+  // and 5). 100-109: table beside it, covered by one bleeding mask. Views 0 and 1 missed C
+  // entirely (no mask there), views 2 and 3 mask it whole, views 4 and 5 mask its instance part.
+  const TrackerSet set = MakeSetFromLists(6, 110,
+                                          {{2, 1, Range(0, 100)},
+                                           {3, 1, Range(0, 110)},  // bleeding onto the table
+                                           {4, 1, Range(0, 60)},
+                                           {5, 1, Range(0, 60)}});
+  GaussianCloud cloud;
+  cloud.Resize(110);
+  for (int g = 0; g < 110; ++g) {
+    cloud.positions[3 * g] = g < 100 ? 0.001f * g : -0.001f * (g - 99);  // the table before C
+  }
+  auto label = [&](bool skip_missed, int threads) {
+    DecompositionOptions options;
+    options.orphan_skips_missed_frames = skip_missed;
+    options.num_threads = threads;
+    std::vector<Instance> instances(1);
+    instances[0].gaussians = Range(0, 60);
+    LabelOrphanGaussians(set, cloud, 0.0015f, options, &instances);
+    return instances[0].gaussians;
+  };
+  // Every traced frame counted: the rim is held in 2 of 6 frames, too few. Without the two frames
+  // that missed C: 2 of 4. The table: 1 of 6, then 1 of 4, out either way.
+  EXPECT_EQ(label(false, 1), Range(0, 60));
+  EXPECT_EQ(label(true, 1), Range(0, 100));
+  EXPECT_EQ(label(true, 2), label(true, 1));
+}
+
+TEST(PostProcess, UntracedGaussiansJoinTheInstanceOfTheNearestTracedOne) {
+  // Gaussians 0-4 traced and in the instance (x = 0 .. 0.4), 5-9 traced and in none (x = 2 ..
+  // 2.4); 10-14 untraced: 10-12 beside the instance, 13 beside the unclaimed ones, 14 beyond the
+  // radius from everything.
+  TrackerSet set = MakeSet(1, 15, {{0, 1, 0, 5}});
+  set.frames.clear();
+  set.frame_offsets.assign(1, 0);
+  for (uint32_t g = 0; g < 15; ++g) {
+    if (g < 10) set.frames.push_back(0);
+    set.frame_offsets.push_back(set.frames.size());
+  }
+  GaussianCloud cloud;
+  cloud.Resize(15);
+  const float x[15] = {0,    0.1f, 0.2f,  0.3f,  0.4f,  2,     2.1f, 2.2f,
+                       2.3f, 2.4f, 0.05f, 0.15f, 0.42f, 2.05f, 5};
+  for (int g = 0; g < 15; ++g) cloud.positions[3 * g] = x[g];
+  std::vector<Instance> instances(1);
+  instances[0].gaussians = {0, 1, 2, 3, 4};
+  EXPECT_EQ(LabelUntracedGaussians(set, cloud, 0.5f, 1, &instances), 3u);
+  EXPECT_EQ(instances[0].gaussians, (std::vector<uint32_t>{0, 1, 2, 3, 4, 10, 11, 12}));
+  // Radius 0 is off.
+  instances[0].gaussians = {0, 1, 2, 3, 4};
+  EXPECT_EQ(LabelUntracedGaussians(set, cloud, 0.0f, 1, &instances), 0u);
+  EXPECT_EQ(instances[0].gaussians.size(), 5u);
+}
+
+TEST(PostProcess, DbscanSplitsClustersAndDropsFloaters) {
+  std::mt19937 rng(3);
+  std::normal_distribution<float> n(0.0f, 0.01f);
+  std::vector<Eigen::Vector3f> points;
+  for (int i = 0; i < 60; ++i) points.emplace_back(n(rng), n(rng), n(rng));
+  for (int i = 0; i < 60; ++i) points.emplace_back(1.0f + n(rng), n(rng), n(rng));
+  points.emplace_back(0.5f, 0.5f, 0.5f);  // floaters
+  points.emplace_back(-0.7f, 0.2f, 0.0f);
+  const std::vector<int> label = Dbscan(points, 0.05f, 4);
+  for (int i = 1; i < 60; ++i) EXPECT_EQ(label[i], label[0]);
+  for (int i = 61; i < 120; ++i) EXPECT_EQ(label[i], label[60]);
+  EXPECT_NE(label[0], label[60]);
+  EXPECT_GE(label[0], 0);
+  EXPECT_EQ(label[120], -1);
+  EXPECT_EQ(label[121], -1);
+}
+
+// Textbook O(n^2) DBSCAN core-point clustering: the reference for the grid implementation.
+std::vector<int> BruteCoreClusters(const std::vector<Eigen::Vector3f>& p, float eps,
+                                   int min_points) {
+  const size_t n = p.size();
+  std::vector<uint8_t> core(n, 0);
+  for (size_t i = 0; i < n; ++i) {
+    int count = 0;
+    for (size_t j = 0; j < n; ++j) count += (p[i] - p[j]).norm() <= eps;
+    core[i] = count >= min_points;
+  }
+  std::vector<int> label(n, -1);
+  int next = 0;
+  for (size_t i = 0; i < n; ++i) {
+    if (!core[i] || label[i] >= 0) continue;
+    std::vector<size_t> stack = {i};
+    label[i] = next;
+    while (!stack.empty()) {
+      const size_t a = stack.back();
+      stack.pop_back();
+      for (size_t b = 0; b < n; ++b) {
+        if (core[b] && label[b] < 0 && (p[a] - p[b]).norm() <= eps) {
+          label[b] = next;
+          stack.push_back(b);
+        }
+      }
+    }
+    ++next;
+  }
+  return label;
+}
+
+TEST(PostProcess, GridDbscanMatchesBruteForceOnCorePoints) {
+  std::mt19937 rng(21);
+  std::uniform_real_distribution<float> u(0.0f, 1.0f);
+  for (int trial = 0; trial < 6; ++trial) {
+    std::vector<Eigen::Vector3f> p;
+    for (int c = 0; c < 5; ++c) {  // blobs of varying density plus uniform clutter
+      const Eigen::Vector3f center(u(rng), u(rng), u(rng));
+      const float spread = 0.02f + 0.05f * u(rng);
+      for (int i = 0; i < 80; ++i)
+        p.push_back(center + spread * Eigen::Vector3f(u(rng) - 0.5f, u(rng) - 0.5f, u(rng) - 0.5f));
+    }
+    for (int i = 0; i < 100; ++i) p.emplace_back(u(rng), u(rng), u(rng));
+    const float eps = 0.03f + 0.02f * trial;
+    const std::vector<int> fast = Dbscan(p, eps, 4), ref = BruteCoreClusters(p, eps, 4);
+    for (size_t i = 0; i < p.size(); ++i) {
+      if (ref[i] >= 0) {
+        EXPECT_EQ(fast[i], ref[i]) << "core point " << i << " trial " << trial;
+      }
+      // A non-core point is noise exactly when no core point lies within eps.
+      bool near_core = false;
+      for (size_t j = 0; j < p.size(); ++j) near_core |= ref[j] >= 0 && (p[i] - p[j]).norm() <= eps;
+      EXPECT_EQ(fast[i] >= 0, ref[i] >= 0 || near_core) << i;
+    }
+  }
+}
+
+}  // namespace
+}  // namespace instascene::decomposition
