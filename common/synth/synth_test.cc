@@ -25,61 +25,6 @@
 namespace instascene {
 namespace {
 
-// Signed volume by the divergence theorem: positive and equal to the analytic volume for a
-// closed, outward-oriented mesh.
-double SignedVolume(const TriangleMesh& mesh) {
-  double v = 0;
-  for (const auto& t : mesh.triangles) {
-    v += mesh.vertices[t[0]].cast<double>().dot(
-             mesh.vertices[t[1]].cast<double>().cross(mesh.vertices[t[2]].cast<double>())) /
-         6.0;
-  }
-  return v;
-}
-
-TEST(Primitives, ClosedMeshesHaveTheAnalyticVolume) {
-  const double pi = std::numbers::pi;
-  EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kBox, {0.2f, 0.3f, 0.4f}})), 0.024, 1e-6);
-  EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kCylinder, {0.1f, 0, 0.2f}}, 256)),
-              pi * 0.01 * 0.2, 2e-5);
-  EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kCone, {0.1f, 0, 0.3f}}, 256)),
-              pi * 0.01 * 0.1, 2e-5);
-  EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kSphere, {0.1f, 0, 0}}, 256)),
-              4.0 / 3 * pi * 1e-3, 2e-5);
-  EXPECT_NEAR(SignedVolume(MakeShapeMesh({ShapeKind::kTorus, {0.1f, 0.03f, 0}}, 256)),
-              2 * pi * pi * 0.1 * 0.0009, 2e-5);
-  for (ShapeKind k : {ShapeKind::kBottle, ShapeKind::kCup, ShapeKind::kBowl}) {
-    const TriangleMesh m = MakeShapeMesh({k, {0.05f, 0, 0.15f}});
-    EXPECT_GT(SignedVolume(m), 0.0) << ShapeKindName(k);
-    EXPECT_NEAR(m.Bounds().min().z(), 0.0f, 1e-6f);
-  }
-}
-
-TEST(Primitives, AsymmetricShapesAreClosedPartsWithTheirVolumes) {
-  // The L-block's two boxes share a face: volumes add up.
-  const TriangleMesh l = MakeShapeMesh({ShapeKind::kLBlock, {0.2f, 0.1f, 0.1f}});
-  EXPECT_NEAR(SignedVolume(l), 0.2 * 0.04 * 0.1 + 0.07 * 0.06 * 0.055, 1e-6);
-  // The mug: the cup plus a handle torus beside it.
-  const TriangleMesh cup = MakeShapeMesh({ShapeKind::kCup, {0.05f, 0, 0.1f}}, 96);
-  const TriangleMesh mug = MakeShapeMesh({ShapeKind::kMug, {0.05f, 0, 0.1f}}, 96);
-  EXPECT_GT(SignedVolume(mug), SignedVolume(cup));
-  EXPECT_GT(mug.Bounds().max().x(), cup.Bounds().max().x() + 0.03f);  // the handle sticks out
-  // Nothing of the handle hangs inside the cavity (above the floor, within the inner wall).
-  const float inner = 0.05f * (1.0f - 0.08f), floor = 0.08f * 0.05f;
-  int in_cavity = 0;
-  for (const Eigen::Vector3f& v : mug.vertices) {
-    in_cavity += v.z() > floor + 1e-5f && std::hypot(v.x(), v.y()) < inner - 1e-5f;
-  }
-  EXPECT_EQ(in_cavity, 0);
-  // The irregular block keeps its base and is closed with a positive volume.
-  const TriangleMesh rock = MakeShapeMesh({ShapeKind::kIrregular, {0.15f, 0.1f, 0.1f}});
-  EXPECT_GT(SignedVolume(rock), 0.15 * 0.1 * 0.1);
-  EXPECT_NEAR(rock.Bounds().min().z(), 0.0f, 1e-6f);
-  for (ShapeKind k : {ShapeKind::kMug, ShapeKind::kLBlock, ShapeKind::kIrregular}) {
-    EXPECT_NE(ShapeKindName(k), "?");
-  }
-}
-
 TEST(ClutterScene, AsymmetricShareDrawsAsymmetricShapes) {
   auto options = ClutterPreset("tiny");
   ASSERT_TRUE(options.ok());
@@ -257,25 +202,6 @@ TEST(ClutterScene, EveryConesApexCarriesASurfel) {
   EXPECT_GE(cones, 1);
 }
 
-TEST(Surfels, ApicesAreAppendedWithoutChangingTheSampledSurfels) {
-  const TriangleMesh cone = MakeShapeMesh({ShapeKind::kCone, {0.04f, 0, 0.09f}});
-  GaussianCloud plain, tipped;
-  plain.num_scales = tipped.num_scales = 2;
-  std::mt19937_64 a(5), b(5);
-  AppendSurfels(cone, 300, Appearance{}, SurfelSampling{}, a, &plain);
-  const SurfelApex apex{Eigen::Vector3f(0, 0, 0.09f), Eigen::Vector3f::UnitZ(), {0, 1}};
-  AppendSurfels(cone, 300, Appearance{}, SurfelSampling{}, b, &tipped, 0.0f, {apex});
-  ASSERT_EQ(tipped.size(), 301u);
-  ASSERT_TRUE(tipped.Validate().ok());
-  EXPECT_EQ(a(), b());  // the apex drew nothing from the generator
-  for (size_t k = 0; k < 3 * 300; ++k) ASSERT_EQ(plain.positions[k], tipped.positions[k]);
-  EXPECT_EQ(Eigen::Vector3f(&tipped.positions[3 * 300]), apex.position);
-  // Sized like its neighbours, facing along its normal.
-  EXPECT_EQ(tipped.log_scales[2 * 300], tipped.log_scales[0]);
-  const float* q = &tipped.rotations[4 * 300];
-  EXPECT_NEAR(RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).col(2).z(), 1.0, 1e-6);
-}
-
 TEST(ClutterScene, RejectsBadOptionsAndScalesTheTable) {
   ClutterOptions options;
   options.objects = 0;
@@ -316,114 +242,6 @@ TEST(GroundTruth, InstanceMapsAgreeWithOneHotFeatureRendering) {
     }
   }
   EXPECT_GT(labelled, 1000);
-}
-
-LabelMap TwoTouchingSquares() {
-  LabelMap gt{64, 48, std::vector<uint16_t>(64 * 48, 0)};
-  for (int y = 10; y < 30; ++y) {
-    for (int x = 10; x < 50; ++x) gt.labels[y * 64 + x] = x < 30 ? 3 : 7;
-  }
-  gt.labels[40 * 64 + 5] = 9;  // a 1-pixel instance: below the minimum area
-  return gt;
-}
-
-TEST(MaskNoise, NoneIsGroundTruthWithRandomIds) {
-  const LabelMap gt = TwoTouchingSquares();
-  MaskNoiseOptions none = *MaskNoiseOptions::Level("none");
-  none.min_area_fraction = 0.001f;  // 3 px on this 64x48 map
-  const LabelMap noisy = SimulateSegmenter(gt, none, 5);
-  std::map<uint16_t, std::set<uint16_t>> mapping;
-  for (size_t p = 0; p < gt.labels.size(); ++p) {
-    if (gt.labels[p] == 9) {
-      EXPECT_EQ(noisy.labels[p], 0);  // dropped: below the minimum area
-      continue;
-    }
-    mapping[gt.labels[p]].insert(noisy.labels[p]);
-  }
-  EXPECT_EQ(mapping[0], std::set<uint16_t>{0});
-  ASSERT_EQ(mapping[3].size(), 1u);
-  ASSERT_EQ(mapping[7].size(), 1u);
-  EXPECT_NE(*mapping[3].begin(), *mapping[7].begin());
-  EXPECT_LE(*mapping[3].begin(), 2);  // ids are 1..K
-}
-
-TEST(MaskNoise, MergesSplitsAndMissesHappenAtTheirRates) {
-  const LabelMap gt = TwoTouchingSquares();
-  MaskNoiseOptions merge_only;
-  merge_only.merge_probability = 1.0f;
-  const LabelMap merged = SimulateSegmenter(gt, merge_only, 1);
-  EXPECT_EQ(merged.labels[20 * 64 + 15], merged.labels[20 * 64 + 45]);  // one mask over both
-  EXPECT_NE(merged.labels[20 * 64 + 15], 0);
-  MaskNoiseOptions split_only;
-  split_only.split_probability = 1.0f;
-  const LabelMap split = SimulateSegmenter(gt, split_only, 2);
-  std::set<uint16_t> ids(split.labels.begin(), split.labels.end());
-  EXPECT_EQ(ids.size(), 6u);  // background, two halves of each square, the 1-px instance
-  // Over many seeds, "high" changes the mask count more often than "low".
-  int changed_low = 0, changed_high = 0;
-  for (uint64_t seed = 0; seed < 60; ++seed) {
-    for (const char* level : {"low", "high"}) {
-      const LabelMap m = SimulateSegmenter(gt, *MaskNoiseOptions::Level(level), seed);
-      std::set<uint16_t> k(m.labels.begin(), m.labels.end());
-      (std::string(level) == "low" ? changed_low : changed_high) += k.size() != 4;
-    }
-  }
-  EXPECT_GT(changed_high, changed_low);
-  EXPECT_FALSE(MaskNoiseOptions::Level("extreme").ok());
-  // Deterministic from the seed.
-  EXPECT_EQ(SimulateSegmenter(gt, *MaskNoiseOptions::Level("high"), 9).labels,
-            SimulateSegmenter(gt, *MaskNoiseOptions::Level("high"), 9).labels);
-}
-
-TEST(MaskNoise, PartFamilySplitsIntoPartsMergesLookAlikesBleedsAndFlickers) {
-  // A square (3) touching a wider rectangle (7), and a far square of about the size of 3 (5).
-  LabelMap gt{80, 60, std::vector<uint16_t>(80 * 60, 0)};
-  for (int y = 10; y < 30; ++y)
-    for (int x = 10; x < 60; ++x) gt.labels[y * 80 + x] = x < 30 ? 3 : 7;
-  for (int y = 40; y < 58; ++y)
-    for (int x = 55; x < 77; ++x) gt.labels[y * 80 + x] = 5;
-  auto count = [](const LabelMap& m) {
-    std::set<uint16_t> ids(m.labels.begin(), m.labels.end());
-    ids.erase(0);
-    return ids.size();
-  };
-  MaskNoiseOptions parts;
-  parts.part_family = true;
-  parts.part_split_probability = 1.0f;
-  const LabelMap split = SimulateSegmenter(gt, parts, 3);
-  EXPECT_GE(count(split), 6u);  // every square in 2-3 parts
-  // Parts are bands along the longer axis: square 3 (20 wide, 20 tall) splits along y.
-  MaskNoiseOptions lookalike;
-  lookalike.part_family = true;
-  lookalike.similar_merge_probability = 1.0f;
-  const LabelMap merged = SimulateSegmenter(gt, lookalike, 4);
-  EXPECT_EQ(merged.labels[20 * 80 + 15], merged.labels[50 * 80 + 60]);  // 3 and far 5: one mask
-  EXPECT_NE(merged.labels[20 * 80 + 15], merged.labels[20 * 80 + 45]);  // touching 7 is not
-  MaskNoiseOptions bleed;
-  bleed.part_family = true;
-  bleed.bleed_px = 3;
-  int moved = 0;
-  for (uint64_t seed = 0; seed < 10; ++seed) {
-    const LabelMap b = SimulateSegmenter(gt, bleed, seed);
-    // Column 30 belongs to 7; a bleed of 3 replaces it by 3's mask in some views.
-    moved += b.labels[20 * 80 + 30] == b.labels[20 * 80 + 25];
-    EXPECT_EQ(b.labels[5 * 80 + 5], 0);  // background never bleeds
-  }
-  EXPECT_GT(moved, 0);
-  MaskNoiseOptions flicker;
-  flicker.part_family = true;
-  flicker.flicker_probability = 1.0f;
-  const LabelMap f = SimulateSegmenter(gt, flicker, 5);
-  size_t holes = 0;
-  for (size_t p = 0; p < gt.labels.size(); ++p) holes += gt.labels[p] != 0 && f.labels[p] == 0;
-  EXPECT_GT(holes, 0u);
-  // The presets exist, differ from the first family and are deterministic.
-  for (const char* level : {"sam-low", "sam-medium", "sam-high"}) {
-    auto o = MaskNoiseOptions::Level(level);
-    ASSERT_TRUE(o.ok()) << level;
-    EXPECT_TRUE(o->part_family);
-    EXPECT_EQ(SimulateSegmenter(gt, *o, 9).labels, SimulateSegmenter(gt, *o, 9).labels);
-  }
 }
 
 TEST(SceneWriter, WritesImagesMasksAndGroundTruth) {
