@@ -31,6 +31,8 @@ void AddCompleteCommand(CLI::App& app, Action* action);
 void AddExportCommand(CLI::App& app, Action* action);
 void AddServeCommand(CLI::App& app, Action* action);
 void AddClientCommands(CLI::App& app, Action* action);  // submit, watch, jobs, fetch, cancel
+void AddWatchCommand(CLI::App& app, Action* action);    // cmd_jobs.cc
+void AddJobsCommand(CLI::App& app, Action* action);     // cmd_jobs.cc
 void AddObjectCommands(CLI::App& app, Action* action);  // object, objects
 void AddTokenCommand(CLI::App& app, Action* action);    // token create | revoke | list
 

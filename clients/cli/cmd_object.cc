@@ -56,7 +56,7 @@ void PrintObject(const client::ObjectInfo& o) {
 
 void AddObjectCommands(CLI::App& app, Action* action) {
   struct Args {
-    std::string server = "127.0.0.1:50051", store, scene, view, pixel, point, ray, out;
+    std::string server = kDefaultServer, store, scene, view, pixel, point, ray, out;
     ConnectionFlags connection;
     int64_t id = -1;
     double max_distance = 0;
@@ -106,9 +106,8 @@ void AddObjectCommands(CLI::App& app, Action* action) {
         ASSIGN_OR_RETURN(auto v, ParseNumbers(args->ray, 6, "--ray", "OX,OY,OZ,DX,DY,DZ"));
         selector = client::ObjectSelector::Ray({v[0], v[1], v[2]}, {v[3], v[4], v[5]});
       }
-      ASSIGN_OR_RETURN(client::ClientOptions options,
-                       ClientOptionsFor(args->connection, args->server, args->store));
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, client::Client::Connect(options));
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
+                       ConnectClient(args->connection, args->server, args->store));
       ASSIGN_OR_RETURN(client::ObjectInfo object, c->GetObject(args->scene, selector));
       PrintObject(object);
       nlohmann::json out = ObjectJson(object);
@@ -124,7 +123,7 @@ void AddObjectCommands(CLI::App& app, Action* action) {
   });
 
   struct ListArgs {
-    std::string server = "127.0.0.1:50051", scene;
+    std::string server = kDefaultServer, scene;
     ConnectionFlags connection;
     bool json = false;
   };
@@ -139,9 +138,8 @@ void AddObjectCommands(CLI::App& app, Action* action) {
   ls->add_flag("--json", list->json, "Print {\"objects\": [...]} as the last stdout line");
   ls->callback([list, action] {
     *action = [list]() -> absl::Status {
-      ASSIGN_OR_RETURN(client::ClientOptions options,
-                       ClientOptionsFor(list->connection, list->server));
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, client::Client::Connect(options));
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
+                       ConnectClient(list->connection, list->server));
       ASSIGN_OR_RETURN(std::vector<client::ObjectInfo> objects, c->ListObjects(list->scene));
       std::printf("%-5s %-9s %-26s %-30s %s\n", "ID", "SOURCE", "SIZE", "COMPLETION", "ARTEFACTS");
       nlohmann::json all = nlohmann::json::array();

@@ -55,4 +55,11 @@ absl::StatusOr<client::ClientOptions> ClientOptionsFor(const ConnectionFlags& fl
   return options;
 }
 
+absl::StatusOr<std::unique_ptr<client::Client>> ConnectClient(const ConnectionFlags& flags,
+                                                              const std::string& server,
+                                                              const std::string& store) {
+  ASSIGN_OR_RETURN(client::ClientOptions options, ClientOptionsFor(flags, server, store));
+  return client::Client::Connect(options);
+}
+
 }  // namespace instascene::cli

@@ -7,12 +7,16 @@
 
 #include <CLI/CLI.hpp>
 
+#include <memory>
 #include <string>
 
 #include "absl/status/statusor.h"
 #include "instascene/client/client.h"
 
 namespace instascene::cli {
+
+// The scheduler's address the client commands connect to by default (`instascene serve`'s).
+inline constexpr char kDefaultServer[] = "127.0.0.1:50051";
 
 struct ConnectionFlags {
   std::string token_file, tls_ca, tls_cert, tls_key, tls_server_name;
@@ -22,5 +26,10 @@ void AddConnectionFlags(CLI::App* command, ConnectionFlags* flags);
 absl::StatusOr<client::ClientOptions> ClientOptionsFor(const ConnectionFlags& flags,
                                                        const std::string& server,
                                                        const std::string& store = "");
+
+// Connects through the C++ client library (deadlines, retries while UNAVAILABLE).
+absl::StatusOr<std::unique_ptr<client::Client>> ConnectClient(const ConnectionFlags& flags,
+                                                              const std::string& server,
+                                                              const std::string& store = "");
 
 }  // namespace instascene::cli
