@@ -65,6 +65,8 @@ class SchedulerService final : public v1::Scheduler::Service {
                          grpc::ServerWriter<v1::Job>* writer) override;
 
  private:
+  // A job as the caller sees it: its scene under the caller's own name for it.
+  static void ToCallerProto(const auth::Identity& who, const Job& job, v1::Job* out);
   absl::Status Submit(const auth::Identity& who, const v1::SubmitPipelineRequest& request,
                       v1::SubmitPipelineResponse* response);
   absl::StatusOr<auth::Identity> Caller(grpc::ServerContext* context,
