@@ -11,6 +11,13 @@
 namespace instascene {
 namespace {
 
+// A fixed vertex whose normal has less than this across the slide normal (sin of ~17 degrees)
+// does not slide: the inside of a flat base.
+constexpr float kMinAcross = 0.3f;
+// A sliding vertex's layer is extrapolated to its height where the layer's heights spread by at
+// least this share of the neighbourhood's radius (standard deviation 0.1 radius).
+constexpr float kMinRiseSpread = 0.01f;
+
 // Area-weighted vertex normals, pointing out of the volume the mesh encloses (by the sign of its
 // signed volume; an open mesh keeps its winding's side).
 std::vector<Eigen::Vector3f> OutwardVertexNormals(const TriangleMesh& mesh) {
@@ -32,18 +39,23 @@ std::vector<Eigen::Vector3f> OutwardVertexNormals(const TriangleMesh& mesh) {
   return normals;
 }
 
-// `passes` times, each value becomes the mean over its vertex and the vertex's 1-ring (`zero`
-// where `is_fixed`).
-template <typename T, typename Fixed>
-void SmoothOverRings(const std::vector<std::vector<uint32_t>>& ring, const Fixed& is_fixed,
-                     int passes, const T& zero, std::vector<T>* values) {
+// `passes` times, each value becomes the mean over its vertex and those of the vertex's 1-ring
+// not `left_out` (`zero` where `stays`).
+template <typename T, typename Stays, typename LeftOut>
+void SmoothOverRings(const std::vector<std::vector<uint32_t>>& ring, const Stays& stays,
+                     const LeftOut& left_out, int passes, const T& zero, std::vector<T>* values) {
   for (int pass = 0; pass < passes; ++pass) {
     std::vector<T> next(values->size(), zero);
     for (size_t v = 0; v < values->size(); ++v) {
-      if (is_fixed(v)) continue;
+      if (stays(v)) continue;
       T sum = (*values)[v];
-      for (uint32_t u : ring[v]) sum += (*values)[u];
-      next[v] = sum / static_cast<float>(1 + ring[v].size());
+      int count = 1;
+      for (uint32_t u : ring[v]) {
+        if (left_out(u)) continue;
+        sum += (*values)[u];
+        ++count;
+      }
+      next[v] = sum / static_cast<float>(count);
     }
     values->swap(next);
   }
@@ -57,10 +69,23 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
   if (points.empty() || mesh->vertices.empty() || options.radius <= 0 || options.max_move <= 0) {
     return 0;
   }
-  const std::vector<Eigen::Vector3f> vertex_normals = OutwardVertexNormals(*mesh);
+  std::vector<Eigen::Vector3f> vertex_normals = OutwardVertexNormals(*mesh);
+  auto is_fixed = [&fixed](size_t v) { return v < fixed.size() && fixed[v]; };
+  // A fixed vertex slides along its normal's part across `slide_normal` (none where that part is
+  // short: the inside of a flat base, whose normal is the slide normal).
+  const bool slide = !options.slide_normal.isZero();
+  for (size_t v = 0; v < vertex_normals.size(); ++v) {
+    if (!is_fixed(v)) continue;
+    Eigen::Vector3f across = Eigen::Vector3f::Zero();
+    if (slide) {
+      across =
+          vertex_normals[v] - vertex_normals[v].dot(options.slide_normal) * options.slide_normal;
+      across = across.norm() >= kMinAcross ? across.normalized() : Eigen::Vector3f::Zero();
+    }
+    vertex_normals[v] = across;
+  }
   const PointIndex3 index(points);
   const size_t n = mesh->vertices.size();
-  auto is_fixed = [&fixed](size_t v) { return v < fixed.size() && fixed[v]; };
   const int min_surfels = std::max(1, options.min_surfels);
   // Each vertex's signed move along its normal (0 where too few surfels face its way).
   std::vector<float> move(n, 0.0f);
@@ -68,34 +93,53 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
   const float tangential_var = 0.25f * options.radius * options.radius;
   tbb::parallel_for(
       tbb::blocked_range<size_t>(0, n, 256), [&](const tbb::blocked_range<size_t>& r) {
-        std::vector<std::pair<float, float>> facing;  // (offset along the normal, weight)
+        struct Facing {
+          float along, weight, rise;  // offset along the normal, weight, height along the slide
+        };
+        std::vector<Facing> facing;
         for (size_t v = r.begin(); v != r.end(); ++v) {
           const Eigen::Vector3f& p = mesh->vertices[v];
           const Eigen::Vector3f& nv = vertex_normals[v];
-          if (nv.isZero() || is_fixed(v)) continue;
+          if (nv.isZero()) continue;
           facing.clear();
           for (uint32_t i : index.WithinRadius(p, options.radius)) {
             if (std::abs(normals[i].dot(nv)) < options.min_cos) continue;
             const Eigen::Vector3f d = points[i] - p;
             const float along = d.dot(nv);
             const float tangential_sq = std::max(0.0f, d.squaredNorm() - along * along);
-            facing.emplace_back(along, std::exp(-0.5f * tangential_sq / tangential_var));
+            facing.push_back({along, std::exp(-0.5f * tangential_sq / tangential_var),
+                              d.dot(options.slide_normal)});
           }
           if (static_cast<int>(facing.size()) < min_surfels) continue;
           // The outermost layer: surfels within `layer` of the min_surfels-th outermost one (fewer
           // stray surfels standing farther out do not define it, nor count in it).
           std::nth_element(facing.begin(), facing.begin() + (min_surfels - 1), facing.end(),
-                           [](const auto& a, const auto& b) { return a.first > b.first; });
-          const float outer = facing[min_surfels - 1].first;
-          double sum = 0, weight = 0;
-          for (const auto& [along, w] : facing) {
-            if (std::abs(along - outer) > options.layer) continue;
-            sum += w * along;
-            weight += w;
+                           [](const Facing& a, const Facing& b) { return a.along > b.along; });
+          const float outer = facing[min_surfels - 1].along;
+          double sum = 0, weight = 0, rise = 0, rise_sq = 0, rise_along = 0;
+          for (const Facing& f : facing) {
+            if (std::abs(f.along - outer) > options.layer) continue;
+            sum += f.weight * f.along;
+            weight += f.weight;
+            rise += f.weight * f.rise;
+            rise_sq += f.weight * f.rise * f.rise;
+            rise_along += f.weight * f.rise * f.along;
           }
           if (weight <= 0) continue;
-          move[v] =
-              std::clamp(static_cast<float>(sum / weight), -options.max_move, options.max_move);
+          double offset = sum / weight;
+          // A sliding vertex (a base's rim) has the side's surfels only above it: where the side
+          // slopes (a cone's) their mean stands inside the rim, so the layer is extrapolated down
+          // to the vertex's height (a weighted line fit of the offset over the height).
+          if (is_fixed(v)) {
+            const double mean_rise = rise / weight;
+            const double var_rise = rise_sq / weight - mean_rise * mean_rise;
+            if (var_rise > kMinRiseSpread * options.radius * options.radius) {
+              const double slope = (rise_along / weight - mean_rise * offset) / var_rise;
+              offset -= slope * mean_rise;
+            }
+          }
+          if (weight <= 0) continue;
+          move[v] = std::clamp(static_cast<float>(offset), -options.max_move, options.max_move);
           snapped[v] = 1;
         }
       });
@@ -107,7 +151,12 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
       ring[t[k]].push_back(t[(k + 2) % 3]);
     }
   }
-  SmoothOverRings(ring, is_fixed, options.smooth_passes, 0.0f, &move);
+  // Fixed vertices that do not slide (a zero direction) stay. Without a slide they count as not
+  // moving (the surface near a fixed base moves less); with one, the rim slides and the inside of
+  // the base, which has no say across the slide normal, is left out of its neighbours' means.
+  auto stays = [&](size_t v) { return is_fixed(v) && vertex_normals[v].isZero(); };
+  auto left_out = [&](size_t v) { return slide && stays(v); };
+  SmoothOverRings(ring, stays, left_out, options.smooth_passes, 0.0f, &move);
   size_t moved = 0;
   for (size_t v = 0; v < n; ++v) {
     mesh->vertices[v] += move[v] * vertex_normals[v];
@@ -125,7 +174,9 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
                         pull[v] = length / dist * (points[nearest] - mesh->vertices[v]);
                       }
                     });
-  SmoothOverRings(ring, is_fixed, options.smooth_passes, Eigen::Vector3f::Zero().eval(), &pull);
+  SmoothOverRings(
+      ring, is_fixed, [](size_t) { return false; }, options.smooth_passes,
+      Eigen::Vector3f::Zero().eval(), &pull);
   for (size_t v = 0; v < n; ++v) {
     mesh->vertices[v] += pull[v];
     moved += !snapped[v] && !pull[v].isZero();

@@ -30,12 +30,19 @@ struct SurfelSnapOptions {
   // surface: a fused lip over a rim or a corner) is pulled towards the nearest centre until it is
   // this far, by at most max_move (smoothed likewise). 0 = off.
   float reach = 0.0f;
+  // Vertices flagged `fixed` move only across this unit direction (an object's support's up):
+  // along the part of their normal perpendicular to it (where that part is at least 0.3 of it),
+  // onto the facing surfels' layer, the layer's offsets fitted by a weighted line over their
+  // height along this direction and taken at the vertex's own (a rim has its side's surfels only
+  // above it; on a side that narrows upwards their mean stands inside the rim). A flat base stays
+  // flat and its rim reaches the surfels. Zero: fixed vertices do not move. Not pulled by `reach`.
+  Eigen::Vector3f slide_normal = Eigen::Vector3f::Zero();
 };
 
 // Moves the vertices of `mesh` (a closed or open triangle mesh; normals taken outward by the sign
 // of its volume) onto the surfel centres `points` with unit normals `normals` (either sign).
-// Vertices flagged in `fixed` (empty, or one flag per vertex) do not move (an object's base on
-// its support). Returns how many vertices moved.
+// Vertices flagged in `fixed` (empty, or one flag per vertex) do not move, or slide within their
+// plane (`slide_normal`; an object's base on its support). Returns how many vertices moved.
 size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
                      const std::vector<Eigen::Vector3f>& normals, const SurfelSnapOptions& options,
                      TriangleMesh* mesh, const std::vector<uint8_t>& fixed = {});

@@ -122,6 +122,93 @@ TEST(SurfelSnap, MovesAreBoundedAndFixedVerticesOrASurfaceWithoutSurfelsStay) {
   EXPECT_EQ(alone.vertices, before.vertices);
 }
 
+// Surfels on the side of an upright cylinder of radius 1 and height 2 standing on z = 0 (rings
+// 0.08 apart, from 0.04 up), normals outward, negated every other surfel.
+void CylinderSideSurfels(std::vector<Eigen::Vector3f>* points,
+                         std::vector<Eigen::Vector3f>* normals) {
+  for (int k = 0; k < 25; ++k) {
+    for (int j = 0; j < 78; ++j) {
+      const float a = static_cast<float>(2 * M_PI * (j + 0.5f * (k % 2)) / 78);
+      const Eigen::Vector3f u(std::cos(a), std::sin(a), 0);
+      points->push_back(u + Eigen::Vector3f(0, 0, 0.04f + 0.08f * k));
+      normals->push_back((j + k) % 2 ? u : Eigen::Vector3f(-u));
+    }
+  }
+}
+
+TEST(SurfelSnap, AFixedBaseSlidesAcrossItsNormalOntoTheSurfels) {
+  // A fused cylinder 0.04 narrow (an inset at its base's sharp edge), its base on z = 0 fixed.
+  std::vector<Eigen::Vector3f> points, normals;
+  CylinderSideSurfels(&points, &normals);
+  std::vector<Eigen::Vector2f> profile = {{0, 0}, {0.5f, 0}};
+  for (int i = 0; i <= 8; ++i) profile.emplace_back(0.96f, 0.25f * i);
+  profile.emplace_back(0, 2);
+  const TriangleMesh start = MakeLathe(profile, 64, false);
+  std::vector<uint8_t> fixed(start.vertices.size());
+  for (size_t v = 0; v < fixed.size(); ++v) fixed[v] = start.vertices[v].z() <= 0;
+  auto rim = [](const TriangleMesh& mesh) {  // the base's widest radius, its lowest height
+    float widest = 0, lowest = 1e9f;
+    for (const Eigen::Vector3f& v : mesh.vertices) {
+      if (std::abs(v.z()) < 1e-6f) widest = std::max(widest, v.head<2>().norm());
+      lowest = std::min(lowest, v.z());
+    }
+    return std::make_pair(widest, lowest);
+  };
+  TriangleMesh held = start;
+  SnapToSurfels(points, normals, Options(), &held, fixed);
+  EXPECT_FLOAT_EQ(rim(held).first, 0.96f);  // fixed: the rim stays inside the surfels
+  SurfelSnapOptions o = Options();
+  o.slide_normal = Eigen::Vector3f::UnitZ();
+  TriangleMesh slid = start;
+  SnapToSurfels(points, normals, o, &slid, fixed);
+  EXPECT_NEAR(rim(slid).first, 1.0f, 0.01f);  // the rim reaches the side's surfels
+  EXPECT_EQ(rim(slid).second, 0.0f);          // and the base stays on z = 0, flat
+  for (size_t v = 0; v < start.vertices.size(); ++v) {
+    if (!fixed[v]) continue;
+    EXPECT_EQ(slid.vertices[v].z(), 0.0f);
+    // The inside of the base (its normal the slide normal) does not move.
+    if (start.vertices[v].head<2>().norm() < 0.6f) {
+      EXPECT_EQ(slid.vertices[v], start.vertices[v]);
+    }
+  }
+}
+
+// A cone's side sampled likewise (radius 1 at z = 0, apex at z = 2).
+void ConeSideSurfels(std::vector<Eigen::Vector3f>* points, std::vector<Eigen::Vector3f>* normals) {
+  for (int k = 0; k < 24; ++k) {
+    const float z = 0.04f + 0.08f * k, r = 1.0f - 0.5f * z;
+    const int n = static_cast<int>(std::lround(2 * M_PI * r / 0.08));
+    for (int j = 0; j < n; ++j) {
+      const float a = static_cast<float>(2 * M_PI * (j + 0.5f * (k % 2)) / n);
+      const Eigen::Vector3f u =
+          Eigen::Vector3f(2 * std::cos(a), 2 * std::sin(a), 1).normalized();  // (H cos, H sin, R)
+      points->push_back(Eigen::Vector3f(r * std::cos(a), r * std::sin(a), z));
+      normals->push_back((j + k) % 2 ? u : Eigen::Vector3f(-u));
+    }
+  }
+}
+
+// A cone's rim slides out to where its side's surfels meet the base: they all stand above it, on
+// a side that narrows upwards, so their layer is extrapolated down to the rim's height.
+TEST(SurfelSnap, AConesBaseRimSlidesToWhereItsSideMeetsTheBase) {
+  std::vector<Eigen::Vector3f> points, normals;
+  ConeSideSurfels(&points, &normals);
+  std::vector<Eigen::Vector2f> profile = {{0, 0}, {0.5f, 0}};
+  for (int i = 0; i <= 8; ++i) profile.emplace_back(0.96f * (1.0f - i / 8.0f), 0.25f * i * 0.96f);
+  const TriangleMesh start = MakeLathe(profile, 64, false);
+  std::vector<uint8_t> fixed(start.vertices.size());
+  for (size_t v = 0; v < fixed.size(); ++v) fixed[v] = start.vertices[v].z() <= 0;
+  SurfelSnapOptions o = Options();
+  o.slide_normal = Eigen::Vector3f::UnitZ();
+  TriangleMesh slid = start;
+  SnapToSurfels(points, normals, o, &slid, fixed);
+  float rim = 0;
+  for (const Eigen::Vector3f& v : slid.vertices) {
+    if (v.z() == 0) rim = std::max(rim, v.head<2>().norm());
+  }
+  EXPECT_NEAR(rim, 1.0f, 0.012f);
+}
+
 TEST(SurfelSnap, PastTheSurfelsEdgeTheReachPullsTheSurfaceBack) {
   // Surfels only on the cap z > 0.5; the mesh the whole sphere. Without a reach the uncovered
   // part stays; with one, it comes towards the cap by up to max_move, and the cap stays put.

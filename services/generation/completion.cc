@@ -106,6 +106,8 @@ nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& optio
         {"snap_layer_spacings", options.meshing.snap_layer_spacings},
         {"snap_max_voxels", options.meshing.snap_max_voxels},
         {"snap_reach_spacings", options.meshing.snap_reach_spacings},
+        {"snap_base_across", options.meshing.snap_base_across},
+        {"base_on_support", options.meshing.base_on_support},
         {"carve_views", options.meshing.carve_views},
         {"enclose_hull", options.meshing.enclose_hull},
         {"top_at_highest_surfel", options.meshing.top_at_highest_surfel},

@@ -53,6 +53,9 @@ MeshingOptions MeshingFromManifest(const nlohmann::json& m) {
   meshing.snap_layer_spacings = j.value("snap_layer_spacings", meshing.snap_layer_spacings);
   meshing.snap_max_voxels = j.value("snap_max_voxels", meshing.snap_max_voxels);
   meshing.snap_reach_spacings = j.value("snap_reach_spacings", 0.0f);
+  // And before the base's slide with a fixed base.
+  meshing.snap_base_across = j.value("snap_base_across", false);
+  meshing.base_on_support = j.value("base_on_support", false);
   // And before the visual hull without it.
   meshing.enclose_hull = j.value("enclose_hull", false);
   // And before the top and side clamps without them.

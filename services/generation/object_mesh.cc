@@ -226,6 +226,29 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
     }
   }
   ASSIGN_OR_RETURN(TriangleMesh mesh, FuseDepthMaps(views, fusion));
+  // The fused floor stands a fraction of a voxel above the plane it was cut at (the zero crossing
+  // between the last voxel inside and the first below the plane): the lowest voxel's layer of
+  // vertices is lowered onto the plane, together.
+  const float floor = std::min(frame.support_height, frame.bottom_height);
+  if (options.closed && frame.has_support && options.base_on_support) {
+    float lowest = std::numeric_limits<float>::infinity();
+    for (const Eigen::Vector3f& v : mesh.vertices) lowest = std::min(lowest, frame.up.dot(v));
+    const float drop = lowest - floor;
+    if (drop > 0 && drop <= fusion.voxel) {
+      for (Eigen::Vector3f& v : mesh.vertices) {
+        if (frame.up.dot(v) <= lowest + fusion.voxel) v -= drop * frame.up;
+      }
+    }
+  }
+  // The base: vertices within a voxel of the support (or of the lowest observed point, where the
+  // support was estimated above it).
+  std::vector<uint8_t> base;
+  if (options.closed && frame.has_support) {
+    base.resize(mesh.vertices.size());
+    for (size_t v = 0; v < mesh.vertices.size(); ++v) {
+      base[v] = frame.up.dot(mesh.vertices[v]) <= floor + fusion.voxel;
+    }
+  }
   if (options.closed && options.snap_radius_spacings > 0 && frame.spacing > 0) {
     SurfelSnapOptions snap;
     snap.radius = options.snap_radius_spacings * frame.spacing;
@@ -234,15 +257,8 @@ absl::StatusOr<TriangleMesh> MeshObject(const GaussianCloud& input, const Object
     snap.reach = options.snap_reach_spacings * frame.spacing;
     // The base on the support stays flat: it is where the object stands (a sphere's cap, a
     // bottle's foot), and a rounded base rolls in a simulator.
-    std::vector<uint8_t> fixed;
-    if (frame.has_support) {
-      const float floor = std::min(frame.support_height, frame.bottom_height) + fusion.voxel;
-      fixed.resize(mesh.vertices.size());
-      for (size_t v = 0; v < mesh.vertices.size(); ++v) {
-        fixed[v] = frame.up.dot(mesh.vertices[v]) <= floor;
-      }
-    }
-    SnapToSurfels(points, normals, snap, &mesh, fixed);
+    if (frame.has_support && options.snap_base_across) snap.slide_normal = frame.up;
+    SnapToSurfels(points, normals, snap, &mesh, base);
   }
   // Where the renders' visual hull closed what the surfels leave open (an unseen back), the
   // surface stands past the surfels by right: the clamp would cut it. Not where the surfels stand

@@ -168,6 +168,38 @@ TEST(ObjectMesh, NoSideStandsPastTheOutermostSurfels) {
   EXPECT_NEAR(centres.max().x(), box.bounds.max().x(), 1e-4f);
 }
 
+// The box standing on a support at z = 0: the closed fusion cuts it at the plane, and the fused
+// floor stands a fraction of a voxel above it; the base is lowered onto the plane, the rest stays.
+TEST(ObjectMesh, TheBaseStandsOnTheSupport) {
+  SurfelBox box(4000, SurfelSampling{}, 5);
+  box.frame.has_support = true;
+  box.frame.up = Eigen::Vector3f::UnitZ();
+  box.frame.support_height = 0;
+  box.frame.bottom_height = 0;
+  auto mesh = [&](bool on_support) {
+    MeshingOptions options;
+    options.base_on_support = on_support;
+    auto m = MeshObject(box.surfels, box.frame, options, 2);
+    EXPECT_TRUE(m.ok()) << m.status();
+    return *m;
+  };
+  auto lowest = [](const TriangleMesh& m) {
+    float z = 1;
+    for (const Eigen::Vector3f& v : m.vertices) z = std::min(z, v.z());
+    return z;
+  };
+  const TriangleMesh cut = mesh(false), lowered = mesh(true);
+  // The fused floor stood 0.9 mm (0.63 voxel) above the plane; the snap pulls part of it towards
+  // the bottom face's surfels, by at most the layer's offset.
+  EXPECT_GT(lowest(cut), 0.0002f);
+  EXPECT_NEAR(lowest(lowered), 0.0f, 1e-6f);
+  // The sides and the top stay where they were.
+  const Eigen::AlignedBox3f before = cut.Bounds(), after = lowered.Bounds();
+  EXPECT_NEAR(after.max().z(), before.max().z(), 1e-5f);
+  EXPECT_TRUE(after.max().head<2>().isApprox(before.max().head<2>(), 1e-3f));
+  EXPECT_TRUE(after.min().head<2>().isApprox(before.min().head<2>(), 1e-3f));
+}
+
 // A completed shell with a refused patch: a hole in a box's top, wider than the closing's gap
 // rule passes. Views looking into it see the inner sides of the far walls; fused, those depths
 // mark the inside as empty and the box comes out hollow. Fusing only the surfels whose outer
