@@ -138,7 +138,6 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
               offset -= slope * mean_rise;
             }
           }
-          if (weight <= 0) continue;
           move[v] = std::clamp(static_cast<float>(offset), -options.max_move, options.max_move);
           snapped[v] = 1;
         }
