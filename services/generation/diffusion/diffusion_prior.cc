@@ -56,6 +56,92 @@ class ConditionedDenoiser : public Denoiser {
   std::vector<std::vector<std::array<double, 16>>> poses_;
 };
 
+// The codec's (VAE's) latent channels C: InvalidArgument unless its latents are C x n x n with C
+// in [1, kMaxCodecChannels] (what the warping handles).
+absl::StatusOr<int> CodecChannels(const LatentCodec& codec, int n) {
+  const int cells = n * n;
+  const int channels = codec.latent_values() / cells;
+  if (channels < 1 || channels > kMaxCodecChannels || codec.latent_values() != channels * cells)
+    return absl::InvalidArgumentError(absl::StrCat(
+        "diffusion prior: the codec ", codec.name(), " makes latents of ", codec.latent_values(),
+        " values; the warping needs C x ", n, " x ", n, " with C in [1, ", kMaxCodecChannels, "]"));
+  return channels;
+}
+
+// Every target's plan on the latent grid (what the known views show of it, warped through the
+// instance's surfel discs; what stays background; what is left to the sampler), with the counts
+// the report gives.
+struct PlannedTargets {
+  std::vector<TargetPlan> plans;
+  int64_t warped_cells = 0, background_cells = 0, generated_cells = 0;
+};
+absl::StatusOr<PlannedTargets> PlanTargets(const PriorInput& input, const KnownViews& known,
+                                           const LatentCodec& codec, int n, int channels,
+                                           bool pixel_warp, bool unseen_mask) {
+  ASSIGN_OR_RETURN(std::unique_ptr<RayCaster> mesh,
+                   RayCaster::Create(SurfelDiscs(*input.instance, {}, SurfelDiscOptions{})));
+  PlannedTargets out;
+  for (const PinholeCamera& target : input.targets) {
+    ASSIGN_OR_RETURN(TargetPlan plan, PlanTarget(target, known.warp_sources, *mesh, codec, input, n,
+                                                 channels, pixel_warp, unseen_mask));
+    for (int cell = 0; cell < n * n; ++cell) out.background_cells += plan.background[cell];
+    out.warped_cells += plan.warp.written;
+    out.generated_cells += plan.generated;
+    out.plans.push_back(std::move(plan));
+  }
+  return out;
+}
+
+// RePaint: after each step of the first `replace_fraction` of the steps (from the noisiest),
+// pinned cells take their clean value noised to the level the latents are now at (clean after
+// the last step). Checks for cancellation at every step.
+StepHook RepaintHook(const PinnedCells& pinned, const NoiseSchedule& schedule,
+                     const DiffusionPriorOptions& options, int steps, int channels, int cells,
+                     uint64_t seed, const CancelFlag* cancel) {
+  const int replace_steps = static_cast<int>(std::ceil(options.replace_fraction * steps - 1e-9));
+  struct Noise {
+    std::mt19937_64 rng;
+    std::normal_distribution<double> normal{0.0, 1.0};
+  };
+  auto noise = std::make_shared<Noise>(Noise{std::mt19937_64(seed ^ 0x5eedULL)});
+  return
+      [&pinned, &schedule, replace = options.replace_known, replace_steps, channels, cells, cancel,
+       noise](int step, int timestep, std::vector<std::vector<float>>* latents) -> absl::Status {
+        RETURN_IF_ERROR(CheckCancelled(cancel, "diffusion prior"));
+        if (!replace || step >= replace_steps) return absl::OkStatus();
+        const double a = timestep < 0 ? 1.0 : schedule.alphas_cumprod[timestep];
+        for (size_t t = 0; t < latents->size(); ++t) {
+          for (int cell = 0; cell < cells; ++cell) {
+            float x0[kMaxCodecChannels + 1];
+            if (!pinned(t, cell, x0)) continue;
+            for (int c = 0; c <= channels; ++c) {
+              (*latents)[t][c * cells + cell] = static_cast<float>(
+                  std::sqrt(a) * x0[c] + std::sqrt(1.0 - a) * noise->normal(noise->rng));
+            }
+          }
+        }
+        return absl::OkStatus();
+      };
+}
+
+// How far the samples ended from the warped known content in the cells a known view sees (0
+// when replacement runs to the last step), per cell over the colour and depth channels.
+double KnownCellsDrift(const std::vector<TargetPlan>& plans, const PinnedCells& pinned,
+                       const std::vector<std::vector<float>>& latents, int channels, int cells) {
+  double drift = 0;
+  int64_t known_cells = 0;
+  for (size_t t = 0; t < plans.size(); ++t) {
+    for (int cell = 0; cell < cells; ++cell) {
+      float x0[kMaxCodecChannels + 1];
+      if (!plans[t].warp.known[cell] || !pinned(t, cell, x0)) continue;
+      ++known_cells;
+      for (int c = 0; c <= channels; ++c)
+        drift += std::abs(latents[t][c * cells + cell] - x0[c]) / (channels + 1);
+    }
+  }
+  return known_cells ? drift / known_cells : 0.0;
+}
+
 }  // namespace
 
 DiffusionPrior::DiffusionPrior(std::shared_ptr<const Denoiser> denoiser, std::string where,
@@ -76,11 +162,7 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   const int n = options_.latent_size, cells = n * n;
   const std::shared_ptr<const LatentCodec> codec =
       options_.codec ? options_.codec : std::make_shared<IdentityCodec>(n);
-  const int channels = codec->latent_values() / cells;  // the codec's (VAE's) channels
-  if (channels < 1 || channels > kMaxCodecChannels || codec->latent_values() != channels * cells)
-    return absl::InvalidArgumentError(absl::StrCat(
-        "diffusion prior: the codec ", codec->name(), " makes latents of ", codec->latent_values(),
-        " values; the warping needs C x ", n, " x ", n, " with C in [1, ", kMaxCodecChannels, "]"));
+  ASSIGN_OR_RETURN(const int channels, CodecChannels(*codec, n));
   const int latent_values = (channels + 1) * cells;  // colour latent + depth channel
   const bool pixel_warp = options_.warp == "pixel";
   ASSIGN_OR_RETURN(const KnownViews known,
@@ -91,19 +173,10 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
           std::vector<float>(
               static_cast<size_t>(3) * input.targets[0].width * input.targets[0].height, 1.0f),
           input.targets[0].width, input.targets[0].height));
-  ASSIGN_OR_RETURN(std::unique_ptr<RayCaster> mesh,
-                   RayCaster::Create(SurfelDiscs(*input.instance, {}, SurfelDiscOptions{})));
   const bool unseen_mask = options_.unseen_mask && input.free_space != nullptr;
-  std::vector<TargetPlan> plans;
-  int64_t warped_cells = 0, background_cells = 0, generated_cells = 0;
-  for (const PinholeCamera& target : input.targets) {
-    ASSIGN_OR_RETURN(TargetPlan plan, PlanTarget(target, known.warp_sources, *mesh, *codec, input,
-                                                 n, channels, pixel_warp, unseen_mask));
-    for (int cell = 0; cell < cells; ++cell) background_cells += plan.background[cell];
-    warped_cells += plan.warp.written;
-    generated_cells += plan.generated;
-    plans.push_back(std::move(plan));
-  }
+  ASSIGN_OR_RETURN(const PlannedTargets planned,
+                   PlanTargets(input, known, *codec, n, channels, pixel_warp, unseen_mask));
+  const std::vector<TargetPlan>& plans = planned.plans;
   RETURN_IF_ERROR(CheckCancelled(input.cancel, "diffusion prior"));
   const NoiseSchedule schedule = NoiseSchedule::ScaledLinear();
   DdimOptions ddim = options_.ddim;
@@ -112,30 +185,8 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   std::vector<int> conditions(input.conditions.size());
   for (size_t k = 0; k < conditions.size(); ++k) conditions[k] = static_cast<int>(k);
   const PinnedCells pinned(plans, background_latent, channels, cells);
-  std::mt19937_64 replace_rng(input.seed ^ 0x5eedULL);
-  std::normal_distribution<double> normal(0.0, 1.0);
-  // RePaint: after each step of the first replace_fraction of the steps (from the noisiest),
-  // pinned cells take their clean value noised to the level the latents are now at (clean after
-  // the last step).
-  const int replace_steps =
-      static_cast<int>(std::ceil(options_.replace_fraction * ddim.steps - 1e-9));
-  StepHook hook = [&](int step, int timestep,
-                      std::vector<std::vector<float>>* latents) -> absl::Status {
-    RETURN_IF_ERROR(CheckCancelled(input.cancel, "diffusion prior"));
-    if (!options_.replace_known || step >= replace_steps) return absl::OkStatus();
-    const double a = timestep < 0 ? 1.0 : schedule.alphas_cumprod[timestep];
-    for (size_t t = 0; t < latents->size(); ++t) {
-      for (int cell = 0; cell < cells; ++cell) {
-        float x0[kMaxCodecChannels + 1];
-        if (!pinned(t, cell, x0)) continue;
-        for (int c = 0; c <= channels; ++c) {
-          (*latents)[t][c * cells + cell] =
-              static_cast<float>(std::sqrt(a) * x0[c] + std::sqrt(1.0 - a) * normal(replace_rng));
-        }
-      }
-    }
-    return absl::OkStatus();
-  };
+  const StepHook hook = RepaintHook(pinned, schedule, options_, ddim.steps, channels, cells,
+                                    input.seed, input.cancel);
   std::vector<PinholeCamera> condition_cameras;
   for (const ViewImages& v : input.conditions) condition_cameras.push_back(v.camera);
   const ConditionedDenoiser conditioned(*denoiser_, known.condition_latents, condition_cameras,
@@ -147,19 +198,7 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
     return absl::Status(latents.status().code(), absl::StrCat("diffusion prior (denoiser ", where_,
                                                               "): ", latents.status().message()));
   }
-  // How far the samples ended from the warped known content in the cells a known view sees (0
-  // when replacement runs to the last step), over the colour and depth channels.
-  double drift = 0;
-  int64_t known_cells = 0;
-  for (size_t t = 0; t < plans.size(); ++t) {
-    for (int cell = 0; cell < cells; ++cell) {
-      float x0[kMaxCodecChannels + 1];
-      if (!plans[t].warp.known[cell] || !pinned(t, cell, x0)) continue;
-      ++known_cells;
-      for (int c = 0; c <= channels; ++c)
-        drift += std::abs((*latents)[t][c * cells + cell] - x0[c]) / (channels + 1);
-    }
-  }
+  const double drift = KnownCellsDrift(plans, pinned, *latents, channels, cells);
   int64_t object_pixels = 0;
   for (size_t t = 0; t < input.targets.size(); ++t) {
     ASSIGN_OR_RETURN(ViewImages v, DecodeTarget((*latents)[t], input.targets[t], *codec,
@@ -178,11 +217,11 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
                 {"replace_fraction", options_.replace_fraction},
                 {"warp", options_.warp},
                 {"unseen_mask", unseen_mask},
-                {"warped_latent_pixels", warped_cells},  // latent cells known, all targets
-                {"background_cells", background_cells},  // pinned to the background
-                {"generated_cells", generated_cells},    // left to the sampler
+                {"warped_latent_pixels", planned.warped_cells},  // latent cells known, all targets
+                {"background_cells", planned.background_cells},  // pinned to the background
+                {"generated_cells", planned.generated_cells},    // left to the sampler
                 {"generated_object_pixels", object_pixels},
-                {"known_cells_drift", known_cells ? drift / known_cells : 0.0},
+                {"known_cells_drift", drift},
                 {"vae", codec->name()}};
   return out;
 }
