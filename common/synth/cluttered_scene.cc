@@ -9,6 +9,7 @@
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
 #include "common/mesh/ray_caster.h"
+#include "common/synth/random_objects.h"
 
 namespace instascene {
 namespace {
@@ -24,95 +25,6 @@ struct Layout {
   float half_y() const { return 0.4f * scale; }
   float wall_y() const { return half_y() + 0.02f; }
 };
-
-struct Rng {
-  std::mt19937_64 engine;
-  float Uniform(float lo, float hi) {
-    return std::uniform_real_distribution<float>(lo, hi)(engine);
-  }
-  int Int(int lo, int hi) { return std::uniform_int_distribution<int>(lo, hi)(engine); }
-};
-
-Eigen::Vector3f RandomColor(Rng& rng) {
-  // Saturated, varied colours via HSV.
-  const float h = rng.Uniform(0, 6), s = rng.Uniform(0.45f, 0.9f), v = rng.Uniform(0.5f, 0.95f);
-  const float c = v * s, x = c * (1 - std::abs(std::fmod(h, 2.0f) - 1)), m = v - c;
-  Eigen::Vector3f rgb;
-  switch (static_cast<int>(h)) {
-    case 0:
-      rgb = {c, x, 0};
-      break;
-    case 1:
-      rgb = {x, c, 0};
-      break;
-    case 2:
-      rgb = {0, c, x};
-      break;
-    case 3:
-      rgb = {0, x, c};
-      break;
-    case 4:
-      rgb = {x, 0, c};
-      break;
-    default:
-      rgb = {c, 0, x};
-      break;
-  }
-  return rgb + Eigen::Vector3f::Constant(m);
-}
-
-ShapeSpec RandomShape(Rng& rng) {
-  ShapeSpec s;
-  s.kind = static_cast<ShapeKind>(rng.Int(0, 7));
-  const float r = rng.Uniform(0.035f, 0.10f);
-  switch (s.kind) {
-    case ShapeKind::kBox:
-      s.size = {rng.Uniform(0.06f, 0.2f), rng.Uniform(0.05f, 0.14f), rng.Uniform(0.04f, 0.22f)};
-      break;
-    case ShapeKind::kSphere:
-      s.size = {r, r, 2 * r};
-      break;
-    case ShapeKind::kTorus:
-      s.size = {r, 0.35f * r, 0.7f * r};
-      break;
-    case ShapeKind::kBottle:
-      s.size = {0.7f * r, 0, rng.Uniform(0.16f, 0.28f)};
-      break;
-    case ShapeKind::kCup:
-      s.size = {0.8f * r, 0, rng.Uniform(0.07f, 0.12f)};
-      break;
-    case ShapeKind::kBowl:
-      s.size = {1.3f * r, 0, 0.6f * r};
-      break;
-    default:
-      s.size = {r, 0, rng.Uniform(0.06f, 0.2f)};
-      break;
-  }
-  return s;
-}
-
-ShapeSpec AsymmetricShape(Rng& rng) {
-  ShapeSpec s;
-  s.kind = static_cast<ShapeKind>(
-      rng.Int(static_cast<int>(ShapeKind::kMug), static_cast<int>(ShapeKind::kIrregular)));
-  if (s.kind == ShapeKind::kMug) {
-    s.size = {rng.Uniform(0.035f, 0.06f), 0, rng.Uniform(0.08f, 0.12f)};
-  } else {
-    s.size = {rng.Uniform(0.1f, 0.2f), rng.Uniform(0.08f, 0.14f), rng.Uniform(0.06f, 0.16f)};
-  }
-  return s;
-}
-
-Appearance RandomAppearance(Rng& rng, int sh_degree) {
-  Appearance a;
-  a.color_a = RandomColor(rng);
-  a.color_b = rng.Uniform(0, 1) < 0.5f ? RandomColor(rng) : Eigen::Vector3f(0.92f, 0.92f, 0.9f);
-  a.pattern = static_cast<TexturePattern>(rng.Int(1, 4));  // textured, never a flat colour
-  a.frequency = rng.Uniform(3.0f, 10.0f);
-  a.noise_seed = static_cast<uint32_t>(rng.engine());
-  a.specular = sh_degree >= 1 && rng.Uniform(0, 1) < 0.4f ? 0.08f : 0.0f;
-  return a;
-}
 
 // Builds floor, back wall and table as one mesh (with UVs) and its appearance per part.
 struct StuffPart {
@@ -233,6 +145,133 @@ absl::Status RefineTableNearObjects(const std::vector<Placement>& placed,
   return absl::OkStatus();
 }
 
+// 1. Objects: shapes, appearances, placements on the table top (their footprints in `placed`).
+absl::Status PlaceObjects(const ClutterOptions& options, const Layout& layout, Rng& rng,
+                          ClutterScene* out, std::vector<Placement>* out_placed) {
+  ClutterScene& scene = *out;
+  std::vector<Placement>& placed = *out_placed;
+  const float kTableHalfX = layout.half_x(), kTableHalfY = layout.half_y(),
+              kWallY = layout.wall_y();
+  const int dup = options.duplicates >= 2 ? std::min(options.duplicates, options.objects) : 0;
+  ShapeSpec dup_shape{ShapeKind::kBottle, {0.035f, 0, 0.22f}};
+  Appearance dup_look = RandomAppearance(rng, options.sh_degree);
+  for (int k = 0; k < options.objects; ++k) {
+    SynthObject obj;
+    obj.id = k + 1;
+    const bool is_dup = k < dup;
+    obj.shape = is_dup ? dup_shape : RandomShape(rng);
+    if (!is_dup && options.asymmetric_share > 0 && rng.Uniform(0, 1) < options.asymmetric_share) {
+      obj.shape = AsymmetricShape(rng);
+    }
+    obj.appearance = is_dup ? dup_look : RandomAppearance(rng, options.sh_degree);
+    obj.duplicate_group = is_dup ? 0 : -1;
+    // Some neighbours share a colour (but keep their own pattern).
+    if (!is_dup && k > dup && rng.Uniform(0, 1) < 0.25f)
+      obj.appearance.color_a = scene.objects.back().appearance.color_a;
+    const float radius = obj.shape.FootprintRadius();
+    Eigen::Vector2f xy;
+    bool ok = false;
+    for (int attempt = 0; attempt < 400 && !ok; ++attempt) {
+      if (is_dup && k > 0) {  // a touching row
+        xy = placed.back().xy + Eigen::Vector2f(placed.back().radius + radius + 0.003f, 0);
+      } else if (!placed.empty() && attempt < 200 &&
+                 rng.Uniform(0, 1) < 0.6f) {  // touch a neighbour
+        const Placement& n = placed[rng.Int(0, static_cast<int>(placed.size()) - 1)];
+        const float a = rng.Uniform(0, 2 * std::numbers::pi_v<float>);
+        xy = n.xy + (n.radius + radius + 0.003f) * Eigen::Vector2f(std::cos(a), std::sin(a));
+      } else if (is_dup) {
+        xy = {rng.Uniform(-0.6f * kTableHalfX, -0.1f), rng.Uniform(0.0f, 0.6f * kTableHalfY)};
+      } else {
+        xy = {rng.Uniform(-kTableHalfX, kTableHalfX), rng.Uniform(-kTableHalfY, kWallY)};
+      }
+      ok = Fits(layout, placed, xy, radius);
+    }
+    if (!ok) {
+      return absl::ResourceExhaustedError(absl::StrCat("could not place ", options.objects,
+                                                       " objects on the table; use fewer objects"));
+    }
+    placed.push_back({xy, radius});
+    const double yaw = rng.Uniform(0, 2 * std::numbers::pi_v<float>);
+    obj.world_from_object = {Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
+                             Eigen::Vector3d(xy.x(), xy.y(), kTableTopZ)};
+    obj.mesh = MakeShapeMesh(obj.shape);
+    obj.mesh.Transform(obj.world_from_object);
+    obj.name = absl::StrCat(ShapeKindName(obj.shape.kind), "_", obj.id);
+    scene.objects.push_back(std::move(obj));
+  }
+  return absl::OkStatus();
+}
+
+// 2. Surfels: stuff first, then objects, each group split by surface area.
+absl::Status SampleSurfels(const ClutterOptions& options, const Layout& layout,
+                           const std::vector<Placement>& placed, Rng& rng, ClutterScene* out) {
+  ClutterScene& scene = *out;
+  scene.cloud.num_scales = 2;
+  scene.cloud.sh_degree = options.sh_degree;
+  SurfelSampling sampling;
+  std::vector<StuffPart> stuff = MakeStuff(layout);
+  const size_t stuff_budget = static_cast<size_t>(options.stuff_fraction * options.gaussians);
+  double stuff_area = 0, object_area = 0;
+  for (const StuffPart& p : stuff) stuff_area += p.mesh.SurfaceArea();
+  for (const SynthObject& o : scene.objects) object_area += o.mesh.SurfaceArea();
+  size_t used = 0;
+  for (size_t p = 0; p < stuff.size(); ++p) {
+    const size_t count =
+        p + 1 == stuff.size()
+            ? stuff_budget - used
+            : static_cast<size_t>(stuff_budget * stuff[p].mesh.SurfaceArea() / stuff_area);
+    AppendSurfels(stuff[p].mesh, count, stuff[p].appearance, sampling, rng.engine, &scene.cloud);
+    used += count;
+    scene.stuff_mesh.Append(stuff[p].mesh);
+  }
+  RETURN_IF_ERROR(
+      RefineTableNearObjects(placed, scene.objects, options.table_detail, &scene.cloud));
+  scene.instance_ids.assign(scene.cloud.size(), 0);
+  const size_t object_budget = options.gaussians - stuff_budget;
+  size_t object_used = 0;
+  for (size_t k = 0; k < scene.objects.size(); ++k) {
+    SynthObject& obj = scene.objects[k];
+    const size_t count =
+        k + 1 == scene.objects.size()
+            ? object_budget - object_used
+            : static_cast<size_t>(object_budget * obj.mesh.SurfaceArea() / object_area);
+    // A cone's apex carries a surfel: area sampling leaves it bare (until 2026-12-06 cones had
+    // none, their highest surfel 4-13 % of the height below the apex; docs/SYNTHETIC.md).
+    std::vector<SurfelApex> apices;
+    for (const ShapeTip& tip : ShapeTips(obj.shape)) {
+      apices.push_back({(obj.world_from_object * tip.position.cast<double>()).cast<float>(),
+                        (obj.world_from_object.rotation * Eigen::Vector3d::UnitZ()).cast<float>(),
+                        tip.uv});
+    }
+    obj.first_gaussian = scene.cloud.size();
+    obj.num_gaussians = count + apices.size();
+    AppendSurfels(obj.mesh, count, obj.appearance, sampling, rng.engine, &scene.cloud, 0.0f,
+                  apices);
+    object_used += count;
+    scene.instance_ids.resize(scene.cloud.size(), static_cast<uint16_t>(obj.id));
+  }
+  return absl::OkStatus();
+}
+
+// 3. Cameras: a handheld-like sweep over the front half at three heights, with jitter.
+void PlaceCameras(const ClutterOptions& options, const Layout& layout, Rng& rng,
+                  ClutterScene* out) {
+  ClutterScene& scene = *out;
+  for (int v = 0; v < options.views; ++v) {
+    const int ring = v % 3;
+    const float t = options.views == 1 ? 0.5f : static_cast<float>(v) / (options.views - 1);
+    const float azimuth = -160.0f + 140.0f * t + rng.Uniform(-4.0f, 4.0f);
+    const float elevation = 22.0f + 14.0f * ring + rng.Uniform(-3.0f, 3.0f);
+    const float distance = layout.scale * rng.Uniform(0.95f, 1.25f);
+    const Eigen::Vector3d target =
+        scene.focus + Eigen::Vector3d(rng.Uniform(-0.04f, 0.04f), rng.Uniform(-0.04f, 0.04f),
+                                      rng.Uniform(-0.02f, 0.02f));
+    scene.cameras.push_back(OrbitCamera(target, Eigen::Vector3d::UnitZ(), distance, azimuth,
+                                        elevation, options.width, options.height,
+                                        options.fov_x_deg));
+  }
+}
+
 }  // namespace
 
 absl::Status ClutterOptions::Validate() const {
@@ -288,121 +327,12 @@ absl::StatusOr<ClutterScene> GenerateClutterScene(const ClutterOptions& options)
   if (absl::Status s = options.Validate(); !s.ok()) return s;
   Rng rng{std::mt19937_64(options.seed)};
   const Layout layout(options.objects);
-  const float kTableHalfX = layout.half_x(), kTableHalfY = layout.half_y(),
-              kWallY = layout.wall_y();
   ClutterScene scene;
   scene.focus = Eigen::Vector3d(0, 0.05, kTableTopZ + 0.08);
-
-  // 1. Objects: shapes, appearances, placements on the table top.
   std::vector<Placement> placed;
-  const int dup = options.duplicates >= 2 ? std::min(options.duplicates, options.objects) : 0;
-  ShapeSpec dup_shape{ShapeKind::kBottle, {0.035f, 0, 0.22f}};
-  Appearance dup_look = RandomAppearance(rng, options.sh_degree);
-  for (int k = 0; k < options.objects; ++k) {
-    SynthObject obj;
-    obj.id = k + 1;
-    const bool is_dup = k < dup;
-    obj.shape = is_dup ? dup_shape : RandomShape(rng);
-    if (!is_dup && options.asymmetric_share > 0 && rng.Uniform(0, 1) < options.asymmetric_share) {
-      obj.shape = AsymmetricShape(rng);
-    }
-    obj.appearance = is_dup ? dup_look : RandomAppearance(rng, options.sh_degree);
-    obj.duplicate_group = is_dup ? 0 : -1;
-    // Some neighbours share a colour (but keep their own pattern).
-    if (!is_dup && k > dup && rng.Uniform(0, 1) < 0.25f)
-      obj.appearance.color_a = scene.objects.back().appearance.color_a;
-    const float radius = obj.shape.FootprintRadius();
-    Eigen::Vector2f xy;
-    bool ok = false;
-    for (int attempt = 0; attempt < 400 && !ok; ++attempt) {
-      if (is_dup && k > 0) {  // a touching row
-        xy = placed.back().xy + Eigen::Vector2f(placed.back().radius + radius + 0.003f, 0);
-      } else if (!placed.empty() && attempt < 200 &&
-                 rng.Uniform(0, 1) < 0.6f) {  // touch a neighbour
-        const Placement& n = placed[rng.Int(0, static_cast<int>(placed.size()) - 1)];
-        const float a = rng.Uniform(0, 2 * std::numbers::pi_v<float>);
-        xy = n.xy + (n.radius + radius + 0.003f) * Eigen::Vector2f(std::cos(a), std::sin(a));
-      } else if (is_dup) {
-        xy = {rng.Uniform(-0.6f * kTableHalfX, -0.1f), rng.Uniform(0.0f, 0.6f * kTableHalfY)};
-      } else {
-        xy = {rng.Uniform(-kTableHalfX, kTableHalfX), rng.Uniform(-kTableHalfY, kWallY)};
-      }
-      ok = Fits(layout, placed, xy, radius);
-    }
-    if (!ok) {
-      return absl::ResourceExhaustedError(absl::StrCat("could not place ", options.objects,
-                                                       " objects on the table; use fewer objects"));
-    }
-    placed.push_back({xy, radius});
-    const double yaw = rng.Uniform(0, 2 * std::numbers::pi_v<float>);
-    obj.world_from_object = {Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()).toRotationMatrix(),
-                             Eigen::Vector3d(xy.x(), xy.y(), kTableTopZ)};
-    obj.mesh = MakeShapeMesh(obj.shape);
-    obj.mesh.Transform(obj.world_from_object);
-    obj.name = absl::StrCat(ShapeKindName(obj.shape.kind), "_", obj.id);
-    scene.objects.push_back(std::move(obj));
-  }
-
-  // 2. Surfels: stuff first, then objects, each group split by surface area.
-  scene.cloud.num_scales = 2;
-  scene.cloud.sh_degree = options.sh_degree;
-  SurfelSampling sampling;
-  std::vector<StuffPart> stuff = MakeStuff(layout);
-  const size_t stuff_budget = static_cast<size_t>(options.stuff_fraction * options.gaussians);
-  double stuff_area = 0, object_area = 0;
-  for (const StuffPart& p : stuff) stuff_area += p.mesh.SurfaceArea();
-  for (const SynthObject& o : scene.objects) object_area += o.mesh.SurfaceArea();
-  size_t used = 0;
-  for (size_t p = 0; p < stuff.size(); ++p) {
-    const size_t count =
-        p + 1 == stuff.size()
-            ? stuff_budget - used
-            : static_cast<size_t>(stuff_budget * stuff[p].mesh.SurfaceArea() / stuff_area);
-    AppendSurfels(stuff[p].mesh, count, stuff[p].appearance, sampling, rng.engine, &scene.cloud);
-    used += count;
-    scene.stuff_mesh.Append(stuff[p].mesh);
-  }
-  RETURN_IF_ERROR(
-      RefineTableNearObjects(placed, scene.objects, options.table_detail, &scene.cloud));
-  scene.instance_ids.assign(scene.cloud.size(), 0);
-  const size_t object_budget = options.gaussians - stuff_budget;
-  size_t object_used = 0;
-  for (size_t k = 0; k < scene.objects.size(); ++k) {
-    SynthObject& obj = scene.objects[k];
-    const size_t count =
-        k + 1 == scene.objects.size()
-            ? object_budget - object_used
-            : static_cast<size_t>(object_budget * obj.mesh.SurfaceArea() / object_area);
-    // A cone's apex carries a surfel: area sampling leaves it bare (until 2026-12-06 cones had
-    // none, their highest surfel 4-13 % of the height below the apex; docs/SYNTHETIC.md).
-    std::vector<SurfelApex> apices;
-    for (const ShapeTip& tip : ShapeTips(obj.shape)) {
-      apices.push_back({(obj.world_from_object * tip.position.cast<double>()).cast<float>(),
-                        (obj.world_from_object.rotation * Eigen::Vector3d::UnitZ()).cast<float>(),
-                        tip.uv});
-    }
-    obj.first_gaussian = scene.cloud.size();
-    obj.num_gaussians = count + apices.size();
-    AppendSurfels(obj.mesh, count, obj.appearance, sampling, rng.engine, &scene.cloud, 0.0f,
-                  apices);
-    object_used += count;
-    scene.instance_ids.resize(scene.cloud.size(), static_cast<uint16_t>(obj.id));
-  }
-
-  // 3. Cameras: a handheld-like sweep over the front half at three heights, with jitter.
-  for (int v = 0; v < options.views; ++v) {
-    const int ring = v % 3;
-    const float t = options.views == 1 ? 0.5f : static_cast<float>(v) / (options.views - 1);
-    const float azimuth = -160.0f + 140.0f * t + rng.Uniform(-4.0f, 4.0f);
-    const float elevation = 22.0f + 14.0f * ring + rng.Uniform(-3.0f, 3.0f);
-    const float distance = layout.scale * rng.Uniform(0.95f, 1.25f);
-    const Eigen::Vector3d target =
-        scene.focus + Eigen::Vector3d(rng.Uniform(-0.04f, 0.04f), rng.Uniform(-0.04f, 0.04f),
-                                      rng.Uniform(-0.02f, 0.02f));
-    scene.cameras.push_back(OrbitCamera(target, Eigen::Vector3d::UnitZ(), distance, azimuth,
-                                        elevation, options.width, options.height,
-                                        options.fov_x_deg));
-  }
+  RETURN_IF_ERROR(PlaceObjects(options, layout, rng, &scene, &placed));
+  RETURN_IF_ERROR(SampleSurfels(options, layout, placed, rng, &scene));
+  PlaceCameras(options, layout, rng, &scene);
   return scene;
 }
 
