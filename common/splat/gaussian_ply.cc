@@ -34,25 +34,15 @@ bool IsCoreProperty(absl::string_view name) {
          IndexedSuffix(name, "rot_") >= 0;
 }
 
-}  // namespace
-
-float OpacityLogit(float logit) {
-  if (logit == std::numeric_limits<float>::infinity()) return kOpaqueLogit;
-  if (logit == -std::numeric_limits<float>::infinity()) return -kOpaqueLogit;
-  return logit;  // NaN stays NaN: Validate refuses it
-}
-
-absl::StatusOr<GaussianCloud> ParseGaussianPly(absl::string_view data, absl::string_view source) {
-  ASSIGN_OR_RETURN(PlyHeader header, ParsePlyHeader(data, source));
-  for (const PlyElement& e : header.elements) {
-    if (e.name == "chunk") {
-      return absl::InvalidArgumentError(absl::StrCat(
-          source,
-          ": a SuperSplat compressed PLY (element 'chunk'); ReadSplatFile (splat_formats.h) "
-          "reads it"));
-    }
-  }
-  ASSIGN_OR_RETURN(PlyColumns cols, ReadPlyElement(data, header, "vertex", source));
+// The columns of a Gaussian PLY's vertex element: every core property under its canonical name,
+// indexed groups numbered 0..n-1, counts that make an SH degree 0-3, 2 or 3 scales, a quaternion.
+struct GaussianColumns {
+  int pos[3], dc[3], scale[3], rot[4], opacity;
+  std::vector<int> rest;  // f_rest_*, channel-major
+  int num_scales, sh_degree;
+};
+absl::StatusOr<GaussianColumns> FindGaussianColumns(const PlyColumns& cols,
+                                                    absl::string_view source) {
   auto require = [&](const std::string& name) -> absl::StatusOr<int> {
     int c = cols.Find(name);
     if (c < 0) {
@@ -77,6 +67,7 @@ absl::StatusOr<GaussianCloud> ParseGaussianPly(absl::string_view data, absl::str
     }
     return count;
   };
+  GaussianColumns out;
   ASSIGN_OR_RETURN(int num_rest, count_group("f_rest_"));
   ASSIGN_OR_RETURN(int num_scales, count_group("scale_"));
   ASSIGN_OR_RETURN(int num_rot, count_group("rot_"));
@@ -101,26 +92,53 @@ absl::StatusOr<GaussianCloud> ParseGaussianPly(absl::string_view data, absl::str
     return absl::InvalidArgumentError(
         absl::StrCat(source, ": ", num_dc, " f_dc_* properties; expected 3 (R, G, B)"));
   }
-  int pos[3], dc[3], scale[3], rot[4];
-  ASSIGN_OR_RETURN(pos[0], require("x"));
-  ASSIGN_OR_RETURN(pos[1], require("y"));
-  ASSIGN_OR_RETURN(pos[2], require("z"));
-  ASSIGN_OR_RETURN(int opacity, require("opacity"));
+  out.num_scales = num_scales;
+  out.sh_degree = sh_degree;
+  ASSIGN_OR_RETURN(out.pos[0], require("x"));
+  ASSIGN_OR_RETURN(out.pos[1], require("y"));
+  ASSIGN_OR_RETURN(out.pos[2], require("z"));
+  ASSIGN_OR_RETURN(out.opacity, require("opacity"));
   // Every index of each group must be there under its canonical name.
   for (int i = 0; i < 3; ++i) {
-    ASSIGN_OR_RETURN(dc[i], require(absl::StrCat("f_dc_", i)));
+    ASSIGN_OR_RETURN(out.dc[i], require(absl::StrCat("f_dc_", i)));
   }
   for (int i = 0; i < num_scales; ++i) {
-    ASSIGN_OR_RETURN(scale[i], require(absl::StrCat("scale_", i)));
+    ASSIGN_OR_RETURN(out.scale[i], require(absl::StrCat("scale_", i)));
   }
   for (int i = 0; i < 4; ++i) {
-    ASSIGN_OR_RETURN(rot[i], require(absl::StrCat("rot_", i)));
+    ASSIGN_OR_RETURN(out.rot[i], require(absl::StrCat("rot_", i)));
   }
-  std::vector<int> rest(num_rest);
+  out.rest.resize(num_rest);
   for (int i = 0; i < num_rest; ++i) {
-    ASSIGN_OR_RETURN(rest[i], require(absl::StrCat("f_rest_", i)));
+    ASSIGN_OR_RETURN(out.rest[i], require(absl::StrCat("f_rest_", i)));
   }
+  return out;
+}
 
+}  // namespace
+
+float OpacityLogit(float logit) {
+  if (logit == std::numeric_limits<float>::infinity()) return kOpaqueLogit;
+  if (logit == -std::numeric_limits<float>::infinity()) return -kOpaqueLogit;
+  return logit;  // NaN stays NaN: Validate refuses it
+}
+
+absl::StatusOr<GaussianCloud> ParseGaussianPly(absl::string_view data, absl::string_view source) {
+  ASSIGN_OR_RETURN(PlyHeader header, ParsePlyHeader(data, source));
+  for (const PlyElement& e : header.elements) {
+    if (e.name == "chunk") {
+      return absl::InvalidArgumentError(absl::StrCat(
+          source,
+          ": a SuperSplat compressed PLY (element 'chunk'); ReadSplatFile (splat_formats.h) "
+          "reads it"));
+    }
+  }
+  ASSIGN_OR_RETURN(PlyColumns cols, ReadPlyElement(data, header, "vertex", source));
+  ASSIGN_OR_RETURN(const GaussianColumns gc, FindGaussianColumns(cols, source));
+  const int *pos = gc.pos, *dc = gc.dc, *scale = gc.scale, *rot = gc.rot;
+  const std::vector<int>& rest = gc.rest;
+  const int opacity = gc.opacity, sh_degree = gc.sh_degree;
+  int num_scales = gc.num_scales;
   const size_t n = static_cast<size_t>(cols.count);
   // 2DGS exports with a constant log(1e-6) third scale are surfels.
   if (num_scales == 3 && n > 0) {
