@@ -6,10 +6,10 @@
 #include <cmath>
 #include <map>
 #include <numeric>
-#include <unordered_map>
 
 #include "common/core/parallel.h"
 #include "common/geometry/point_index.h"
+#include "services/decomposition/dbscan.h"
 #include "services/decomposition/union_find.h"
 
 namespace instascene::decomposition {
@@ -116,118 +116,6 @@ std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node,
 }
 
 }  // namespace
-
-std::vector<int> Dbscan(const std::vector<Eigen::Vector3f>& points, float eps, int min_points) {
-  // Grid DBSCAN: cells of side eps / sqrt(3), so any two points of one cell are neighbours. A cell
-  // with >= min_points points makes all its points core without any query; other points count
-  // neighbours in the 5x5x5 surrounding cells with an early exit. Core cells are joined when some
-  // pair of their core points is within eps; border points take the cluster of their nearest core
-  // point. The core-point clusters are exactly DBSCAN's (border points, which DBSCAN assigns by
-  // visiting order, may differ).
-  const size_t n = points.size();
-  std::vector<int> label(n, -1);
-  if (n == 0) return label;
-  const float cell = eps / std::sqrt(3.0f), eps2 = eps * eps;
-  auto key_of = [&](const Eigen::Vector3f& p) {
-    return Eigen::Vector3i(static_cast<int>(std::floor(p.x() / cell)),
-                           static_cast<int>(std::floor(p.y() / cell)),
-                           static_cast<int>(std::floor(p.z() / cell)));
-  };
-  struct KeyHash {
-    size_t operator()(const Eigen::Vector3i& k) const {
-      return static_cast<size_t>(k.x()) * 73856093u ^ static_cast<size_t>(k.y()) * 19349663u ^
-             static_cast<size_t>(k.z()) * 83492791u;
-    }
-  };
-  std::unordered_map<Eigen::Vector3i, uint32_t, KeyHash> cell_of_key;
-  std::vector<std::vector<uint32_t>> cells;  // point indices, ascending
-  std::vector<Eigen::Vector3i> keys;
-  std::vector<uint32_t> cell_of(n);
-  for (uint32_t i = 0; i < n; ++i) {
-    const Eigen::Vector3i k = key_of(points[i]);
-    auto [it, inserted] = cell_of_key.try_emplace(k, static_cast<uint32_t>(cells.size()));
-    if (inserted) {
-      cells.emplace_back();
-      keys.push_back(k);
-    }
-    cells[it->second].push_back(i);
-    cell_of[i] = it->second;
-  }
-  auto for_each_neighbour_cell = [&](uint32_t c, auto&& fn) {
-    for (int dx = -2; dx <= 2; ++dx) {
-      for (int dy = -2; dy <= 2; ++dy) {
-        for (int dz = -2; dz <= 2; ++dz) {
-          auto it = cell_of_key.find(keys[c] + Eigen::Vector3i(dx, dy, dz));
-          if (it != cell_of_key.end() && !fn(it->second)) return;
-        }
-      }
-    }
-  };
-  std::vector<uint8_t> core(n, 0);
-  for (uint32_t c = 0; c < cells.size(); ++c) {
-    if (static_cast<int>(cells[c].size()) >= min_points) {
-      for (uint32_t i : cells[c]) core[i] = 1;
-      continue;
-    }
-    for (uint32_t i : cells[c]) {
-      int count = 0;
-      for_each_neighbour_cell(c, [&](uint32_t d) {
-        for (uint32_t j : cells[d]) count += (points[i] - points[j]).squaredNorm() <= eps2;
-        return count < min_points;
-      });
-      core[i] = count >= min_points;
-    }
-  }
-  // Union core cells that have a core pair within eps.
-  UnionFind sets(cells.size());
-  std::vector<std::vector<uint32_t>> core_points(cells.size());
-  for (uint32_t c = 0; c < cells.size(); ++c) {
-    for (uint32_t i : cells[c]) {
-      if (core[i]) core_points[c].push_back(i);
-    }
-  }
-  for (uint32_t c = 0; c < cells.size(); ++c) {
-    if (core_points[c].empty()) continue;
-    for_each_neighbour_cell(c, [&](uint32_t d) {
-      if (d <= c || core_points[d].empty() || sets.Find(c) == sets.Find(d)) return true;
-      for (uint32_t i : core_points[c]) {
-        for (uint32_t j : core_points[d]) {
-          if ((points[i] - points[j]).squaredNorm() <= eps2) {
-            sets.Union(c, d);
-            return true;
-          }
-        }
-      }
-      return true;
-    });
-  }
-  // Number clusters by their first core point in index order.
-  std::vector<int> cluster_of_root(cells.size(), -1);
-  int next = 0;
-  for (uint32_t i = 0; i < n; ++i) {
-    if (!core[i]) continue;
-    const uint32_t root = sets.Find(cell_of[i]);
-    if (cluster_of_root[root] < 0) cluster_of_root[root] = next++;
-    label[i] = cluster_of_root[root];
-  }
-  for (uint32_t i = 0; i < n; ++i) {  // border points: the nearest core point within eps
-    if (core[i]) continue;
-    float best = eps2;
-    int best_label = -1;
-    for_each_neighbour_cell(cell_of[i], [&](uint32_t d) {
-      for (uint32_t j : core_points[d]) {
-        const float d2 = (points[i] - points[j]).squaredNorm();
-        if (d2 <= best && (best_label < 0 || d2 < best)) {
-          best = d2;
-          best_label = label[j];
-        }
-      }
-      return true;
-    });
-    label[i] = best_label;
-  }
-  return label;
-}
 
 float RobustSceneDiagonal(const GaussianCloud& cloud) {
   return cloud.size() == 0 ? 0.0f : RobustBounds(cloud).diagonal().norm();

@@ -21,11 +21,6 @@ struct Instance {
   Eigen::AlignedBox3f box;          // of the unfiltered sub-object points
 };
 
-// DBSCAN over points (Open3D semantics: min_points counts the point itself; -1 = noise), grid
-// accelerated. Clusters are numbered in order of their first core point by index; border points
-// join the cluster of their nearest core point.
-std::vector<int> Dbscan(const std::vector<Eigen::Vector3f>& points, float eps, int min_points);
-
 // Robust diagonal of the Gaussian centres (2nd-98th percentile box), for scene-relative constants.
 float RobustSceneDiagonal(const GaussianCloud& cloud);
 
