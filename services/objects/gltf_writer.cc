@@ -19,6 +19,109 @@ void AppendU32(std::string* out, uint32_t v) {
   out->append(b, 4);
 }
 
+// The mesh as a Draco mesh: positions (attribute id in *pos) and, where every vertex has one,
+// 8-bit colours (*col, else -1).
+absl::StatusOr<std::unique_ptr<draco::Mesh>> BuildDracoMesh(const TriangleMesh& mesh, int* pos,
+                                                            int* col) {
+  const bool colored = mesh.colors.size() == mesh.vertices.size();
+  draco::TriangleSoupMeshBuilder builder;
+  builder.Start(static_cast<int>(mesh.triangles.size()));
+  *pos = builder.AddAttribute(draco::GeometryAttribute::POSITION, 3, draco::DT_FLOAT32);
+  *col = colored ? builder.AddAttribute(draco::GeometryAttribute::COLOR, 3, draco::DT_UINT8, true)
+                 : -1;
+  for (size_t f = 0; f < mesh.triangles.size(); ++f) {
+    const auto& t = mesh.triangles[f];
+    for (uint32_t v : t)
+      if (v >= mesh.vertices.size()) return absl::InvalidArgumentError("glb: bad vertex index");
+    builder.SetAttributeValuesForFace(*pos, draco::FaceIndex(static_cast<uint32_t>(f)),
+                                      mesh.vertices[t[0]].data(), mesh.vertices[t[1]].data(),
+                                      mesh.vertices[t[2]].data());
+    if (colored) {
+      uint8_t c[3][3];
+      for (int k = 0; k < 3; ++k)
+        for (int ch = 0; ch < 3; ++ch)
+          c[k][ch] = static_cast<uint8_t>(
+              std::clamp(mesh.colors[t[static_cast<size_t>(k)]][ch], 0.0f, 1.0f) * 255.0f + 0.5f);
+      builder.SetAttributeValuesForFace(*col, draco::FaceIndex(static_cast<uint32_t>(f)), c[0],
+                                        c[1], c[2]);
+    }
+  }
+  std::unique_ptr<draco::Mesh> draco_mesh = builder.Finalize();
+  if (!draco_mesh) return absl::InternalError("Draco: mesh building failed");
+  return draco_mesh;
+}
+
+// The glTF document of one node, one mesh, one vertex-colour material and one Draco-compressed
+// primitive whose accessors describe the decoded data (`box`: its positions' bounds).
+nlohmann::json GltfDocument(const GlbResult& out, const draco::Mesh& draco_mesh, int pos, int col,
+                            const Eigen::AlignedBox3f& box, size_t bin_bytes,
+                            const std::string& name) {
+  using nlohmann::json;
+  json attributes = {{"POSITION", 0}};
+  json draco_attributes = {{"POSITION", draco_mesh.attribute(pos)->unique_id()}};
+  json accessors = json::array();
+  accessors.push_back({{"componentType", 5126},
+                       {"count", out.vertices},
+                       {"type", "VEC3"},
+                       {"min", {box.min().x(), box.min().y(), box.min().z()}},
+                       {"max", {box.max().x(), box.max().y(), box.max().z()}}});
+  if (col >= 0) {
+    attributes["COLOR_0"] = 1;
+    draco_attributes["COLOR_0"] = draco_mesh.attribute(col)->unique_id();
+    accessors.push_back(
+        {{"componentType", 5121}, {"normalized", true}, {"count", out.vertices}, {"type", "VEC3"}});
+  }
+  const int indices = static_cast<int>(accessors.size());
+  accessors.push_back({{"componentType", out.vertices > 65535 ? 5125 : 5123},
+                       {"count", 3 * out.triangles},
+                       {"type", "SCALAR"}});
+  return {
+      {"asset", {{"version", "2.0"}, {"generator", "InstaScene export"}}},
+      {"extensionsUsed", {"KHR_draco_mesh_compression"}},
+      {"extensionsRequired", {"KHR_draco_mesh_compression"}},
+      {"scene", 0},
+      {"scenes", {{{"nodes", {0}}}}},
+      {"nodes", {{{"mesh", 0}, {"name", name}}}},
+      {"materials",
+       {{{"name", "vertex_colour"},
+         {"pbrMetallicRoughness",
+          {{"baseColorFactor", {1, 1, 1, 1}}, {"metallicFactor", 0}, {"roughnessFactor", 1}}}}}},
+      {"meshes",
+       {{{"name", name},
+         {"primitives",
+          {{{"attributes", attributes},
+            {"indices", indices},
+            {"material", 0},
+            {"mode", 4},
+            {"extensions",
+             {{"KHR_draco_mesh_compression",
+               {{"bufferView", 0}, {"attributes", draco_attributes}}}}}}}}}}},
+      {"accessors", accessors},
+      {"bufferViews", {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", out.draco.size()}}}},
+      {"buffers", {{{"byteLength", bin_bytes}}}},
+  };
+}
+
+// The GLB container: header, the JSON chunk (space-padded) and the BIN chunk (zero-padded).
+std::string PackGlb(std::string text, std::string bin) {
+  while (text.size() % 4 != 0) text.push_back(' ');
+  while (bin.size() % 4 != 0) bin.push_back('\0');
+  const uint32_t total =
+      12 + 8 + static_cast<uint32_t>(text.size()) + 8 + static_cast<uint32_t>(bin.size());
+  std::string bytes;
+  bytes.reserve(total);
+  bytes.append("glTF", 4);
+  AppendU32(&bytes, 2);
+  AppendU32(&bytes, total);
+  AppendU32(&bytes, static_cast<uint32_t>(text.size()));
+  bytes.append("JSON", 4);
+  bytes += text;
+  AppendU32(&bytes, static_cast<uint32_t>(bin.size()));
+  bytes.append("BIN\0", 4);
+  bytes += bin;
+  return bytes;
+}
+
 }  // namespace
 
 absl::StatusOr<TriangleMesh> DecodeDraco(const std::string& bytes) {
@@ -52,32 +155,8 @@ absl::StatusOr<TriangleMesh> DecodeDraco(const std::string& bytes) {
 
 absl::StatusOr<GlbResult> EncodeDracoGlb(const TriangleMesh& mesh, const GlbOptions& options) {
   if (mesh.triangles.empty()) return absl::InvalidArgumentError("glb: the mesh has no triangles");
-  const bool colored = mesh.colors.size() == mesh.vertices.size();
-  draco::TriangleSoupMeshBuilder builder;
-  builder.Start(static_cast<int>(mesh.triangles.size()));
-  const int pos = builder.AddAttribute(draco::GeometryAttribute::POSITION, 3, draco::DT_FLOAT32);
-  const int col =
-      colored ? builder.AddAttribute(draco::GeometryAttribute::COLOR, 3, draco::DT_UINT8, true)
-              : -1;
-  for (size_t f = 0; f < mesh.triangles.size(); ++f) {
-    const auto& t = mesh.triangles[f];
-    for (uint32_t v : t)
-      if (v >= mesh.vertices.size()) return absl::InvalidArgumentError("glb: bad vertex index");
-    builder.SetAttributeValuesForFace(pos, draco::FaceIndex(static_cast<uint32_t>(f)),
-                                      mesh.vertices[t[0]].data(), mesh.vertices[t[1]].data(),
-                                      mesh.vertices[t[2]].data());
-    if (colored) {
-      uint8_t c[3][3];
-      for (int k = 0; k < 3; ++k)
-        for (int ch = 0; ch < 3; ++ch)
-          c[k][ch] = static_cast<uint8_t>(
-              std::clamp(mesh.colors[t[static_cast<size_t>(k)]][ch], 0.0f, 1.0f) * 255.0f + 0.5f);
-      builder.SetAttributeValuesForFace(col, draco::FaceIndex(static_cast<uint32_t>(f)), c[0], c[1],
-                                        c[2]);
-    }
-  }
-  std::unique_ptr<draco::Mesh> draco_mesh = builder.Finalize();
-  if (!draco_mesh) return absl::InternalError("Draco: mesh building failed");
+  int pos = -1, col = -1;
+  ASSIGN_OR_RETURN(std::unique_ptr<draco::Mesh> draco_mesh, BuildDracoMesh(mesh, &pos, &col));
   draco::Encoder encoder;
   encoder.SetAttributeQuantization(draco::GeometryAttribute::POSITION, options.position_bits);
   encoder.SetSpeedOptions(5, 5);
@@ -92,67 +171,10 @@ absl::StatusOr<GlbResult> EncodeDracoGlb(const TriangleMesh& mesh, const GlbOpti
   out.triangles = decoded.triangles.size();
   Eigen::AlignedBox3f box;
   for (const Eigen::Vector3f& v : decoded.vertices) box.extend(v);
-
-  using nlohmann::json;
-  json attributes = {{"POSITION", 0}};
-  json draco_attributes = {{"POSITION", draco_mesh->attribute(pos)->unique_id()}};
-  json accessors = json::array();
-  accessors.push_back({{"componentType", 5126},
-                       {"count", out.vertices},
-                       {"type", "VEC3"},
-                       {"min", {box.min().x(), box.min().y(), box.min().z()}},
-                       {"max", {box.max().x(), box.max().y(), box.max().z()}}});
-  if (colored) {
-    attributes["COLOR_0"] = 1;
-    draco_attributes["COLOR_0"] = draco_mesh->attribute(col)->unique_id();
-    accessors.push_back(
-        {{"componentType", 5121}, {"normalized", true}, {"count", out.vertices}, {"type", "VEC3"}});
-  }
-  const int indices = static_cast<int>(accessors.size());
-  accessors.push_back({{"componentType", out.vertices > 65535 ? 5125 : 5123},
-                       {"count", 3 * out.triangles},
-                       {"type", "SCALAR"}});
-  std::string bin = out.draco;
-  while (bin.size() % 4 != 0) bin.push_back('\0');
-  const json gltf = {
-      {"asset", {{"version", "2.0"}, {"generator", "InstaScene export"}}},
-      {"extensionsUsed", {"KHR_draco_mesh_compression"}},
-      {"extensionsRequired", {"KHR_draco_mesh_compression"}},
-      {"scene", 0},
-      {"scenes", {{{"nodes", {0}}}}},
-      {"nodes", {{{"mesh", 0}, {"name", options.name}}}},
-      {"materials",
-       {{{"name", "vertex_colour"},
-         {"pbrMetallicRoughness",
-          {{"baseColorFactor", {1, 1, 1, 1}}, {"metallicFactor", 0}, {"roughnessFactor", 1}}}}}},
-      {"meshes",
-       {{{"name", options.name},
-         {"primitives",
-          {{{"attributes", attributes},
-            {"indices", indices},
-            {"material", 0},
-            {"mode", 4},
-            {"extensions",
-             {{"KHR_draco_mesh_compression",
-               {{"bufferView", 0}, {"attributes", draco_attributes}}}}}}}}}}},
-      {"accessors", accessors},
-      {"bufferViews", {{{"buffer", 0}, {"byteOffset", 0}, {"byteLength", out.draco.size()}}}},
-      {"buffers", {{{"byteLength", bin.size()}}}},
-  };
-  std::string text = gltf.dump();
-  while (text.size() % 4 != 0) text.push_back(' ');
-  const uint32_t total =
-      12 + 8 + static_cast<uint32_t>(text.size()) + 8 + static_cast<uint32_t>(bin.size());
-  out.bytes.reserve(total);
-  out.bytes.append("glTF", 4);
-  AppendU32(&out.bytes, 2);
-  AppendU32(&out.bytes, total);
-  AppendU32(&out.bytes, static_cast<uint32_t>(text.size()));
-  out.bytes.append("JSON", 4);
-  out.bytes += text;
-  AppendU32(&out.bytes, static_cast<uint32_t>(bin.size()));
-  out.bytes.append("BIN\0", 4);
-  out.bytes += bin;
+  const size_t bin_bytes = (out.draco.size() + 3) / 4 * 4;
+  const nlohmann::json gltf =
+      GltfDocument(out, *draco_mesh, pos, col, box, bin_bytes, options.name);
+  out.bytes = PackGlb(gltf.dump(), out.draco);
   return out;
 }
 
