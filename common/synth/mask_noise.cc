@@ -189,6 +189,118 @@ LabelMap SimulatePartSegmenter(const LabelMap& gt, const MaskNoiseOptions& o, st
   return map;
 }
 
+// Areas, centroids and touching pairs of the ground-truth instances.
+struct InstanceStats {
+  std::map<uint16_t, size_t> area;
+  std::map<uint16_t, std::pair<double, double>> centroid;  // pixel sums
+  std::set<std::pair<uint16_t, uint16_t>> touching;
+};
+InstanceStats MeasureInstances(const LabelMap& gt) {
+  InstanceStats s;
+  const int w = gt.width, h = gt.height;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      const uint16_t id = gt.labels[static_cast<size_t>(y) * w + x];
+      if (id == 0) continue;
+      ++s.area[id];
+      s.centroid[id].first += x;
+      s.centroid[id].second += y;
+      const uint16_t right = x + 1 < w ? gt.labels[static_cast<size_t>(y) * w + x + 1] : 0;
+      const uint16_t down = y + 1 < h ? gt.labels[static_cast<size_t>(y + 1) * w + x] : 0;
+      for (uint16_t other : {right, down}) {
+        if (other != 0 && other != id)
+          s.touching.insert({std::min(id, other), std::max(id, other)});
+      }
+    }
+  }
+  return s;
+}
+
+// 1. Under-segmentation: touching instances merged (labels rewritten through a union-find style
+// map); 2. over-segmentation: instances cut by a random line through their centroid, the far
+// side a new label.
+LabelMap MergeAndSplit(const LabelMap& gt, const MaskNoiseOptions& o, const InstanceStats& stats,
+                       std::mt19937_64& rng, uint16_t* next_label) {
+  std::uniform_real_distribution<float> uni(0.0f, 1.0f);
+  const int w = gt.width, h = gt.height;
+  LabelMap map = gt;
+  std::map<uint16_t, uint16_t> merged_into;
+  auto root = [&](uint16_t id) {
+    while (merged_into.count(id)) id = merged_into[id];
+    return id;
+  };
+  for (const auto& [a, b] : stats.touching) {
+    if (uni(rng) < o.merge_probability && root(a) != root(b)) merged_into[root(b)] = root(a);
+  }
+  std::map<uint16_t, std::array<double, 4>> split_line;  // instance -> (cx, cy, nx, ny)
+  for (const auto& [id, a] : stats.area) {
+    if (a < 50 || uni(rng) >= o.split_probability) continue;
+    const double angle = uni(rng) * 3.14159265358979;
+    const auto& c = stats.centroid.at(id);
+    split_line[id] = {c.first / a, c.second / a, std::cos(angle), std::sin(angle)};
+  }
+  std::map<uint16_t, uint16_t> split_label;
+  for (auto& [id, line] : split_line) split_label[id] = (*next_label)++;
+  for (int y = 0; y < h; ++y) {
+    for (int x = 0; x < w; ++x) {
+      uint16_t& label = map.labels[static_cast<size_t>(y) * w + x];
+      if (label == 0) continue;
+      const uint16_t original = label;
+      label = root(original);
+      auto it = split_line.find(original);
+      if (it != split_line.end()) {
+        const auto& l = it->second;
+        if ((x - l[0]) * l[2] + (y - l[1]) * l[3] > 0) label = split_label[original];
+      }
+    }
+  }
+  return map;
+}
+
+// 3. Misses of small instances; 4. boundary jitter (each kept mask grown or shrunk a few pixels).
+void MissAndJitter(const MaskNoiseOptions& o, std::mt19937_64& rng, LabelMap* map) {
+  std::uniform_real_distribution<float> uni(0.0f, 1.0f);
+  const size_t n = map->labels.size();
+  std::map<uint16_t, size_t> new_area;
+  for (uint16_t v : map->labels)
+    if (v != 0) ++new_area[v];
+  std::set<uint16_t> missed;
+  for (const auto& [id, a] : new_area) {
+    if (a < o.miss_area_fraction * n && uni(rng) < o.miss_probability) missed.insert(id);
+  }
+  for (uint16_t& v : map->labels)
+    if (missed.count(v)) v = 0;
+  if (o.jitter_px > 0) {
+    for (const auto& [id, a] : new_area) {
+      if (missed.count(id)) continue;
+      const int steps = std::uniform_int_distribution<int>(-o.jitter_px, o.jitter_px)(rng);
+      for (int s = 0; s < std::abs(steps); ++s) MorphStep(*map, id, steps > 0);
+    }
+  }
+}
+
+// 5. Spurious masks: ellipses on background pixels, a Poisson number per view.
+void AddSpuriousMasks(const LabelMap& gt, const MaskNoiseOptions& o, std::mt19937_64& rng,
+                      uint16_t* next_label, LabelMap* map) {
+  std::uniform_real_distribution<float> uni(0.0f, 1.0f);
+  const int w = gt.width, h = gt.height;
+  std::poisson_distribution<int> spurious(o.spurious_per_view);
+  const int count = o.spurious_per_view > 0 ? spurious(rng) : 0;
+  for (int s = 0; s < count; ++s) {
+    const double cx = uni(rng) * w, cy = uni(rng) * h;
+    const double rx = (0.04 + 0.08 * uni(rng)) * w, ry = (0.04 + 0.08 * uni(rng)) * h;
+    const uint16_t id = (*next_label)++;
+    for (int y = 0; y < h; ++y) {
+      for (int x = 0; x < w; ++x) {
+        uint16_t& v = map->labels[static_cast<size_t>(y) * w + x];
+        const double dx = (x - cx) / rx, dy = (y - cy) / ry;
+        if (v == 0 && gt.labels[static_cast<size_t>(y) * w + x] == 0 && dx * dx + dy * dy <= 1.0)
+          v = id;
+      }
+    }
+  }
+}
+
 }  // namespace
 
 absl::StatusOr<MaskNoiseOptions> MaskNoiseOptions::Level(const std::string& level) {
@@ -232,99 +344,15 @@ absl::StatusOr<MaskNoiseOptions> MaskNoiseOptions::Level(const std::string& leve
 
 LabelMap SimulateSegmenter(const LabelMap& gt, const MaskNoiseOptions& o, uint64_t seed) {
   std::mt19937_64 rng(seed);
-  std::uniform_real_distribution<float> uni(0.0f, 1.0f);
-  const int w = gt.width, h = gt.height;
-  const size_t n = gt.labels.size();
-  LabelMap map = gt;
-  // Areas, centroids and touching pairs of the ground-truth instances.
-  std::map<uint16_t, size_t> area;
-  std::map<uint16_t, std::pair<double, double>> centroid;
-  std::set<std::pair<uint16_t, uint16_t>> touching;
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      const uint16_t id = gt.labels[static_cast<size_t>(y) * w + x];
-      if (id == 0) continue;
-      ++area[id];
-      centroid[id].first += x;
-      centroid[id].second += y;
-      const uint16_t right = x + 1 < w ? gt.labels[static_cast<size_t>(y) * w + x + 1] : 0;
-      const uint16_t down = y + 1 < h ? gt.labels[static_cast<size_t>(y + 1) * w + x] : 0;
-      for (uint16_t other : {right, down}) {
-        if (other != 0 && other != id) touching.insert({std::min(id, other), std::max(id, other)});
-      }
-    }
-  }
-  if (o.part_family) return SimulatePartSegmenter(gt, o, rng, area, touching);
-  // Labels are rewritten through a union-find style map (merges), then splits add new labels.
-  std::map<uint16_t, uint16_t> merged_into;
-  auto root = [&](uint16_t id) {
-    while (merged_into.count(id)) id = merged_into[id];
-    return id;
-  };
-  for (const auto& [a, b] : touching) {  // 1. under-segmentation
-    if (uni(rng) < o.merge_probability && root(a) != root(b)) merged_into[root(b)] = root(a);
-  }
+  const InstanceStats stats = MeasureInstances(gt);
+  if (o.part_family) return SimulatePartSegmenter(gt, o, rng, stats.area, stats.touching);
   uint16_t next_label =
       gt.labels.empty()
           ? 1
           : static_cast<uint16_t>(*std::max_element(gt.labels.begin(), gt.labels.end()) + 1);
-  std::map<uint16_t, std::array<double, 4>>
-      split_line;                     // instance -> (cx, cy, nx, ny), new label in [3]
-  for (const auto& [id, a] : area) {  // 2. over-segmentation
-    if (a < 50 || uni(rng) >= o.split_probability) continue;
-    const double angle = uni(rng) * 3.14159265358979;
-    split_line[id] = {centroid[id].first / a, centroid[id].second / a, std::cos(angle),
-                      std::sin(angle)};
-  }
-  std::map<uint16_t, uint16_t> split_label;
-  for (auto& [id, line] : split_line) split_label[id] = next_label++;
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      uint16_t& label = map.labels[static_cast<size_t>(y) * w + x];
-      if (label == 0) continue;
-      const uint16_t original = label;
-      label = root(original);
-      auto it = split_line.find(original);
-      if (it != split_line.end()) {
-        const auto& l = it->second;
-        if ((x - l[0]) * l[2] + (y - l[1]) * l[3] > 0) label = split_label[original];
-      }
-    }
-  }
-  // 3. misses of small instances.
-  std::map<uint16_t, size_t> new_area;
-  for (uint16_t v : map.labels)
-    if (v != 0) ++new_area[v];
-  std::set<uint16_t> missed;
-  for (const auto& [id, a] : new_area) {
-    if (a < o.miss_area_fraction * n && uni(rng) < o.miss_probability) missed.insert(id);
-  }
-  for (uint16_t& v : map.labels)
-    if (missed.count(v)) v = 0;
-  // 4. boundary jitter.
-  if (o.jitter_px > 0) {
-    for (const auto& [id, a] : new_area) {
-      if (missed.count(id)) continue;
-      const int steps = std::uniform_int_distribution<int>(-o.jitter_px, o.jitter_px)(rng);
-      for (int s = 0; s < std::abs(steps); ++s) MorphStep(map, id, steps > 0);
-    }
-  }
-  // 5. spurious masks on background pixels.
-  std::poisson_distribution<int> spurious(o.spurious_per_view);
-  const int count = o.spurious_per_view > 0 ? spurious(rng) : 0;
-  for (int s = 0; s < count; ++s) {
-    const double cx = uni(rng) * w, cy = uni(rng) * h;
-    const double rx = (0.04 + 0.08 * uni(rng)) * w, ry = (0.04 + 0.08 * uni(rng)) * h;
-    const uint16_t id = next_label++;
-    for (int y = 0; y < h; ++y) {
-      for (int x = 0; x < w; ++x) {
-        uint16_t& v = map.labels[static_cast<size_t>(y) * w + x];
-        const double dx = (x - cx) / rx, dy = (y - cy) / ry;
-        if (v == 0 && gt.labels[static_cast<size_t>(y) * w + x] == 0 && dx * dx + dy * dy <= 1.0)
-          v = id;
-      }
-    }
-  }
+  LabelMap map = MergeAndSplit(gt, o, stats, rng, &next_label);
+  MissAndJitter(o, rng, &map);
+  AddSpuriousMasks(gt, o, rng, &next_label, &map);
   FinishMasks(map, o, rng);
   return map;
 }
