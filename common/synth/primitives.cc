@@ -186,6 +186,87 @@ TriangleMesh MakeRectangle(float size_x, float size_y, int cells_x, int cells_y)
   return mesh;
 }
 
+namespace {
+
+std::vector<Eigen::Vector2f> BottleProfile(float r, float h) {
+  // Body, shoulder, neck: radius r, height h; neck radius 0.35 r over the top 25 %.
+  const float neck = 0.35f * r, body = 0.6f * h, shoulder = 0.75f * h;
+  std::vector<Eigen::Vector2f> profile = {{0, 0}, {r, 0}, {r, body}};
+  for (int i = 1; i <= 6; ++i) {
+    const float t = static_cast<float>(i) / 6.0f;
+    const float s = 0.5f - 0.5f * std::cos(kPi * t);
+    profile.emplace_back(r + (neck - r) * s, body + (shoulder - body) * t);
+  }
+  profile.push_back({neck, h});
+  profile.push_back({0, h});
+  return profile;
+}
+
+std::vector<Eigen::Vector2f> BowlProfile(float r, float h) {
+  // Outer quarter-ellipse from the foot to the rim, inner one back down.
+  const float wall = 0.08f * r;
+  std::vector<Eigen::Vector2f> profile = {{0, 0}, {0.5f * r, 0}};
+  for (int i = 1; i <= 8; ++i) {
+    const float a = 0.5f * kPi * static_cast<float>(i) / 8.0f;
+    profile.emplace_back(0.5f * r + 0.5f * r * std::sin(a), h * (1.0f - std::cos(a)));
+  }
+  for (int i = 8; i >= 0; --i) {
+    const float a = 0.5f * kPi * static_cast<float>(i) / 8.0f;
+    profile.emplace_back(std::max(0.0f, (r - wall) * std::sin(a)),
+                         wall + (h - wall) * (1.0f - std::cos(a)));
+  }
+  profile.back().x() = 0.0f;
+  return profile;
+}
+
+TriangleMesh MakeMug(const ShapeSpec& spec, int segments) {
+  const float r = spec.size.x(), h = spec.size.z();
+  // The cup, and a handle: a torus standing in the x-z plane at +x whose tube touches the
+  // wall, sunk half the wall's thickness into it. (Until 2026-12-06 the torus stood 2 tubes
+  // into the cup: its inner arc hung inside the cavity, a surface no mug has.) The handle
+  // reaches 0.56 h beyond the wall, its hole 0.2 h across.
+  TriangleMesh mesh = MakeShapeMesh({ShapeKind::kCup, spec.size}, segments);
+  const float wall = 0.08f * r, tube = 0.09f * h, major = 0.28f * h - tube + 0.25f * wall;
+  TriangleMesh handle =
+      MakeShapeMesh({ShapeKind::kTorus, Eigen::Vector3f(major, tube, 0)}, segments / 2);
+  Rigid3d stand;  // torus axis z -> y, centred beside the wall at mid height
+  stand.rotation = Eigen::AngleAxisd(0.5 * kPi, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  stand.translation = Eigen::Vector3d(r - 0.5f * wall + major + tube, 0, 0.5 * h - tube);
+  handle.Transform(stand);
+  mesh.Append(handle);
+  return mesh;
+}
+
+TriangleMesh MakeLBlock(const Eigen::Vector3f& size) {
+  // A tall bar along x and a lower arm along y at one end: the two boxes share a face.
+  const Eigen::Vector3f bar(size.x(), 0.4f * size.y(), size.z());
+  const Eigen::Vector3f arm(0.35f * size.x(), 0.6f * size.y(), 0.55f * size.z());
+  TriangleMesh mesh = MakeBox(bar);
+  Rigid3d shift_bar, shift_arm;
+  shift_bar.translation = Eigen::Vector3d(0, -0.3 * size.y(), 0);
+  mesh.Transform(shift_bar);
+  TriangleMesh side = MakeBox(arm);
+  shift_arm.translation = Eigen::Vector3d(0.5 * (size.x() - arm.x()), 0.2 * size.y(), 0);
+  side.Transform(shift_arm);
+  mesh.Append(side);
+  return mesh;
+}
+
+TriangleMesh MakeIrregular(const Eigen::Vector3f& size) {
+  // A box sheared along x with height, its top slanted along x and twisted along y.
+  TriangleMesh mesh = MakeBox(size);
+  const Eigen::Vector3f s = size;
+  for (Eigen::Vector3f& v : mesh.vertices) {
+    const float tx = v.x() / s.x(), tz = v.z() / s.z();  // tx in [-0.5, 0.5], tz in [0, 1]
+    v.z() *= 1.0f + 0.7f * (tx + 0.5f) * 0.5f;           // top rises towards +x
+    v.x() += 0.25f * s.x() * tz;                         // shear
+    v.y() += 0.3f * s.y() * tz * (tx + 0.5f);            // twist
+  }
+  return mesh;
+}
+
+}  // namespace
+
 TriangleMesh MakeShapeMesh(const ShapeSpec& spec, int segments) {
   const float r = spec.size.x(), h = spec.size.z();
   std::vector<Eigen::Vector2f> profile;
@@ -207,83 +288,21 @@ TriangleMesh MakeShapeMesh(const ShapeSpec& spec, int segments) {
       profile.pop_back();  // closed loop: the last point equals the first
       return MakeLathe(profile, segments, true);
     }
-    case ShapeKind::kBottle: {
-      // Body, shoulder, neck: radius r, height h; neck radius 0.35 r over the top 25 %.
-      const float neck = 0.35f * r, body = 0.6f * h, shoulder = 0.75f * h;
-      profile = {{0, 0}, {r, 0}, {r, body}};
-      for (int i = 1; i <= 6; ++i) {
-        const float t = static_cast<float>(i) / 6.0f;
-        const float s = 0.5f - 0.5f * std::cos(kPi * t);
-        profile.emplace_back(r + (neck - r) * s, body + (shoulder - body) * t);
-      }
-      profile.push_back({neck, h});
-      profile.push_back({0, h});
-      return MakeLathe(profile, segments, false);
-    }
+    case ShapeKind::kBottle:
+      return MakeLathe(BottleProfile(r, h), segments, false);
     case ShapeKind::kCup: {
       const float wall = 0.08f * r;
       return MakeLathe({{0, 0}, {r, 0}, {r, h}, {r - wall, h}, {r - wall, wall}, {0, wall}},
                        segments, false);
     }
-    case ShapeKind::kBowl: {
-      // Outer quarter-ellipse from the foot to the rim, inner one back down.
-      const float wall = 0.08f * r;
-      profile = {{0, 0}, {0.5f * r, 0}};
-      for (int i = 1; i <= 8; ++i) {
-        const float a = 0.5f * kPi * static_cast<float>(i) / 8.0f;
-        profile.emplace_back(0.5f * r + 0.5f * r * std::sin(a), h * (1.0f - std::cos(a)));
-      }
-      for (int i = 8; i >= 0; --i) {
-        const float a = 0.5f * kPi * static_cast<float>(i) / 8.0f;
-        profile.emplace_back(std::max(0.0f, (r - wall) * std::sin(a)),
-                             wall + (h - wall) * (1.0f - std::cos(a)));
-      }
-      profile.back().x() = 0.0f;
-      return MakeLathe(profile, segments, false);
-    }
-    case ShapeKind::kMug: {
-      // The cup, and a handle: a torus standing in the x-z plane at +x whose tube touches the
-      // wall, sunk half the wall's thickness into it. (Until 2026-12-06 the torus stood 2 tubes
-      // into the cup: its inner arc hung inside the cavity, a surface no mug has.) The handle
-      // reaches 0.56 h beyond the wall, its hole 0.2 h across.
-      TriangleMesh mesh = MakeShapeMesh({ShapeKind::kCup, spec.size}, segments);
-      const float wall = 0.08f * r, tube = 0.09f * h, major = 0.28f * h - tube + 0.25f * wall;
-      TriangleMesh handle =
-          MakeShapeMesh({ShapeKind::kTorus, Eigen::Vector3f(major, tube, 0)}, segments / 2);
-      Rigid3d stand;  // torus axis z -> y, centred beside the wall at mid height
-      stand.rotation = Eigen::AngleAxisd(0.5 * kPi, Eigen::Vector3d::UnitX()).toRotationMatrix();
-      stand.translation = Eigen::Vector3d(r - 0.5f * wall + major + tube, 0, 0.5 * h - tube);
-      handle.Transform(stand);
-      mesh.Append(handle);
-      return mesh;
-    }
-    case ShapeKind::kLBlock: {
-      // A tall bar along x and a lower arm along y at one end: the two boxes share a face.
-      const Eigen::Vector3f bar(spec.size.x(), 0.4f * spec.size.y(), spec.size.z());
-      const Eigen::Vector3f arm(0.35f * spec.size.x(), 0.6f * spec.size.y(), 0.55f * spec.size.z());
-      TriangleMesh mesh = MakeBox(bar);
-      Rigid3d shift_bar, shift_arm;
-      shift_bar.translation = Eigen::Vector3d(0, -0.3 * spec.size.y(), 0);
-      mesh.Transform(shift_bar);
-      TriangleMesh side = MakeBox(arm);
-      shift_arm.translation =
-          Eigen::Vector3d(0.5 * (spec.size.x() - arm.x()), 0.2 * spec.size.y(), 0);
-      side.Transform(shift_arm);
-      mesh.Append(side);
-      return mesh;
-    }
-    case ShapeKind::kIrregular: {
-      // A box sheared along x with height, its top slanted along x and twisted along y.
-      TriangleMesh mesh = MakeBox(spec.size);
-      const Eigen::Vector3f s = spec.size;
-      for (Eigen::Vector3f& v : mesh.vertices) {
-        const float tx = v.x() / s.x(), tz = v.z() / s.z();  // tx in [-0.5, 0.5], tz in [0, 1]
-        v.z() *= 1.0f + 0.7f * (tx + 0.5f) * 0.5f;           // top rises towards +x
-        v.x() += 0.25f * s.x() * tz;                         // shear
-        v.y() += 0.3f * s.y() * tz * (tx + 0.5f);            // twist
-      }
-      return mesh;
-    }
+    case ShapeKind::kBowl:
+      return MakeLathe(BowlProfile(r, h), segments, false);
+    case ShapeKind::kMug:
+      return MakeMug(spec, segments);
+    case ShapeKind::kLBlock:
+      return MakeLBlock(spec.size);
+    case ShapeKind::kIrregular:
+      return MakeIrregular(spec.size);
   }
   return {};
 }
