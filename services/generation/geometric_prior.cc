@@ -224,6 +224,50 @@ void AddSupport(const std::vector<SymmetryHypothesis>& hypotheses, const Gaussia
   (*added_by)["support_cap"] = static_cast<int>(filter->added().size() - before);
 }
 
+// The instance's surfel centres and normals.
+void CentresAndNormals(const GaussianCloud& instance, std::vector<Eigen::Vector3f>* points,
+                       std::vector<Eigen::Vector3f>* normals) {
+  points->resize(instance.size());
+  normals->resize(instance.size());
+  for (size_t g = 0; g < instance.size(); ++g) {
+    (*points)[g] = Eigen::Vector3f(&instance.positions[3 * g]);
+    (*normals)[g] = SurfelRotation(instance, g).col(2);
+  }
+}
+
+// The prior's output where hypotheses were accepted: the added surfels, the foreign observed
+// ones, which axes the object has, and the report (what each hypothesis and cap added, the
+// sources left out and the candidates rejected, by reason).
+void FillOutput(const std::vector<SymmetryHypothesis>& hypotheses, const GaussianCloud& instance,
+                const CandidateFilter& filter, const SourceCounts& counts, const AxisBodies& bodies,
+                const std::vector<uint8_t>& foreign, int accepted,
+                const std::map<std::string, int>& added_by, PriorOutput* out) {
+  const std::vector<Candidate>& added = filter.added();
+  out->added = BuildSurfels(instance, added);
+  out->reason =
+      absl::StrCat(accepted, " symmetry hypothesis(es) accepted; ", added.size(), " surfels added");
+  out->report["added"] = added.size();
+  out->report["added_by"] = added_by;
+  out->report["asymmetric_sources"] = counts.asymmetric;
+  out->report["mirror_axis_asymmetric_sources"] = counts.mirror_axis_asymmetric;
+  out->report["beyond_axis_profile_sources"] = counts.beyond_axis_profile;
+  out->report["handle_joined_sources"] = bodies.handle_joined;
+  for (const SymmetryHypothesis& h : hypotheses) {
+    out->revolution_axis |= h.accepted && h.kind == SymmetryKind::kAxis && h.order == 0;
+    out->order_axis |= h.accepted && h.kind == SymmetryKind::kAxis && h.order > 0;
+  }
+  for (uint32_t g = 0; g < instance.size(); ++g) {
+    if (foreign[g]) out->foreign.push_back(g);
+  }
+  out->report["foreign_observed"] = out->foreign.size();
+  const CandidateRejections& rejected = filter.rejected();
+  out->report["rejected"] = {{"observed_free", rejected.observed_free},
+                             {"already_covered", rejected.already_covered},
+                             {"below_support", rejected.below_support},
+                             {"off_observed_surface", rejected.off_observed_surface},
+                             {"axis_cap_open_above", rejected.axis_cap_open_above}};
+}
+
 }  // namespace
 
 absl::StatusOr<PriorOutput> NoPrior::Complete(const PriorInput& input) const {
@@ -238,11 +282,8 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   RETURN_IF_ERROR(options_.observed_surface.Validate());
   const GaussianCloud& instance = *input.instance;
   const ObjectFrame& frame = input.frame;
-  std::vector<Eigen::Vector3f> points(instance.size()), normals(instance.size());
-  for (size_t g = 0; g < instance.size(); ++g) {
-    points[g] = Eigen::Vector3f(&instance.positions[3 * g]);
-    normals[g] = SurfelRotation(instance, g).col(2);
-  }
+  std::vector<Eigen::Vector3f> points, normals;
+  CentresAndNormals(instance, &points, &normals);
   const std::vector<SymmetryHypothesis> hypotheses =
       DetectSymmetries(points, normals, frame, *input.free_space, options_.symmetry);
   RETURN_IF_ERROR(CheckCancelled(input.cancel, "complete"));
@@ -298,30 +339,7 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
       frame.bottom_height - frame.support_height <= options_.max_support_gap_radii * frame.radius) {
     AddSupport(hypotheses, instance, s, own, options_, &filter, &added_by);
   }
-  const std::vector<Candidate>& added = filter.added();
-  out.added = BuildSurfels(instance, added);
-  out.reason =
-      absl::StrCat(accepted, " symmetry hypothesis(es) accepted; ", added.size(), " surfels added");
-  out.report["added"] = added.size();
-  out.report["added_by"] = added_by;
-  out.report["asymmetric_sources"] = counts.asymmetric;
-  out.report["mirror_axis_asymmetric_sources"] = counts.mirror_axis_asymmetric;
-  out.report["beyond_axis_profile_sources"] = counts.beyond_axis_profile;
-  out.report["handle_joined_sources"] = bodies.handle_joined;
-  for (const SymmetryHypothesis& h : hypotheses) {
-    out.revolution_axis |= h.accepted && h.kind == SymmetryKind::kAxis && h.order == 0;
-    out.order_axis |= h.accepted && h.kind == SymmetryKind::kAxis && h.order > 0;
-  }
-  for (uint32_t g = 0; g < instance.size(); ++g) {
-    if (foreign[g]) out.foreign.push_back(g);
-  }
-  out.report["foreign_observed"] = out.foreign.size();
-  const CandidateRejections& rejected = filter.rejected();
-  out.report["rejected"] = {{"observed_free", rejected.observed_free},
-                            {"already_covered", rejected.already_covered},
-                            {"below_support", rejected.below_support},
-                            {"off_observed_surface", rejected.off_observed_surface},
-                            {"axis_cap_open_above", rejected.axis_cap_open_above}};
+  FillOutput(hypotheses, instance, filter, counts, bodies, foreign, accepted, added_by, &out);
   return out;
 }
 
