@@ -65,6 +65,57 @@ bool CurlMisordersHeaders(const std::vector<std::string>& headers) {
   return false;
 }
 
+// SigV4's canonical query string: sorted by key, keys and values URI-encoded.
+std::string CanonicalQuery(std::vector<std::pair<std::string, std::string>> query,
+                           bool slash_literal) {
+  std::sort(query.begin(), query.end());
+  std::vector<std::string> params;
+  for (const auto& [k, v] : query)
+    params.push_back(absl::StrCat(AwsUriEncode(k, false), "=", AwsUriEncode(v, slash_literal)));
+  return absl::StrJoin(params, "&");
+}
+
+// The request's header lines: its own, the payload's hash, the session token, a content type.
+std::vector<std::string> RequestHeaders(const S3Request& r, const S3Credentials& credentials) {
+  std::vector<std::string> lines = r.headers;
+  lines.push_back(absl::StrCat("x-amz-content-sha256: ", ComputeDigest(r.body).hash));
+  if (!credentials.session_token.empty())
+    lines.push_back(absl::StrCat("x-amz-security-token: ", credentials.session_token));
+  // Never curl's default form type for a body: servers may parse (and swallow) it as a form.
+  if (r.method != "GET" && r.method != "HEAD" &&
+      std::none_of(r.headers.begin(), r.headers.end(), [](const std::string& h) {
+        return absl::StartsWithIgnoreCase(h, "content-type:");
+      }))
+    lines.push_back("Content-Type: application/octet-stream");
+  return lines;
+}
+
+// Signs the request itself (x-amz-date and Authorization appended to `lines`), where curl would
+// sign its headers in another order than it sends them.
+void SignHeaders(const std::string& method, const std::string& url,
+                 const std::string& canonical_query, const std::string& region,
+                 const S3Credentials& credentials, std::vector<std::string>* out_lines) {
+  std::vector<std::string>& lines = *out_lines;
+  char amz_date[32];
+  const std::time_t now = std::time(nullptr);
+  std::tm utc{};
+  gmtime_r(&now, &utc);
+  std::strftime(amz_date, sizeof(amz_date), "%Y%m%dT%H%M%SZ", &utc);
+  lines.push_back(absl::StrCat("x-amz-date: ", amz_date));
+  std::map<std::string, std::string> signed_headers;
+  for (const std::string& h : lines) {
+    const size_t colon = h.find(':');
+    signed_headers[absl::AsciiStrToLower(h.substr(0, colon))] = Trim(h.substr(colon + 1));
+  }
+  const size_t host_start = url.find("://") + 3;
+  const size_t path_start = url.find('/', host_start);
+  signed_headers["host"] = url.substr(host_start, path_start - host_start);
+  const std::string path = url.substr(path_start, url.find('?') - path_start);
+  lines.push_back(absl::StrCat(
+      "Authorization: ",
+      SignS3RequestV4(method, path, canonical_query, signed_headers, region, credentials)));
+}
+
 }  // namespace
 
 S3Client::S3Client(S3Location location, S3Credentials credentials, S3ClientOptions options)
@@ -101,48 +152,15 @@ absl::StatusOr<S3Response> S3Client::SendOnce(const S3Request& r) {
   if (curl == nullptr) return absl::ResourceExhaustedError("curl_easy_init failed");
   curl_easy_reset(curl);
   std::string url = location_.Url(r.key);
-  std::vector<std::pair<std::string, std::string>> query = r.query;
-  std::sort(query.begin(), query.end());  // SigV4's canonical query string is sorted
   // curl signs the query string exactly as sent, so it is sent in canonical form (s3_store_test
   // checks curl's signature against SignS3RequestV4 on a captured request).
-  std::vector<std::string> params;
-  for (const auto& [k, v] : query)
-    params.push_back(
-        absl::StrCat(AwsUriEncode(k, false), "=", AwsUriEncode(v, location_.query_slash_literal)));
-  const std::string canonical_query = absl::StrJoin(params, "&");
-  if (!params.empty()) absl::StrAppend(&url, "?", canonical_query);
+  const std::string canonical_query = CanonicalQuery(r.query, location_.query_slash_literal);
+  if (!canonical_query.empty()) absl::StrAppend(&url, "?", canonical_query);
   const std::string sigv4 = absl::StrCat("aws:amz:", location_.region, ":s3");
-  std::vector<std::string> lines = r.headers;
-  lines.push_back(absl::StrCat("x-amz-content-sha256: ", ComputeDigest(r.body).hash));
-  if (!credentials_.session_token.empty())
-    lines.push_back(absl::StrCat("x-amz-security-token: ", credentials_.session_token));
-  // Never curl's default form type for a body: servers may parse (and swallow) it as a form.
-  if (r.method != "GET" && r.method != "HEAD" &&
-      std::none_of(r.headers.begin(), r.headers.end(), [](const std::string& h) {
-        return absl::StartsWithIgnoreCase(h, "content-type:");
-      }))
-    lines.push_back("Content-Type: application/octet-stream");
+  std::vector<std::string> lines = RequestHeaders(r, credentials_);
   const bool own_signature = CurlMisordersHeaders(lines);
-  if (own_signature) {
-    char amz_date[32];
-    const std::time_t now = std::time(nullptr);
-    std::tm utc{};
-    gmtime_r(&now, &utc);
-    std::strftime(amz_date, sizeof(amz_date), "%Y%m%dT%H%M%SZ", &utc);
-    lines.push_back(absl::StrCat("x-amz-date: ", amz_date));
-    std::map<std::string, std::string> signed_headers;
-    for (const std::string& h : lines) {
-      const size_t colon = h.find(':');
-      signed_headers[absl::AsciiStrToLower(h.substr(0, colon))] = Trim(h.substr(colon + 1));
-    }
-    const size_t host_start = url.find("://") + 3;
-    const size_t path_start = url.find('/', host_start);
-    signed_headers["host"] = url.substr(host_start, path_start - host_start);
-    const std::string path = url.substr(path_start, url.find('?') - path_start);
-    lines.push_back(absl::StrCat("Authorization: ",
-                                 SignS3RequestV4(r.method, path, canonical_query, signed_headers,
-                                                 location_.region, credentials_)));
-  }
+  if (own_signature)
+    SignHeaders(r.method, url, canonical_query, location_.region, credentials_, &lines);
   Slist headers, resolve;
   for (const std::string& h : lines) Append(headers, h);
   for (const std::string& entry : options_.resolve) Append(resolve, entry);
