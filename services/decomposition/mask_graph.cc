@@ -28,6 +28,88 @@ void ViewSet::Or(const ViewSet& other) {
   for (size_t i = 0; i < words.size(); ++i) words[i] |= other.words[i];
 }
 
+namespace {
+
+// One thread's buffers for JudgeOne, zeroed between trackers.
+struct JudgeScratch {
+  std::vector<uint32_t> counts;   // per container tracker: members of P labelled with it
+  std::vector<uint32_t> touched;  // the trackers with a count
+  std::vector<uint32_t> traced;   // per frame: members of P traced
+};
+
+// The frames where at least 1 - mask_visible_threshold of the tracker's Gaussians are traced.
+int CountTracedFrames(const TrackerSet& set, const Tracker& tracker,
+                      const DecompositionOptions& options, std::vector<uint32_t>* traced) {
+  const double size = static_cast<double>(tracker.gaussians.size());
+  for (uint32_t g : tracker.gaussians) {
+    const uint16_t* frames;
+    const size_t count = set.FramesOf(g, &frames);
+    for (size_t q = 0; q < count; ++q) ++(*traced)[frames[q]];
+  }
+  int traced_num = 0;
+  for (uint32_t& c : *traced) {
+    traced_num += (size - static_cast<double>(c)) / size <= options.mask_visible_threshold;
+    c = 0;
+  }
+  return traced_num;
+}
+
+// ALGORITHM.md 4.3 for tracker t: per frame where enough of its Gaussians lie in masks, whether
+// one mask contains it (visible, contained) or several split it; under-segmented when split in
+// more than undersegment_threshold of the frames where it is visible.
+void JudgeOne(const TrackerSet& set, const DecompositionOptions& options, size_t t, JudgeScratch* s,
+              MaskJudgement* j) {
+  const Tracker& tracker = set.trackers[t];
+  std::vector<uint32_t>& counts = s->counts;
+  std::vector<uint32_t>& touched = s->touched;
+  touched.clear();
+  for (uint32_t g : tracker.gaussians) {
+    for (uint64_t k = set.mask_offsets[g]; k < set.mask_offsets[g + 1]; ++k) {
+      const uint32_t u = set.masks[k];
+      if (counts[u]++ == 0) touched.push_back(u);
+    }
+  }
+  // Trackers are ordered by view, so sorting groups the touched masks frame by frame.
+  std::sort(touched.begin(), touched.end());
+  const double size = static_cast<double>(tracker.gaussians.size());
+  int visible_num = 0, split_num = 0;
+  for (size_t b = 0; b < touched.size();) {
+    const int view = set.trackers[touched[b]].view;
+    size_t e = b;
+    uint64_t nonzero = 0;
+    uint32_t best = touched[b];
+    for (; e < touched.size() && set.trackers[touched[e]].view == view; ++e) {
+      nonzero += counts[touched[e]];
+      if (counts[touched[e]] > counts[best]) best = touched[e];
+    }
+    if (view == tracker.view) {  // the own frame always counts: P is contained in itself
+      ++visible_num;
+      j->visible[t].Set(view);
+      j->contained[t].push_back(static_cast<uint32_t>(t));
+    } else if ((size - static_cast<double>(nonzero)) / size <= options.mask_visible_threshold) {
+      ++visible_num;
+      if (counts[best] / static_cast<double>(nonzero) > options.contained_threshold) {
+        j->visible[t].Set(view);
+        j->contained[t].push_back(best);
+      } else {
+        ++split_num;
+      }
+    }
+    b = e;
+  }
+  const int traced_num = CountTracedFrames(set, tracker, options, &s->traced);
+  j->frames[t] = {static_cast<uint16_t>(traced_num), static_cast<uint16_t>(visible_num),
+                  static_cast<uint16_t>(split_num)};
+  if (visible_num == 0 ||
+      split_num / static_cast<double>(visible_num) > options.undersegment_threshold) {
+    j->undersegmented[t] = 1;
+  }
+  std::sort(j->contained[t].begin(), j->contained[t].end());
+  for (uint32_t u : touched) counts[u] = 0;
+}
+
+}  // namespace
+
 MaskJudgement JudgeTrackers(const TrackerSet& set, const DecompositionOptions& options) {
   const size_t m = set.trackers.size();
   MaskJudgement j;
@@ -38,68 +120,10 @@ MaskJudgement JudgeTrackers(const TrackerSet& set, const DecompositionOptions& o
   RunWithThreads(options.num_threads, [&] {
     tbb::parallel_for(
         tbb::blocked_range<size_t>(0, m, 16), [&](const tbb::blocked_range<size_t>& range) {
-          std::vector<uint32_t> counts(m,
-                                       0);  // per container tracker: members of P labelled with it
-          std::vector<uint32_t> touched;
-          std::vector<uint32_t> traced(set.num_views, 0);  // per frame: members of P traced
-          for (size_t t = range.begin(); t < range.end(); ++t) {
-            const Tracker& tracker = set.trackers[t];
-            touched.clear();
-            for (uint32_t g : tracker.gaussians) {
-              for (uint64_t k = set.mask_offsets[g]; k < set.mask_offsets[g + 1]; ++k) {
-                const uint32_t u = set.masks[k];
-                if (counts[u]++ == 0) touched.push_back(u);
-              }
-            }
-            // Trackers are ordered by view, so sorting groups the touched masks frame by frame.
-            std::sort(touched.begin(), touched.end());
-            const double size = static_cast<double>(tracker.gaussians.size());
-            int visible_num = 0, split_num = 0;
-            for (size_t b = 0; b < touched.size();) {
-              const int view = set.trackers[touched[b]].view;
-              size_t e = b;
-              uint64_t nonzero = 0;
-              uint32_t best = touched[b];
-              for (; e < touched.size() && set.trackers[touched[e]].view == view; ++e) {
-                nonzero += counts[touched[e]];
-                if (counts[touched[e]] > counts[best]) best = touched[e];
-              }
-              if (view == tracker.view) {  // the own frame always counts: P is contained in itself
-                ++visible_num;
-                j.visible[t].Set(view);
-                j.contained[t].push_back(static_cast<uint32_t>(t));
-              } else if ((size - static_cast<double>(nonzero)) / size <=
-                         options.mask_visible_threshold) {
-                ++visible_num;
-                if (counts[best] / static_cast<double>(nonzero) > options.contained_threshold) {
-                  j.visible[t].Set(view);
-                  j.contained[t].push_back(best);
-                } else {
-                  ++split_num;
-                }
-              }
-              b = e;
-            }
-            int traced_num = 0;
-            for (uint32_t g : tracker.gaussians) {
-              const uint16_t* frames;
-              const size_t count = set.FramesOf(g, &frames);
-              for (size_t q = 0; q < count; ++q) ++traced[frames[q]];
-            }
-            for (uint32_t& c : traced) {
-              traced_num +=
-                  (size - static_cast<double>(c)) / size <= options.mask_visible_threshold;
-              c = 0;
-            }
-            j.frames[t] = {static_cast<uint16_t>(traced_num), static_cast<uint16_t>(visible_num),
-                           static_cast<uint16_t>(split_num)};
-            if (visible_num == 0 ||
-                split_num / static_cast<double>(visible_num) > options.undersegment_threshold) {
-              j.undersegmented[t] = 1;
-            }
-            std::sort(j.contained[t].begin(), j.contained[t].end());
-            for (uint32_t u : touched) counts[u] = 0;
-          }
+          JudgeScratch scratch{
+              std::vector<uint32_t>(m, 0), {}, std::vector<uint32_t>(set.num_views, 0)};
+          for (size_t t = range.begin(); t < range.end(); ++t)
+            JudgeOne(set, options, t, &scratch, &j);
         });
   });
   return j;
