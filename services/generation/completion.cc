@@ -13,6 +13,7 @@
 #include "common/mesh/surfel_mesh.h"
 #include "common/scene/image_io.h"
 #include "common/splat/gaussian_ply.h"
+#include "services/generation/manifest_options.h"
 #include "services/generation/refinement_views.h"
 
 namespace instascene::generation {
@@ -96,33 +97,8 @@ nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& optio
         {"completed_share",
          o.object.size() ? static_cast<double>(completed) / o.object.size() : 0}}},
       {"ring", ring},
-      {"meshing",
-       {{"size_px", options.meshing.size_px},
-        {"azimuths", options.meshing.azimuths},
-        {"voxel_radii", options.meshing.voxel_radii},
-        {"min_alpha", options.meshing.min_alpha},
-        {"inset_sigmas", options.meshing.inset_sigmas},
-        {"snap_radius_spacings", options.meshing.snap_radius_spacings},
-        {"snap_layer_spacings", options.meshing.snap_layer_spacings},
-        {"snap_max_voxels", options.meshing.snap_max_voxels},
-        {"snap_reach_spacings", options.meshing.snap_reach_spacings},
-        {"snap_base_across", options.meshing.snap_base_across},
-        {"base_on_support", options.meshing.base_on_support},
-        {"carve_views", options.meshing.carve_views},
-        {"enclose_hull", options.meshing.enclose_hull},
-        {"top_at_highest_surfel", options.meshing.top_at_highest_surfel},
-        {"sides_within_surfels", options.meshing.sides_within_surfels},
-        {"sides_within_order_axis_copies", options.meshing.sides_within_order_axis_copies},
-        {"empty_alpha", options.meshing.empty_alpha},
-        {"empty_close_px", options.meshing.empty_close_px}}},
-      {"free_space",
-       {{"resolution", options.free_space.resolution},
-        {"extent_radii", options.free_space.extent_radii},
-        {"min_views", options.free_space.min_views},
-        {"margin_voxels", options.free_space.margin_voxels},
-        {"max_rays_per_view", options.free_space.max_rays_per_view},
-        {"hole_rays", options.free_space.hole_rays},
-        {"hole_slack", options.free_space.hole_slack}}},
+      {"meshing", MeshingToManifest(options.meshing)},
+      {"free_space", FreeSpaceToManifest(options.free_space)},
       {"ring_camera",
        {{"size_px", options.ring.size_px},
         {"focal_px", options.ring.focal_px},

@@ -80,4 +80,35 @@ RingOptions RingFromManifest(const nlohmann::json& m, std::vector<bool>* known) 
   return ring;
 }
 
+nlohmann::json FreeSpaceToManifest(const FreeSpaceOptions& f) {
+  return {{"resolution", f.resolution},
+          {"extent_radii", f.extent_radii},
+          {"min_views", f.min_views},
+          {"margin_voxels", f.margin_voxels},
+          {"max_rays_per_view", f.max_rays_per_view},
+          {"hole_rays", f.hole_rays},
+          {"hole_slack", f.hole_slack}};
+}
+
+nlohmann::json MeshingToManifest(const MeshingOptions& m) {
+  return {{"size_px", m.size_px},
+          {"azimuths", m.azimuths},
+          {"voxel_radii", m.voxel_radii},
+          {"min_alpha", m.min_alpha},
+          {"inset_sigmas", m.inset_sigmas},
+          {"snap_radius_spacings", m.snap_radius_spacings},
+          {"snap_layer_spacings", m.snap_layer_spacings},
+          {"snap_max_voxels", m.snap_max_voxels},
+          {"snap_reach_spacings", m.snap_reach_spacings},
+          {"snap_base_across", m.snap_base_across},
+          {"base_on_support", m.base_on_support},
+          {"carve_views", m.carve_views},
+          {"enclose_hull", m.enclose_hull},
+          {"top_at_highest_surfel", m.top_at_highest_surfel},
+          {"sides_within_surfels", m.sides_within_surfels},
+          {"sides_within_order_axis_copies", m.sides_within_order_axis_copies},
+          {"empty_alpha", m.empty_alpha},
+          {"empty_close_px", m.empty_close_px}};
+}
+
 }  // namespace instascene::generation
