@@ -190,15 +190,20 @@ absl::Status JobQueue::Expand(QueueTx& tx, const Job& source, const nlohmann::js
   return absl::OkStatus();
 }
 
-absl::StatusOr<std::vector<SubmitResult>> JobQueue::Submit(const SubmitRequest& request) {
-  RETURN_IF_ERROR(store::ValidateDigest(request.scene_manifest));
-  if (request.stages.empty()) return absl::InvalidArgumentError("submission has no stages");
-  if (request.max_attempts < 1) return absl::InvalidArgumentError("max_attempts must be >= 1");
-  // Classify the stages: submitted now (fixed), per item of a fan-out source, or joins.
-  struct Placement {
-    std::string source;  // "" = submitted now; else the fan-out stage whose completion creates it
-    std::string over;    // joins: the per-item stage they wait for
-  };
+namespace {
+
+// Where each stage of a submission goes: submitted now, created per item when a fan-out stage
+// completes, or a join of such per-item stages.
+struct Placement {
+  std::string source;  // "" = submitted now; else the fan-out stage whose completion creates it
+  std::string over;    // joins: the per-item stage they wait for
+};
+
+// The stages classified; InvalidArgument for a stage without a kind, one that appears twice,
+// parameters that are not an object, an input not earlier in the pipeline, and fan-out inputs
+// taken one way they cannot be (a per-item input taken as one, two fan-out inputs, a nested
+// fan-out, a join over what is not per item).
+absl::StatusOr<std::map<std::string, Placement>> PlaceStages(const SubmitRequest& request) {
   std::map<std::string, Placement> placed;
   for (const PlannedStage& stage : request.stages) {
     if (stage.kind.empty()) return absl::InvalidArgumentError("a stage has no kind");
@@ -234,6 +239,16 @@ absl::StatusOr<std::vector<SubmitResult>> JobQueue::Submit(const SubmitRequest& 
     }
     placed[stage.kind] = p;
   }
+  return placed;
+}
+
+}  // namespace
+
+absl::StatusOr<std::vector<SubmitResult>> JobQueue::Submit(const SubmitRequest& request) {
+  RETURN_IF_ERROR(store::ValidateDigest(request.scene_manifest));
+  if (request.stages.empty()) return absl::InvalidArgumentError("submission has no stages");
+  if (request.max_attempts < 1) return absl::InvalidArgumentError("max_attempts must be >= 1");
+  ASSIGN_OR_RETURN(const auto placed, PlaceStages(request));
   std::vector<SubmitResult> results;
   RETURN_IF_ERROR(store_->Transact(false, [&](QueueTx& tx) -> absl::Status {
     results.clear();
