@@ -52,6 +52,30 @@ absl::Status CheckSceneName(const std::string& scene) {
   return absl::OkStatus();
 }
 
+// A scene's objects index loaded from the store; an exception (e.g. allocation failure, a
+// stored manifest of the wrong shape) fails this load only.
+absl::StatusOr<std::shared_ptr<const SceneObjects>> LoadGuarded(store::BlobStore& store,
+                                                                const SceneOutputs& outputs,
+                                                                const std::string& work_dir,
+                                                                const std::string& scene) {
+  try {
+    absl::StatusOr<std::unique_ptr<SceneObjects>> built =
+        SceneObjects::Load(store, outputs, work_dir);
+    if (built.ok()) return std::shared_ptr<const SceneObjects>(std::move(*built));
+    return absl::Status(built.status().code(),
+                        absl::StrCat("scene '", scene, "': ", built.status().message()));
+  } catch (const nlohmann::json::exception& e) {  // a stored manifest of the wrong shape
+    return absl::DataLossError(
+        absl::StrCat("scene '", scene, "': a stored result is malformed: ", e.what()));
+  } catch (const std::bad_alloc&) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat("scene '", scene, "': out of memory loading its objects"));
+  } catch (const std::exception& e) {
+    return absl::InternalError(
+        absl::StrCat("scene '", scene, "': loading its objects failed: ", e.what()));
+  }
+}
+
 }  // namespace
 
 ObjectsService::Loaded ObjectsService::Index(const std::string& scene, bool* fresh) {
@@ -81,27 +105,8 @@ ObjectsService::Loaded ObjectsService::Index(const std::string& scene, bool* fre
     }
   }
   if (!*fresh) return future.get();
-  // Load outside the lock; an exception (e.g. allocation failure) fails this load only.
-  Loaded loaded = absl::InternalError("index load did not finish");
-  try {
-    absl::StatusOr<std::unique_ptr<SceneObjects>> built =
-        SceneObjects::Load(*store_, outputs, work_dir_);
-    if (built.ok()) {
-      loaded = std::shared_ptr<const SceneObjects>(std::move(*built));
-    } else {
-      loaded = absl::Status(built.status().code(),
-                            absl::StrCat("scene '", scene, "': ", built.status().message()));
-    }
-  } catch (const nlohmann::json::exception& e) {  // a stored manifest of the wrong shape
-    loaded = absl::DataLossError(
-        absl::StrCat("scene '", scene, "': a stored result is malformed: ", e.what()));
-  } catch (const std::bad_alloc&) {
-    loaded = absl::ResourceExhaustedError(
-        absl::StrCat("scene '", scene, "': out of memory loading its objects"));
-  } catch (const std::exception& e) {
-    loaded = absl::InternalError(
-        absl::StrCat("scene '", scene, "': loading its objects failed: ", e.what()));
-  }
+  // Load outside the lock.
+  const Loaded loaded = LoadGuarded(*store_, outputs, work_dir_, scene);
   promise.set_value(loaded);
   std::list<Entry> evicted;  // destroyed after the lock is released
   {
