@@ -53,6 +53,41 @@ int RejudgeUndersegmented(const TrackerSet& set, const std::vector<Instance>& in
   return changed;
 }
 
+namespace {
+
+// Per pair a < b (key a * n + b), over the frames where one of them is held and the other traced
+// in kept masks but in fewer than min_tracker_gaussians Gaussians: the other's Gaussians in the
+// held one's mask, and in other masks.
+std::unordered_map<uint64_t, std::pair<uint32_t, uint32_t>> Glimpses(
+    const TrackerSet& set, const std::vector<uint32_t>& instance_of, size_t n,
+    const std::vector<std::vector<int64_t>>& holders, const DecompositionOptions& options) {
+  std::unordered_map<uint64_t, std::pair<uint32_t, uint32_t>> glimpses;
+  std::vector<uint32_t> total(n + 1);
+  for (int v = 0; v < set.num_views; ++v) {
+    const std::vector<uint32_t>& frame = set.view_trackers[v];
+    std::fill(total.begin(), total.end(), 0u);
+    for (uint32_t t : frame)
+      for (uint32_t g : set.trackers[t].gaussians) ++total[instance_of[g]];
+    for (size_t a = 1; a <= n; ++a) {
+      const int64_t h = holders[v][a - 1];
+      if (h < 0) continue;
+      std::vector<uint32_t> in_holder(n + 1, 0);
+      for (uint32_t g : set.trackers[h].gaussians) ++in_holder[instance_of[g]];
+      for (size_t b = 1; b <= n; ++b) {
+        if (b == a || holders[v][b - 1] >= 0 || total[b] == 0 ||
+            total[b] >= static_cast<uint32_t>(options.min_tracker_gaussians))
+          continue;
+        const uint64_t key = uint64_t{std::min(a, b) - 1} * n + (std::max(a, b) - 1);
+        glimpses[key].first += in_holder[b];
+        glimpses[key].second += total[b] - in_holder[b];
+      }
+    }
+  }
+  return glimpses;
+}
+
+}  // namespace
+
 int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions& options,
                               std::vector<Instance>* instances) {
   const size_t n = instances->size();
@@ -60,7 +95,8 @@ int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions&
   const std::vector<uint32_t> instance_of = InstanceOf(*instances, set.num_gaussians);
   // Per pair a < b (key a * n + b): frames holding them together, frames holding them apart.
   std::unordered_map<uint64_t, std::pair<uint32_t, uint32_t>> evidence;
-  for (const std::vector<int64_t>& holder : HoldersPerFrame(set, instance_of, n, options)) {
+  const std::vector<std::vector<int64_t>> holders = HoldersPerFrame(set, instance_of, n, options);
+  for (const std::vector<int64_t>& holder : holders) {
     std::vector<uint32_t> held;  // instances held by one mask in this frame
     for (size_t a = 0; a < n; ++a) {
       if (holder[a] >= 0) held.push_back(static_cast<uint32_t>(a));
@@ -79,6 +115,16 @@ int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions&
     const double j = e.first, s = e.second;
     if (j < options.merge_min_joins || s > options.merge_max_separation * (j + s)) continue;
     merges += sets.Union(static_cast<uint32_t>(key / n), static_cast<uint32_t>(key % n));
+  }
+  if (options.merge_glimpse_min > 0) {
+    for (const auto& [key, g] : Glimpses(set, instance_of, n, holders, options)) {
+      const auto held = evidence.find(key);
+      if (held != evidence.end() && held->second.second > 0) continue;  // held apart somewhere
+      const double in = g.first, out = g.second;
+      if (in < options.merge_glimpse_min || out > options.merge_max_separation * (in + out))
+        continue;
+      merges += sets.Union(static_cast<uint32_t>(key / n), static_cast<uint32_t>(key % n));
+    }
   }
   if (merges == 0) return 0;
   std::vector<Instance> merged;

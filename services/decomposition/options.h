@@ -65,6 +65,13 @@ struct DecompositionOptions {
   // object seen from two sides. 0 joins = off.
   int merge_min_joins = 2;
   double merge_max_separation = 0.25;
+  // Glimpses (DECOMPOSITION.md step 8): in a frame where one of two instances is held and the
+  // other is traced in fewer than min_tracker_gaussians Gaussians, where that other's Gaussians
+  // lie: in the held one's mask or in other masks. Two instances that no frame holds apart, whose
+  // glimpses put at least this many Gaussians in the other's mask and at most
+  // merge_max_separation of them elsewhere, are one object seen from two arcs of views that meet
+  // nowhere (a cone's front in the first views, its back in the last). 0 = off.
+  int merge_glimpse_min = 20;
   // Labelling of untraced Gaussians (not in the released code; docs/DECOMPOSITION.md): a
   // Gaussian that no view traces joins the instance of the nearest traced Gaussian within this
   // share of the robust scene diagonal. 0 = off.

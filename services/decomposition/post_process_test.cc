@@ -52,6 +52,51 @@ TEST(MergeUnseparated, TwoSidesOfOneObjectMergeNeighboursDoNot) {
   EXPECT_EQ(MergeUnseparatedInstances(set, options, &strict), 0);
 }
 
+// A (0..99) and B (100..199) are one object's front and back, seen in two arcs of views that
+// never hold both: views 0-3 hold A, their mask also taking 10 of B's Gaussians at the seam;
+// views 4-7 hold B, with 10 of A's. C (200..299) and D (300..399) are touching neighbours: views
+// 0-3 hold D, C's 10 Gaussians there in a mask of their own; views 4-7 hold C. Only A and B merge,
+// and not when one frame (8) holds them apart.
+std::vector<Instance> MergedByGlimpses(int glimpse_min, bool held_apart_once) {
+  std::vector<ListMask> masks;
+  auto join = [](std::vector<uint32_t> a, const std::vector<uint32_t>& b) {
+    a.insert(a.end(), b.begin(), b.end());
+    std::sort(a.begin(), a.end());
+    return a;
+  };
+  for (int v = 0; v < 4; ++v) {
+    masks.push_back({v, 1, join(Range(0, 100), Range(100, 110))});
+    masks.push_back({v, 2, Range(300, 400)});
+    masks.push_back({v, 3, Range(200, 210)});
+  }
+  for (int v = 4; v < 8; ++v) {
+    masks.push_back({v, 1, join(Range(90, 100), Range(100, 200))});
+    masks.push_back({v, 2, Range(200, 300)});
+  }
+  if (held_apart_once) {
+    masks.push_back({8, 1, Range(0, 100)});
+    masks.push_back({8, 2, Range(100, 200)});
+  }
+  const TrackerSet set = MakeSetFromLists(9, 400, masks);
+  std::vector<Instance> instances(4);
+  for (uint32_t k = 0; k < 4; ++k) instances[k].gaussians = Range(100 * k, 100 * (k + 1));
+  DecompositionOptions options;
+  options.merge_glimpse_min = glimpse_min;
+  MergeUnseparatedInstances(set, options, &instances);
+  return instances;
+}
+
+TEST(MergeUnseparated, TwoArcsOfViewsThatMeetNowhereMergeByTheirGlimpses) {
+  EXPECT_EQ(MergedByGlimpses(0, false).size(), 4u);  // off: no frame holds A and B together
+  const std::vector<Instance> merged = MergedByGlimpses(20, false);
+  ASSERT_EQ(merged.size(), 3u);
+  EXPECT_EQ(merged[0].gaussians, Range(0, 200));
+  EXPECT_EQ(merged[1].gaussians, Range(200, 300));
+  EXPECT_EQ(merged[2].gaussians, Range(300, 400));
+  EXPECT_EQ(MergedByGlimpses(100, false).size(), 4u);  // 80 glimpsed Gaussians: too few
+  EXPECT_EQ(MergedByGlimpses(20, true).size(), 4u);    // held apart in frame 8
+}
+
 TEST(PostProcess, GaussiansOnlyMergedMasksHoldJoinTheNearestHeldInstance) {
   // Object A: instance 0 holds 0-59, its Gaussians 60-99 lie in no instance (only masks merging
   // it with B hold them, or whole masks of A the clustering did not keep). B: instance 1, 100-199.

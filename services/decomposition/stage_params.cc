@@ -68,6 +68,10 @@ const pipeline::ParamCodec<DecompositionOptions>& DecomposeCodec() {
              "that masks rarely hold apart); 0 = off (the released code)")
         .Real("merge_max_separation", &O::merge_max_separation, 0.0, 1.0,
               "Largest share of frames holding two instances apart that still allows the merge")
+        .Int("merge_glimpse_min", &O::merge_glimpse_min, 0, 1000000,
+             "Merge two instances never held apart whose glimpses (frames where one is held, "
+             "the other barely traced) put at least this many Gaussians in the held one's mask; "
+             "0 = off")
         .Real("rejudge_min_coverage", &O::rejudge_min_coverage, 0.0, 1.0,
               "Share of a mask's tracker that must lie in instances before it is re-judged")
         .Real("uncovered_min_labelled", &O::uncovered_min_labelled, 0.0, 2.0,
