@@ -25,6 +25,73 @@ namespace {
 
 constexpr int64_t kDownloadChunk = 1 << 20;
 
+// The job listing's query (scene, page_token, limit, state); false after answering a bad one.
+bool ParseListJobs(const httplib::Request& req, httplib::Response& res,
+                   v1::ListJobsRequest* request) {
+  request->set_scene(req.get_param_value("scene"));
+  request->set_page_token(req.get_param_value("page_token"));
+  if (req.has_param("limit")) {
+    int limit = 0;
+    if (!absl::SimpleAtoi(req.get_param_value("limit"), &limit)) {
+      SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "limit: not an integer");
+      return false;
+    }
+    request->set_limit(limit);
+  }
+  if (req.has_param("state")) {
+    v1::JobState state;
+    if (!v1::JobState_Parse("JOB_STATE_" + absl::AsciiStrToUpper(req.get_param_value("state")),
+                            &state)) {
+      SendError(res, grpc::StatusCode::INVALID_ARGUMENT,
+                "state: queued, leased, running, succeeded, failed or cancelled");
+      return false;
+    }
+    request->set_state(state);
+  }
+  return true;
+}
+
+// Live job events as Server-Sent Events: one "job" event per change, "end" when all are final.
+void AddJobEventsRoute(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) {
+  http.Get("/api/v1/events", [stubs](const httplib::Request& req, httplib::Response& res) {
+    auto request = std::make_shared<v1::WatchJobsRequest>();
+    request->set_scene(req.get_param_value("scene"));
+    for (absl::string_view id :
+         absl::StrSplit(req.get_param_value("job_ids"), ',', absl::SkipEmpty()))
+      request->add_job_ids(std::string(id));
+    auto context = std::make_shared<grpc::ClientContext>();
+    Prepare(req, context.get(), /*allow_query_token=*/true);
+    context->set_deadline(std::chrono::system_clock::time_point::max());
+    auto reader = std::shared_ptr<grpc::ClientReader<v1::Job>>(
+        stubs->scheduler->WatchJobs(context.get(), *request));
+    // The first event decides the status: an error before any event is an HTTP error.
+    auto first = std::make_shared<v1::Job>();
+    if (!reader->Read(first.get())) return SendError(res, reader->Finish());
+    res.set_header("Cache-Control", "no-cache");
+    res.set_chunked_content_provider("text/event-stream", [stubs, context, reader, first](
+                                                              size_t, httplib::DataSink& sink) {
+      auto send = [&](const std::string& event, const std::string& data) {
+        const std::string frame = absl::StrCat("event: ", event, "\ndata: ", data, "\n\n");
+        return sink.write(frame.data(), frame.size());
+      };
+      bool open = send("job", ToJson(*first));
+      v1::Job job;
+      while (open && reader->Read(&job)) open = send("job", ToJson(job));
+      if (!open) {  // the browser went away: end the watch
+        context->TryCancel();
+        (void)reader->Finish();
+        return false;
+      }
+      const grpc::Status s = reader->Finish();
+      send(s.ok() ? "end" : "error",
+           nlohmann::json{{"status", StatusName(s.error_code())}, {"message", s.error_message()}}
+               .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
+      sink.done();
+      return true;
+    });
+  });
+}
+
 // Jobs, scenes, pipelines, the queue and its live events: the Scheduler service.
 void AddSchedulerRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) {
   http.Get("/api/v1/stages", [stubs](const httplib::Request& req, httplib::Response& res) {
@@ -34,22 +101,7 @@ void AddSchedulerRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stu
   });
   http.Get("/api/v1/jobs", [stubs](const httplib::Request& req, httplib::Response& res) {
     v1::ListJobsRequest request;
-    request.set_scene(req.get_param_value("scene"));
-    request.set_page_token(req.get_param_value("page_token"));
-    if (req.has_param("limit")) {
-      int limit = 0;
-      if (!absl::SimpleAtoi(req.get_param_value("limit"), &limit))
-        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "limit: not an integer");
-      request.set_limit(limit);
-    }
-    if (req.has_param("state")) {
-      v1::JobState state;
-      if (!v1::JobState_Parse("JOB_STATE_" + absl::AsciiStrToUpper(req.get_param_value("state")),
-                              &state))
-        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT,
-                         "state: queued, leased, running, succeeded, failed or cancelled");
-      request.set_state(state);
-    }
+    if (!ParseListJobs(req, res, &request)) return;
     Unary<v1::ListJobsRequest, v1::ListJobsResponse>(
         req, res, request,
         [&](auto* c, const auto& q, auto* r) { return stubs->scheduler->ListJobs(c, q, r); });
@@ -99,44 +151,7 @@ void AddSchedulerRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stu
         req, res, v1::GetQueueStatsRequest(),
         [&](auto* c, const auto& q, auto* r) { return stubs->scheduler->GetQueueStats(c, q, r); });
   });
-  // Live job events as Server-Sent Events: one "job" event per change, "end" when all are final.
-  http.Get("/api/v1/events", [stubs](const httplib::Request& req, httplib::Response& res) {
-    auto request = std::make_shared<v1::WatchJobsRequest>();
-    request->set_scene(req.get_param_value("scene"));
-    for (absl::string_view id :
-         absl::StrSplit(req.get_param_value("job_ids"), ',', absl::SkipEmpty()))
-      request->add_job_ids(std::string(id));
-    auto context = std::make_shared<grpc::ClientContext>();
-    Prepare(req, context.get(), /*allow_query_token=*/true);
-    context->set_deadline(std::chrono::system_clock::time_point::max());
-    auto reader = std::shared_ptr<grpc::ClientReader<v1::Job>>(
-        stubs->scheduler->WatchJobs(context.get(), *request));
-    // The first event decides the status: an error before any event is an HTTP error.
-    auto first = std::make_shared<v1::Job>();
-    if (!reader->Read(first.get())) return SendError(res, reader->Finish());
-    res.set_header("Cache-Control", "no-cache");
-    res.set_chunked_content_provider("text/event-stream", [stubs, context, reader, first](
-                                                              size_t, httplib::DataSink& sink) {
-      auto send = [&](const std::string& event, const std::string& data) {
-        const std::string frame = absl::StrCat("event: ", event, "\ndata: ", data, "\n\n");
-        return sink.write(frame.data(), frame.size());
-      };
-      bool open = send("job", ToJson(*first));
-      v1::Job job;
-      while (open && reader->Read(&job)) open = send("job", ToJson(job));
-      if (!open) {  // the browser went away: end the watch
-        context->TryCancel();
-        (void)reader->Finish();
-        return false;
-      }
-      const grpc::Status s = reader->Finish();
-      send(s.ok() ? "end" : "error",
-           nlohmann::json{{"status", StatusName(s.error_code())}, {"message", s.error_message()}}
-               .dump(-1, ' ', false, nlohmann::json::error_handler_t::replace));
-      sink.done();
-      return true;
-    });
-  });
+  AddJobEventsRoute(http, stubs);
 }
 
 // Blobs: which are missing, resumable uploads, ranged downloads: the Store service.
