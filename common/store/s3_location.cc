@@ -110,6 +110,49 @@ std::string AwsUriEncode(absl::string_view text, bool keep_slash) {
   return out;
 }
 
+namespace {
+
+// The URI's query parameters (endpoint, region, addressing, query_slash) into `loc`; addressing
+// as given (checked by the caller).
+absl::Status ApplyQuery(absl::string_view query, S3Location* loc, std::string* addressing) {
+  for (absl::string_view kv : absl::StrSplit(query, '&', absl::SkipEmpty())) {
+    const size_t eq = kv.find('=');
+    const absl::string_view key = kv.substr(0, eq);
+    const std::string value =
+        eq == absl::string_view::npos ? std::string() : std::string(kv.substr(eq + 1));
+    if (key == "endpoint") {
+      loc->endpoint = std::string(absl::StripSuffix(value, "/"));
+    } else if (key == "region") {
+      loc->region = value;
+    } else if (key == "addressing") {
+      *addressing = value;
+    } else if (key == "query_slash") {
+      if (value != "literal" && value != "encoded")
+        return absl::InvalidArgumentError("s3 URI: query_slash must be literal or encoded");
+      loc->query_slash_literal = value == "literal";
+    } else {
+      return absl::InvalidArgumentError(
+          absl::StrCat("s3 URI: unknown parameter '", key.substr(0, 40),
+                       "' (known: endpoint, region, addressing, query_slash)"));
+    }
+  }
+  return absl::OkStatus();
+}
+
+// A region name: 1-64 lower-case letters, digits and dashes.
+absl::Status ValidateRegion(const std::string& region) {
+  if (region.empty() || region.size() > 64 ||
+      !std::all_of(region.begin(), region.end(), [](char c) {
+        return absl::ascii_islower(static_cast<unsigned char>(c)) ||
+               absl::ascii_isdigit(static_cast<unsigned char>(c)) || c == '-';
+      }))
+    return absl::InvalidArgumentError(
+        absl::StrCat("s3 URI: region '", region.substr(0, 40), "' is not a region name"));
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 absl::StatusOr<S3Location> S3Location::Parse(absl::string_view uri) {
   if (!absl::StartsWith(uri, "s3://"))
     return absl::InvalidArgumentError(absl::StrCat(
@@ -132,34 +175,8 @@ absl::StatusOr<S3Location> S3Location::Parse(absl::string_view uri) {
     }
   }
   std::string addressing;
-  for (absl::string_view kv : absl::StrSplit(query, '&', absl::SkipEmpty())) {
-    const size_t eq = kv.find('=');
-    const absl::string_view key = kv.substr(0, eq);
-    const std::string value =
-        eq == absl::string_view::npos ? std::string() : std::string(kv.substr(eq + 1));
-    if (key == "endpoint") {
-      loc.endpoint = std::string(absl::StripSuffix(value, "/"));
-    } else if (key == "region") {
-      loc.region = value;
-    } else if (key == "addressing") {
-      addressing = value;
-    } else if (key == "query_slash") {
-      if (value != "literal" && value != "encoded")
-        return absl::InvalidArgumentError("s3 URI: query_slash must be literal or encoded");
-      loc.query_slash_literal = value == "literal";
-    } else {
-      return absl::InvalidArgumentError(
-          absl::StrCat("s3 URI: unknown parameter '", key.substr(0, 40),
-                       "' (known: endpoint, region, addressing, query_slash)"));
-    }
-  }
-  if (loc.region.empty() || loc.region.size() > 64 ||
-      !std::all_of(loc.region.begin(), loc.region.end(), [](char c) {
-        return absl::ascii_islower(static_cast<unsigned char>(c)) ||
-               absl::ascii_isdigit(static_cast<unsigned char>(c)) || c == '-';
-      }))
-    return absl::InvalidArgumentError(
-        absl::StrCat("s3 URI: region '", loc.region.substr(0, 40), "' is not a region name"));
+  RETURN_IF_ERROR(ApplyQuery(query, &loc, &addressing));
+  RETURN_IF_ERROR(ValidateRegion(loc.region));
   const bool aws = loc.endpoint.empty();
   if (aws) loc.endpoint = absl::StrCat("https://s3.", loc.region, ".amazonaws.com");
   const size_t scheme = loc.endpoint.find("://");
