@@ -43,8 +43,11 @@ std::string EncodeMeshPly(const TriangleMesh& mesh) {
   return out;
 }
 
-absl::StatusOr<TriangleMesh> ParseMeshPly(absl::string_view data, absl::string_view source) {
-  ASSIGN_OR_RETURN(PlyHeader header, ParsePlyHeader(data, source));
+namespace {
+
+// Binary little-endian, 'vertex' (no list properties) then 'face' (one 'list uchar int
+// vertex_indices'): what this reader (and our writer) handles.
+absl::Status CheckMeshHeader(const PlyHeader& header, absl::string_view source) {
   auto unsupported = [&](absl::string_view what) {
     return absl::InvalidArgumentError(absl::StrCat(source, ": unsupported mesh PLY: ", what));
   };
@@ -64,9 +67,52 @@ absl::StatusOr<TriangleMesh> ParseMeshPly(absl::string_view data, absl::string_v
   for (const PlyProperty& p : header.elements[0].properties) {
     if (p.is_list) return unsupported("list property on vertices");
   }
+  return absl::OkStatus();
+}
+
+// The triangles: after the vertex block, 13-byte records (count 3, three int32 indices), each
+// index within [0, vertices).
+absl::Status ReadTriangles(absl::string_view data, const PlyHeader& header, int64_t vertices,
+                           absl::string_view source, TriangleMesh* mesh) {
+  const PlyElement& faces = header.elements[1];
+  // Faces follow the vertex block: fixed-size vertex records (no lists on vertices).
+  size_t vertex_bytes = 0;
+  for (const PlyProperty& p : header.elements[0].properties) vertex_bytes += ScalarTypeSize(p.type);
+  size_t offset = header.data_offset + vertex_bytes * static_cast<size_t>(vertices);
+  constexpr size_t kFaceBytes = 13;
+  if (faces.count < 0 || data.size() < offset ||
+      (data.size() - offset) / kFaceBytes < static_cast<size_t>(faces.count)) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(source, ": truncated: ", faces.count, " faces do not fit"));
+  }
+  mesh->triangles.resize(faces.count);
+  for (int64_t f = 0; f < faces.count; ++f, offset += kFaceBytes) {
+    if (static_cast<uint8_t>(data[offset]) != 3) {
+      return absl::InvalidArgumentError(absl::StrCat(source, ": face ", f, " is not a triangle"));
+    }
+    for (int k = 0; k < 3; ++k) {
+      int32_t index;
+      std::memcpy(&index, data.data() + offset + 1 + 4 * k, 4);
+      if (index < 0 || index >= vertices) {
+        return absl::InvalidArgumentError(
+            absl::StrCat(source, ": face ", f, " index ", index, " outside [0, ", vertices, ")"));
+      }
+      mesh->triangles[f][k] = static_cast<uint32_t>(index);
+    }
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<TriangleMesh> ParseMeshPly(absl::string_view data, absl::string_view source) {
+  ASSIGN_OR_RETURN(PlyHeader header, ParsePlyHeader(data, source));
+  RETURN_IF_ERROR(CheckMeshHeader(header, source));
   ASSIGN_OR_RETURN(PlyColumns vertices, ReadPlyElement(data, header, "vertex", source));
   const int x = vertices.Find("x"), y = vertices.Find("y"), z = vertices.Find("z");
-  if (x < 0 || y < 0 || z < 0) return unsupported("vertex lacks x, y or z");
+  if (x < 0 || y < 0 || z < 0)
+    return absl::InvalidArgumentError(
+        absl::StrCat(source, ": unsupported mesh PLY: vertex lacks x, y or z"));
   const int r = vertices.Find("red"), g = vertices.Find("green"), b = vertices.Find("blue");
   TriangleMesh mesh;
   mesh.vertices.resize(vertices.count);
@@ -84,31 +130,7 @@ absl::StatusOr<TriangleMesh> ParseMeshPly(absl::string_view data, absl::string_v
           255.0f;
     }
   }
-  // Faces follow the vertex block: fixed-size vertex records (no lists on vertices).
-  size_t vertex_bytes = 0;
-  for (const PlyProperty& p : header.elements[0].properties) vertex_bytes += ScalarTypeSize(p.type);
-  size_t offset = header.data_offset + vertex_bytes * static_cast<size_t>(vertices.count);
-  constexpr size_t kFaceBytes = 13;
-  if (faces.count < 0 || data.size() < offset ||
-      (data.size() - offset) / kFaceBytes < static_cast<size_t>(faces.count)) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(source, ": truncated: ", faces.count, " faces do not fit"));
-  }
-  mesh.triangles.resize(faces.count);
-  for (int64_t f = 0; f < faces.count; ++f, offset += kFaceBytes) {
-    if (static_cast<uint8_t>(data[offset]) != 3) {
-      return absl::InvalidArgumentError(absl::StrCat(source, ": face ", f, " is not a triangle"));
-    }
-    for (int k = 0; k < 3; ++k) {
-      int32_t index;
-      std::memcpy(&index, data.data() + offset + 1 + 4 * k, 4);
-      if (index < 0 || index >= vertices.count) {
-        return absl::InvalidArgumentError(absl::StrCat(source, ": face ", f, " index ", index,
-                                                       " outside [0, ", vertices.count, ")"));
-      }
-      mesh.triangles[f][k] = static_cast<uint32_t>(index);
-    }
-  }
+  RETURN_IF_ERROR(ReadTriangles(data, header, vertices.count, source, &mesh));
   return mesh;
 }
 
