@@ -133,66 +133,81 @@ absl::StatusOr<std::string> Gunzip(absl::string_view data, size_t limit, absl::s
   return out;
 }
 
+// Version 2-3: one gzip stream holding the 16-byte header and the six attribute blocks.
+absl::Status ReadGzipSpz(absl::string_view data, absl::string_view name, SpzHeader* h,
+                         std::vector<std::string>* parts) {
+  ASSIGN_OR_RETURN(std::string head, Gunzip(data, 16, name));
+  if (head.size() < 16 || Load<uint32_t>(head.data()) != kSpzMagic)
+    return Bad(name, ".spz: no NGSP header inside the gzip stream");
+  h->version = Load<uint32_t>(head.data() + 4);
+  h->points = Load<uint32_t>(head.data() + 8);
+  h->sh_degree = static_cast<uint8_t>(head[12]);
+  h->fractional_bits = static_cast<uint8_t>(head[13]);
+  h->flags = static_cast<uint8_t>(head[14]);
+  RETURN_IF_ERROR(CheckSpzHeader(*h, name));
+  if (h->version == 4) return Bad(name, ".spz: version 4 is never gzip-compressed");
+  const std::vector<size_t> sizes = SpzSizes(*h);
+  size_t total = 16;
+  for (size_t s : sizes) total += s;
+  // A gzip stream expands at most ~1032x: refuse counts the file cannot hold before inflating.
+  if (total / 1032 > data.size())
+    return Bad(name,
+               absl::StrCat(".spz: ", h->points, " points cannot fit in ", data.size(), " bytes"));
+  ASSIGN_OR_RETURN(std::string all, Gunzip(data, total, name));
+  if (all.size() < total) return Bad(name, ".spz: the data is shorter than its header says");
+  size_t at = 16;
+  for (int k = 0; k < 6; ++k) {
+    (*parts)[k] = all.substr(at, sizes[k]);
+    at += sizes[k];
+  }
+  return absl::OkStatus();
+}
+
+// Version 4: a 32-byte header, a table of zstd streams (compressed, raw sizes) and the streams,
+// one per attribute block present.
+absl::Status ReadZstdSpz(absl::string_view data, absl::string_view name, SpzHeader* h,
+                         std::vector<std::string>* parts) {
+  h->version = Load<uint32_t>(data.data() + 4);
+  h->points = Load<uint32_t>(data.data() + 8);
+  h->sh_degree = static_cast<uint8_t>(data[12]);
+  h->fractional_bits = static_cast<uint8_t>(data[13]);
+  h->flags = static_cast<uint8_t>(data[14]);
+  h->streams = static_cast<uint8_t>(data[15]);
+  h->toc = Load<uint32_t>(data.data() + 16);
+  RETURN_IF_ERROR(CheckSpzHeader(*h, name));
+  if (h->version != 4) return Bad(name, ".spz: an uncompressed header needs version 4");
+  const std::vector<size_t> sizes = SpzSizes(*h);
+  std::vector<int> present;
+  for (int k = 0; k < 6; ++k)
+    if (sizes[k] > 0) present.push_back(k);
+  if (h->streams != static_cast<int>(present.size()) || h->toc < 32 ||
+      static_cast<size_t>(h->toc) + 16 * static_cast<size_t>(h->streams) > data.size())
+    return Bad(name, absl::StrCat(".spz: ", h->streams, " streams / table at ", h->toc,
+                                  " do not match the header"));
+  size_t at = h->toc + 16 * static_cast<size_t>(h->streams);
+  for (int s = 0; s < h->streams; ++s) {
+    const uint64_t compressed = Load<uint64_t>(data.data() + h->toc + 16 * s);
+    const uint64_t raw = Load<uint64_t>(data.data() + h->toc + 16 * s + 8);
+    const int k = present[s];
+    if (raw != sizes[k] || compressed > data.size() - at)
+      return Bad(name, absl::StrCat(".spz: stream ", s, " sizes do not match the header"));
+    (*parts)[k].resize(sizes[k]);
+    const size_t got =
+        ZSTD_decompress((*parts)[k].data(), (*parts)[k].size(), data.data() + at, compressed);
+    if (ZSTD_isError(got) || got != sizes[k])
+      return Bad(name, absl::StrCat(".spz: stream ", s, " does not decompress (zstd)"));
+    at += compressed;
+  }
+  return absl::OkStatus();
+}
+
 absl::StatusOr<GaussianCloud> ParseSpz(absl::string_view data, absl::string_view name) {
   SpzHeader h;
   std::vector<std::string> parts(6);
   if (IsGzip(data)) {
-    ASSIGN_OR_RETURN(std::string head, Gunzip(data, 16, name));
-    if (head.size() < 16 || Load<uint32_t>(head.data()) != kSpzMagic)
-      return Bad(name, ".spz: no NGSP header inside the gzip stream");
-    h.version = Load<uint32_t>(head.data() + 4);
-    h.points = Load<uint32_t>(head.data() + 8);
-    h.sh_degree = static_cast<uint8_t>(head[12]);
-    h.fractional_bits = static_cast<uint8_t>(head[13]);
-    h.flags = static_cast<uint8_t>(head[14]);
-    RETURN_IF_ERROR(CheckSpzHeader(h, name));
-    if (h.version == 4) return Bad(name, ".spz: version 4 is never gzip-compressed");
-    const std::vector<size_t> sizes = SpzSizes(h);
-    size_t total = 16;
-    for (size_t s : sizes) total += s;
-    // A gzip stream expands at most ~1032x: refuse counts the file cannot hold before inflating.
-    if (total / 1032 > data.size())
-      return Bad(name,
-                 absl::StrCat(".spz: ", h.points, " points cannot fit in ", data.size(), " bytes"));
-    ASSIGN_OR_RETURN(std::string all, Gunzip(data, total, name));
-    if (all.size() < total) return Bad(name, ".spz: the data is shorter than its header says");
-    size_t at = 16;
-    for (int k = 0; k < 6; ++k) {
-      parts[k] = all.substr(at, sizes[k]);
-      at += sizes[k];
-    }
+    RETURN_IF_ERROR(ReadGzipSpz(data, name, &h, &parts));
   } else if (IsNgsp(data) && data.size() >= 32) {
-    h.version = Load<uint32_t>(data.data() + 4);
-    h.points = Load<uint32_t>(data.data() + 8);
-    h.sh_degree = static_cast<uint8_t>(data[12]);
-    h.fractional_bits = static_cast<uint8_t>(data[13]);
-    h.flags = static_cast<uint8_t>(data[14]);
-    h.streams = static_cast<uint8_t>(data[15]);
-    h.toc = Load<uint32_t>(data.data() + 16);
-    RETURN_IF_ERROR(CheckSpzHeader(h, name));
-    if (h.version != 4) return Bad(name, ".spz: an uncompressed header needs version 4");
-    const std::vector<size_t> sizes = SpzSizes(h);
-    std::vector<int> present;
-    for (int k = 0; k < 6; ++k)
-      if (sizes[k] > 0) present.push_back(k);
-    if (h.streams != static_cast<int>(present.size()) || h.toc < 32 ||
-        static_cast<size_t>(h.toc) + 16 * static_cast<size_t>(h.streams) > data.size())
-      return Bad(name, absl::StrCat(".spz: ", h.streams, " streams / table at ", h.toc,
-                                    " do not match the header"));
-    size_t at = h.toc + 16 * static_cast<size_t>(h.streams);
-    for (int s = 0; s < h.streams; ++s) {
-      const uint64_t compressed = Load<uint64_t>(data.data() + h.toc + 16 * s);
-      const uint64_t raw = Load<uint64_t>(data.data() + h.toc + 16 * s + 8);
-      const int k = present[s];
-      if (raw != sizes[k] || compressed > data.size() - at)
-        return Bad(name, absl::StrCat(".spz: stream ", s, " sizes do not match the header"));
-      parts[k].resize(sizes[k]);
-      const size_t got =
-          ZSTD_decompress(parts[k].data(), parts[k].size(), data.data() + at, compressed);
-      if (ZSTD_isError(got) || got != sizes[k])
-        return Bad(name, absl::StrCat(".spz: stream ", s, " does not decompress (zstd)"));
-      at += compressed;
-    }
+    RETURN_IF_ERROR(ReadZstdSpz(data, name, &h, &parts));
   } else {
     return Bad(name, ".spz: neither a gzip stream nor an NGSP header");
   }
