@@ -247,6 +247,46 @@ void AddStoreRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) 
            });
 }
 
+// An object selector from the query: the id in the path, point=X,Y,Z[&max_distance=D],
+// view=V&x=X&y=Y (a click) or ray=OX,OY,OZ,DX,DY,DZ; what is wrong with it, or "".
+std::string ParseSelector(const httplib::Request& req, v1::ObjectSelector* selector) {
+  std::vector<double> v;
+  if (req.matches.size() > 2) {
+    uint32_t id = 0;
+    if (!absl::SimpleAtoi(std::string(req.matches[2]), &id)) return "object id: not an integer";
+    selector->set_id(id);
+  } else if (req.has_param("point")) {
+    if (!ParseVector(req.get_param_value("point"), 3, &v)) return "point: X,Y,Z";
+    selector->mutable_point()->set_x(v[0]);
+    selector->mutable_point()->set_y(v[1]);
+    selector->mutable_point()->set_z(v[2]);
+    double d = 0;
+    if (req.has_param("max_distance") && !absl::SimpleAtod(req.get_param_value("max_distance"), &d))
+      return "max_distance: not a number";
+    selector->set_max_distance(d);
+  } else if (req.has_param("view")) {
+    int x = 0, y = 0;
+    if (!absl::SimpleAtoi(req.get_param_value("x"), &x) ||
+        !absl::SimpleAtoi(req.get_param_value("y"), &y))
+      return "a click needs integer x and y";
+    selector->mutable_click()->set_view(req.get_param_value("view"));
+    selector->mutable_click()->set_x(x);
+    selector->mutable_click()->set_y(y);
+  } else if (req.has_param("ray")) {
+    if (!ParseVector(req.get_param_value("ray"), 6, &v)) return "ray: OX,OY,OZ,DX,DY,DZ";
+    auto* ray = selector->mutable_ray();
+    ray->mutable_origin()->set_x(v[0]);
+    ray->mutable_origin()->set_y(v[1]);
+    ray->mutable_origin()->set_z(v[2]);
+    ray->mutable_direction()->set_x(v[3]);
+    ray->mutable_direction()->set_y(v[4]);
+    ray->mutable_direction()->set_z(v[5]);
+  } else {
+    return "give point=X,Y,Z, view=V&x=X&y=Y or ray=OX,OY,OZ,DX,DY,DZ";
+  }
+  return "";
+}
+
 // A scene's objects, and one object by id, point, click or ray: the Objects service.
 void AddObjectRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) {
   http.Get(R"(/api/v1/scenes/([^/]+)/objects)",
@@ -270,46 +310,8 @@ void AddObjectRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs)
   auto get_object = [stubs](const httplib::Request& req, httplib::Response& res) {
     v1::GetObjectRequest request;
     request.set_scene(req.matches[1]);
-    v1::ObjectSelector* selector = request.mutable_selector();
-    std::vector<double> v;
-    if (req.matches.size() > 2) {
-      uint32_t id = 0;
-      if (!absl::SimpleAtoi(std::string(req.matches[2]), &id))
-        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "object id: not an integer");
-      selector->set_id(id);
-    } else if (req.has_param("point")) {
-      if (!ParseVector(req.get_param_value("point"), 3, &v))
-        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "point: X,Y,Z");
-      selector->mutable_point()->set_x(v[0]);
-      selector->mutable_point()->set_y(v[1]);
-      selector->mutable_point()->set_z(v[2]);
-      double d = 0;
-      if (req.has_param("max_distance") &&
-          !absl::SimpleAtod(req.get_param_value("max_distance"), &d))
-        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "max_distance: not a number");
-      selector->set_max_distance(d);
-    } else if (req.has_param("view")) {
-      int x = 0, y = 0;
-      if (!absl::SimpleAtoi(req.get_param_value("x"), &x) ||
-          !absl::SimpleAtoi(req.get_param_value("y"), &y))
-        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "a click needs integer x and y");
-      selector->mutable_click()->set_view(req.get_param_value("view"));
-      selector->mutable_click()->set_x(x);
-      selector->mutable_click()->set_y(y);
-    } else if (req.has_param("ray")) {
-      if (!ParseVector(req.get_param_value("ray"), 6, &v))
-        return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, "ray: OX,OY,OZ,DX,DY,DZ");
-      auto* ray = selector->mutable_ray();
-      ray->mutable_origin()->set_x(v[0]);
-      ray->mutable_origin()->set_y(v[1]);
-      ray->mutable_origin()->set_z(v[2]);
-      ray->mutable_direction()->set_x(v[3]);
-      ray->mutable_direction()->set_y(v[4]);
-      ray->mutable_direction()->set_z(v[5]);
-    } else {
-      return SendError(res, grpc::StatusCode::INVALID_ARGUMENT,
-                       "give point=X,Y,Z, view=V&x=X&y=Y or ray=OX,OY,OZ,DX,DY,DZ");
-    }
+    if (const std::string error = ParseSelector(req, request.mutable_selector()); !error.empty())
+      return SendError(res, grpc::StatusCode::INVALID_ARGUMENT, error);
     Unary<v1::GetObjectRequest, v1::Object>(
         req, res, request,
         [&](auto* c, const auto& q, auto* r) { return stubs->objects->GetObject(c, q, r); });
