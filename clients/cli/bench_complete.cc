@@ -18,15 +18,20 @@
 
 namespace instascene::cli {
 
-// A textured bottle (radius 5 cm, 25 cm) on a 1.5 m table, seen by 10 cameras on its front half
-// (azimuth -70..70 degrees): the surfels facing away from every camera are dropped, as a capture
-// would have nothing there. The views' images are renders of the complete scene.
-absl::Status BenchComplete(const CompleteBenchArgs& args) {
-  if (args.gaussians < 1000 || args.gaussians > 2'000'000 || args.iterations < 0 ||
-      !(args.lambda_normal >= 0)) {
-    return absl::InvalidArgumentError(
-        "bench complete: --gaussians in [1000, 2e6], iterations >= 0, lambda-normal >= 0");
-  }
+namespace {
+
+// A textured bottle (radius 5 cm, 25 cm) of `args.gaussians` surfels on a 1.5 m table, seen by 10
+// cameras on its front half (azimuth -70..70 degrees): the surfels facing away from every camera
+// are dropped, as a capture would have nothing there (labels: table 0, bottle 1). The views'
+// images are renders of the complete scene.
+struct BottleScene {
+  GaussianCloud scene;
+  std::vector<uint32_t> labels;
+  std::vector<PinholeCamera> cameras;
+  std::vector<Image> images;
+  size_t table = 0;  // table surfels (the first ones)
+};
+absl::StatusOr<BottleScene> MakeBottleScene(const CompleteBenchArgs& args) {
   std::mt19937_64 rng(args.seed);
   Appearance table_look, bottle_look;
   bottle_look.pattern = TexturePattern::kStripes;
@@ -65,13 +70,29 @@ absl::Status BenchComplete(const CompleteBenchArgs& args) {
     keep.push_back(g);
     labels.push_back(g < table ? 0 : 1);
   }
-  const GaussianCloud scene = all.Subset(keep);
+  return BottleScene{all.Subset(keep), std::move(labels), std::move(cameras), std::move(images),
+                     table};
+}
+
+}  // namespace
+
+absl::Status BenchComplete(const CompleteBenchArgs& args) {
+  if (args.gaussians < 1000 || args.gaussians > 2'000'000 || args.iterations < 0 ||
+      !(args.lambda_normal >= 0)) {
+    return absl::InvalidArgumentError(
+        "bench complete: --gaussians in [1000, 2e6], iterations >= 0, lambda-normal >= 0");
+  }
+  ASSIGN_OR_RETURN(const BottleScene bench, MakeBottleScene(args));
+  const GaussianCloud& scene = bench.scene;
+  const std::vector<PinholeCamera>& cameras = bench.cameras;
+  const std::vector<uint32_t>& labels = bench.labels;
+  const size_t table = bench.table;
   generation::CompletionOptions options;
   options.refinement.iterations = args.iterations;
   options.refinement.lambda_normal = args.lambda_normal;
   options.num_threads = args.threads;
   options.seed = args.seed;
-  options.load_view = [&](int view) -> absl::StatusOr<Image> { return images.at(view); };
+  options.load_view = [&](int view) -> absl::StatusOr<Image> { return bench.images.at(view); };
   std::fprintf(stderr,
                "bench complete: a bottle of %zu observed surfels on a table, %zu views of %dx%d, "
                "%d refinement iterations, %d threads\n",
