@@ -38,6 +38,49 @@ struct BenchArgs {
   bool json = false;
 };
 
+// Per frame: the plain render's time and stages, the traced render's and the tracker's (w > 0.1);
+// per-frame means of the counts.
+struct RasterFrames {
+  std::vector<double> ms, trace_ms, pre, bin, blend, trace_blend, trace_assembly, tracker_ms;
+  double visible = 0, pairs = 0, blended = 0, evaluated = 0, entries = 0, tracker_entries = 0;
+};
+absl::StatusOr<RasterFrames> MeasureFrames(const ClutterScene& scene, const BenchArgs& args) {
+  RasterWorkspace workspace;  // reused across frames, as a long-running worker would
+  RenderOptions plain;
+  plain.depth = true;
+  plain.workspace = &workspace;
+  plain.num_threads = args.threads;
+  RenderOptions traced = plain;
+  traced.trace.enabled = true;
+  RenderOptions tracker = traced;  // the decomposition tracker's rule: keep w > 0.1 only
+  tracker.trace.min_weight = 0.1f;
+  RasterFrames f;
+  // Untimed warm-up frames (thread pool start, first-touch of the reused buffers).
+  RenderResult r, t, k;  // reused across frames
+  RETURN_IF_ERROR(RenderInto(scene.cloud, scene.cameras[0], plain, &r));
+  RETURN_IF_ERROR(RenderInto(scene.cloud, scene.cameras[0], traced, &t));
+  for (const PinholeCamera& camera : scene.cameras) {
+    RETURN_IF_ERROR(RenderInto(scene.cloud, camera, plain, &r));
+    f.ms.push_back(r.stats.total_ms);
+    f.pre.push_back(r.stats.preprocess_ms);
+    f.bin.push_back(r.stats.binning_ms);
+    f.blend.push_back(r.stats.blend_ms);
+    f.visible += static_cast<double>(r.stats.visible_gaussians) / args.frames;
+    f.pairs += static_cast<double>(r.stats.gaussian_tile_pairs) / args.frames;
+    f.blended += static_cast<double>(r.stats.blended_fragments) / args.frames;
+    f.evaluated += static_cast<double>(r.stats.evaluated_fragments) / args.frames;
+    RETURN_IF_ERROR(RenderInto(scene.cloud, camera, traced, &t));
+    f.trace_ms.push_back(t.stats.total_ms);
+    f.trace_blend.push_back(t.stats.blend_ms);
+    f.trace_assembly.push_back(t.stats.trace_assembly_ms);
+    f.entries += static_cast<double>(t.trace.entries.size()) / args.frames;
+    RETURN_IF_ERROR(RenderInto(scene.cloud, camera, tracker, &k));
+    f.tracker_ms.push_back(k.stats.total_ms);
+    f.tracker_entries += static_cast<double>(k.trace.entries.size()) / args.frames;
+  }
+  return f;
+}
+
 absl::Status BenchRaster(const BenchArgs& args) {
   ClutterOptions options;
   options.seed = args.seed;
@@ -53,41 +96,8 @@ absl::Status BenchRaster(const BenchArgs& args) {
       "bench raster: scene of %zu Gaussians built in %.1f s; %d frames of %dx%d, %d threads\n",
       scene.cloud.size(), build.ElapsedSeconds(), args.frames, args.width, args.height,
       args.threads > 0 ? args.threads : DefaultThreadCount());
-  RasterWorkspace workspace;  // reused across frames, as a long-running worker would
-  RenderOptions plain;
-  plain.depth = true;
-  plain.workspace = &workspace;
-  plain.num_threads = args.threads;
-  RenderOptions traced = plain;
-  traced.trace.enabled = true;
-  RenderOptions tracker = traced;  // the decomposition tracker's rule: keep w > 0.1 only
-  tracker.trace.min_weight = 0.1f;
-  std::vector<double> ms, trace_ms, pre, bin, blend, trace_blend, trace_assembly, tracker_ms;
-  double visible = 0, pairs = 0, blended = 0, evaluated = 0, entries = 0, tracker_entries = 0;
-  // Untimed warm-up frames (thread pool start, first-touch of the reused buffers).
-  RenderResult r, t, k;  // reused across frames
-  RETURN_IF_ERROR(RenderInto(scene.cloud, scene.cameras[0], plain, &r));
-  RETURN_IF_ERROR(RenderInto(scene.cloud, scene.cameras[0], traced, &t));
-  for (const PinholeCamera& camera : scene.cameras) {
-    RETURN_IF_ERROR(RenderInto(scene.cloud, camera, plain, &r));
-    ms.push_back(r.stats.total_ms);
-    pre.push_back(r.stats.preprocess_ms);
-    bin.push_back(r.stats.binning_ms);
-    blend.push_back(r.stats.blend_ms);
-    visible += static_cast<double>(r.stats.visible_gaussians) / args.frames;
-    pairs += static_cast<double>(r.stats.gaussian_tile_pairs) / args.frames;
-    blended += static_cast<double>(r.stats.blended_fragments) / args.frames;
-    evaluated += static_cast<double>(r.stats.evaluated_fragments) / args.frames;
-    RETURN_IF_ERROR(RenderInto(scene.cloud, camera, traced, &t));
-    trace_ms.push_back(t.stats.total_ms);
-    trace_blend.push_back(t.stats.blend_ms);
-    trace_assembly.push_back(t.stats.trace_assembly_ms);
-    entries += static_cast<double>(t.trace.entries.size()) / args.frames;
-    RETURN_IF_ERROR(RenderInto(scene.cloud, camera, tracker, &k));
-    tracker_ms.push_back(k.stats.total_ms);
-    tracker_entries += static_cast<double>(k.trace.entries.size()) / args.frames;
-  }
-  const double median = Median(ms), trace_median = Median(trace_ms);
+  ASSIGN_OR_RETURN(const RasterFrames f, MeasureFrames(scene, args));
+  const double median = Median(f.ms), trace_median = Median(f.trace_ms);
   std::fprintf(stderr,
                "bench raster: median %.1f ms/frame (preprocess %.1f, binning %.1f, blend %.1f); "
                "traced %.1f ms (%.2fx; blend %.1f, assembly %.1f)\n"
@@ -95,10 +105,10 @@ absl::Status BenchRaster(const BenchArgs& args) {
                "blended fragments per frame; "
                "%.1f M pairs/s, %.1f M blended fragments/s; %.0f trace entries per frame\n"
                "  tracker trace (w > 0.1): %.1f ms (%.2fx), %.0f entries per frame\n",
-               median, Median(pre), Median(bin), Median(blend), trace_median, trace_median / median,
-               Median(trace_blend), Median(trace_assembly), visible, pairs, evaluated, blended,
-               pairs / median / 1e3, blended / median / 1e3, entries, Median(tracker_ms),
-               Median(tracker_ms) / median, tracker_entries);
+               median, Median(f.pre), Median(f.bin), Median(f.blend), trace_median,
+               trace_median / median, Median(f.trace_blend), Median(f.trace_assembly), f.visible,
+               f.pairs, f.evaluated, f.blended, f.pairs / median / 1e3, f.blended / median / 1e3,
+               f.entries, Median(f.tracker_ms), Median(f.tracker_ms) / median, f.tracker_entries);
   if (args.json) {
     nlohmann::json j = {{"benchmark", "raster"},
                         {"gaussians", scene.cloud.size()},
@@ -108,20 +118,20 @@ absl::Status BenchRaster(const BenchArgs& args) {
                         {"threads", args.threads > 0 ? args.threads : DefaultThreadCount()},
                         {"median_ms", median},
                         {"trace_median_ms", trace_median},
-                        {"preprocess_ms", Median(pre)},
-                        {"binning_ms", Median(bin)},
-                        {"blend_ms", Median(blend)},
-                        {"visible_gaussians", visible},
-                        {"gaussian_tile_pairs", pairs},
-                        {"evaluated_fragments", evaluated},
-                        {"blended_fragments", blended},
-                        {"pairs_per_s", pairs / median * 1e3},
-                        {"blended_fragments_per_s", blended / median * 1e3},
-                        {"trace_entries", entries},
-                        {"trace_blend_ms", Median(trace_blend)},
-                        {"trace_assembly_ms", Median(trace_assembly)},
-                        {"tracker_trace_median_ms", Median(tracker_ms)},
-                        {"tracker_trace_entries", tracker_entries}};
+                        {"preprocess_ms", Median(f.pre)},
+                        {"binning_ms", Median(f.bin)},
+                        {"blend_ms", Median(f.blend)},
+                        {"visible_gaussians", f.visible},
+                        {"gaussian_tile_pairs", f.pairs},
+                        {"evaluated_fragments", f.evaluated},
+                        {"blended_fragments", f.blended},
+                        {"pairs_per_s", f.pairs / median * 1e3},
+                        {"blended_fragments_per_s", f.blended / median * 1e3},
+                        {"trace_entries", f.entries},
+                        {"trace_blend_ms", Median(f.trace_blend)},
+                        {"trace_assembly_ms", Median(f.trace_assembly)},
+                        {"tracker_trace_median_ms", Median(f.tracker_ms)},
+                        {"tracker_trace_entries", f.tracker_entries}};
     PrintJsonLine(j.dump());
   }
   return absl::OkStatus();
