@@ -70,7 +70,8 @@ struct DecompositionOptions {
   // lie: in the held one's mask or in other masks. Two instances that no frame holds apart, whose
   // glimpses put at least this many Gaussians in the other's mask and at most
   // merge_max_separation of them elsewhere, are one object seen from two arcs of views that meet
-  // nowhere (a cone's front in the first views, its back in the last). 0 = off.
+  // nowhere (a cone's front in the first views, its back in the last). 0 = off (and with
+  // merge_min_joins 0: no merging at all, as in the released code).
   int merge_glimpse_min = 20;
   // Labelling of untraced Gaussians (not in the released code; docs/DECOMPOSITION.md): a
   // Gaussian that no view traces joins the instance of the nearest traced Gaussian within this
