@@ -7,6 +7,7 @@
 
 #include "absl/strings/str_cat.h"
 #include "common/core/file_io.h"
+#include "common/core/status.h"
 
 namespace instascene::generation::diffusion {
 namespace {
@@ -24,36 +25,25 @@ cv::Mat Blob(const std::vector<int>& dims, float fill) {
 
 }  // namespace
 
-absl::StatusOr<OnnxDenoiserConfig> ReadOnnxDenoiserConfig(const std::string& path) {
-  std::error_code ec;
-  if (!std::filesystem::is_regular_file(path, ec))
-    return absl::NotFoundError(absl::StrCat("ONNX denoiser config ", path, ": no such file"));
-  absl::StatusOr<std::string> text = ReadFileBounded(path, kMaxOnnxConfigBytes);
-  if (!text.ok()) return ConfigError(path, std::string(text.status().message()));
-  const nlohmann::json j = nlohmann::json::parse(*text, nullptr, /*allow_exceptions=*/false);
-  if (!j.is_object()) return ConfigError(path, "not a JSON object");
-  auto string_field = [&](const nlohmann::json& o, const char* key, bool required,
-                          std::string* out) -> absl::Status {
-    if (!o.contains(key)) {
-      return required ? ConfigError(path, absl::StrCat("\"", key, "\" is missing"))
-                      : absl::OkStatus();
-    }
-    if (!o[key].is_string() || o[key].get<std::string>().empty() ||
-        o[key].get<std::string>().size() > 256)
-      return ConfigError(path, absl::StrCat("\"", key, "\" must be a non-empty string"));
-    *out = o[key].get<std::string>();
-    return absl::OkStatus();
-  };
-  OnnxDenoiserConfig c;
-  std::string model;
-  if (absl::Status s = string_field(j, "model", true, &model); !s.ok()) return s;
-  if (absl::Status s = string_field(j, "name", false, &c.name); !s.ok()) return s;
-  if (absl::Status s = string_field(j, "output", true, &c.output); !s.ok()) return s;
-  const std::filesystem::path model_path(model);
-  c.model_path = model_path.is_absolute()
-                     ? model
-                     : (std::filesystem::path(path).parent_path() / model_path).string();
-  if (c.name.empty()) c.name = model_path.filename().string();
+namespace {
+
+// o[key] into *out: a non-empty string of at most 256 bytes; absent is an error when required.
+absl::Status StringField(const std::string& path, const nlohmann::json& o, const char* key,
+                         bool required, std::string* out) {
+  if (!o.contains(key)) {
+    return required ? ConfigError(path, absl::StrCat("\"", key, "\" is missing"))
+                    : absl::OkStatus();
+  }
+  if (!o[key].is_string() || o[key].get<std::string>().empty() ||
+      o[key].get<std::string>().size() > 256)
+    return ConfigError(path, absl::StrCat("\"", key, "\" must be a non-empty string"));
+  *out = o[key].get<std::string>();
+  return absl::OkStatus();
+}
+
+// "latent_shape": [C, H, W], positive, at most kMaxValuesPerLatent values in all.
+absl::Status ReadLatentShape(const std::string& path, const nlohmann::json& j,
+                             std::vector<int>* shape) {
   if (!j.contains("latent_shape") || !j["latent_shape"].is_array() || j["latent_shape"].size() != 3)
     return ConfigError(path, "\"latent_shape\" must be [C, H, W]");
   int64_t values = 1;
@@ -64,8 +54,14 @@ absl::StatusOr<OnnxDenoiserConfig> ReadOnnxDenoiserConfig(const std::string& pat
     if (values > kMaxValuesPerLatent)
       return ConfigError(
           path, absl::StrCat("\"latent_shape\" holds more than ", kMaxValuesPerLatent, " values"));
-    c.latent_shape.push_back(d.get<int>());
+    shape->push_back(d.get<int>());
   }
+  return absl::OkStatus();
+}
+
+// "inputs": the model's input names (latent required; the rest optional, none unknown).
+absl::Status ReadInputNames(const std::string& path, const nlohmann::json& j,
+                            OnnxDenoiserConfig* c) {
   if (!j.contains("inputs") || !j["inputs"].is_object())
     return ConfigError(path, "\"inputs\" must be an object");
   const nlohmann::json& in = j["inputs"];
@@ -76,13 +72,36 @@ absl::StatusOr<OnnxDenoiserConfig> ReadOnnxDenoiserConfig(const std::string& pat
                                             "\" (latent, alpha_bar, timestep, condition_latent, "
                                             "target_from_condition)"));
   }
-  if (absl::Status s = string_field(in, "latent", true, &c.latent_input); !s.ok()) return s;
-  if (absl::Status s = string_field(in, "alpha_bar", false, &c.alpha_bar_input); !s.ok()) return s;
-  if (absl::Status s = string_field(in, "timestep", false, &c.timestep_input); !s.ok()) return s;
-  if (absl::Status s = string_field(in, "condition_latent", false, &c.condition_input); !s.ok())
-    return s;
-  if (absl::Status s = string_field(in, "target_from_condition", false, &c.pose_input); !s.ok())
-    return s;
+  RETURN_IF_ERROR(StringField(path, in, "latent", true, &c->latent_input));
+  RETURN_IF_ERROR(StringField(path, in, "alpha_bar", false, &c->alpha_bar_input));
+  RETURN_IF_ERROR(StringField(path, in, "timestep", false, &c->timestep_input));
+  RETURN_IF_ERROR(StringField(path, in, "condition_latent", false, &c->condition_input));
+  RETURN_IF_ERROR(StringField(path, in, "target_from_condition", false, &c->pose_input));
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<OnnxDenoiserConfig> ReadOnnxDenoiserConfig(const std::string& path) {
+  std::error_code ec;
+  if (!std::filesystem::is_regular_file(path, ec))
+    return absl::NotFoundError(absl::StrCat("ONNX denoiser config ", path, ": no such file"));
+  absl::StatusOr<std::string> text = ReadFileBounded(path, kMaxOnnxConfigBytes);
+  if (!text.ok()) return ConfigError(path, std::string(text.status().message()));
+  const nlohmann::json j = nlohmann::json::parse(*text, nullptr, /*allow_exceptions=*/false);
+  if (!j.is_object()) return ConfigError(path, "not a JSON object");
+  OnnxDenoiserConfig c;
+  std::string model;
+  RETURN_IF_ERROR(StringField(path, j, "model", true, &model));
+  RETURN_IF_ERROR(StringField(path, j, "name", false, &c.name));
+  RETURN_IF_ERROR(StringField(path, j, "output", true, &c.output));
+  const std::filesystem::path model_path(model);
+  c.model_path = model_path.is_absolute()
+                     ? model
+                     : (std::filesystem::path(path).parent_path() / model_path).string();
+  if (c.name.empty()) c.name = model_path.filename().string();
+  RETURN_IF_ERROR(ReadLatentShape(path, j, &c.latent_shape));
+  RETURN_IF_ERROR(ReadInputNames(path, j, &c));
   return c;
 }
 
