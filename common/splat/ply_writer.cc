@@ -9,47 +9,31 @@
 namespace instascene {
 namespace {
 
-// `v` converted to `type` (integers truncated toward zero) and stored at dst, little-endian.
+// `v` converted to T (integers truncated toward zero) and stored at dst, little-endian.
+template <typename T>
+void Store(float v, char* dst) {
+  const T x = static_cast<T>(v);
+  std::memcpy(dst, &x, sizeof(T));
+}
+
 void EncodeScalar(float v, ScalarType type, char* dst) {
   switch (type) {
-    case ScalarType::kInt8: {
-      int8_t x = static_cast<int8_t>(v);
-      std::memcpy(dst, &x, 1);
-      break;
-    }
-    case ScalarType::kUint8: {
-      uint8_t x = static_cast<uint8_t>(v);
-      std::memcpy(dst, &x, 1);
-      break;
-    }
-    case ScalarType::kInt16: {
-      int16_t x = static_cast<int16_t>(v);
-      std::memcpy(dst, &x, 2);
-      break;
-    }
-    case ScalarType::kUint16: {
-      uint16_t x = static_cast<uint16_t>(v);
-      std::memcpy(dst, &x, 2);
-      break;
-    }
-    case ScalarType::kInt32: {
-      int32_t x = static_cast<int32_t>(v);
-      std::memcpy(dst, &x, 4);
-      break;
-    }
-    case ScalarType::kUint32: {
-      uint32_t x = static_cast<uint32_t>(v);
-      std::memcpy(dst, &x, 4);
-      break;
-    }
+    case ScalarType::kInt8:
+      return Store<int8_t>(v, dst);
+    case ScalarType::kUint8:
+      return Store<uint8_t>(v, dst);
+    case ScalarType::kInt16:
+      return Store<int16_t>(v, dst);
+    case ScalarType::kUint16:
+      return Store<uint16_t>(v, dst);
+    case ScalarType::kInt32:
+      return Store<int32_t>(v, dst);
+    case ScalarType::kUint32:
+      return Store<uint32_t>(v, dst);
     case ScalarType::kFloat32:
-      std::memcpy(dst, &v, 4);
-      break;
-    case ScalarType::kFloat64: {
-      double x = v;
-      std::memcpy(dst, &x, 8);
-      break;
-    }
+      return Store<float>(v, dst);
+    case ScalarType::kFloat64:
+      return Store<double>(v, dst);
   }
 }
 
