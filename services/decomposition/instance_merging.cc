@@ -62,7 +62,7 @@ std::unordered_map<uint64_t, std::pair<uint32_t, uint32_t>> Glimpses(
     const TrackerSet& set, const std::vector<uint32_t>& instance_of, size_t n,
     const std::vector<std::vector<int64_t>>& holders, const DecompositionOptions& options) {
   std::unordered_map<uint64_t, std::pair<uint32_t, uint32_t>> glimpses;
-  std::vector<uint32_t> total(n + 1);
+  std::vector<uint32_t> total(n + 1), in_holder(n + 1);
   for (int v = 0; v < set.num_views; ++v) {
     const std::vector<uint32_t>& frame = set.view_trackers[v];
     std::fill(total.begin(), total.end(), 0u);
@@ -71,7 +71,7 @@ std::unordered_map<uint64_t, std::pair<uint32_t, uint32_t>> Glimpses(
     for (size_t a = 1; a <= n; ++a) {
       const int64_t h = holders[v][a - 1];
       if (h < 0) continue;
-      std::vector<uint32_t> in_holder(n + 1, 0);
+      std::fill(in_holder.begin(), in_holder.end(), 0u);
       for (uint32_t g : set.trackers[h].gaussians) ++in_holder[instance_of[g]];
       for (size_t b = 1; b <= n; ++b) {
         if (b == a || holders[v][b - 1] >= 0 || total[b] == 0 ||
