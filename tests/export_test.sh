@@ -5,7 +5,8 @@
 # folder), every object.urdf passes urdfdom's check_urdf, every object.xml loads in MuJoCo and,
 # dropped onto a floor, comes to rest within a simulated second (objects_drop_check), and the
 # catalogue lists every object in metres; from the ground-truth instances of a scene whose
-# never-seen surfels are dropped, every exported object's extents are within 5 % of the truth.
+# never-seen surfels are dropped, every exported object's extents are within 5 % of the truth, and
+# so are the pipeline's own objects on that scene, end to end.
 # Usage: export_test.sh INSTASCENE SOURCE_DIR BUILD_DIR
 set -uo pipefail
 BIN=$1
@@ -31,8 +32,10 @@ check "every object.xml loads in MuJoCo and comes to rest on a floor within a si
   "$BUILD/services/objects/objects_drop_check" "$WORK"/run/export/*/object.xml
 # Placement and metric scale against the ground truth: each exported mesh, placed by its
 # world_from_object, lies on a ground-truth object (mean Chamfer under 2 cm; a wrong pose or scale
-# is off by decimetres). The extents are reported, not asserted: they are not within 5 % yet
-# (docs/OBJECTS.md, "Measured").
+# is off by decimetres). The extents are reported, not asserted, on this scene: it keeps the
+# surfels no view sees, and the hidden backs of touching bottles go to the neighbour whose seen
+# surfels are nearest (docs/OBJECTS.md, "Checked by tools nobody here wrote"); they are asserted
+# end to end on the same scene with those surfels dropped, below.
 check "eval --export" "$BIN" eval --scene "$WORK/scene" --export "$WORK/run/export" --json
 check "every exported object lies on a ground-truth object" python3 -c "
 import json, sys
@@ -53,6 +56,15 @@ check "complete the ground-truth instances" "$BIN" complete --scene "$WORK/seen"
 check "export them" "$BIN" export --scene "$WORK/seen" --objects "$WORK/seen_objects" --out "$WORK/seen_export"
 check "eval --export of the ground-truth instances" "$BIN" eval --scene "$WORK/seen" --export "$WORK/seen_export" --json
 check "from the ground-truth instances every object's extents are within 5 %" python3 -c "
+import json, sys
+d = json.loads(open('$WORK/out.txt').read().strip().splitlines()[-1])
+print([(o['gt_name'], round(o['extent_error'], 3)) for o in d['objects']])
+sys.exit(0 if d['count'] == 5 and d['extents_within_5_percent'] == d['count'] and d['mean']['chamfer_m'] < 0.01 else 1)"
+# End to end on that scene (what a trained capture holds: no surfel where no view looked), every
+# exported object's extents are within 5 % of the ground-truth object's.
+check "run with export on the scene without never-seen surfels" "$BIN" run --scene "$WORK/seen" --out "$WORK/seen_run" --stages decompose,train,segment,complete,export
+check "eval --export of the pipeline's objects" "$BIN" eval --scene "$WORK/seen" --export "$WORK/seen_run/export" --json
+check "end to end every object's extents are within 5 %" python3 -c "
 import json, sys
 d = json.loads(open('$WORK/out.txt').read().strip().splitlines()[-1])
 print([(o['gt_name'], round(o['extent_error'], 3)) for o in d['objects']])
