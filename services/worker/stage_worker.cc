@@ -15,6 +15,7 @@
 #include "common/rpc/status.h"
 #include "common/store/manifest.h"
 #include "services/worker/input_cache.h"
+#include "services/worker/lease_heartbeat.h"
 
 namespace instascene::worker {
 namespace fs = std::filesystem;
@@ -54,95 +55,6 @@ v1::FailureKind FailureFor(absl::StatusCode code) {
       return v1::FAILURE_KIND_RETRYABLE;
   }
 }
-
-// Latest progress of the running stage with an ETA from the rate within the current phase.
-class ProgressTracker {
- public:
-  void Update(const pipeline::StageProgress& p) {
-    std::lock_guard<std::mutex> lock(mutex_);
-    if (p.phase != current_.phase()) {
-      phase_watch_ = Stopwatch();
-    }
-    current_.set_phase(p.phase);
-    current_.set_step(p.step);
-    current_.set_total(p.total);
-    current_.set_loss(p.loss);
-    const double elapsed = phase_watch_.ElapsedSeconds();
-    current_.set_eta_seconds(p.step > 0 && p.total >= p.step
-                                 ? elapsed * static_cast<double>(p.total - p.step) / p.step
-                                 : -1.0);
-  }
-  v1::Progress Get() const {
-    std::lock_guard<std::mutex> lock(mutex_);
-    return current_;
-  }
-
- private:
-  mutable std::mutex mutex_;
-  v1::Progress current_;
-  Stopwatch phase_watch_;
-};
-
-// Renews a running job's lease every `interval` with the stage's progress, on its own thread from
-// construction until Stop() or destruction. A lease the scheduler no longer knows
-// (FAILED_PRECONDITION, NOT_FOUND) and a cancellation request both set `cancel`, which the stage
-// polls. Stop() waits for a heartbeat in flight (its deadline is 10 s).
-class LeaseHeartbeat {
- public:
-  LeaseHeartbeat(v1::Scheduler::Stub* scheduler, const v1::LeaseJobResponse& lease,
-                 std::chrono::milliseconds interval, const std::string& worker_id,
-                 const ProgressTracker& progress, CancelFlag* cancel)
-      : thread_([this, scheduler, &lease, interval, worker_id, &progress, cancel] {
-          Run(scheduler, lease, interval, worker_id, progress, cancel);
-        }) {}
-  ~LeaseHeartbeat() { Stop(); }
-  LeaseHeartbeat(const LeaseHeartbeat&) = delete;
-  LeaseHeartbeat& operator=(const LeaseHeartbeat&) = delete;
-
-  void Stop() {
-    {
-      std::lock_guard<std::mutex> lock(mutex_);
-      stop_ = true;
-    }
-    wake_.notify_all();
-    if (thread_.joinable()) thread_.join();
-  }
-  bool lease_lost() const { return lease_lost_; }
-  bool cancel_requested() const { return cancel_requested_; }
-
- private:
-  void Run(v1::Scheduler::Stub* scheduler, const v1::LeaseJobResponse& lease,
-           std::chrono::milliseconds interval, const std::string& worker_id,
-           const ProgressTracker& progress, CancelFlag* cancel) {
-    const v1::Job& job = lease.job();
-    std::unique_lock<std::mutex> lock(mutex_);
-    while (!wake_.wait_for(lock, interval, [&] { return stop_; })) {
-      v1::HeartbeatRequest request;
-      request.set_job_id(job.id());
-      request.set_lease_token(lease.lease_token());
-      *request.mutable_progress() = progress.Get();
-      v1::HeartbeatResponse response;
-      grpc::ClientContext context;
-      context.set_deadline(std::chrono::system_clock::now() + std::chrono::seconds(10));
-      const grpc::Status s = scheduler->Heartbeat(&context, request, &response);
-      if (s.error_code() == grpc::StatusCode::FAILED_PRECONDITION ||
-          s.error_code() == grpc::StatusCode::NOT_FOUND) {
-        spdlog::warn("worker {}: job {}: {}; stopping it", worker_id, job.id(), s.error_message());
-        lease_lost_ = true;
-        *cancel = true;
-      } else if (s.ok() && response.cancel_requested()) {
-        cancel_requested_ = true;
-        *cancel = true;
-      }
-    }
-  }
-
-  std::mutex mutex_;
-  std::condition_variable wake_;
-  bool stop_ = false;  // under mutex_
-  std::atomic<bool> lease_lost_{false}, cancel_requested_{false};
-  std::thread thread_;  // last: starts once every other member is constructed
-};
 
 }  // namespace
 
