@@ -142,6 +142,48 @@ double KnownCellsDrift(const std::vector<TargetPlan>& plans, const PinnedCells& 
   return known_cells ? drift / known_cells : 0.0;
 }
 
+// A codec latent of a white (background) target image.
+absl::StatusOr<std::vector<float>> BackgroundLatent(const LatentCodec& codec,
+                                                    const PinholeCamera& target) {
+  return codec.Encode(
+      std::vector<float>(static_cast<size_t>(3) * target.width * target.height, 1.0f), target.width,
+      target.height);
+}
+
+// DDIM sampling of every target's latent (colour channels + depth), conditioned on the known
+// views' latents, with the known cells replaced while `replace_fraction` of the steps run.
+absl::StatusOr<std::vector<std::vector<float>>> SampleTargets(
+    const Denoiser& denoiser, const std::string& where, const DiffusionPriorOptions& options,
+    const DdimOptions& ddim, const PriorInput& input, const KnownViews& known,
+    const PinnedCells& pinned, int channels, int cells) {
+  const NoiseSchedule schedule = NoiseSchedule::ScaledLinear();
+  std::vector<int> conditions(input.conditions.size());
+  for (size_t k = 0; k < conditions.size(); ++k) conditions[k] = static_cast<int>(k);
+  const StepHook hook =
+      RepaintHook(pinned, schedule, options, ddim.steps, channels, cells, input.seed, input.cancel);
+  std::vector<PinholeCamera> condition_cameras;
+  for (const ViewImages& v : input.conditions) condition_cameras.push_back(v.camera);
+  const ConditionedDenoiser conditioned(denoiser, known.condition_latents, condition_cameras,
+                                        input.targets);
+  absl::StatusOr<std::vector<std::vector<float>>> latents =
+      SampleDdim(conditioned, schedule, static_cast<int>(input.targets.size()),
+                 (channels + 1) * cells, conditions, ddim, hook);
+  if (!latents.ok()) {
+    return absl::Status(latents.status().code(), absl::StrCat("diffusion prior (denoiser ", where,
+                                                              "): ", latents.status().message()));
+  }
+  return latents;
+}
+
+// Nothing to generate (no unknown ring view) or nothing to condition on (no known one).
+PriorOutput Abstain(const PriorInput& input, const std::string& where, PriorOutput out) {
+  out.abstained = true;
+  out.reason = input.targets.empty() ? "no unknown ring view to generate"
+                                     : "no known ring view to condition on";
+  out.report = {{"denoiser", where}};
+  return out;
+}
+
 }  // namespace
 
 DiffusionPrior::DiffusionPrior(std::shared_ptr<const Denoiser> denoiser, std::string where,
@@ -152,57 +194,33 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   PriorOutput out;
   out.added.num_scales = 2;
   out.added.sh_degree = input.instance->sh_degree;
-  if (input.targets.empty() || input.conditions.empty()) {
-    out.abstained = true;
-    out.reason = input.targets.empty() ? "no unknown ring view to generate"
-                                       : "no known ring view to condition on";
-    out.report = {{"denoiser", where_}};
-    return out;
-  }
+  if (input.targets.empty() || input.conditions.empty()) return Abstain(input, where_, out);
   const int n = options_.latent_size, cells = n * n;
   const std::shared_ptr<const LatentCodec> codec =
       options_.codec ? options_.codec : std::make_shared<IdentityCodec>(n);
   ASSIGN_OR_RETURN(const int channels, CodecChannels(*codec, n));
-  const int latent_values = (channels + 1) * cells;  // colour latent + depth channel
   const bool pixel_warp = options_.warp == "pixel";
   ASSIGN_OR_RETURN(const KnownViews known,
                    EncodeKnownViews(input, *codec, n, channels, pixel_warp));
-  ASSIGN_OR_RETURN(
-      const std::vector<float> background_latent,
-      codec->Encode(
-          std::vector<float>(
-              static_cast<size_t>(3) * input.targets[0].width * input.targets[0].height, 1.0f),
-          input.targets[0].width, input.targets[0].height));
+  ASSIGN_OR_RETURN(const std::vector<float> background_latent,
+                   BackgroundLatent(*codec, input.targets[0]));
   const bool unseen_mask = options_.unseen_mask && input.free_space != nullptr;
   ASSIGN_OR_RETURN(const PlannedTargets planned,
                    PlanTargets(input, known, *codec, n, channels, pixel_warp, unseen_mask));
   const std::vector<TargetPlan>& plans = planned.plans;
   RETURN_IF_ERROR(CheckCancelled(input.cancel, "diffusion prior"));
-  const NoiseSchedule schedule = NoiseSchedule::ScaledLinear();
   DdimOptions ddim = options_.ddim;
   ddim.guidance = options_.guidance;
   ddim.seed = input.seed;
-  std::vector<int> conditions(input.conditions.size());
-  for (size_t k = 0; k < conditions.size(); ++k) conditions[k] = static_cast<int>(k);
   const PinnedCells pinned(plans, background_latent, channels, cells);
-  const StepHook hook = RepaintHook(pinned, schedule, options_, ddim.steps, channels, cells,
-                                    input.seed, input.cancel);
-  std::vector<PinholeCamera> condition_cameras;
-  for (const ViewImages& v : input.conditions) condition_cameras.push_back(v.camera);
-  const ConditionedDenoiser conditioned(*denoiser_, known.condition_latents, condition_cameras,
-                                        input.targets);
-  absl::StatusOr<std::vector<std::vector<float>>> latents =
-      SampleDdim(conditioned, schedule, static_cast<int>(input.targets.size()), latent_values,
-                 conditions, ddim, hook);
-  if (!latents.ok()) {
-    return absl::Status(latents.status().code(), absl::StrCat("diffusion prior (denoiser ", where_,
-                                                              "): ", latents.status().message()));
-  }
-  const double drift = KnownCellsDrift(plans, pinned, *latents, channels, cells);
+  ASSIGN_OR_RETURN(
+      const std::vector<std::vector<float>> latents,
+      SampleTargets(*denoiser_, where_, options_, ddim, input, known, pinned, channels, cells));
+  const double drift = KnownCellsDrift(plans, pinned, latents, channels, cells);
   int64_t object_pixels = 0;
   for (size_t t = 0; t < input.targets.size(); ++t) {
-    ASSIGN_OR_RETURN(ViewImages v, DecodeTarget((*latents)[t], input.targets[t], *codec,
-                                                input.frame, n, channels, &object_pixels));
+    ASSIGN_OR_RETURN(ViewImages v, DecodeTarget(latents[t], input.targets[t], *codec, input.frame,
+                                                n, channels, &object_pixels));
     out.generated.push_back(std::move(v));
   }
   out.reason = absl::StrCat("generated ", input.targets.size(), " unknown views from ",
