@@ -1,14 +1,14 @@
+// Symmetry hypotheses (symmetry.h) and how one is scored against the observed points; the search
+// over them is in symmetry_search.cc.
 #include "services/generation/symmetry.h"
-
-#include <tbb/parallel_for.h>
 
 #include <algorithm>
 #include <cmath>
-#include <memory>
 
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_format.h"
 #include "common/geometry/point_index.h"
+#include "services/generation/symmetry_scoring.h"
 
 namespace instascene::generation {
 namespace {
@@ -21,6 +21,67 @@ float DistanceToElement(const SymmetryHypothesis& h, const Eigen::Vector3f& p) {
   if (h.kind == SymmetryKind::kPlane) return std::abs(offset.dot(h.direction));
   return (offset - offset.dot(h.direction) * h.direction).norm();
 }
+
+}  // namespace
+
+Eigen::Matrix3f SymmetryHypothesis::Linear(int k) const {
+  if (kind == SymmetryKind::kPlane) {
+    return Eigen::Matrix3f::Identity() - 2.0f * direction * direction.transpose();
+  }
+  const double angle = 2.0 * kPi * (k + 1) / (copies + 1);
+  return Eigen::AngleAxisf(static_cast<float>(angle), direction).toRotationMatrix();
+}
+
+Eigen::Vector3f SymmetryHypothesis::MapPoint(const Eigen::Vector3f& p, int k) const {
+  return point + Linear(k) * (p - point);
+}
+
+std::string SymmetryHypothesis::Describe() const {
+  std::string out = absl::StrFormat(
+      "%s through (%.4f, %.4f, %.4f) %s (%.4f, %.4f, %.4f): agreement %.3f, "
+      "evidence %.3f, %s",
+      kind == SymmetryKind::kPlane ? "plane"
+      : order > 0                  ? absl::StrFormat("%d-fold axis", order)
+                                   : std::string("axis"),
+      point.x(), point.y(), point.z(), kind == SymmetryKind::kPlane ? "normal" : "direction",
+      direction.x(), direction.y(), direction.z(), agreement, evidence,
+      accepted ? "accepted" : "rejected");
+  if (kind == SymmetryKind::kAxis && copies > 1) {
+    // Each turn's own agreement: where a revolution fails (a mug's handle) shows here.
+    std::string turns;
+    for (size_t k = 0; k < copy_agree.size() && k < copy_contradict.size(); ++k) {
+      const int decided = copy_agree[k] + copy_contradict[k];
+      absl::StrAppendFormat(&turns, "%s%.2f", k ? "/" : "",
+                            decided ? static_cast<double>(copy_agree[k]) / decided : 0.0);
+    }
+    out += absl::StrCat("; turns ", turns);
+  }
+  return out;
+}
+
+namespace {
+
+// The k-th image of observed point i under h: agreeing when an observed point with a compatible
+// normal lies within `match` (its squared distance written to *dist_sq), contradicting when it
+// lands in seen-empty space, unknown otherwise.
+enum class Image { kAgrees, kContradicts, kUnknown };
+Image ClassifyImage(const std::vector<Eigen::Vector3f>& points,
+                    const std::vector<Eigen::Vector3f>& normals, const PointIndex3& index,
+                    const FreeSpaceGrid& free_space, const SymmetryOptions& options, float match,
+                    const SymmetryHypothesis& h, size_t i, int k, float* dist_sq) {
+  const Eigen::Vector3f image = h.MapPoint(points[i], k);
+  const auto [nearest, squared] = index.Nearest(image);
+  *dist_sq = squared;
+  if (squared <= match * match &&
+      std::abs((h.Linear(k) * normals[i]).dot(normals[nearest])) >= options.normal_agreement) {
+    return Image::kAgrees;
+  }
+  return free_space.IsFree(image) ? Image::kContradicts : Image::kUnknown;
+}
+
+}  // namespace
+
+namespace symmetry_internal {
 
 // Vertical axis through the least-squares common centre of the horizontal circles the points lie
 // on (Kasa fit with one radius per height bin): the axis of a solid of revolution.
@@ -69,45 +130,6 @@ bool Better(const SymmetryHypothesis& a, const SymmetryHypothesis& b) {
   return sa > sb;
 }
 
-}  // namespace
-
-Eigen::Matrix3f SymmetryHypothesis::Linear(int k) const {
-  if (kind == SymmetryKind::kPlane) {
-    return Eigen::Matrix3f::Identity() - 2.0f * direction * direction.transpose();
-  }
-  const double angle = 2.0 * kPi * (k + 1) / (copies + 1);
-  return Eigen::AngleAxisf(static_cast<float>(angle), direction).toRotationMatrix();
-}
-
-Eigen::Vector3f SymmetryHypothesis::MapPoint(const Eigen::Vector3f& p, int k) const {
-  return point + Linear(k) * (p - point);
-}
-
-std::string SymmetryHypothesis::Describe() const {
-  std::string out = absl::StrFormat(
-      "%s through (%.4f, %.4f, %.4f) %s (%.4f, %.4f, %.4f): agreement %.3f, "
-      "evidence %.3f, %s",
-      kind == SymmetryKind::kPlane ? "plane"
-      : order > 0                  ? absl::StrFormat("%d-fold axis", order)
-                                   : std::string("axis"),
-      point.x(), point.y(), point.z(), kind == SymmetryKind::kPlane ? "normal" : "direction",
-      direction.x(), direction.y(), direction.z(), agreement, evidence,
-      accepted ? "accepted" : "rejected");
-  if (kind == SymmetryKind::kAxis && copies > 1) {
-    // Each turn's own agreement: where a revolution fails (a mug's handle) shows here.
-    std::string turns;
-    for (size_t k = 0; k < copy_agree.size() && k < copy_contradict.size(); ++k) {
-      const int decided = copy_agree[k] + copy_contradict[k];
-      absl::StrAppendFormat(&turns, "%s%.2f", k ? "/" : "",
-                            decided ? static_cast<double>(copy_agree[k]) / decided : 0.0);
-    }
-    out += absl::StrCat("; turns ", turns);
-  }
-  return out;
-}
-
-namespace {
-
 // The vertical plane whose normal is at `theta` from the frame's first horizontal axis, `offset`
 // along that normal from the frame's centre.
 SymmetryHypothesis VerticalPlane(const ObjectFrame& frame, double theta, float offset) {
@@ -120,24 +142,6 @@ SymmetryHypothesis VerticalPlane(const ObjectFrame& frame, double theta, float o
                     .normalized();
   h.point = frame.center + offset * h.direction;
   return h;
-}
-
-// The k-th image of observed point i under h: agreeing when an observed point with a compatible
-// normal lies within `match` (its squared distance written to *dist_sq), contradicting when it
-// lands in seen-empty space, unknown otherwise.
-enum class Image { kAgrees, kContradicts, kUnknown };
-Image ClassifyImage(const std::vector<Eigen::Vector3f>& points,
-                    const std::vector<Eigen::Vector3f>& normals, const PointIndex3& index,
-                    const FreeSpaceGrid& free_space, const SymmetryOptions& options, float match,
-                    const SymmetryHypothesis& h, size_t i, int k, float* dist_sq) {
-  const Eigen::Vector3f image = h.MapPoint(points[i], k);
-  const auto [nearest, squared] = index.Nearest(image);
-  *dist_sq = squared;
-  if (squared <= match * match &&
-      std::abs((h.Linear(k) * normals[i]).dot(normals[nearest])) >= options.normal_agreement) {
-    return Image::kAgrees;
-  }
-  return free_space.IsFree(image) ? Image::kContradicts : Image::kUnknown;
 }
 
 void ScoreWithIndex(const std::vector<Eigen::Vector3f>& points,
@@ -207,7 +211,7 @@ double AlignmentCost(const std::vector<Eigen::Vector3f>& points,
   return decided ? cost / (decided * static_cast<double>(match) * match) : 1.0;
 }
 
-}  // namespace
+}  // namespace symmetry_internal
 
 int DiscreteOrder(const SymmetryHypothesis& h, const SymmetryOptions& options) {
   constexpr double kTurnSpread = 0.1;
@@ -266,162 +270,7 @@ void ScoreHypothesis(const std::vector<Eigen::Vector3f>& points,
                      const FreeSpaceGrid& free_space, const SymmetryOptions& options,
                      SymmetryHypothesis* h) {
   const PointIndex3 index(points);
-  ScoreWithIndex(points, normals, index, frame, free_space, options, h);
-}
-
-std::vector<SymmetryHypothesis> DetectSymmetries(const std::vector<Eigen::Vector3f>& all_points,
-                                                 const std::vector<Eigen::Vector3f>& all_normals,
-                                                 const ObjectFrame& frame,
-                                                 const FreeSpaceGrid& free_space,
-                                                 const SymmetryOptions& options) {
-  std::vector<Eigen::Vector3f> points, normals;
-  const size_t stride =
-      std::max<size_t>(1, all_points.size() / static_cast<size_t>(std::max(1, options.max_points)));
-  for (size_t i = 0; i < all_points.size(); i += stride) {
-    points.push_back(all_points[i]);
-    normals.push_back(all_normals[i]);
-  }
-  if (points.size() < 10) return {};
-  const PointIndex3 index(points);
-  const Eigen::Matrix3f basis = frame.Basis();
-  // Planes: every (angle, offset) pair, scored in parallel into fixed slots (thread-count free).
-  const int angles = std::max(1, options.plane_angles),
-            offsets = std::max(1, options.plane_offsets);
-  std::vector<SymmetryHypothesis> planes(static_cast<size_t>(angles) * offsets);
-  tbb::parallel_for(size_t{0}, planes.size(), [&](size_t slot) {
-    const int a = static_cast<int>(slot) / offsets, o = static_cast<int>(slot) % offsets;
-    const double theta = kPi * a / angles;
-    const float offset = offsets == 1 ? 0.0f
-                                      : options.offset_range_radii * frame.radius *
-                                            (2.0f * o / (offsets - 1) - 1.0f);
-    SymmetryHypothesis& h = planes[slot];
-    h = VerticalPlane(frame, theta, offset);
-    ScoreWithIndex(points, normals, index, frame, free_space, options, &h);
-  });
-  SymmetryHypothesis best_plane = planes[0];
-  for (const SymmetryHypothesis& h : planes) {
-    if (Better(h, best_plane)) best_plane = h;
-  }
-  // The grid's steps (180 / plane_angles degrees, a tenth of the offset range) leave the plane up
-  // to half a step off, and a mirror doubles the angle: a mug's handle mirrored 5 degrees off
-  // lands a centimetre beside it. Refined by the alignment cost over a finer local grid.
-  if (options.refine_steps > 0) {
-    const int n = options.refine_steps;
-    const double angle_step = kPi / angles / n;
-    const float offset_step = (offsets == 1 ? 0.1f : 2.0f / (offsets - 1)) *
-                              options.offset_range_radii * frame.radius / n;
-    const double theta0 =
-        std::atan2(best_plane.direction.dot(basis.col(1)), best_plane.direction.dot(basis.col(0)));
-    const float offset0 = (best_plane.point - frame.center).dot(best_plane.direction);
-    std::vector<SymmetryHypothesis> fine(static_cast<size_t>(2 * n + 1) * (2 * n + 1));
-    std::vector<double> cost(fine.size());
-    tbb::parallel_for(size_t{0}, fine.size(), [&](size_t slot) {
-      const int da = static_cast<int>(slot) / (2 * n + 1) - n;
-      const int doff = static_cast<int>(slot) % (2 * n + 1) - n;
-      fine[slot] = VerticalPlane(frame, theta0 + da * angle_step, offset0 + doff * offset_step);
-      cost[slot] = AlignmentCost(points, normals, index, frame, free_space, options, fine[slot]);
-    });
-    const size_t best = static_cast<size_t>(std::min_element(cost.begin(), cost.end()) -
-                                            cost.begin());  // first minimum: deterministic
-    SymmetryHypothesis refined = fine[best];
-    ScoreWithIndex(points, normals, index, frame, free_space, options, &refined);
-    if (refined.accepted || !best_plane.accepted) best_plane = refined;
-  }
-  // Axis: the circle fit's centre, refined by a local search (+- 6 % of the radius, 1 % steps)
-  // scored on a subsample with fewer copies; a few millimetres matter for thin rings (tori).
-  const Eigen::Vector3f fitted = FitAxisPoint(all_points, frame);
-  std::vector<Eigen::Vector3f> coarse_points, coarse_normals;
-  for (size_t i = 0; i < points.size(); i += 3) {
-    coarse_points.push_back(points[i]);
-    coarse_normals.push_back(normals[i]);
-  }
-  const PointIndex3 coarse_index(coarse_points);
-  // The shift of `start` by (dx, dy) x step_radii radii, |dx|, |dy| <= reach, with the highest
-  // `value` (scored in parallel into fixed slots; the first maximum, the start winning ties) on
-  // the coarse sample with `steps` turns.
-  auto best_shift = [&](const Eigen::Vector3f& start, int steps, int reach, float step_radii,
-                        auto&& value) {
-    SymmetryOptions coarse = options;
-    coarse.axis_steps = steps;
-    const int side = 2 * reach + 1;
-    std::vector<SymmetryHypothesis> shifted(static_cast<size_t>(side) * side);
-    std::vector<double> values(shifted.size());
-    tbb::parallel_for(size_t{0}, shifted.size(), [&](size_t slot) {
-      const int dx = static_cast<int>(slot) % side - reach;
-      const int dy = static_cast<int>(slot) / side - reach;
-      SymmetryHypothesis& h = shifted[slot];
-      h.kind = SymmetryKind::kAxis;
-      h.direction = frame.up;
-      h.point = start + step_radii * frame.radius * (dx * basis.col(0) + dy * basis.col(1));
-      h.copies = coarse.axis_steps - 1;
-      values[slot] = value(coarse, &h);
-    });
-    size_t best = shifted.size() / 2;  // the start itself
-    for (size_t k = 0; k < shifted.size(); ++k) {
-      if (values[k] > values[best]) best = k;
-    }
-    return shifted[best].point;
-  };
-  // The axis point maximising the coarse score among shifts of the fit.
-  auto search = [&](const Eigen::Vector3f& start, int order, int reach, float step_radii) {
-    return best_shift(start, order > 0 ? order : 6, reach, step_radii,
-                      [&](const SymmetryOptions& coarse, SymmetryHypothesis* h) {
-                        ScoreWithIndex(coarse_points, coarse_normals, coarse_index, frame,
-                                       free_space, coarse, h);
-                        return h->agreement * std::min(1.0, 2 * h->evidence);
-                      });
-  };
-  // Agreement counts images within the match distance and is flat over millimetres: a mug's
-  // handle pulls the circle fit towards itself and the search keeps it there (a body revolved
-  // about an axis 3 mm off stands 6 mm proud of itself on the far side). The point with the
-  // least alignment cost (as for the planes) over the coarse sample, coarse then fine.
-  auto refine = [&](const Eigen::Vector3f& start, int reach, float step_radii) {
-    return best_shift(start, 6, reach, step_radii,
-                      [&](const SymmetryOptions& coarse, SymmetryHypothesis* h) {
-                        return -AlignmentCost(coarse_points, coarse_normals, coarse_index, frame,
-                                              free_space, coarse, *h);
-                      });
-  };
-  SymmetryHypothesis axis;
-  axis.kind = SymmetryKind::kAxis;
-  axis.direction = frame.up;
-  axis.point = search(fitted, 0, 6, 0.01f);
-  axis.copies = std::max(1, options.axis_steps - 1);
-  ScoreWithIndex(points, normals, index, frame, free_space, options, &axis);
-  if (options.refine_axis) {
-    SymmetryHypothesis refined = axis;
-    refined.point = refine(refine(axis.point, 6, 0.01f), 4, 0.0025f);
-    ScoreWithIndex(points, normals, index, frame, free_space, options, &refined);
-    if (refined.accepted || !axis.accepted) axis = refined;
-  }
-  if (const int n = DiscreteOrder(axis, options); n > 0) {
-    // An n-fold axis: each order dividing n with its own point (a box's centre, not a fitted
-    // circle's), coarse then fine; the largest order that agrees as well as the best one wins (a
-    // nearly square box's quarter turns agree a little less than its half turn: 2-fold).
-    constexpr double kOrderTolerance = 0.01;
-    std::vector<SymmetryHypothesis> orders;
-    for (int m = n; m >= 2; --m) {
-      if (n % m != 0) continue;
-      SymmetryHypothesis h = axis;
-      h.order = m;
-      h.copies = m - 1;
-      h.point = search(axis.point, m, 10, 0.02f);
-      h.point = search(h.point, m, 4, 0.005f);
-      ScoreWithIndex(points, normals, index, frame, free_space, options, &h);
-      orders.push_back(std::move(h));
-    }
-    double top = 0;
-    for (const SymmetryHypothesis& h : orders) top = std::max(top, h.agreement);
-    for (const SymmetryHypothesis& h : orders) {
-      if (h.agreement >= top - kOrderTolerance) {
-        axis = h;
-        break;
-      }
-    }
-  }
-  std::vector<SymmetryHypothesis> out = {axis, best_plane};
-  std::stable_sort(out.begin(), out.end(), Better);
-  return out;
+  symmetry_internal::ScoreWithIndex(points, normals, index, frame, free_space, options, h);
 }
 
 }  // namespace instascene::generation
