@@ -268,6 +268,46 @@ void FillOutput(const std::vector<SymmetryHypothesis>& hypotheses, const Gaussia
                              {"axis_cap_open_above", rejected.axis_cap_open_above}};
 }
 
+// The hypotheses tried (described), how many were accepted, and what the accepted ones added.
+struct ImagesAdded {
+  nlohmann::json tried = nlohmann::json::array();
+  int accepted = 0;
+  SourceCounts counts;
+  std::map<std::string, int> added_by;  // "mirrored" / "revolved" -> surfels
+};
+
+// Every accepted hypothesis's images of the instance's surfels, offered to the filter.
+absl::StatusOr<ImagesAdded> AddAcceptedImages(const std::vector<SymmetryHypothesis>& hypotheses,
+                                              const GaussianCloud& instance,
+                                              const InstanceSurfels& s, const AxisBodies& bodies,
+                                              const std::vector<uint8_t>& foreign,
+                                              const GeometricPriorOptions& options,
+                                              const CancelFlag* cancel, CandidateFilter* filter) {
+  ImagesAdded images;
+  for (const SymmetryHypothesis& h : hypotheses) {
+    images.tried.push_back(h.Describe());
+    if (!h.accepted) continue;
+    ++images.accepted;
+    const size_t before = filter->added().size();
+    RETURN_IF_ERROR(
+        AddImages(h, instance, s, bodies, foreign, options, cancel, &images.counts, filter));
+    images.added_by[h.kind == SymmetryKind::kPlane ? "mirrored" : "revolved"] +=
+        static_cast<int>(filter->added().size() - before);
+  }
+  return images;
+}
+
+// No hypothesis accepted: the object is its observed surfels.
+PriorOutput Abstention(const std::vector<SymmetryHypothesis>& hypotheses,
+                       const GaussianCloud& instance, PriorOutput out) {
+  out.abstained = true;
+  out.reason = hypotheses.empty() ? "too few observed surfels to test any symmetry"
+                                  : "no symmetry hypothesis passed";
+  out.added = BuildSurfels(instance, {});
+  out.report["added"] = 0;
+  return out;
+}
+
 }  // namespace
 
 absl::StatusOr<PriorOutput> NoPrior::Complete(const PriorInput& input) const {
@@ -278,6 +318,7 @@ absl::StatusOr<PriorOutput> NoPrior::Complete(const PriorInput& input) const {
   out.reason = "prior 'none': the object is the closed crop";
   return out;
 }
+
 absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) const {
   RETURN_IF_ERROR(options_.observed_surface.Validate());
   const GaussianCloud& instance = *input.instance;
@@ -308,38 +349,21 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   for (uint32_t g = 0; g < instance.size(); ++g) {
     if (!foreign[g]) own.push_back(g);
   }
-  nlohmann::json tried = nlohmann::json::array();
-  int accepted = 0;
-  SourceCounts counts;
-  std::map<std::string, int> added_by;
-  for (const SymmetryHypothesis& h : hypotheses) {
-    tried.push_back(h.Describe());
-    if (!h.accepted) continue;
-    ++accepted;
-    const size_t before = filter.added().size();
-    RETURN_IF_ERROR(
-        AddImages(h, instance, s, bodies, foreign, options_, input.cancel, &counts, &filter));
-    added_by[h.kind == SymmetryKind::kPlane ? "mirrored" : "revolved"] +=
-        static_cast<int>(filter.added().size() - before);
-  }
+  ASSIGN_OR_RETURN(ImagesAdded images, AddAcceptedImages(hypotheses, instance, s, bodies, foreign,
+                                                         options_, input.cancel, &filter));
+  std::map<std::string, int>& added_by = images.added_by;
   if (options_.axis_cap) {
     RETURN_IF_ERROR(AddAxisCaps(hypotheses, instance, s, own, &filter, &added_by));
   }
   PriorOutput out;
-  out.report["hypotheses"] = tried;
-  if (accepted == 0) {
-    out.abstained = true;
-    out.reason = hypotheses.empty() ? "too few observed surfels to test any symmetry"
-                                    : "no symmetry hypothesis passed";
-    out.added = BuildSurfels(instance, {});
-    out.report["added"] = 0;
-    return out;
-  }
+  out.report["hypotheses"] = images.tried;
+  if (images.accepted == 0) return Abstention(hypotheses, instance, std::move(out));
   if (options_.support_cap && frame.has_support &&
       frame.bottom_height - frame.support_height <= options_.max_support_gap_radii * frame.radius) {
     AddSupport(hypotheses, instance, s, own, options_, &filter, &added_by);
   }
-  FillOutput(hypotheses, instance, filter, counts, bodies, foreign, accepted, added_by, &out);
+  FillOutput(hypotheses, instance, filter, images.counts, bodies, foreign, images.accepted,
+             added_by, &out);
   return out;
 }
 
