@@ -311,59 +311,62 @@ absl::Status SceneObjects::AddSplats(store::BlobStore& store, const store::Manif
 }
 
 absl::StatusOr<uint32_t> SceneObjects::Resolve(const v1::ObjectSelector& selector) const {
-  const std::string& scene = outputs_.scene;
   switch (selector.selector_case()) {
-    case v1::ObjectSelector::kId: {
+    case v1::ObjectSelector::kId:
       if (objects_.count(selector.id()) == 0)
-        return absl::NotFoundError(absl::StrCat("scene '", scene, "' has no object ", selector.id(),
-                                                " (", objects_.size(),
+        return absl::NotFoundError(absl::StrCat("scene '", outputs_.scene, "' has no object ",
+                                                selector.id(), " (", objects_.size(),
                                                 " objects; ListObjects names them)"));
       return selector.id();
-    }
-    case v1::ObjectSelector::kPoint: {
-      const v1::Vector3& p = selector.point();
-      const Eigen::Vector3d point(p.x(), p.y(), p.z());
-      if (!point.allFinite()) return absl::InvalidArgumentError("selector.point is not finite");
-      double radius = selector.max_distance();
-      if (!(radius >= 0) || radius > max_radius_)
-        return absl::InvalidArgumentError(absl::StrFormat(
-            "selector.max_distance %g: must be in [0, %g] (the scene's diagonal; 0 = %g)", radius,
-            max_radius_, default_radius_));
-      if (radius == 0) radius = default_radius_;
-      ASSIGN_OR_RETURN(QueryAnswer a,
-                       index_->Point(point.cast<float>(), static_cast<float>(radius)));
-      if (a.instance == 0 || objects_.count(a.instance) == 0)
-        return absl::NotFoundError(
-            absl::StrFormat("scene '%s': no object within %g scene units of (%g, %g, %g)", scene,
-                            radius, point.x(), point.y(), point.z()));
-      return a.instance;
-    }
-    case v1::ObjectSelector::kClick: {
-      const v1::PixelClick& c = selector.click();
-      ASSIGN_OR_RETURN(int view, ResolveView(scene_, c.view()));
-      ASSIGN_OR_RETURN(QueryAnswer a, index_->Click(view, c.x(), c.y()));
-      if (a.instance == 0 || objects_.count(a.instance) == 0)
-        return absl::NotFoundError(
-            absl::StrFormat("scene '%s': pixel (%d, %d) of view %s shows the background, no object",
-                            scene, c.x(), c.y(), scene_.views[view].name));
-      return a.instance;
-    }
-    case v1::ObjectSelector::kRay: {
-      const v1::Ray& r = selector.ray();
-      const Eigen::Vector3d o(r.origin().x(), r.origin().y(), r.origin().z());
-      const Eigen::Vector3d d(r.direction().x(), r.direction().y(), r.direction().z());
-      ASSIGN_OR_RETURN(QueryAnswer a, index_->Ray(o.cast<float>(), d.cast<float>()));
-      if (a.instance == 0 || objects_.count(a.instance) == 0)
-        return absl::NotFoundError(
-            absl::StrFormat("scene '%s': the ray from (%g, %g, %g) along (%g, %g, %g) meets no "
-                            "object",
-                            scene, o.x(), o.y(), o.z(), d.x(), d.y(), d.z()));
-      return a.instance;
-    }
+    case v1::ObjectSelector::kPoint:
+      return ResolvePoint(selector.point(), selector.max_distance());
+    case v1::ObjectSelector::kClick:
+      return ResolveClick(selector.click());
+    case v1::ObjectSelector::kRay:
+      return ResolveRay(selector.ray());
     case v1::ObjectSelector::SELECTOR_NOT_SET:
       break;
   }
   return absl::InvalidArgumentError("selector: give one of id, point, click or ray");
+}
+
+absl::StatusOr<uint32_t> SceneObjects::ResolvePoint(const v1::Vector3& p,
+                                                    double max_distance) const {
+  const Eigen::Vector3d point(p.x(), p.y(), p.z());
+  if (!point.allFinite()) return absl::InvalidArgumentError("selector.point is not finite");
+  double radius = max_distance;
+  if (!(radius >= 0) || radius > max_radius_)
+    return absl::InvalidArgumentError(absl::StrFormat(
+        "selector.max_distance %g: must be in [0, %g] (the scene's diagonal; 0 = %g)", radius,
+        max_radius_, default_radius_));
+  if (radius == 0) radius = default_radius_;
+  ASSIGN_OR_RETURN(QueryAnswer a, index_->Point(point.cast<float>(), static_cast<float>(radius)));
+  if (a.instance == 0 || objects_.count(a.instance) == 0)
+    return absl::NotFoundError(
+        absl::StrFormat("scene '%s': no object within %g scene units of (%g, %g, %g)",
+                        outputs_.scene, radius, point.x(), point.y(), point.z()));
+  return a.instance;
+}
+
+absl::StatusOr<uint32_t> SceneObjects::ResolveClick(const v1::PixelClick& c) const {
+  ASSIGN_OR_RETURN(int view, ResolveView(scene_, c.view()));
+  ASSIGN_OR_RETURN(QueryAnswer a, index_->Click(view, c.x(), c.y()));
+  if (a.instance == 0 || objects_.count(a.instance) == 0)
+    return absl::NotFoundError(
+        absl::StrFormat("scene '%s': pixel (%d, %d) of view %s shows the background, no object",
+                        outputs_.scene, c.x(), c.y(), scene_.views[view].name));
+  return a.instance;
+}
+
+absl::StatusOr<uint32_t> SceneObjects::ResolveRay(const v1::Ray& r) const {
+  const Eigen::Vector3d o(r.origin().x(), r.origin().y(), r.origin().z());
+  const Eigen::Vector3d d(r.direction().x(), r.direction().y(), r.direction().z());
+  ASSIGN_OR_RETURN(QueryAnswer a, index_->Ray(o.cast<float>(), d.cast<float>()));
+  if (a.instance == 0 || objects_.count(a.instance) == 0)
+    return absl::NotFoundError(
+        absl::StrFormat("scene '%s': the ray from (%g, %g, %g) along (%g, %g, %g) meets no object",
+                        outputs_.scene, o.x(), o.y(), o.z(), d.x(), d.y(), d.z()));
+  return a.instance;
 }
 
 absl::StatusOr<v1::Object> SceneObjects::Describe(uint32_t id) const {

@@ -71,6 +71,11 @@ class SceneObjects {
   void AddSegmentOnly(const store::Manifest& segment);
   // An answer's common fields: scene, id, source, units, observed Gaussians, segment digest.
   v1::Object NewObject(uint32_t id, const std::string& source) const;
+  // Resolve's selectors: the object nearest a point, under a pixel, along a ray (NOT_FOUND when
+  // none).
+  absl::StatusOr<uint32_t> ResolvePoint(const v1::Vector3& p, double max_distance) const;
+  absl::StatusOr<uint32_t> ResolveClick(const v1::PixelClick& c) const;
+  absl::StatusOr<uint32_t> ResolveRay(const v1::Ray& r) const;
 
   SceneOutputs outputs_;
   Scene scene_;
