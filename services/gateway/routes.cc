@@ -88,8 +88,8 @@ void AddJobEventsRoute(httplib::Server& http, const std::shared_ptr<Stubs>& stub
   });
 }
 
-// Jobs, scenes, pipelines, the queue and its live events: the Scheduler service.
-void AddSchedulerRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) {
+// The stages, the job listing, one job and its cancellation: the Scheduler service.
+void AddJobRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) {
   http.Get("/api/v1/stages", [stubs](const httplib::Request& req, httplib::Response& res) {
     Unary<v1::ListStagesRequest, v1::ListStagesResponse>(
         req, res, v1::ListStagesRequest(),
@@ -118,6 +118,11 @@ void AddSchedulerRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stu
       return stubs->scheduler->CancelJob(c, q, r);
     });
   });
+}
+
+// A scene and its cancellation, pipeline submission, the queue's statistics: the Scheduler
+// service.
+void AddSceneRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) {
   http.Get(R"(/api/v1/scenes/([^/]+))", [stubs](const httplib::Request& req,
                                                 httplib::Response& res) {
     v1::GetSceneRequest request;
@@ -147,6 +152,12 @@ void AddSchedulerRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stu
         req, res, v1::GetQueueStatsRequest(),
         [&](auto* c, const auto& q, auto* r) { return stubs->scheduler->GetQueueStats(c, q, r); });
   });
+}
+
+// Jobs, scenes, pipelines, the queue and its live events: the Scheduler service.
+void AddSchedulerRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) {
+  AddJobRoutes(http, stubs);
+  AddSceneRoutes(http, stubs);
   AddJobEventsRoute(http, stubs);
 }
 
