@@ -60,31 +60,39 @@ nlohmann::json OrientedBox(const GaussianCloud& cloud, const ObjectFrame& frame)
   return {{"min", Vec(box.min())}, {"max", Vec(box.max())}, {"extent", Vec(box.sizes())}};
 }
 
-nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& options) {
+// The viewpoint ring: per view its angles, score, visible surfels and whether a real view knows it.
+nlohmann::json RingToManifest(const CompletedObject& o, const CompletionOptions& options) {
   nlohmann::json ring = nlohmann::json::array();
-  int known = 0;
   for (size_t k = 0; k < o.ring.size(); ++k) {
     const ViewVisibility& v = o.ring_visibility[k];
-    known += v.known;
     ring.push_back({{"azimuth_deg", 360.0 * k / o.ring.size()},
                     {"elevation_deg", options.ring.elevation_deg},
                     {"score", v.score},
                     {"self_visible", v.self_visible},
                     {"known", v.known}});
   }
+  return ring;
+}
+
+nlohmann::json FrameToManifest(const ObjectFrame& frame) {
+  return {{"center", Vec(frame.center)},
+          {"up", Vec(frame.up)},
+          {"radius", frame.radius},
+          {"spacing", frame.spacing},
+          {"bottom", frame.bottom_height},
+          {"support",
+           frame.has_support ? nlohmann::json(frame.support_height) : nlohmann::json(nullptr)}};
+}
+
+nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& options) {
+  int known = 0;
+  for (size_t k = 0; k < o.ring.size(); ++k) known += o.ring_visibility[k].known;
   const size_t observed = o.raw.size(), completed = o.object.size() - o.raw.size();
   nlohmann::json m = {
       {"format", kObjectFormat},
       {"id", o.id},
       {"world_from_object", Pose(o.frame)},
-      {"frame",
-       {{"center", Vec(o.frame.center)},
-        {"up", Vec(o.frame.up)},
-        {"radius", o.frame.radius},
-        {"spacing", o.frame.spacing},
-        {"bottom", o.frame.bottom_height},
-        {"support",
-         o.frame.has_support ? nlohmann::json(o.frame.support_height) : nlohmann::json(nullptr)}}},
+      {"frame", FrameToManifest(o.frame)},
       {"bounding_box", OrientedBox(o.object, o.frame)},
       {"prior", options.prior},
       {"abstained", o.prior.abstained},
@@ -96,7 +104,7 @@ nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& optio
         {"completed", completed},
         {"completed_share",
          o.object.size() ? static_cast<double>(completed) / o.object.size() : 0}}},
-      {"ring", ring},
+      {"ring", RingToManifest(o, options)},
       {"meshing", MeshingToManifest(options.meshing)},
       {"free_space", FreeSpaceToManifest(options.free_space)},
       {"ring_camera",
