@@ -39,6 +39,18 @@ absl::Status VerifyBlobBytes(const Digest& digest, absl::string_view bytes) {
   return absl::OkStatus();
 }
 
+absl::Status CheckAppend(const Digest& digest, int64_t offset, int64_t committed, size_t bytes) {
+  if (offset != committed)
+    return absl::FailedPreconditionError(
+        absl::StrCat("blob ", digest.ToString(), ": write at offset ", offset,
+                     " but the upload has ", committed, " bytes committed (resume there)"));
+  if (offset + static_cast<int64_t>(bytes) > digest.size_bytes)
+    return absl::InvalidArgumentError(absl::StrCat("blob ", digest.ToString(), ": ",
+                                                   offset + static_cast<int64_t>(bytes),
+                                                   " bytes sent, more than the digest's size"));
+  return absl::OkStatus();
+}
+
 absl::Status CheckTenantName(absl::string_view tenant) {
   bool ok = !tenant.empty() && tenant.size() <= 32 && tenant[0] != '-';
   for (char c : tenant) ok &= (c >= 'a' && c <= 'z') || (c >= '0' && c <= '9') || c == '-';

@@ -48,6 +48,10 @@ using TransferProgress = std::function<void(int64_t done, int64_t total)>;
 // stored").
 absl::Status CheckWritable(const Digest& digest, const StoreOptions& options);
 absl::Status VerifyBlobBytes(const Digest& digest, absl::string_view bytes);
+// An append of `bytes` at `offset` to an upload with `committed` bytes: it must start there
+// (FailedPrecondition: resume at the committed size) and stay within the digest's size
+// (InvalidArgument).
+absl::Status CheckAppend(const Digest& digest, int64_t offset, int64_t committed, size_t bytes);
 // A tenant name safe as a path or key component: 1-32 of [a-z0-9-], not starting with '-' (the
 // rule common/auth/tokens.h documents; checked here too because the store sits below auth).
 absl::Status CheckTenantName(absl::string_view tenant);

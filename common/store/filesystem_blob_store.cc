@@ -170,14 +170,7 @@ absl::StatusOr<int64_t> FilesystemBlobStore::AppendPart(const Digest& digest,
   std::error_code ec;
   const auto existing = fs::file_size(part, ec);
   const int64_t committed = ec ? 0 : static_cast<int64_t>(existing);
-  if (offset != committed)
-    return absl::FailedPreconditionError(
-        absl::StrCat("blob ", digest.ToString(), ": write at offset ", offset,
-                     " but the upload has ", committed, " bytes committed (resume there)"));
-  if (offset + static_cast<int64_t>(data.size()) > digest.size_bytes)
-    return absl::InvalidArgumentError(absl::StrCat("blob ", digest.ToString(), ": ",
-                                                   offset + static_cast<int64_t>(data.size()),
-                                                   " bytes sent, more than the digest's size"));
+  RETURN_IF_ERROR(CheckAppend(digest, offset, committed, data.size()));
   std::ofstream out(part, std::ios::binary | std::ios::app);
   out.write(data.data(), static_cast<std::streamsize>(data.size()));
   out.flush();

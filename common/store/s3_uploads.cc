@@ -143,18 +143,11 @@ absl::StatusOr<int64_t> S3BlobStore::AppendPart(const Digest& digest, const std:
     }
     if (upload->assembled) return digest.size_bytes;
     const int64_t durable = upload->durable();
-    const int64_t committed = durable + static_cast<int64_t>(upload->buffer.size());
-    if (offset == durable && offset != committed) {
+    if (offset == durable && upload->buffer.size() > 0) {
       upload->buffer.clear();  // a restarted client resends what was only buffered
-    } else if (offset != committed) {
-      return absl::FailedPreconditionError(
-          absl::StrCat("blob ", digest.ToString(), ": write at offset ", offset,
-                       " but the upload has ", committed, " bytes committed (resume there)"));
     }
-    if (offset + static_cast<int64_t>(data.size()) > digest.size_bytes)
-      return absl::InvalidArgumentError(absl::StrCat("blob ", digest.ToString(), ": ",
-                                                     offset + static_cast<int64_t>(data.size()),
-                                                     " bytes sent, more than the digest's size"));
+    RETURN_IF_ERROR(CheckAppend(
+        digest, offset, durable + static_cast<int64_t>(upload->buffer.size()), data.size()));
     upload->buffer.append(data.data(), data.size());
     RETURN_IF_ERROR(SendFullParts(*upload));
     if (upload->buffer.empty()) return offset + static_cast<int64_t>(data.size());
