@@ -4,6 +4,7 @@
 #include <thread>
 
 #include "absl/strings/str_cat.h"
+#include "common/core/status.h"
 #include "common/rpc/status.h"
 
 namespace instascene::generation::diffusion {
@@ -31,6 +32,40 @@ absl::Status CheckLatent(const v1::Latent& latent, const std::string& what) {
     return absl::InvalidArgumentError(
         absl::StrCat(what, ": ", latent.values_size(), " values for a shape of ", n));
   return absl::OkStatus();
+}
+
+// The request for one query: its latent (and condition latent) with the denoiser's shape, the
+// timestep, the target and condition views and the warp between them.
+absl::StatusOr<v1::PredictNoiseRequest> NoiseRequest(const NoiseQuery& q,
+                                                     const std::vector<int>& latent_shape,
+                                                     const std::string& address) {
+  int64_t size = 1;
+  for (int d : latent_shape) size *= d;
+  if (latent_shape.empty() || size != static_cast<int64_t>(q.latent->size()) ||
+      size > kMaxValuesPerLatent)
+    return absl::InvalidArgumentError(absl::StrCat("denoiser ", address, ": a latent of ",
+                                                   q.latent->size(), " values for its shape"));
+  v1::PredictNoiseRequest request;
+  v1::NoiseItem* item = request.add_items();
+  for (int d : latent_shape) item->mutable_latent()->add_shape(d);
+  item->mutable_latent()->mutable_values()->Add(q.latent->begin(), q.latent->end());
+  item->set_timestep(q.timestep);
+  item->set_target(q.target);
+  item->set_condition(q.condition);
+  if (q.condition_latent != nullptr) {
+    if (static_cast<int64_t>(q.condition_latent->size()) != size)
+      return absl::InvalidArgumentError(
+          absl::StrCat("denoiser ", address, ": a condition latent of ", q.condition_latent->size(),
+                       " values for a shape of ", size));
+    for (int d : latent_shape) item->mutable_condition_latent()->add_shape(d);
+    item->mutable_condition_latent()->mutable_values()->Add(q.condition_latent->begin(),
+                                                            q.condition_latent->end());
+  }
+  if (q.target_from_condition != nullptr) {
+    item->mutable_target_from_condition()->Add(q.target_from_condition->begin(),
+                                               q.target_from_condition->end());
+  }
+  return request;
 }
 
 }  // namespace
@@ -98,32 +133,8 @@ GrpcDenoiser::GrpcDenoiser(std::shared_ptr<grpc::Channel> channel, std::string a
       options_(std::move(options)) {}
 
 absl::StatusOr<std::vector<float>> GrpcDenoiser::PredictNoise(const NoiseQuery& q) const {
-  int64_t size = 1;
-  for (int d : options_.latent_shape) size *= d;
-  if (options_.latent_shape.empty() || size != static_cast<int64_t>(q.latent->size()) ||
-      size > kMaxValuesPerLatent)
-    return absl::InvalidArgumentError(absl::StrCat("denoiser ", address_, ": a latent of ",
-                                                   q.latent->size(), " values for its shape"));
-  v1::PredictNoiseRequest request;
-  v1::NoiseItem* item = request.add_items();
-  for (int d : options_.latent_shape) item->mutable_latent()->add_shape(d);
-  item->mutable_latent()->mutable_values()->Add(q.latent->begin(), q.latent->end());
-  item->set_timestep(q.timestep);
-  item->set_target(q.target);
-  item->set_condition(q.condition);
-  if (q.condition_latent != nullptr) {
-    if (static_cast<int64_t>(q.condition_latent->size()) != size)
-      return absl::InvalidArgumentError(
-          absl::StrCat("denoiser ", address_, ": a condition latent of ",
-                       q.condition_latent->size(), " values for a shape of ", size));
-    for (int d : options_.latent_shape) item->mutable_condition_latent()->add_shape(d);
-    item->mutable_condition_latent()->mutable_values()->Add(q.condition_latent->begin(),
-                                                            q.condition_latent->end());
-  }
-  if (q.target_from_condition != nullptr) {
-    item->mutable_target_from_condition()->Add(q.target_from_condition->begin(),
-                                               q.target_from_condition->end());
-  }
+  ASSIGN_OR_RETURN(const v1::PredictNoiseRequest request,
+                   NoiseRequest(q, options_.latent_shape, address_));
   grpc::Status last;
   std::chrono::milliseconds backoff = options_.backoff;
   for (int attempt = 1; attempt <= std::max(1, options_.attempts); ++attempt) {
