@@ -136,11 +136,9 @@ absl::StatusOr<rpc::ChannelOptions> PeerChannelOptions(const NodeOptions& option
   return channel;
 }
 
-}  // namespace
-
-absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& stages,
-                     const std::vector<StageService>& available) {
-  RETURN_IF_ERROR(options.Validate());
+// The stage services this node hosts, by name. InvalidArgument names an unknown one.
+absl::StatusOr<std::vector<const StageService*>> HostedServices(
+    const NodeOptions& options, const std::vector<StageService>& available) {
   std::vector<const StageService*> hosted;
   for (const std::string& name : options.workers) {
     const StageService* found = nullptr;
@@ -154,168 +152,227 @@ absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& 
           "unknown worker '", name, "' (this binary runs ", absl::StrJoin(names, ", "), ")"));
     hosted.push_back(found);
   }
-  rpc::BlockShutdownSignals();
-  std::error_code ec;
-  fs::create_directories(options.data_dir, ec);
-  if (ec) return absl::UnavailableError(absl::StrCat(options.data_dir, ": ", ec.message()));
-  ASSIGN_OR_RETURN(std::shared_ptr<auth::Authenticator> authenticator, OpenAuthenticator(options));
-  auth::Authenticator* auth = authenticator.get();
-  ASSIGN_OR_RETURN(rpc::ChannelOptions peer, PeerChannelOptions(options));
-  auto connect_peer = [&peer](const std::string& address) {
-    rpc::ChannelOptions c = peer;
+  return hosted;
+}
+
+// The scheduler's channel, known once the server runs (services built before ask it lazily).
+struct SchedulerChannel {
+  std::mutex mutex;
+  std::shared_ptr<grpc::Channel> channel;
+};
+
+// Everything a node runs. Members are destroyed in reverse order: the gateway and the server
+// before the services, the workers and the queue they use, the store last.
+class Node {
+ public:
+  Node(const NodeOptions& options, const pipeline::StageRegistry& stages)
+      : options_(options), stages_(stages) {}
+
+  absl::Status Open();  // authenticator, peer channel options, store
+  absl::Status AddScheduler();
+  absl::Status AddStageWorkers(const std::vector<const StageService*>& hosted);
+  absl::Status Serve();  // metrics, gRPC server, workers started, gateway, ready file
+  void Drain();
+
+ private:
+  absl::StatusOr<std::shared_ptr<grpc::Channel>> ConnectPeer(const std::string& address) const {
+    rpc::ChannelOptions c = peer_;
     return rpc::Connect(address, c);
-  };
+  }
+  absl::Status StartWorkers();
+  void Announce() const;
 
+  const NodeOptions& options_;
+  const pipeline::StageRegistry& stages_;
+  std::shared_ptr<auth::Authenticator> authenticator_;
+  rpc::ChannelOptions peer_;
+  std::unique_ptr<store::BlobStore> store_;
+  std::vector<grpc::Service*> services_;
+  std::vector<std::string> names_;
+  std::unique_ptr<store_service::StoreService> store_service_;
+  std::unique_ptr<scheduler::JobQueue> queue_;
+  std::unique_ptr<scheduler::SchedulerService> scheduler_service_;
+  std::shared_ptr<SchedulerChannel> scheduler_channel_ = std::make_shared<SchedulerChannel>();
+  std::vector<std::unique_ptr<worker::StageWorker>> workers_;
+  std::vector<std::unique_ptr<grpc::Service>> stage_services_;
+  std::unique_ptr<metrics::Endpoint> metrics_endpoint_;
+  std::vector<std::shared_ptr<prometheus::Collectable>> collectors_;
+  std::unique_ptr<rpc::Server> server_;
+  std::unique_ptr<gateway::Gateway> gateway_;
+};
+
+absl::Status Node::Open() {
+  std::error_code ec;
+  fs::create_directories(options_.data_dir, ec);
+  if (ec) return absl::UnavailableError(absl::StrCat(options_.data_dir, ": ", ec.message()));
+  ASSIGN_OR_RETURN(authenticator_, OpenAuthenticator(options_));
+  ASSIGN_OR_RETURN(peer_, PeerChannelOptions(options_));
   // The store: local (served here) or remote.
-  std::unique_ptr<store::BlobStore> owned_store;
-  if (options.run_store || store::IsBlobStoreUri(options.store)) {
-    const std::string uri = options.store.empty()
-                                ? "file:" + (fs::path(options.data_dir) / "store").string()
-                                : options.store;
-    ASSIGN_OR_RETURN(owned_store, store::OpenBlobStoreUri(uri, options.store_options));
+  if (options_.run_store || store::IsBlobStoreUri(options_.store)) {
+    const std::string uri = options_.store.empty()
+                                ? "file:" + (fs::path(options_.data_dir) / "store").string()
+                                : options_.store;
+    ASSIGN_OR_RETURN(store_, store::OpenBlobStoreUri(uri, options_.store_options));
   } else {
-    ASSIGN_OR_RETURN(std::shared_ptr<grpc::Channel> store_channel, connect_peer(options.store));
-    ASSIGN_OR_RETURN(owned_store, store_service::RemoteBlobStore::Connect(store_channel));
+    ASSIGN_OR_RETURN(std::shared_ptr<grpc::Channel> store_channel, ConnectPeer(options_.store));
+    ASSIGN_OR_RETURN(store_, store_service::RemoteBlobStore::Connect(store_channel));
   }
-  store::BlobStore* blob_store = owned_store.get();
+  if (options_.run_store) {
+    store_service_ =
+        std::make_unique<store_service::StoreService>(store_.get(), authenticator_.get());
+    services_.push_back(store_service_.get());
+    names_.push_back("instascene.v1.ContentStore");
+  }
+  return absl::OkStatus();
+}
 
-  std::vector<grpc::Service*> services;
-  std::vector<std::string> names;
-  std::unique_ptr<store_service::StoreService> store_svc;
-  if (options.run_store) {
-    store_svc = std::make_unique<store_service::StoreService>(blob_store, auth);
-    services.push_back(store_svc.get());
-    names.push_back("instascene.v1.ContentStore");
+absl::Status Node::AddScheduler() {
+  if (!options_.run_scheduler) return absl::OkStatus();
+  scheduler::QueueOptions queue_options;
+  queue_options.lease_ms = int64_t{options_.lease_seconds} * 1000;
+  queue_options.max_lease_ms = std::max(queue_options.max_lease_ms, queue_options.lease_ms);
+  for (const std::string& kind : stages_.Kinds()) {
+    if (stages_.Find(kind)->spec.partial_join) queue_options.partial_join_kinds.insert(kind);
   }
-  std::unique_ptr<scheduler::JobQueue> queue;
-  std::unique_ptr<scheduler::SchedulerService> scheduler_svc;
-  if (options.run_scheduler) {
-    scheduler::QueueOptions queue_options;
-    queue_options.lease_ms = int64_t{options.lease_seconds} * 1000;
-    queue_options.max_lease_ms = std::max(queue_options.max_lease_ms, queue_options.lease_ms);
-    for (const std::string& kind : stages.Kinds()) {
-      if (stages.Find(kind)->spec.partial_join) queue_options.partial_join_kinds.insert(kind);
-    }
-    ASSIGN_OR_RETURN(queue, OpenQueue(options, queue_options));
-    scheduler::SchedulerServiceOptions scheduler_options;
-    scheduler_options.rescue_interval_ms = std::min(1000, options.lease_seconds * 250);
-    scheduler_options.retention_ms = static_cast<int64_t>(options.retention_hours * 3600e3);
-    scheduler_options.auth = auth;
-    scheduler_svc = std::make_unique<scheduler::SchedulerService>(queue.get(), blob_store, &stages,
-                                                                  scheduler_options);
-    services.push_back(scheduler_svc.get());
-    names.push_back("instascene.v1.Scheduler");
-  }
-  const std::string work_dir = (fs::path(options.data_dir) / "work").string();
-  // The scheduler's channel, known once the server runs (services built before ask it lazily).
-  struct SchedulerChannel {
-    std::mutex mutex;
-    std::shared_ptr<grpc::Channel> channel;
-  };
-  auto scheduler_channel = std::make_shared<SchedulerChannel>();
-  auto get_scheduler = [scheduler_channel]() {
+  ASSIGN_OR_RETURN(queue_, OpenQueue(options_, queue_options));
+  scheduler::SchedulerServiceOptions scheduler_options;
+  scheduler_options.rescue_interval_ms = std::min(1000, options_.lease_seconds * 250);
+  scheduler_options.retention_ms = static_cast<int64_t>(options_.retention_hours * 3600e3);
+  scheduler_options.auth = authenticator_.get();
+  scheduler_service_ = std::make_unique<scheduler::SchedulerService>(queue_.get(), store_.get(),
+                                                                     &stages_, scheduler_options);
+  services_.push_back(scheduler_service_.get());
+  names_.push_back("instascene.v1.Scheduler");
+  return absl::OkStatus();
+}
+
+absl::Status Node::AddStageWorkers(const std::vector<const StageService*>& hosted) {
+  const std::string work_dir = (fs::path(options_.data_dir) / "work").string();
+  auto get_scheduler = [scheduler_channel = scheduler_channel_]() {
     std::lock_guard<std::mutex> lock(scheduler_channel->mutex);
     return scheduler_channel->channel;
   };
-  std::vector<std::unique_ptr<worker::StageWorker>> workers;
-  std::vector<std::unique_ptr<grpc::Service>> stage_services;
   for (const StageService* hosted_service : hosted) {
     worker::WorkerOptions w;
     w.kinds = hosted_service->kinds;
     w.work_dir = work_dir;
-    w.num_threads = options.num_threads;
-    w.lease_seconds = options.lease_seconds;
-    w.cache_bytes = options.cache_bytes;
-    if (!options.denoiser.empty()) w.stage_settings["denoiser"] = options.denoiser;
-    w.memory_budget_bytes = options.memory_budget_bytes == 0  ? pipeline::PhysicalMemoryBytes()
-                            : options.memory_budget_bytes < 0 ? 0
-                                                              : options.memory_budget_bytes;
-    w.heartbeat_interval_ms = std::min(1000, options.lease_seconds * 1000 / 4);  // live progress
-    RETURN_IF_ERROR(w.Validate(stages));
-    workers.push_back(std::make_unique<worker::StageWorker>(w, blob_store, &stages));
+    w.num_threads = options_.num_threads;
+    w.lease_seconds = options_.lease_seconds;
+    w.cache_bytes = options_.cache_bytes;
+    if (!options_.denoiser.empty()) w.stage_settings["denoiser"] = options_.denoiser;
+    w.memory_budget_bytes = options_.memory_budget_bytes == 0  ? pipeline::PhysicalMemoryBytes()
+                            : options_.memory_budget_bytes < 0 ? 0
+                                                               : options_.memory_budget_bytes;
+    w.heartbeat_interval_ms = std::min(1000, options_.lease_seconds * 1000 / 4);  // live progress
+    RETURN_IF_ERROR(w.Validate(stages_));
+    workers_.push_back(std::make_unique<worker::StageWorker>(w, store_.get(), &stages_));
     StageServiceContext context;
-    context.worker = workers.back().get();
-    context.store = blob_store;
+    context.worker = workers_.back().get();
+    context.store = store_.get();
     context.work_dir = (fs::path(work_dir) / hosted_service->name).string();
     context.scheduler = get_scheduler;
-    context.index_cache_bytes = options.index_cache_bytes;
-    context.auth = auth;
-    stage_services.push_back(hosted_service->make(context));
-    services.push_back(stage_services.back().get());
-    names.push_back(hosted_service->grpc_name);
+    context.index_cache_bytes = options_.index_cache_bytes;
+    context.auth = authenticator_.get();
+    stage_services_.push_back(hosted_service->make(context));
+    services_.push_back(stage_services_.back().get());
+    names_.push_back(hosted_service->grpc_name);
   }
+  return absl::OkStatus();
+}
 
+// The node's own workers reach an in-process scheduler with a token valid in this process only,
+// or the remote scheduler.
+absl::Status Node::StartWorkers() {
+  if (workers_.empty()) return absl::OkStatus();
+  std::string process_token;
+  if (authenticator_ != nullptr && options_.run_scheduler) {
+    ASSIGN_OR_RETURN(process_token, authenticator_->AddProcessToken(auth::Role::kWorker));
+  }
+  std::shared_ptr<grpc::Channel> channel;
+  if (options_.run_scheduler) {
+    channel = server_->InProcessChannel(process_token);
+  } else {
+    ASSIGN_OR_RETURN(channel, ConnectPeer(options_.scheduler_address));
+  }
+  {
+    std::lock_guard<std::mutex> lock(scheduler_channel_->mutex);
+    scheduler_channel_->channel = channel;
+  }
+  for (auto& w : workers_) w->Start(channel);
+  return absl::OkStatus();
+}
+
+absl::Status Node::Serve() {
   // Metrics before the server: a refused metrics address stops the node before anything runs.
-  std::unique_ptr<metrics::Endpoint> metrics_endpoint;
-  std::vector<std::shared_ptr<prometheus::Collectable>> collectors;
-  if (!options.metrics_listen.empty()) {
-    ASSIGN_OR_RETURN(metrics_endpoint, metrics::Endpoint::Start(options.metrics_listen));
-    if (queue) collectors.push_back(scheduler::QueueCollector(queue.get()));
-    collectors.push_back(StoreCollector(blob_store, options.run_store, options.data_dir));
-    for (const auto& c : collectors) metrics_endpoint->Add(c);
+  if (!options_.metrics_listen.empty()) {
+    ASSIGN_OR_RETURN(metrics_endpoint_, metrics::Endpoint::Start(options_.metrics_listen));
+    if (queue_) collectors_.push_back(scheduler::QueueCollector(queue_.get()));
+    collectors_.push_back(StoreCollector(store_.get(), options_.run_store, options_.data_dir));
+    for (const auto& c : collectors_) metrics_endpoint_->Add(c);
   }
-
   rpc::ServerOptions server_options;
-  server_options.listen = options.listen;
-  server_options.tls = options.tls;
+  server_options.listen = options_.listen;
+  server_options.tls = options_.tls;
   server_options.interceptors = metrics::RpcMetricsInterceptors;  // call latencies by method
   server_options.max_message_bytes = static_cast<int>(
-      std::min<int64_t>(options.store_options.max_batch_bytes + (1 << 20), 1 << 30));
-  ASSIGN_OR_RETURN(std::unique_ptr<rpc::Server> server,
-                   rpc::Server::Start(server_options, services, names));
-  if (!workers.empty()) {
-    // The node's own workers reach an in-process scheduler with a token valid in this process only.
-    std::string process_token;
-    if (auth != nullptr && options.run_scheduler) {
-      ASSIGN_OR_RETURN(process_token, auth->AddProcessToken(auth::Role::kWorker));
-    }
-    std::shared_ptr<grpc::Channel> channel;
-    if (options.run_scheduler) {
-      channel = server->InProcessChannel(process_token);
-    } else {
-      ASSIGN_OR_RETURN(channel, connect_peer(options.scheduler_address));
-    }
-    {
-      std::lock_guard<std::mutex> lock(scheduler_channel->mutex);
-      scheduler_channel->channel = channel;
-    }
-    for (auto& w : workers) w->Start(channel);
-  }
-  std::unique_ptr<gateway::Gateway> http_gateway;
-  if (!options.gateway_listen.empty()) {
+      std::min<int64_t>(options_.store_options.max_batch_bytes + (1 << 20), 1 << 30));
+  ASSIGN_OR_RETURN(server_, rpc::Server::Start(server_options, services_, names_));
+  RETURN_IF_ERROR(StartWorkers());
+  if (!options_.gateway_listen.empty()) {
     gateway::GatewayOptions gateway_options;
-    gateway_options.listen = options.gateway_listen;
+    gateway_options.listen = options_.gateway_listen;
     gateway_options.web_root =
-        options.web_root.empty() ? gateway::DefaultWebRoot() : options.web_root;
+        options_.web_root.empty() ? gateway::DefaultWebRoot() : options_.web_root;
     if (gateway_options.web_root == "none") gateway_options.web_root.clear();
-    const std::shared_ptr<grpc::Channel> local = server->InProcessChannel();
-    ASSIGN_OR_RETURN(http_gateway, gateway::Gateway::Start(gateway_options, local, local, local));
+    const std::shared_ptr<grpc::Channel> local = server_->InProcessChannel();
+    ASSIGN_OR_RETURN(gateway_, gateway::Gateway::Start(gateway_options, local, local, local));
   }
-  spdlog::info("instascene node serving on {} (data {}): {}", server->address(), options.data_dir,
-               absl::StrJoin(names, ", "));
-  if (http_gateway) spdlog::info("HTTP gateway at http://{}/api/v1/", http_gateway->address());
-  if (http_gateway && http_gateway->serves_ui())
-    spdlog::info("web UI at http://{}/", http_gateway->address());
-  if (metrics_endpoint) spdlog::info("metrics at http://{}/metrics", metrics_endpoint->address());
-  if (!options.ready_file.empty()) {
-    std::string ready = server->address() + "\n";
-    if (metrics_endpoint) absl::StrAppend(&ready, "metrics=", metrics_endpoint->address(), "\n");
-    if (http_gateway) absl::StrAppend(&ready, "gateway=", http_gateway->address(), "\n");
-    RETURN_IF_ERROR(WriteFileAtomically(options.ready_file, ready));
-  }
+  Announce();
+  if (options_.ready_file.empty()) return absl::OkStatus();
+  std::string ready = server_->address() + "\n";
+  if (metrics_endpoint_) absl::StrAppend(&ready, "metrics=", metrics_endpoint_->address(), "\n");
+  if (gateway_) absl::StrAppend(&ready, "gateway=", gateway_->address(), "\n");
+  return WriteFileAtomically(options_.ready_file, ready);
+}
 
+void Node::Announce() const {
+  spdlog::info("instascene node serving on {} (data {}): {}", server_->address(), options_.data_dir,
+               absl::StrJoin(names_, ", "));
+  if (gateway_) spdlog::info("HTTP gateway at http://{}/api/v1/", gateway_->address());
+  if (gateway_ && gateway_->serves_ui()) spdlog::info("web UI at http://{}/", gateway_->address());
+  if (metrics_endpoint_) spdlog::info("metrics at http://{}/metrics", metrics_endpoint_->address());
+}
+
+// Workers first (they still need the scheduler to hand jobs back), then the scheduler, then RPCs.
+void Node::Drain() {
+  const auto deadline = std::chrono::seconds(options_.drain_seconds);
+  std::vector<std::thread> drains;
+  for (auto& w : workers_) drains.emplace_back([w = w.get(), deadline] { w->Drain(deadline); });
+  for (std::thread& t : drains) t.join();
+  if (scheduler_service_) scheduler_service_->Stop();
+  gateway_.reset();  // open event streams end
+  server_->Drain(std::chrono::seconds(5));
+  metrics_endpoint_.reset();
+  std::error_code ec;
+  if (!options_.ready_file.empty()) fs::remove(options_.ready_file, ec);
+}
+
+}  // namespace
+
+absl::Status RunNode(const NodeOptions& options, const pipeline::StageRegistry& stages,
+                     const std::vector<StageService>& available) {
+  RETURN_IF_ERROR(options.Validate());
+  ASSIGN_OR_RETURN(const std::vector<const StageService*> hosted,
+                   HostedServices(options, available));
+  rpc::BlockShutdownSignals();
+  Node node(options, stages);
+  RETURN_IF_ERROR(node.Open());
+  RETURN_IF_ERROR(node.AddScheduler());
+  RETURN_IF_ERROR(node.AddStageWorkers(hosted));
+  RETURN_IF_ERROR(node.Serve());
   const int sig = rpc::WaitForShutdownSignal();
   spdlog::info("signal {}: draining (running jobs get {} s)", sig, options.drain_seconds);
-  const auto deadline = std::chrono::seconds(options.drain_seconds);
-  // Workers first (they still need the scheduler to hand jobs back), then the scheduler, then RPCs.
-  std::vector<std::thread> drains;
-  for (auto& w : workers) drains.emplace_back([w = w.get(), deadline] { w->Drain(deadline); });
-  for (std::thread& t : drains) t.join();
-  if (scheduler_svc) scheduler_svc->Stop();
-  http_gateway.reset();  // open event streams end
-  server->Drain(std::chrono::seconds(5));
-  metrics_endpoint.reset();
-  if (!options.ready_file.empty()) fs::remove(options.ready_file, ec);
+  node.Drain();
   spdlog::info("stopped");
   return absl::OkStatus();
 }
