@@ -52,43 +52,34 @@ absl::StatusOr<ViewRender> RenderView(const GaussianCloud& cloud, const PinholeC
   return view;
 }
 
-}  // namespace
-
-absl::StatusOr<ClickEvaluation> EvaluateClicks(const Scene& scene, const GaussianCloud& cloud,
-                                               const std::vector<std::vector<uint32_t>>& gt_masks,
-                                               const std::vector<uint32_t>& gt_ids,
-                                               const SegmentationResult& result,
-                                               const std::vector<std::string>& names,
-                                               const ClickEvalOptions& options) {
-  if (gt_masks.size() != scene.views.size())
-    return absl::InvalidArgumentError("one GT mask per view is required");
-  if (result.labels.size() != cloud.size() || gt_ids.size() != cloud.size()) {
-    return absl::InvalidArgumentError(
-        "labels, GT ids and the cloud disagree on the Gaussian count");
-  }
-  ClickEvaluation eval;
-  eval.used_features = options.use_features && result.feature_dim > 0;
-  const int dim = result.feature_dim;
-  const std::vector<float> unit_features =
-      eval.used_features ? NormalizedRows(result.features, dim) : std::vector<float>{};
-  // Objects, their visible views and reference views.
-  std::map<uint32_t, std::vector<std::pair<int, size_t>>> visible;  // id -> (view, GT area)
+// The views where each object is visible (GT area >= min_visible_pixels) with its area there;
+// never-visible objects present with no views (they score 0).
+using VisibleViews = std::map<uint32_t, std::vector<std::pair<int, size_t>>>;
+VisibleViews FindVisibleViews(const std::vector<std::vector<uint32_t>>& gt_masks,
+                              const std::vector<uint32_t>& gt_ids, int min_visible_pixels) {
+  VisibleViews visible;
   for (size_t v = 0; v < gt_masks.size(); ++v) {
     std::map<uint32_t, size_t> area;
     for (uint32_t id : gt_masks[v])
       if (id != 0) ++area[id];
     for (const auto& [id, a] : area) {
-      if (a >= static_cast<size_t>(options.min_visible_pixels))
+      if (a >= static_cast<size_t>(min_visible_pixels))
         visible[id].emplace_back(static_cast<int>(v), a);
     }
   }
   for (uint32_t id : gt_ids)
-    if (id != 0) visible.try_emplace(id);  // never-visible objects score 0
-  std::map<uint32_t, ObjectClickScore> scores;
-  std::map<uint32_t, std::vector<float>> reference_feature;
+    if (id != 0) visible.try_emplace(id);
+  return visible;
+}
+
+// Each object's score entry and reference view (where its GT mask is largest); returns the
+// objects by reference view.
+std::map<int, std::vector<uint32_t>> ReferenceViews(const VisibleViews& visible,
+                                                    const std::vector<std::string>& names,
+                                                    std::map<uint32_t, ObjectClickScore>* scores) {
   std::map<int, std::vector<uint32_t>> by_reference_view;
   for (const auto& [id, views] : visible) {
-    ObjectClickScore& s = scores[id];
+    ObjectClickScore& s = (*scores)[id];
     s.id = id;
     s.name = id < names.size() ? names[id] : absl::StrCat("object_", id);
     if (views.empty()) continue;
@@ -98,72 +89,69 @@ absl::StatusOr<ClickEvaluation> EvaluateClicks(const Scene& scene, const Gaussia
         })->first;
     by_reference_view[s.reference_view].push_back(id);
   }
-  // Pass 1: the selection made in each reference view.
-  for (const auto& [v, ids] : by_reference_view) {
-    ASSIGN_OR_RETURN(ViewRender view, RenderView(cloud, scene.views[v].camera, result,
-                                                 unit_features, eval.used_features, options));
-    for (uint32_t id : ids) {
-      const std::vector<uint32_t>& gt = gt_masks[v];
-      if (eval.used_features) {
-        std::vector<double> mean(dim, 0.0);
-        for (size_t p = 0; p < gt.size(); ++p) {
-          if (gt[p] != id) continue;
-          for (int d = 0; d < dim; ++d) mean[d] += view.features[p * dim + d];
-        }
-        double norm = 0;
-        for (double m : mean) norm += m * m;
-        norm = std::sqrt(norm) + 1e-12;
-        std::vector<float>& ref = reference_feature[id];
-        for (double m : mean) ref.push_back(static_cast<float>(m / norm));
-      } else {
-        std::map<uint32_t, size_t> votes;
-        for (size_t p = 0; p < gt.size(); ++p)
-          if (gt[p] == id) ++votes[view.labels[p]];
-        scores[id].selected_label =
-            std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) {
-              return a.second < b.second;
-            })->first;
-      }
+  return by_reference_view;
+}
+
+// What a click on one object selects: a unit reference feature, or a label.
+struct Selection {
+  std::vector<float> feature;  // feature mode
+  uint32_t label = 0;          // label mode
+};
+
+// The selection made in the reference view: the mean normalised rendered feature inside the GT
+// mask, re-normalised, or the most frequent predicted label there.
+Selection SelectInView(const ViewRender& view, const std::vector<uint32_t>& gt, uint32_t id,
+                       bool features, int dim) {
+  Selection selection;
+  if (features) {
+    std::vector<double> mean(dim, 0.0);
+    for (size_t p = 0; p < gt.size(); ++p) {
+      if (gt[p] != id) continue;
+      for (int d = 0; d < dim; ++d) mean[d] += view.features[p * dim + d];
     }
+    double norm = 0;
+    for (double m : mean) norm += m * m;
+    norm = std::sqrt(norm) + 1e-12;
+    for (double m : mean) selection.feature.push_back(static_cast<float>(m / norm));
+  } else {
+    std::map<uint32_t, size_t> votes;
+    for (size_t p = 0; p < gt.size(); ++p)
+      if (gt[p] == id) ++votes[view.labels[p]];
+    selection.label =
+        std::max_element(votes.begin(), votes.end(), [](const auto& a, const auto& b) {
+          return a.second < b.second;
+        })->first;
   }
-  // Pass 2: IoU in every view where each object is visible.
-  std::map<int, std::vector<uint32_t>> objects_in_view;
-  for (const auto& [id, views] : visible)
-    for (const auto& [v, a] : views) objects_in_view[v].push_back(id);
-  std::map<uint32_t, double> iou_sum;
-  for (const auto& [v, ids] : objects_in_view) {
-    ASSIGN_OR_RETURN(ViewRender view, RenderView(cloud, scene.views[v].camera, result,
-                                                 unit_features, eval.used_features, options));
-    const std::vector<uint32_t>& gt = gt_masks[v];
-    for (uint32_t id : ids) {
-      size_t inter = 0, uni = 0;
-      for (size_t p = 0; p < gt.size(); ++p) {
-        bool selected;
-        if (eval.used_features) {
-          double cos = 0;
-          const std::vector<float>& ref = reference_feature[id];
-          for (int d = 0; d < dim; ++d) cos += double{view.features[p * dim + d]} * ref[d];
-          selected = view.alpha[p] >= options.min_alpha && cos >= options.feature_threshold;
-        } else {
-          const uint32_t label = scores[id].selected_label;
-          selected = label != 0 && view.labels[p] == label;
-        }
-        const bool truth = gt[p] == id;
-        inter += selected && truth;
-        uni += selected || truth;
-      }
-      iou_sum[id] += uni == 0 ? 0.0 : static_cast<double>(inter) / static_cast<double>(uni);
-      ++scores[id].views;
+  return selection;
+}
+
+// IoU of the selected mask against the GT mask of object `id` in one view.
+double SelectionIoU(const ViewRender& view, const std::vector<uint32_t>& gt, uint32_t id,
+                    const Selection& selection, bool features, int dim,
+                    const ClickEvalOptions& options) {
+  size_t inter = 0, uni = 0;
+  for (size_t p = 0; p < gt.size(); ++p) {
+    bool selected;
+    if (features) {
+      double cos = 0;
+      for (int d = 0; d < dim; ++d)
+        cos += double{view.features[p * dim + d]} * selection.feature[d];
+      selected = view.alpha[p] >= options.min_alpha && cos >= options.feature_threshold;
+    } else {
+      selected = selection.label != 0 && view.labels[p] == selection.label;
     }
+    const bool truth = gt[p] == id;
+    inter += selected && truth;
+    uni += selected || truth;
   }
-  double total = 0;
-  for (auto& [id, s] : scores) {
-    s.miou = s.views > 0 ? iou_sum[id] / s.views : 0.0;
-    total += s.miou;
-    eval.objects.push_back(s);
-  }
-  eval.miou = eval.objects.empty() ? 0.0 : total / static_cast<double>(eval.objects.size());
-  // 3D metrics over the observed Gaussians.
+  return uni == 0 ? 0.0 : static_cast<double>(inter) / static_cast<double>(uni);
+}
+
+// 3D metrics over the Gaussians some view shows (blending weight above observed_min_weight).
+absl::Status EvaluateObservedGaussians(const Scene& scene, const GaussianCloud& cloud,
+                                       const std::vector<uint32_t>& gt_ids,
+                                       const SegmentationResult& result,
+                                       const ClickEvalOptions& options, ClickEvaluation* eval) {
   std::vector<uint8_t> observed(cloud.size(), 0);
   RenderOptions trace_options;
   trace_options.color = false;
@@ -183,9 +171,66 @@ absl::StatusOr<ClickEvaluation> EvaluateClicks(const Scene& scene, const Gaussia
     pred_observed.push_back(result.labels[g]);
     gt_observed.push_back(gt_ids[g]);
   }
-  eval.observed_gaussians = pred_observed.size();
-  eval.instances = MatchInstances(pred_observed, gt_observed);
-  eval.adjusted_rand_index = AdjustedRandIndex(pred_observed, gt_observed);
+  eval->observed_gaussians = pred_observed.size();
+  eval->instances = MatchInstances(pred_observed, gt_observed);
+  eval->adjusted_rand_index = AdjustedRandIndex(pred_observed, gt_observed);
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<ClickEvaluation> EvaluateClicks(const Scene& scene, const GaussianCloud& cloud,
+                                               const std::vector<std::vector<uint32_t>>& gt_masks,
+                                               const std::vector<uint32_t>& gt_ids,
+                                               const SegmentationResult& result,
+                                               const std::vector<std::string>& names,
+                                               const ClickEvalOptions& options) {
+  if (gt_masks.size() != scene.views.size())
+    return absl::InvalidArgumentError("one GT mask per view is required");
+  if (result.labels.size() != cloud.size() || gt_ids.size() != cloud.size()) {
+    return absl::InvalidArgumentError(
+        "labels, GT ids and the cloud disagree on the Gaussian count");
+  }
+  ClickEvaluation eval;
+  eval.used_features = options.use_features && result.feature_dim > 0;
+  const bool features = eval.used_features;
+  const int dim = result.feature_dim;
+  const std::vector<float> unit_features =
+      features ? NormalizedRows(result.features, dim) : std::vector<float>{};
+  auto render = [&](int v) {
+    return RenderView(cloud, scene.views[v].camera, result, unit_features, features, options);
+  };
+  const VisibleViews visible = FindVisibleViews(gt_masks, gt_ids, options.min_visible_pixels);
+  std::map<uint32_t, ObjectClickScore> scores;
+  const std::map<int, std::vector<uint32_t>> by_reference_view =
+      ReferenceViews(visible, names, &scores);
+  // Pass 1: the selection made in each reference view.
+  std::map<uint32_t, Selection> selections;
+  for (const auto& [v, ids] : by_reference_view) {
+    ASSIGN_OR_RETURN(ViewRender view, render(v));
+    for (uint32_t id : ids) selections[id] = SelectInView(view, gt_masks[v], id, features, dim);
+  }
+  // Pass 2: IoU in every view where each object is visible.
+  std::map<int, std::vector<uint32_t>> objects_in_view;
+  for (const auto& [id, views] : visible)
+    for (const auto& [v, a] : views) objects_in_view[v].push_back(id);
+  std::map<uint32_t, double> iou_sum;
+  for (const auto& [v, ids] : objects_in_view) {
+    ASSIGN_OR_RETURN(ViewRender view, render(v));
+    for (uint32_t id : ids) {
+      iou_sum[id] += SelectionIoU(view, gt_masks[v], id, selections[id], features, dim, options);
+      ++scores[id].views;
+    }
+  }
+  double total = 0;
+  for (auto& [id, s] : scores) {
+    s.selected_label = selections[id].label;
+    s.miou = s.views > 0 ? iou_sum[id] / s.views : 0.0;
+    total += s.miou;
+    eval.objects.push_back(s);
+  }
+  eval.miou = eval.objects.empty() ? 0.0 : total / static_cast<double>(eval.objects.size());
+  RETURN_IF_ERROR(EvaluateObservedGaussians(scene, cloud, gt_ids, result, options, &eval));
   return eval;
 }
 

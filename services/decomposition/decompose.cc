@@ -91,24 +91,15 @@ absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const Gaussian
   return result;
 }
 
-absl::Status WriteDecomposition(const std::string& directory, const Scene& scene,
-                                const GaussianCloud& cloud, const DecompositionResult& result) {
-  namespace fs = std::filesystem;
-  const fs::path dir(directory);
-  std::error_code ec;
-  for (const char* sub : {"masks_filtered", "masks_sorted"}) {
-    fs::create_directories(dir / sub, ec);
-    if (ec)
-      return absl::UnavailableError(
-          absl::StrCat((dir / sub).string(), ": cannot create: ", ec.message()));
-  }
-  const TrackerSet& set = result.trackers;
-  // Evaluation result (one label per Gaussian).
-  SegmentationResult labels;
-  labels.stage = "decompose";
-  labels.labels = result.Labels();
-  RETURN_IF_ERROR(WriteResult(directory, labels, cloud));
-  // Full 3D masks, overlaps included.
+namespace {
+namespace fs = std::filesystem;
+
+// (mask id, instance) per view, and the under-segmented masks' ids per view.
+using SortedByView = std::vector<std::vector<std::pair<uint32_t, uint32_t>>>;
+using MasksByView = std::vector<std::vector<uint32_t>>;
+
+// Full 3D masks, overlaps included: one (instance, gaussian) row per membership.
+absl::Status WriteMembership(const fs::path& dir, const DecompositionResult& result) {
   PlyColumns membership;
   membership.names = {"instance", "gaussian"};
   membership.types = {ScalarType::kUint32, ScalarType::kUint32};
@@ -120,32 +111,44 @@ absl::Status WriteDecomposition(const std::string& directory, const Scene& scene
     }
   }
   membership.count = static_cast<int64_t>(membership.columns[0].size());
-  RETURN_IF_ERROR(WriteFileAtomically((dir / "instances.ply").string(),
-                                      EncodePlyBinary("membership", membership)));
-  // 2D clusters, under-segmented masks, per-view maps.
+  return WriteFileAtomically((dir / "instances.ply").string(),
+                             EncodePlyBinary("membership", membership));
+}
+
+// The instances with their masks (2D clusters); fills `sorted_by_view`.
+nlohmann::json InstancesJson(const Scene& scene, const DecompositionResult& result,
+                             SortedByView* sorted_by_view) {
   nlohmann::json instances = nlohmann::json::array();
-  std::vector<std::vector<std::pair<uint32_t, uint32_t>>> sorted_by_view(
-      scene.views.size());  // (mask id, instance)
   for (size_t k = 0; k < result.instances.size(); ++k) {
     const Instance& inst = result.instances[k];
     nlohmann::json masks = nlohmann::json::array();
     for (size_t i = 0; i < inst.masks.size(); ++i) {
-      const Tracker& t = set.trackers[inst.masks[i]];
+      const Tracker& t = result.trackers.trackers[inst.masks[i]];
       masks.push_back({{"view", scene.views[t.view].name},
                        {"mask", t.mask_id},
                        {"coverage", inst.coverage[i]}});
-      sorted_by_view[t.view].emplace_back(t.mask_id, static_cast<uint32_t>(k + 1));
+      (*sorted_by_view)[t.view].emplace_back(t.mask_id, static_cast<uint32_t>(k + 1));
     }
     instances.push_back({{"id", k + 1}, {"gaussians", inst.gaussians.size()}, {"masks", masks}});
   }
+  return instances;
+}
+
+// The under-segmented masks; fills `under_by_view`.
+nlohmann::json UndersegmentedJson(const Scene& scene, const DecompositionResult& result,
+                                  MasksByView* under_by_view) {
   nlohmann::json under = nlohmann::json::array();
-  std::vector<std::vector<uint32_t>> under_by_view(scene.views.size());
   for (uint32_t u : result.undersegmented) {
-    const Tracker& t = set.trackers[u];
+    const Tracker& t = result.trackers.trackers[u];
     under.push_back({{"view", scene.views[t.view].name}, {"mask", t.mask_id}});
-    under_by_view[t.view].push_back(t.mask_id);
+    (*under_by_view)[t.view].push_back(t.mask_id);
   }
-  // Every kept mask (tracker) and what became of it.
+  return under;
+}
+
+// Every kept mask (tracker) and what became of it.
+nlohmann::json MaskFatesJson(const Scene& scene, const DecompositionResult& result) {
+  const TrackerSet& set = result.trackers;
   std::vector<int64_t> instance_of_tracker(set.trackers.size(), 0);
   for (size_t k = 0; k < result.instances.size(); ++k) {
     for (uint32_t t : result.instances[k].masks)
@@ -174,20 +177,13 @@ absl::Status WriteDecomposition(const std::string& directory, const Scene& scene
     if (t < result.cluster_of.size()) entry["cluster"] = result.cluster_of[t];
     masks.push_back(std::move(entry));
   }
-  nlohmann::json summary = {{"format", "instascene.decomposition/1"},
-                            {"instances", instances},
-                            {"undersegmented", under},
-                            {"masks", masks},
-                            {"trackers", set.trackers.size()},
-                            {"observer_schedule", result.schedule},
-                            {"merged_instances", result.merged_instances},
-                            {"orphans_labelled", result.orphans_labelled},
-                            {"untraced_labelled", result.untraced_labelled},
-                            {"seconds",
-                             {{"tracking", result.tracking_seconds},
-                              {"clustering", result.clustering_seconds},
-                              {"post_processing", result.post_seconds}}}};
-  RETURN_IF_ERROR(WriteFileAtomically((dir / "decomposition.json").string(), summary.dump(1)));
+  return masks;
+}
+
+// Per view: the filtered mask map (under-segmented masks removed) and the sorted one (global
+// instance ids).
+absl::Status WriteViewMaps(const fs::path& dir, const Scene& scene,
+                           const SortedByView& sorted_by_view, const MasksByView& under_by_view) {
   for (size_t v = 0; v < scene.views.size(); ++v) {
     ASSIGN_OR_RETURN(LabelMap mask, ReadViewMask(scene, static_cast<int>(v)));
     // Per-view lookup tables over the 16-bit mask ids.
@@ -211,6 +207,44 @@ absl::Status WriteDecomposition(const std::string& directory, const Scene& scene
     RETURN_IF_ERROR(WriteLabelMap((dir / "masks_sorted" / name).string(), sorted));
   }
   return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::Status WriteDecomposition(const std::string& directory, const Scene& scene,
+                                const GaussianCloud& cloud, const DecompositionResult& result) {
+  const fs::path dir(directory);
+  std::error_code ec;
+  for (const char* sub : {"masks_filtered", "masks_sorted"}) {
+    fs::create_directories(dir / sub, ec);
+    if (ec)
+      return absl::UnavailableError(
+          absl::StrCat((dir / sub).string(), ": cannot create: ", ec.message()));
+  }
+  // Evaluation result (one label per Gaussian).
+  SegmentationResult labels;
+  labels.stage = "decompose";
+  labels.labels = result.Labels();
+  RETURN_IF_ERROR(WriteResult(directory, labels, cloud));
+  RETURN_IF_ERROR(WriteMembership(dir, result));
+  SortedByView sorted_by_view(scene.views.size());
+  MasksByView under_by_view(scene.views.size());
+  const nlohmann::json summary = {
+      {"format", "instascene.decomposition/1"},
+      {"instances", InstancesJson(scene, result, &sorted_by_view)},
+      {"undersegmented", UndersegmentedJson(scene, result, &under_by_view)},
+      {"masks", MaskFatesJson(scene, result)},
+      {"trackers", result.trackers.trackers.size()},
+      {"observer_schedule", result.schedule},
+      {"merged_instances", result.merged_instances},
+      {"orphans_labelled", result.orphans_labelled},
+      {"untraced_labelled", result.untraced_labelled},
+      {"seconds",
+       {{"tracking", result.tracking_seconds},
+        {"clustering", result.clustering_seconds},
+        {"post_processing", result.post_seconds}}}};
+  RETURN_IF_ERROR(WriteFileAtomically((dir / "decomposition.json").string(), summary.dump(1)));
+  return WriteViewMaps(dir, scene, sorted_by_view, under_by_view);
 }
 
 }  // namespace instascene::decomposition

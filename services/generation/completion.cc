@@ -8,12 +8,11 @@
 #include "absl/strings/str_cat.h"
 #include "common/core/parallel.h"
 #include "common/core/status.h"
-#include "common/mesh/mesh_checks.h"
 #include "common/mesh/mesh_ply.h"
 #include "common/mesh/surfel_mesh.h"
 #include "common/scene/image_io.h"
 #include "common/splat/gaussian_ply.h"
-#include "services/generation/manifest_options.h"
+#include "services/generation/completion_manifest.h"
 #include "services/generation/refinement_views.h"
 
 namespace instascene::generation {
@@ -38,92 +37,6 @@ GaussianCloud MergeWithProvenance(const GaussianCloud& observed, const GaussianC
   provenance.resize(observed.size() + added.size(), 1.0f);
   out.SetExtra(kProvenanceChannel, ScalarType::kUint8, std::move(provenance));
   return out;
-}
-
-nlohmann::json Vec(const Eigen::Vector3f& v) { return {v.x(), v.y(), v.z()}; }
-
-// world_from_object: rotation = the frame's basis (x, y, up), translation = the centre.
-nlohmann::json Pose(const ObjectFrame& frame) {
-  const Eigen::Matrix3f r = frame.Basis();
-  nlohmann::json m = nlohmann::json::array();
-  for (int i = 0; i < 3; ++i) m.push_back({r(i, 0), r(i, 1), r(i, 2), frame.center[i]});
-  return m;
-}
-
-// Oriented bounding box in the object frame.
-nlohmann::json OrientedBox(const GaussianCloud& cloud, const ObjectFrame& frame) {
-  const Eigen::Matrix3f basis = frame.Basis();
-  Eigen::AlignedBox3f box;
-  for (size_t g = 0; g < cloud.size(); ++g) {
-    box.extend(basis.transpose() * (Eigen::Vector3f(&cloud.positions[3 * g]) - frame.center));
-  }
-  return {{"min", Vec(box.min())}, {"max", Vec(box.max())}, {"extent", Vec(box.sizes())}};
-}
-
-// The viewpoint ring: per view its angles, score, visible surfels and whether a real view knows it.
-nlohmann::json RingToManifest(const CompletedObject& o, const CompletionOptions& options) {
-  nlohmann::json ring = nlohmann::json::array();
-  for (size_t k = 0; k < o.ring.size(); ++k) {
-    const ViewVisibility& v = o.ring_visibility[k];
-    ring.push_back({{"azimuth_deg", 360.0 * k / o.ring.size()},
-                    {"elevation_deg", options.ring.elevation_deg},
-                    {"score", v.score},
-                    {"self_visible", v.self_visible},
-                    {"known", v.known}});
-  }
-  return ring;
-}
-
-nlohmann::json FrameToManifest(const ObjectFrame& frame) {
-  return {{"center", Vec(frame.center)},
-          {"up", Vec(frame.up)},
-          {"radius", frame.radius},
-          {"spacing", frame.spacing},
-          {"bottom", frame.bottom_height},
-          {"support",
-           frame.has_support ? nlohmann::json(frame.support_height) : nlohmann::json(nullptr)}};
-}
-
-nlohmann::json Manifest(const CompletedObject& o, const CompletionOptions& options) {
-  int known = 0;
-  for (size_t k = 0; k < o.ring.size(); ++k) known += o.ring_visibility[k].known;
-  const size_t observed = o.raw.size(), completed = o.object.size() - o.raw.size();
-  nlohmann::json m = {
-      {"format", kObjectFormat},
-      {"id", o.id},
-      {"world_from_object", Pose(o.frame)},
-      {"frame", FrameToManifest(o.frame)},
-      {"bounding_box", OrientedBox(o.object, o.frame)},
-      {"prior", options.prior},
-      {"abstained", o.prior.abstained},
-      {"prior_summary", o.prior.reason},
-      {"prior_report", o.prior.report},
-      {"gaussians",
-       {{"observed", observed},
-        {"stray_removed", o.stray_removed},
-        {"completed", completed},
-        {"completed_share",
-         o.object.size() ? static_cast<double>(completed) / o.object.size() : 0}}},
-      {"ring", RingToManifest(o, options)},
-      {"meshing", MeshingToManifest(options.meshing)},
-      {"free_space", FreeSpaceToManifest(options.free_space)},
-      {"ring_camera",
-       {{"size_px", options.ring.size_px},
-        {"focal_px", options.ring.focal_px},
-        {"distance_radii", options.ring.distance_radii}}},
-      {"known_views", known},
-      {"unknown_views", static_cast<int>(o.ring.size()) - known},
-      {"training_views", o.training_views},
-      {"mesh",
-       {{"file", "mesh.ply"},
-        {"vertices", o.mesh.vertices.size()},
-        {"triangles", o.mesh.triangles.size()},
-        {"closed", IsClosedManifold(o.mesh)},
-        {"hull_enclosed", o.hull_enclosed}}},
-      {"refinement", o.refinement},
-      {"seed", options.seed},
-  };
-  return m;
 }
 
 // The scene's camera extent as 2DGS scales its position learning rate (getNerfppNorm: 1.1 x the
@@ -203,14 +116,116 @@ absl::StatusOr<nlohmann::json> Refine(CompletedObject* o, const std::vector<Pinh
       {"not_implemented", "normal consistency (needs the depth/normal backward)"}};
 }
 
-}  // namespace
+// The instance, its strays and support surfels moved to the occluders, and its frame (into
+// `out`: id, frame, raw, stray_removed). FailedPrecondition for a degenerate instance.
+absl::StatusOr<InstanceSplit> FrameInstance(const std::vector<PinholeCamera>& cameras,
+                                            const GaussianCloud& surfels,
+                                            const std::vector<uint32_t>& labels, uint32_t id,
+                                            const CompletionOptions& options,
+                                            CompletedObject* out) {
+  ASSIGN_OR_RETURN(InstanceSplit split, SplitInstance(labels, id, options.min_gaussians));
+  RemoveStrayGaussians(surfels, &split);
+  out->id = id;
+  out->frame = ComputeObjectFrame(surfels, split, cameras);
+  if (RemoveSupportSurfels(surfels, out->frame, &split) > 0) {
+    out->frame = ComputeObjectFrame(surfels, split, cameras);  // the bottom was the support's
+  }
+  out->stray_removed = split.outliers;
+  out->raw = surfels.Subset(split.instance);
+  out->raw.extras.clear();
+  if (!(out->frame.radius > 0) || !(out->frame.spacing > 0)) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("instance ", id, " is degenerate: its Gaussians span no volume"));
+  }
+  return split;
+}
 
-static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<PinholeCamera>& cameras,
-                                                       const GaussianCloud& surfels,
-                                                       const std::vector<uint32_t>& labels,
-                                                       uint32_t id,
-                                                       const CompletionOptions& options,
-                                                       const CompletionProgress& progress) {
+// The real views ranked for refinement and the ring's visibility (into `out`).
+absl::Status ScoreViews(const std::vector<PinholeCamera>& cameras, const GaussianCloud& surfels,
+                        const InstanceSplit& split, const CompletionOptions& options,
+                        CompletedObject* out) {
+  ASSIGN_OR_RETURN(std::unique_ptr<OcclusionScorer> scorer,
+                   OcclusionScorer::Create(surfels, split, out->frame, options.visibility));
+  out->training_views = scorer->RankViews(cameras, options.top_training_views);
+  if (out->training_views.empty()) {
+    return absl::FailedPreconditionError(
+        absl::StrCat("instance ", out->id, " is seen by no real view (no unoccluded point)"));
+  }
+  out->ring = RingCameras(out->frame, options.ring);
+  for (const PinholeCamera& c : out->ring) out->ring_visibility.push_back(scorer->Score(c));
+  return absl::OkStatus();
+}
+
+// The free space the real views carved around the object (every scene surfel occludes).
+absl::StatusOr<FreeSpaceGrid> CarveFreeSpace(const std::vector<PinholeCamera>& cameras,
+                                             const GaussianCloud& surfels, const ObjectFrame& frame,
+                                             const CompletionOptions& options) {
+  std::vector<uint32_t> everything(surfels.size());
+  for (uint32_t g = 0; g < everything.size(); ++g) everything[g] = g;
+  ASSIGN_OR_RETURN(std::unique_ptr<RayCaster> scene_caster,
+                   RayCaster::Create(SurfelDiscs(surfels, everything, SurfelDiscOptions{})));
+  return FreeSpaceGrid::Carve(cameras, *scene_caster, frame, options.free_space);
+}
+
+// The ring's known views rendered as the prior's conditions; the unknown ones are its targets.
+absl::Status AddRingViews(const CompletedObject& out, int num_threads, PriorInput* input) {
+  for (size_t k = 0; k < out.ring.size(); ++k) {
+    if (out.ring_visibility[k].known) {
+      ASSIGN_OR_RETURN(ViewImages view,
+                       RenderObjectView(out.raw, out.ring[k], out.frame, num_threads));
+      input->conditions.push_back(std::move(view));
+    } else {
+      input->targets.push_back(out.ring[k]);
+    }
+  }
+  return absl::OkStatus();
+}
+
+// The surfels the prior found to be a neighbour's (indices into the raw instance) become
+// occluders, like the strays.
+void DropForeignSurfels(InstanceSplit* split, CompletedObject* out) {
+  if (out->prior.foreign.empty()) return;
+  std::vector<uint8_t> drop(split->instance.size(), 0);
+  for (uint32_t g : out->prior.foreign) {
+    if (g < drop.size()) drop[g] = 1;
+  }
+  std::vector<uint32_t> kept, instance;
+  for (uint32_t g = 0; g < drop.size(); ++g) {
+    if (drop[g]) {
+      split->occluders.push_back(split->instance[g]);
+      continue;
+    }
+    kept.push_back(g);
+    instance.push_back(split->instance[g]);
+  }
+  std::sort(split->occluders.begin(), split->occluders.end());
+  split->outliers += split->instance.size() - instance.size();
+  split->instance = std::move(instance);
+  out->raw = out->raw.Subset(kept);
+  out->stray_removed = split->outliers;
+}
+
+// About an accepted axis of revolution the completion went all round and the inside (a cup's
+// cavity) is the axis's to shape; any other object's unknown inside is solid, a box's too
+// (MeshingOptions::enclose_hull, PriorOutput::revolution_axis).
+absl::Status MeshCompleted(const FreeSpaceGrid& free_space, const CompletionOptions& options,
+                           CompletedObject* out) {
+  out->hull_enclosed =
+      options.meshing.closed && options.meshing.enclose_hull && !out->prior.revolution_axis;
+  ASSIGN_OR_RETURN(
+      out->mesh,
+      MeshObject(out->object, out->frame, options.meshing, options.num_threads,
+                 out->hull_enclosed ? [&](const Eigen::Vector3f& p) { return free_space.IsFree(p); }
+                                    : std::function<bool(const Eigen::Vector3f&)>{},
+                 options.meshing.sides_within_order_axis_copies && out->prior.order_axis));
+  return absl::OkStatus();
+}
+
+absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<PinholeCamera>& cameras,
+                                                const GaussianCloud& surfels,
+                                                const std::vector<uint32_t>& labels, uint32_t id,
+                                                const CompletionOptions& options,
+                                                const CompletionProgress& progress) {
   auto report = [&](const std::string& phase, int step, int total) {
     if (progress) progress(phase, step, total);
   };
@@ -223,39 +238,14 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
       std::unique_ptr<CompletionPrior> prior,
       MakePrior(options.prior, options.denoiser, options.diffusion, &options.geometric));
   report("framing", 0, 7);
-  ASSIGN_OR_RETURN(InstanceSplit split, SplitInstance(labels, id, options.min_gaussians));
-  RemoveStrayGaussians(surfels, &split);
   CompletedObject out;
-  out.id = id;
-  out.frame = ComputeObjectFrame(surfels, split, cameras);
-  if (RemoveSupportSurfels(surfels, out.frame, &split) > 0) {
-    out.frame = ComputeObjectFrame(surfels, split, cameras);  // the bottom was the support's
-  }
-  out.stray_removed = split.outliers;
-  out.raw = surfels.Subset(split.instance);
-  out.raw.extras.clear();
-  if (!(out.frame.radius > 0) || !(out.frame.spacing > 0)) {
-    return absl::FailedPreconditionError(
-        absl::StrCat("instance ", id, " is degenerate: its Gaussians span no volume"));
-  }
+  ASSIGN_OR_RETURN(InstanceSplit split, FrameInstance(cameras, surfels, labels, id, options, &out));
   report("scoring views", 1, 7);
-  ASSIGN_OR_RETURN(std::unique_ptr<OcclusionScorer> scorer,
-                   OcclusionScorer::Create(surfels, split, out.frame, options.visibility));
-  out.training_views = scorer->RankViews(cameras, options.top_training_views);
-  if (out.training_views.empty()) {
-    return absl::FailedPreconditionError(
-        absl::StrCat("instance ", id, " is seen by no real view (no unoccluded point)"));
-  }
-  out.ring = RingCameras(out.frame, options.ring);
-  for (const PinholeCamera& c : out.ring) out.ring_visibility.push_back(scorer->Score(c));
+  RETURN_IF_ERROR(ScoreViews(cameras, surfels, split, options, &out));
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
   report("carving free space", 2, 7);
-  std::vector<uint32_t> everything(surfels.size());
-  for (uint32_t g = 0; g < everything.size(); ++g) everything[g] = g;
-  ASSIGN_OR_RETURN(std::unique_ptr<RayCaster> scene_caster,
-                   RayCaster::Create(SurfelDiscs(surfels, everything, SurfelDiscOptions{})));
-  ASSIGN_OR_RETURN(FreeSpaceGrid free_space,
-                   FreeSpaceGrid::Carve(cameras, *scene_caster, out.frame, options.free_space));
+  ASSIGN_OR_RETURN(const FreeSpaceGrid free_space,
+                   CarveFreeSpace(cameras, surfels, out.frame, options));
   std::optional<SeenThroughTest> seen_through;
   if (prior->UsesSeenThrough()) {
     ASSIGN_OR_RETURN(seen_through, SeenThroughTest::Create(cameras, surfels, out.frame.radius,
@@ -263,47 +253,20 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
   }
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
   report("rendering conditions", 3, 7);
+  const std::vector<uint8_t> neighbour_labelled =
+      NeighbourLabelled(surfels, labels, split, out.frame);
   PriorInput input;
   input.instance = &out.raw;
   input.frame = out.frame;
   input.free_space = &free_space;
   input.seen_through = seen_through ? &*seen_through : nullptr;
-  const std::vector<uint8_t> neighbour_labelled =
-      NeighbourLabelled(surfels, labels, split, out.frame);
   input.neighbour_labelled = &neighbour_labelled;
   input.seed = options.seed;
   input.cancel = options.cancel;
-  for (size_t k = 0; k < out.ring.size(); ++k) {
-    if (out.ring_visibility[k].known) {
-      ASSIGN_OR_RETURN(ViewImages view,
-                       RenderObjectView(out.raw, out.ring[k], out.frame, options.num_threads));
-      input.conditions.push_back(std::move(view));
-    } else {
-      input.targets.push_back(out.ring[k]);
-    }
-  }
+  RETURN_IF_ERROR(AddRingViews(out, options.num_threads, &input));
   report("completing", 4, 7);
   ASSIGN_OR_RETURN(out.prior, prior->Complete(input));
-  if (!out.prior.foreign.empty()) {  // a neighbour's surfels: occluders, like the strays
-    std::vector<uint8_t> drop(split.instance.size(), 0);
-    for (uint32_t g : out.prior.foreign) {
-      if (g < drop.size()) drop[g] = 1;
-    }
-    std::vector<uint32_t> kept, instance;
-    for (uint32_t g = 0; g < drop.size(); ++g) {
-      if (drop[g]) {
-        split.occluders.push_back(split.instance[g]);
-        continue;
-      }
-      kept.push_back(g);
-      instance.push_back(split.instance[g]);
-    }
-    std::sort(split.occluders.begin(), split.occluders.end());
-    split.outliers += split.instance.size() - instance.size();
-    split.instance = std::move(instance);
-    out.raw = out.raw.Subset(kept);
-    out.stray_removed = split.outliers;
-  }
+  DropForeignSurfels(&split, &out);
   out.object = MergeWithProvenance(out.raw, out.prior.added);
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
   report("refining", 5, 7);
@@ -311,21 +274,13 @@ static absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<Pinhole
                    Refine(&out, cameras, surfels, split.instance, options, progress));
   RETURN_IF_ERROR(CheckCancelled(options.cancel, "complete"));
   report("meshing", 6, 7);
-  // About an accepted axis of revolution the completion went all round and the inside (a cup's
-  // cavity) is the axis's to shape; any other object's unknown inside is solid, a box's too
-  // (MeshingOptions::enclose_hull, PriorOutput::revolution_axis).
-  out.hull_enclosed =
-      options.meshing.closed && options.meshing.enclose_hull && !out.prior.revolution_axis;
-  ASSIGN_OR_RETURN(
-      out.mesh,
-      MeshObject(out.object, out.frame, options.meshing, options.num_threads,
-                 out.hull_enclosed ? [&](const Eigen::Vector3f& p) { return free_space.IsFree(p); }
-                                   : std::function<bool(const Eigen::Vector3f&)>{},
-                 options.meshing.sides_within_order_axis_copies && out.prior.order_axis));
-  out.manifest = Manifest(out, options);
+  RETURN_IF_ERROR(MeshCompleted(free_space, options, &out));
+  out.manifest = CompletionManifest(out, options);
   report("done", 7, 7);
   return out;
 }
+
+}  // namespace
 
 absl::StatusOr<CompletedObject> CompleteObject(const std::vector<PinholeCamera>& cameras,
                                                const GaussianCloud& surfels,
