@@ -9,9 +9,14 @@
 #include <set>
 
 #include "absl/strings/str_cat.h"
+#include "common/synth/mask_noise_steps.h"
 
 namespace instascene {
 namespace {
+using mask_noise::FinishMasks;
+using mask_noise::MergedInto;
+using mask_noise::MergeTouching;
+using mask_noise::RootOf;
 
 // One 4-neighbour dilation (grow) or erosion (shrink) step of label `id` in `map`; pixels an
 // erosion frees become 0, a dilation only claims pixels that are 0.
@@ -34,159 +39,6 @@ void MorphStep(LabelMap& map, uint16_t id, bool grow) {
     }
   }
   map.labels.swap(next);
-}
-
-// 6. Minimum area, then random ids 1..K (ids carry no meaning across views).
-void FinishMasks(LabelMap& map, const MaskNoiseOptions& o, std::mt19937_64& rng) {
-  const size_t n = map.labels.size();
-  std::map<uint16_t, size_t> final_area;
-  for (uint16_t v : map.labels)
-    if (v != 0) ++final_area[v];
-  std::vector<uint16_t> kept;
-  for (const auto& [id, a] : final_area)
-    if (a >= o.min_area_fraction * n && a >= 1) kept.push_back(id);
-  std::vector<uint16_t> ids(kept.size());
-  std::iota(ids.begin(), ids.end(), uint16_t{1});
-  std::shuffle(ids.begin(), ids.end(), rng);
-  std::map<uint16_t, uint16_t> relabel;
-  for (size_t i = 0; i < kept.size(); ++i) relabel[kept[i]] = ids[i];
-  for (uint16_t& v : map.labels) {
-    auto it = relabel.find(v);
-    v = it == relabel.end() ? 0 : it->second;
-  }
-}
-
-// The part-aware family (steps a-e of mask_noise.h).
-LabelMap SimulatePartSegmenter(const LabelMap& gt, const MaskNoiseOptions& o, std::mt19937_64& rng,
-                               const std::map<uint16_t, size_t>& area,
-                               const std::set<std::pair<uint16_t, uint16_t>>& touching) {
-  std::uniform_real_distribution<float> uni(0.0f, 1.0f);
-  const int w = gt.width, h = gt.height;
-  LabelMap map = gt;
-  uint16_t next_label =
-      gt.labels.empty()
-          ? 1
-          : static_cast<uint16_t>(*std::max_element(gt.labels.begin(), gt.labels.end()) + 1);
-  // b. merges: touching pairs, and similar-area pairs anywhere in the view.
-  std::map<uint16_t, uint16_t> merged_into;
-  auto root = [&](uint16_t id) {
-    while (merged_into.count(id)) id = merged_into[id];
-    return id;
-  };
-  for (const auto& [a, b] : touching)
-    if (uni(rng) < o.merge_probability && root(a) != root(b)) merged_into[root(b)] = root(a);
-  for (auto i = area.begin(); i != area.end(); ++i) {
-    for (auto j = std::next(i); j != area.end(); ++j) {
-      if (touching.count({i->first, j->first})) continue;
-      const double ratio = static_cast<double>(std::min(i->second, j->second)) /
-                           static_cast<double>(std::max(i->second, j->second));
-      if (ratio >= 0.75 && uni(rng) < o.similar_merge_probability &&
-          root(i->first) != root(j->first))
-        merged_into[root(j->first)] = root(i->first);
-    }
-  }
-  // a. part splits along the instance's longer image axis, cut at random quantiles.
-  struct Parts {
-    bool vertical;                 // cut along y (tall instance) or x
-    std::vector<double> cuts;      // sorted coordinates
-    std::vector<uint16_t> labels;  // one per part after the first
-  };
-  std::map<uint16_t, Parts> parts;
-  std::map<uint16_t, std::vector<int>> xs, ys;
-  for (int y = 0; y < h; ++y)
-    for (int x = 0; x < w; ++x)
-      if (const uint16_t id = gt.labels[static_cast<size_t>(y) * w + x]; id != 0) {
-        xs[id].push_back(x);
-        ys[id].push_back(y);
-      }
-  for (const auto& [id, a] : area) {
-    if (a < 60 || uni(rng) >= o.part_split_probability) continue;
-    std::vector<int> px = xs[id], py = ys[id];
-    std::sort(px.begin(), px.end());
-    std::sort(py.begin(), py.end());
-    Parts p;
-    p.vertical = py.back() - py.front() >= px.back() - px.front();
-    const std::vector<int>& axis = p.vertical ? py : px;
-    const int count = uni(rng) < 0.6f ? 2 : 3;
-    for (int c = 1; c < count; ++c) {
-      const double q = (c - 0.3 + 0.6 * uni(rng)) / count;  // near the even cut, jittered
-      p.cuts.push_back(axis[static_cast<size_t>(q * (axis.size() - 1))] + 0.5);
-      p.labels.push_back(next_label++);
-    }
-    std::sort(p.cuts.begin(), p.cuts.end());
-    parts[id] = std::move(p);
-  }
-  for (int y = 0; y < h; ++y) {
-    for (int x = 0; x < w; ++x) {
-      uint16_t& label = map.labels[static_cast<size_t>(y) * w + x];
-      if (label == 0) continue;
-      const uint16_t original = label;
-      label = root(original);
-      auto it = parts.find(original);
-      if (it == parts.end()) continue;
-      const double v = it->second.vertical ? y : x;
-      for (size_t c = it->second.cuts.size(); c-- > 0;) {
-        if (v > it->second.cuts[c]) {
-          label = it->second.labels[c];
-          break;
-        }
-      }
-    }
-  }
-  // c. misses of small masks.
-  std::map<uint16_t, size_t> mask_area;
-  for (uint16_t v : map.labels)
-    if (v != 0) ++mask_area[v];
-  std::set<uint16_t> missed;
-  for (const auto& [id, a] : mask_area)
-    if (a < o.miss_area_fraction * map.labels.size() && uni(rng) < o.miss_probability)
-      missed.insert(id);
-  for (uint16_t& v : map.labels)
-    if (missed.count(v)) v = 0;
-  // d. boundary bleed into touching masks: each step, pixels of another mask next to this one
-  //    switch to it.
-  if (o.bleed_px > 0) {
-    for (const auto& [id, a] : mask_area) {
-      if (missed.count(id) || uni(rng) >= 0.5f) continue;
-      const int steps = std::uniform_int_distribution<int>(1, o.bleed_px)(rng);
-      for (int s = 0; s < steps; ++s) {
-        std::vector<uint16_t> next = map.labels;
-        for (int y = 0; y < h; ++y) {
-          for (int x = 0; x < w; ++x) {
-            const size_t p = static_cast<size_t>(y) * w + x;
-            if (map.labels[p] == 0 || map.labels[p] == id) continue;
-            const int nx[4] = {x - 1, x + 1, x, x}, ny[4] = {y, y, y - 1, y + 1};
-            for (int k = 0; k < 4; ++k) {
-              if (nx[k] < 0 || ny[k] < 0 || nx[k] >= w || ny[k] >= h) continue;
-              if (map.labels[static_cast<size_t>(ny[k]) * w + nx[k]] == id) next[p] = id;
-            }
-          }
-        }
-        map.labels.swap(next);
-      }
-    }
-  }
-  // e. flicker: 1-3 holes of radius 1-3 px inside a mask.
-  for (const auto& [id, a] : mask_area) {
-    if (missed.count(id) || uni(rng) >= o.flicker_probability) continue;
-    std::vector<size_t> pixels;
-    for (size_t p = 0; p < map.labels.size(); ++p)
-      if (map.labels[p] == id) pixels.push_back(p);
-    if (pixels.empty()) continue;
-    const int holes = std::uniform_int_distribution<int>(1, 3)(rng);
-    for (int k = 0; k < holes; ++k) {
-      const size_t c = pixels[std::uniform_int_distribution<size_t>(0, pixels.size() - 1)(rng)];
-      const int cx = static_cast<int>(c % w), cy = static_cast<int>(c / w);
-      const int r = std::uniform_int_distribution<int>(1, 3)(rng);
-      for (int y = std::max(0, cy - r); y <= std::min(h - 1, cy + r); ++y)
-        for (int x = std::max(0, cx - r); x <= std::min(w - 1, cx + r); ++x)
-          if ((x - cx) * (x - cx) + (y - cy) * (y - cy) <= r * r &&
-              map.labels[static_cast<size_t>(y) * w + x] == id)
-            map.labels[static_cast<size_t>(y) * w + x] = 0;
-    }
-  }
-  FinishMasks(map, o, rng);
-  return map;
 }
 
 // Areas, centroids and touching pairs of the ground-truth instances.
@@ -224,14 +76,7 @@ LabelMap MergeAndSplit(const LabelMap& gt, const MaskNoiseOptions& o, const Inst
   std::uniform_real_distribution<float> uni(0.0f, 1.0f);
   const int w = gt.width, h = gt.height;
   LabelMap map = gt;
-  std::map<uint16_t, uint16_t> merged_into;
-  auto root = [&](uint16_t id) {
-    while (merged_into.count(id)) id = merged_into[id];
-    return id;
-  };
-  for (const auto& [a, b] : stats.touching) {
-    if (uni(rng) < o.merge_probability && root(a) != root(b)) merged_into[root(b)] = root(a);
-  }
+  MergedInto merged_into = MergeTouching(o, rng, stats.touching);
   std::map<uint16_t, std::array<double, 4>> split_line;  // instance -> (cx, cy, nx, ny)
   for (const auto& [id, a] : stats.area) {
     if (a < 50 || uni(rng) >= o.split_probability) continue;
@@ -246,7 +91,7 @@ LabelMap MergeAndSplit(const LabelMap& gt, const MaskNoiseOptions& o, const Inst
       uint16_t& label = map.labels[static_cast<size_t>(y) * w + x];
       if (label == 0) continue;
       const uint16_t original = label;
-      label = root(original);
+      label = RootOf(merged_into, original);
       auto it = split_line.find(original);
       if (it != split_line.end()) {
         const auto& l = it->second;
@@ -303,6 +148,47 @@ void AddSpuriousMasks(const LabelMap& gt, const MaskNoiseOptions& o, std::mt1993
 
 }  // namespace
 
+namespace mask_noise {
+
+void FinishMasks(LabelMap& map, const MaskNoiseOptions& o, std::mt19937_64& rng) {
+  const size_t n = map.labels.size();
+  std::map<uint16_t, size_t> final_area;
+  for (uint16_t v : map.labels)
+    if (v != 0) ++final_area[v];
+  std::vector<uint16_t> kept;
+  for (const auto& [id, a] : final_area)
+    if (a >= o.min_area_fraction * n && a >= 1) kept.push_back(id);
+  std::vector<uint16_t> ids(kept.size());
+  std::iota(ids.begin(), ids.end(), uint16_t{1});
+  std::shuffle(ids.begin(), ids.end(), rng);
+  std::map<uint16_t, uint16_t> relabel;
+  for (size_t i = 0; i < kept.size(); ++i) relabel[kept[i]] = ids[i];
+  for (uint16_t& v : map.labels) {
+    auto it = relabel.find(v);
+    v = it == relabel.end() ? 0 : it->second;
+  }
+}
+
+float Uniform(std::mt19937_64& rng) {
+  return std::uniform_real_distribution<float>(0.0f, 1.0f)(rng);
+}
+
+uint16_t RootOf(MergedInto& merged_into, uint16_t id) {
+  while (merged_into.count(id)) id = merged_into[id];
+  return id;
+}
+
+MergedInto MergeTouching(const MaskNoiseOptions& o, std::mt19937_64& rng,
+                         const std::set<std::pair<uint16_t, uint16_t>>& touching) {
+  MergedInto merged_into;
+  for (const auto& [a, b] : touching)
+    if (Uniform(rng) < o.merge_probability && RootOf(merged_into, a) != RootOf(merged_into, b))
+      merged_into[RootOf(merged_into, b)] = RootOf(merged_into, a);
+  return merged_into;
+}
+
+}  // namespace mask_noise
+
 absl::StatusOr<MaskNoiseOptions> MaskNoiseOptions::Level(const std::string& level) {
   MaskNoiseOptions o;
   if (level == "none") return o;
@@ -345,7 +231,8 @@ absl::StatusOr<MaskNoiseOptions> MaskNoiseOptions::Level(const std::string& leve
 LabelMap SimulateSegmenter(const LabelMap& gt, const MaskNoiseOptions& o, uint64_t seed) {
   std::mt19937_64 rng(seed);
   const InstanceStats stats = MeasureInstances(gt);
-  if (o.part_family) return SimulatePartSegmenter(gt, o, rng, stats.area, stats.touching);
+  if (o.part_family)
+    return mask_noise::SimulatePartSegmenter(gt, o, rng, stats.area, stats.touching);
   uint16_t next_label =
       gt.labels.empty()
           ? 1

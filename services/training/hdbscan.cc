@@ -195,114 +195,130 @@ std::vector<MstEdge> MutualReachabilityMst(const float* points, size_t n, int di
   return mst;
 }
 
-std::vector<int> ClustersFromMst(std::vector<MstEdge> mst, size_t n,
-                                 const HdbscanOptions& options) {
-  std::vector<int> labels(n, -1);
-  if (n < 2 || mst.size() != n - 1) return labels;
-  const std::vector<Merge> merges = SingleLinkage(std::move(mst), n);
-  const std::vector<CondensedRow> tree =
-      Condense(merges, n, static_cast<size_t>(std::max(options.min_cluster_size, 2)));
-  const size_t root = n;
-  size_t max_cluster = root;
-  for (const CondensedRow& r : tree) max_cluster = std::max({max_cluster, r.parent, r.child});
-  const size_t clusters = max_cluster - root + 1;
-  // Birth lambda of each cluster, its stability, and the cluster tree (children that are clusters).
-  std::vector<double> birth(clusters, 0.0), stability(clusters, 0.0);
-  std::vector<std::vector<size_t>> children(clusters);
-  std::vector<size_t> cluster_parent(clusters, 0);
+namespace {
+
+// The condensed tree's clusters (ids root..max_cluster, index id - root): each one's birth lambda,
+// stability, parent and the children that are clusters.
+struct ClusterTree {
+  size_t root = 0;
+  size_t max_cluster = 0;
+  std::vector<double> birth, stability;
+  std::vector<std::vector<size_t>> children;
+  std::vector<size_t> parent;
+
+  size_t size() const { return max_cluster - root + 1; }
+  // Calls f on every cluster below `c` (not c itself).
+  template <typename F>
+  void ForEachDescendant(size_t c, F f) const {
+    std::vector<size_t> stack(children[c - root].begin(), children[c - root].end());
+    while (!stack.empty()) {
+      const size_t x = stack.back();
+      stack.pop_back();
+      f(x);
+      for (size_t y : children[x - root]) stack.push_back(y);
+    }
+  }
+};
+
+ClusterTree BuildClusterTree(const std::vector<CondensedRow>& tree, size_t n) {
+  ClusterTree t;
+  t.root = n;
+  t.max_cluster = t.root;
+  for (const CondensedRow& r : tree) t.max_cluster = std::max({t.max_cluster, r.parent, r.child});
+  const size_t clusters = t.size();
+  t.birth.assign(clusters, 0.0);
+  t.stability.assign(clusters, 0.0);
+  t.children.resize(clusters);
+  t.parent.assign(clusters, 0);
   for (const CondensedRow& r : tree) {
-    if (r.child >= root) {
-      birth[r.child - root] = r.lambda;
-      children[r.parent - root].push_back(r.child);
-      cluster_parent[r.child - root] = r.parent;
+    if (r.child >= t.root) {
+      t.birth[r.child - t.root] = r.lambda;
+      t.children[r.parent - t.root].push_back(r.child);
+      t.parent[r.child - t.root] = r.parent;
     }
   }
   for (const CondensedRow& r : tree) {
-    const double lambda = std::isinf(r.lambda) ? birth[r.parent - root] : r.lambda;
-    stability[r.parent - root] +=
-        (lambda - birth[r.parent - root]) * static_cast<double>(r.child_size);
+    const double birth = t.birth[r.parent - t.root];
+    const double lambda = std::isinf(r.lambda) ? birth : r.lambda;
+    t.stability[r.parent - t.root] += (lambda - birth) * static_cast<double>(r.child_size);
   }
-  // Excess of mass: from the leaves up, a cluster is selected unless its children together are
-  // more stable.
-  std::vector<char> selected(clusters, 0);
-  std::vector<size_t> order(clusters);
+  return t;
+}
+
+// Excess of mass: from the leaves up, a cluster is selected unless its children together are
+// more stable (their sum becomes its stability).
+std::vector<char> SelectByExcessOfMass(ClusterTree& t, bool allow_single_cluster) {
+  const size_t root = t.root;
+  std::vector<char> selected(t.size(), 0);
+  std::vector<size_t> order(t.size());
   std::iota(order.begin(), order.end(), root);
   std::sort(order.rbegin(), order.rend());  // children have larger ids than their parents
   for (size_t c : order) {
-    if (c == root && !options.allow_single_cluster) continue;
+    if (c == root && !allow_single_cluster) continue;
     double subtree = 0;
-    for (size_t child : children[c - root]) subtree += stability[child - root];
-    if (!children[c - root].empty() && subtree > stability[c - root]) {
-      stability[c - root] = subtree;
+    for (size_t child : t.children[c - root]) subtree += t.stability[child - root];
+    if (!t.children[c - root].empty() && subtree > t.stability[c - root]) {
+      t.stability[c - root] = subtree;
     } else {
       selected[c - root] = 1;
-      std::vector<size_t> stack(children[c - root].begin(), children[c - root].end());
-      while (!stack.empty()) {
-        const size_t x = stack.back();
-        stack.pop_back();
-        selected[x - root] = 0;
-        for (size_t y : children[x - root]) stack.push_back(y);
-      }
+      t.ForEachDescendant(c, [&](size_t x) { selected[x - root] = 0; });
     }
   }
-  if (!options.allow_single_cluster) {
-    // The root cannot be chosen; if nothing below it was, there is no cluster.
-    selected[0] = 0;
-  }
-  // Epsilon: a selected cluster born closer than epsilon is replaced by its nearest ancestor born
-  // at a distance above epsilon (never the root unless single clusters are allowed).
-  const double eps = options.cluster_selection_epsilon;
-  const bool only_root = selected[0] && std::count(selected.begin(), selected.end(), 1) == 1;
-  if (eps > 0 && clusters > 1 && !only_root) {
-    std::set<size_t> chosen;
-    std::vector<char> processed(clusters, 0);
-    for (size_t c = root + 1; c <= max_cluster; ++c) {
-      if (!selected[c - root]) continue;
-      if (1.0 / birth[c - root] >= eps) {
-        chosen.insert(c);
-        continue;
-      }
-      if (processed[c - root]) continue;
-      size_t node = c;
-      while (true) {
-        const size_t parent = cluster_parent[node - root];
-        if (parent == root) {
-          node = options.allow_single_cluster ? root : node;
-          break;
-        }
-        if (1.0 / birth[parent - root] > eps) {
-          node = parent;
-          break;
-        }
-        node = parent;
-      }
-      chosen.insert(node);
-      std::vector<size_t> stack(children[node - root].begin(), children[node - root].end());
-      while (!stack.empty()) {
-        const size_t x = stack.back();
-        stack.pop_back();
-        processed[x - root] = 1;
-        for (size_t y : children[x - root]) stack.push_back(y);
-      }
+  // The root cannot be chosen unless allowed; if nothing below it was, there is no cluster.
+  if (!allow_single_cluster) selected[0] = 0;
+  return selected;
+}
+
+// Epsilon: a selected cluster born closer than epsilon is replaced by its nearest ancestor born
+// at a distance above epsilon (never the root unless single clusters are allowed); a chosen
+// ancestor absorbs chosen clusters below it.
+void ApplySelectionEpsilon(const ClusterTree& t, double eps, bool allow_single_cluster,
+                           std::vector<char>* selected) {
+  const size_t root = t.root;
+  std::set<size_t> chosen;
+  std::vector<char> processed(t.size(), 0);
+  for (size_t c = root + 1; c <= t.max_cluster; ++c) {
+    if (!(*selected)[c - root]) continue;
+    if (1.0 / t.birth[c - root] >= eps) {
+      chosen.insert(c);
+      continue;
     }
-    // A chosen ancestor absorbs chosen clusters below it.
-    std::fill(selected.begin(), selected.end(), 0);
-    for (size_t c : chosen) {
-      bool covered = false;
-      for (size_t a = c; a != root && !covered;) {
-        a = cluster_parent[a - root];
-        covered = chosen.count(a) > 0;
+    if (processed[c - root]) continue;
+    size_t node = c;
+    while (true) {
+      const size_t parent = t.parent[node - root];
+      if (parent == root) {
+        node = allow_single_cluster ? root : node;
+        break;
       }
-      if (!covered) selected[c - root] = 1;
+      node = parent;
+      if (1.0 / t.birth[parent - root] > eps) break;
     }
+    chosen.insert(node);
+    t.ForEachDescendant(node, [&](size_t x) { processed[x - root] = 1; });
   }
-  // Labels: each point joins the selected cluster it fell out of or below; ids in cluster order.
-  std::vector<int> id(clusters, -1);
+  std::fill(selected->begin(), selected->end(), 0);
+  for (size_t c : chosen) {
+    bool covered = false;
+    for (size_t a = c; a != root && !covered;) {
+      a = t.parent[a - root];
+      covered = chosen.count(a) > 0;
+    }
+    if (!covered) (*selected)[c - root] = 1;
+  }
+}
+
+// Labels: each point joins the selected cluster it fell out of or below; ids in cluster order.
+std::vector<int> LabelPoints(const std::vector<CondensedRow>& tree, const ClusterTree& t,
+                             const std::vector<char>& selected, double eps, size_t n) {
+  const size_t root = t.root;
+  std::vector<int> labels(n, -1);
+  std::vector<int> id(t.size(), -1);
   int next_id = 0;
-  for (size_t c = 0; c < clusters; ++c)
+  for (size_t c = 0; c < t.size(); ++c)
     if (selected[c]) id[c] = next_id++;
   auto selected_ancestor = [&](size_t c) -> int {
-    for (;; c = cluster_parent[c - root]) {
+    for (;; c = t.parent[c - root]) {
       if (selected[c - root]) return static_cast<int>(c);
       if (c == root) return -1;
     }
@@ -323,6 +339,24 @@ std::vector<int> ClustersFromMst(std::vector<MstEdge> mst, size_t n,
     labels[r.child] = id[c - root];
   }
   return labels;
+}
+
+}  // namespace
+
+std::vector<int> ClustersFromMst(std::vector<MstEdge> mst, size_t n,
+                                 const HdbscanOptions& options) {
+  if (n < 2 || mst.size() != n - 1) return std::vector<int>(n, -1);
+  const std::vector<Merge> merges = SingleLinkage(std::move(mst), n);
+  const std::vector<CondensedRow> tree =
+      Condense(merges, n, static_cast<size_t>(std::max(options.min_cluster_size, 2)));
+  ClusterTree clusters = BuildClusterTree(tree, n);
+  std::vector<char> selected = SelectByExcessOfMass(clusters, options.allow_single_cluster);
+  const double eps = options.cluster_selection_epsilon;
+  const bool only_root = selected[0] && std::count(selected.begin(), selected.end(), 1) == 1;
+  if (eps > 0 && clusters.size() > 1 && !only_root) {
+    ApplySelectionEpsilon(clusters, eps, options.allow_single_cluster, &selected);
+  }
+  return LabelPoints(tree, clusters, selected, eps, n);
 }
 
 absl::StatusOr<std::vector<int>> Hdbscan(const float* points, size_t n, int dim,
