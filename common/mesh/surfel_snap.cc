@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
+#include <optional>
 
 #include <tbb/blocked_range.h>
 #include <tbb/parallel_for.h>
@@ -61,6 +63,112 @@ void SmoothOverRings(const std::vector<std::vector<uint32_t>>& ring, const Stays
   }
 }
 
+// A fixed vertex slides along its normal's part across `slide_normal` (none where that part is
+// short: the inside of a flat base, whose normal is the slide normal; none without a slide).
+void SlideDirections(const std::vector<uint8_t>& fixed, const Eigen::Vector3f& slide_normal,
+                     std::vector<Eigen::Vector3f>* vertex_normals) {
+  for (size_t v = 0; v < vertex_normals->size() && v < fixed.size(); ++v) {
+    if (!fixed[v]) continue;
+    Eigen::Vector3f& n = (*vertex_normals)[v];
+    Eigen::Vector3f across = Eigen::Vector3f::Zero();
+    if (!slide_normal.isZero()) {
+      across = n - n.dot(slide_normal) * slide_normal;
+      across = across.norm() >= kMinAcross ? across.normalized() : Eigen::Vector3f::Zero();
+    }
+    n = across;
+  }
+}
+
+struct Facing {
+  float along, weight, rise;  // offset along the normal, weight, height along the slide
+};
+
+// The signed move of the vertex at `p` along `nv` onto the outermost layer of the surfels that
+// face its way; nullopt where fewer than min_surfels do.
+std::optional<float> SnapOffset(const Eigen::Vector3f& p, const Eigen::Vector3f& nv, bool sliding,
+                                const PointIndex3& index,
+                                const std::vector<Eigen::Vector3f>& points,
+                                const std::vector<Eigen::Vector3f>& normals,
+                                const SurfelSnapOptions& options, std::vector<Facing>& facing) {
+  const int min_surfels = std::max(1, options.min_surfels);
+  const float tangential_var = 0.25f * options.radius * options.radius;
+  facing.clear();
+  for (uint32_t i : index.WithinRadius(p, options.radius)) {
+    if (std::abs(normals[i].dot(nv)) < options.min_cos) continue;
+    const Eigen::Vector3f d = points[i] - p;
+    const float along = d.dot(nv);
+    const float tangential_sq = std::max(0.0f, d.squaredNorm() - along * along);
+    facing.push_back(
+        {along, std::exp(-0.5f * tangential_sq / tangential_var), d.dot(options.slide_normal)});
+  }
+  if (static_cast<int>(facing.size()) < min_surfels) return std::nullopt;
+  // The outermost layer: surfels within `layer` of the min_surfels-th outermost one (fewer stray
+  // surfels standing farther out do not define it, nor count in it).
+  std::nth_element(facing.begin(), facing.begin() + (min_surfels - 1), facing.end(),
+                   [](const Facing& a, const Facing& b) { return a.along > b.along; });
+  const float outer = facing[min_surfels - 1].along;
+  double sum = 0, weight = 0, rise = 0, rise_sq = 0, rise_along = 0;
+  for (const Facing& f : facing) {
+    if (std::abs(f.along - outer) > options.layer) continue;
+    sum += f.weight * f.along;
+    weight += f.weight;
+    rise += f.weight * f.rise;
+    rise_sq += f.weight * f.rise * f.rise;
+    rise_along += f.weight * f.rise * f.along;
+  }
+  if (weight <= 0) return std::nullopt;
+  double offset = sum / weight;
+  // A sliding vertex (a base's rim) has the side's surfels only above it: where the side slopes
+  // (a cone's) their mean stands inside the rim, so the layer is extrapolated down to the
+  // vertex's height (a weighted line fit of the offset over the height).
+  if (sliding) {
+    const double mean_rise = rise / weight;
+    const double var_rise = rise_sq / weight - mean_rise * mean_rise;
+    if (var_rise > kMinRiseSpread * options.radius * options.radius) {
+      const double slope = (rise_along / weight - mean_rise * offset) / var_rise;
+      offset -= slope * mean_rise;
+    }
+  }
+  return std::clamp(static_cast<float>(offset), -options.max_move, options.max_move);
+}
+
+// Each vertex's 1-ring neighbours (with repeats).
+std::vector<std::vector<uint32_t>> VertexRings(const TriangleMesh& mesh) {
+  std::vector<std::vector<uint32_t>> ring(mesh.vertices.size());
+  for (const auto& t : mesh.triangles) {
+    for (int k = 0; k < 3; ++k) {
+      ring[t[k]].push_back(t[(k + 1) % 3]);
+      ring[t[k]].push_back(t[(k + 2) % 3]);
+    }
+  }
+  return ring;
+}
+
+// Vertices farther than `reach` from every surfel are pulled towards the nearest (by at most
+// max_move), the pulls smoothed over the rings; fixed vertices stay. Returns the pulls.
+std::vector<Eigen::Vector3f> PullTowardsSurfels(const TriangleMesh& mesh, const PointIndex3& index,
+                                                const std::vector<Eigen::Vector3f>& points,
+                                                const SurfelSnapOptions& options,
+                                                const std::vector<std::vector<uint32_t>>& ring,
+                                                const std::function<bool(size_t)>& is_fixed) {
+  const size_t n = mesh.vertices.size();
+  std::vector<Eigen::Vector3f> pull(n, Eigen::Vector3f::Zero());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      for (size_t v = r.begin(); v != r.end(); ++v) {
+                        const auto [nearest, dist_sq] = index.Nearest(mesh.vertices[v]);
+                        const float dist = std::sqrt(dist_sq);
+                        if (dist <= options.reach || is_fixed(v)) continue;
+                        const float length = std::min(dist - options.reach, options.max_move);
+                        pull[v] = length / dist * (points[nearest] - mesh.vertices[v]);
+                      }
+                    });
+  SmoothOverRings(
+      ring, is_fixed, [](size_t) { return false; }, options.smooth_passes,
+      Eigen::Vector3f::Zero().eval(), &pull);
+  return pull;
+}
+
 }  // namespace
 
 size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
@@ -70,89 +178,34 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
     return 0;
   }
   std::vector<Eigen::Vector3f> vertex_normals = OutwardVertexNormals(*mesh);
-  auto is_fixed = [&fixed](size_t v) { return v < fixed.size() && fixed[v]; };
-  // A fixed vertex slides along its normal's part across `slide_normal` (none where that part is
-  // short: the inside of a flat base, whose normal is the slide normal).
+  const std::function<bool(size_t)> is_fixed = [&fixed](size_t v) {
+    return v < fixed.size() && fixed[v];
+  };
   const bool slide = !options.slide_normal.isZero();
-  for (size_t v = 0; v < vertex_normals.size(); ++v) {
-    if (!is_fixed(v)) continue;
-    Eigen::Vector3f across = Eigen::Vector3f::Zero();
-    if (slide) {
-      across =
-          vertex_normals[v] - vertex_normals[v].dot(options.slide_normal) * options.slide_normal;
-      across = across.norm() >= kMinAcross ? across.normalized() : Eigen::Vector3f::Zero();
-    }
-    vertex_normals[v] = across;
-  }
+  SlideDirections(fixed, options.slide_normal, &vertex_normals);
   const PointIndex3 index(points);
   const size_t n = mesh->vertices.size();
-  const int min_surfels = std::max(1, options.min_surfels);
   // Each vertex's signed move along its normal (0 where too few surfels face its way).
   std::vector<float> move(n, 0.0f);
   std::vector<uint8_t> snapped(n, 0);
-  const float tangential_var = 0.25f * options.radius * options.radius;
-  tbb::parallel_for(
-      tbb::blocked_range<size_t>(0, n, 256), [&](const tbb::blocked_range<size_t>& r) {
-        struct Facing {
-          float along, weight, rise;  // offset along the normal, weight, height along the slide
-        };
-        std::vector<Facing> facing;
-        for (size_t v = r.begin(); v != r.end(); ++v) {
-          const Eigen::Vector3f& p = mesh->vertices[v];
-          const Eigen::Vector3f& nv = vertex_normals[v];
-          if (nv.isZero()) continue;
-          facing.clear();
-          for (uint32_t i : index.WithinRadius(p, options.radius)) {
-            if (std::abs(normals[i].dot(nv)) < options.min_cos) continue;
-            const Eigen::Vector3f d = points[i] - p;
-            const float along = d.dot(nv);
-            const float tangential_sq = std::max(0.0f, d.squaredNorm() - along * along);
-            facing.push_back({along, std::exp(-0.5f * tangential_sq / tangential_var),
-                              d.dot(options.slide_normal)});
-          }
-          if (static_cast<int>(facing.size()) < min_surfels) continue;
-          // The outermost layer: surfels within `layer` of the min_surfels-th outermost one (fewer
-          // stray surfels standing farther out do not define it, nor count in it).
-          std::nth_element(facing.begin(), facing.begin() + (min_surfels - 1), facing.end(),
-                           [](const Facing& a, const Facing& b) { return a.along > b.along; });
-          const float outer = facing[min_surfels - 1].along;
-          double sum = 0, weight = 0, rise = 0, rise_sq = 0, rise_along = 0;
-          for (const Facing& f : facing) {
-            if (std::abs(f.along - outer) > options.layer) continue;
-            sum += f.weight * f.along;
-            weight += f.weight;
-            rise += f.weight * f.rise;
-            rise_sq += f.weight * f.rise * f.rise;
-            rise_along += f.weight * f.rise * f.along;
-          }
-          if (weight <= 0) continue;
-          double offset = sum / weight;
-          // A sliding vertex (a base's rim) has the side's surfels only above it: where the side
-          // slopes (a cone's) their mean stands inside the rim, so the layer is extrapolated down
-          // to the vertex's height (a weighted line fit of the offset over the height).
-          if (is_fixed(v)) {
-            const double mean_rise = rise / weight;
-            const double var_rise = rise_sq / weight - mean_rise * mean_rise;
-            if (var_rise > kMinRiseSpread * options.radius * options.radius) {
-              const double slope = (rise_along / weight - mean_rise * offset) / var_rise;
-              offset -= slope * mean_rise;
-            }
-          }
-          move[v] = std::clamp(static_cast<float>(offset), -options.max_move, options.max_move);
-          snapped[v] = 1;
-        }
-      });
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      std::vector<Facing> facing;
+                      for (size_t v = r.begin(); v != r.end(); ++v) {
+                        if (vertex_normals[v].isZero()) continue;
+                        const std::optional<float> offset =
+                            SnapOffset(mesh->vertices[v], vertex_normals[v], is_fixed(v), index,
+                                       points, normals, options, facing);
+                        if (!offset) continue;
+                        move[v] = *offset;
+                        snapped[v] = 1;
+                      }
+                    });
   // Smooth the moves over each vertex's 1-ring (a vertex that did not snap counts as not moving).
-  std::vector<std::vector<uint32_t>> ring(n);
-  for (const auto& t : mesh->triangles) {
-    for (int k = 0; k < 3; ++k) {
-      ring[t[k]].push_back(t[(k + 1) % 3]);
-      ring[t[k]].push_back(t[(k + 2) % 3]);
-    }
-  }
   // Fixed vertices that do not slide (a zero direction) stay. Without a slide they count as not
   // moving (the surface near a fixed base moves less); with one, the rim slides and the inside of
   // the base, which has no say across the slide normal, is left out of its neighbours' means.
+  const std::vector<std::vector<uint32_t>> ring = VertexRings(*mesh);
   auto stays = [&](size_t v) { return is_fixed(v) && vertex_normals[v].isZero(); };
   auto left_out = [&](size_t v) { return slide && stays(v); };
   SmoothOverRings(ring, stays, left_out, options.smooth_passes, 0.0f, &move);
@@ -162,20 +215,8 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
     moved += snapped[v];
   }
   if (options.reach <= 0) return moved;
-  std::vector<Eigen::Vector3f> pull(n, Eigen::Vector3f::Zero());
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256),
-                    [&](const tbb::blocked_range<size_t>& r) {
-                      for (size_t v = r.begin(); v != r.end(); ++v) {
-                        const auto [nearest, dist_sq] = index.Nearest(mesh->vertices[v]);
-                        const float dist = std::sqrt(dist_sq);
-                        if (dist <= options.reach || is_fixed(v)) continue;
-                        const float length = std::min(dist - options.reach, options.max_move);
-                        pull[v] = length / dist * (points[nearest] - mesh->vertices[v]);
-                      }
-                    });
-  SmoothOverRings(
-      ring, is_fixed, [](size_t) { return false; }, options.smooth_passes,
-      Eigen::Vector3f::Zero().eval(), &pull);
+  const std::vector<Eigen::Vector3f> pull =
+      PullTowardsSurfels(*mesh, index, points, options, ring, is_fixed);
   for (size_t v = 0; v < n; ++v) {
     mesh->vertices[v] += pull[v];
     moved += !snapped[v] && !pull[v].isZero();

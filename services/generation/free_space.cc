@@ -31,6 +31,83 @@ bool ClipToBox(const Eigen::Vector3f& o, const Eigen::Vector3f& d, const Eigen::
   return near < far;
 }
 
+// The pixels whose rays can reach the box [lo, hi]: the bounding box of its projected corners
+// (the whole image when a corner lies behind the camera).
+struct PixelWindow {
+  double x0, y0, x1, y1;
+};
+PixelWindow BoxFootprint(const PinholeCamera& camera, const Eigen::Vector3f& lo,
+                         const Eigen::Vector3f& hi) {
+  PixelWindow w{0, 0, static_cast<double>(camera.width), static_cast<double>(camera.height)};
+  Eigen::AlignedBox2d footprint;
+  for (int corner = 0; corner < 8; ++corner) {
+    const Eigen::Vector3d p((corner & 1) ? hi.x() : lo.x(), (corner & 2) ? hi.y() : lo.y(),
+                            (corner & 4) ? hi.z() : lo.z());
+    const Eigen::Vector3d in_camera = camera.camera_from_world * p;
+    if (in_camera.z() <= 1e-6) return w;
+    footprint.extend(camera.ProjectFromCamera(in_camera));
+  }
+  w.x0 = std::clamp(footprint.min().x(), 0.0, static_cast<double>(camera.width));
+  w.y0 = std::clamp(footprint.min().y(), 0.0, static_cast<double>(camera.height));
+  w.x1 = std::clamp(footprint.max().x(), 0.0, static_cast<double>(camera.width));
+  w.y1 = std::clamp(footprint.max().y(), 0.0, static_cast<double>(camera.height));
+  return w;
+}
+
+// A grid of rays `stride` pixels apart over the window, each with its first hit (inf: none).
+struct RayFan {
+  int rows = 0, cols = 0;
+  std::vector<Eigen::Vector3f> dirs;
+  std::vector<float> hits;
+  float Hit(int r, int q) const { return hits[static_cast<size_t>(r) * cols + q]; }
+};
+RayFan CastRayFan(const PinholeCamera& camera, const Eigen::Vector3f& eye, const PixelWindow& w,
+                  double stride, const RayCaster& surfaces) {
+  RayFan fan;
+  fan.cols = std::max(0, static_cast<int>(std::ceil((w.x1 - w.x0) / stride - 0.5)));
+  fan.rows = std::max(0, static_cast<int>(std::ceil((w.y1 - w.y0) / stride - 0.5)));
+  fan.dirs.resize(static_cast<size_t>(fan.rows) * fan.cols);
+  fan.hits.assign(fan.dirs.size(), std::numeric_limits<float>::infinity());
+  const Eigen::Matrix3d camera_to_world = camera.camera_from_world.rotation.transpose();
+  for (int r = 0; r < fan.rows; ++r) {
+    for (int q = 0; q < fan.cols; ++q) {
+      const double x = w.x0 + (q + 0.5) * stride, y = w.y0 + (r + 0.5) * stride;
+      const size_t i = static_cast<size_t>(r) * fan.cols + q;
+      fan.dirs[i] = (camera_to_world *
+                     Eigen::Vector3d((x - camera.cx) / camera.fx, (y - camera.cy) / camera.fy, 1.0))
+                        .normalized()
+                        .cast<float>();
+      const RayHit hit = surfaces.Cast(eye, fan.dirs[i]);
+      if (hit.hit) fan.hits[i] = hit.distance;
+    }
+  }
+  return fan;
+}
+
+// Where ray (r, q) stops: its hit, or, through a hole (all neighbours within hole_rays but
+// hole_slack stop more than the margin before it), where the farthest of those does. (A
+// silhouette has far fewer such neighbours.)
+float HoleAwareHit(const RayFan& fan, int r, int q, const FreeSpaceOptions& options, float voxel) {
+  const int reach = options.hole_rays;
+  const float own = fan.Hit(r, q);
+  if (reach <= 0) return own;
+  int nearer = 0, neighbours = 0;
+  float farthest_nearer = 0;
+  for (int dr = -reach; dr <= reach; ++dr) {
+    for (int dq = -reach; dq <= reach; ++dq) {
+      const int rr = r + dr, qq = q + dq;
+      if ((dr == 0 && dq == 0) || rr < 0 || rr >= fan.rows || qq < 0 || qq >= fan.cols) continue;
+      ++neighbours;
+      const float h = fan.Hit(rr, qq);
+      if (h < own - options.margin_voxels * voxel) {
+        ++nearer;
+        farthest_nearer = std::max(farthest_nearer, h);
+      }
+    }
+  }
+  return neighbours > 0 && nearer >= neighbours - options.hole_slack ? farthest_nearer : own;
+}
+
 }  // namespace
 
 int64_t FreeSpaceGrid::VoxelOf(const Eigen::Vector3f& p) const {
@@ -81,84 +158,27 @@ absl::StatusOr<FreeSpaceGrid> FreeSpaceGrid::Carve(const std::vector<PinholeCame
     const PinholeCamera& camera = cameras[c];
     const Eigen::Vector3f eye = camera.CenterInWorld().cast<float>();
     const double distance = std::max(1e-6f, (frame.center - eye).norm());
-    // Only pixels whose rays can reach the cube: the bounding box of its projected corners.
-    double x0 = 0, y0 = 0, x1 = camera.width, y1 = camera.height;
-    bool all_in_front = true;
-    Eigen::AlignedBox2d footprint;
-    for (int corner = 0; corner < 8; ++corner) {
-      const Eigen::Vector3d p((corner & 1) ? hi.x() : lo.x(), (corner & 2) ? hi.y() : lo.y(),
-                              (corner & 4) ? hi.z() : lo.z());
-      const Eigen::Vector3d in_camera = camera.camera_from_world * p;
-      if (in_camera.z() <= 1e-6) {
-        all_in_front = false;
-        break;
-      }
-      footprint.extend(camera.ProjectFromCamera(in_camera));
-    }
-    if (all_in_front) {
-      x0 = std::clamp(footprint.min().x(), 0.0, static_cast<double>(camera.width));
-      y0 = std::clamp(footprint.min().y(), 0.0, static_cast<double>(camera.height));
-      x1 = std::clamp(footprint.max().x(), 0.0, static_cast<double>(camera.width));
-      y1 = std::clamp(footprint.max().y(), 0.0, static_cast<double>(camera.height));
-    }
+    const PixelWindow window = BoxFootprint(camera, lo, hi);
     // Rays about half a voxel apart at the object (every pixel when pixels are coarser), bounded
     // by the per-view ray budget.
     double stride = std::max(1.0, 0.5 * grid.voxel_ * camera.fx / distance);
-    const double area = std::max(0.0, (x1 - x0) * (y1 - y0));
+    const double area = std::max(0.0, (window.x1 - window.x0) * (window.y1 - window.y0));
     stride = std::max(stride, std::sqrt(area / options.max_rays_per_view));
-    const Eigen::Matrix3d camera_to_world = camera.camera_from_world.rotation.transpose();
-    std::vector<uint8_t> seen(voxels, 0);
-    const float step = 0.5f * grid.voxel_;
     // Cast every ray of the grid first, so that each ray can end at the nearest hit among its
     // neighbours: a ray slipping through a hole between surfel discs must not carve the inside.
-    const int cols = std::max(0, static_cast<int>(std::ceil((x1 - x0) / stride - 0.5)));
-    const int rows = std::max(0, static_cast<int>(std::ceil((y1 - y0) / stride - 0.5)));
-    const float kFar = std::numeric_limits<float>::infinity();
-    std::vector<Eigen::Vector3f> dirs(static_cast<size_t>(rows) * cols);
-    std::vector<float> hits(dirs.size(), kFar);
-    for (int r = 0; r < rows; ++r) {
-      for (int q = 0; q < cols; ++q) {
-        const double x = x0 + (q + 0.5) * stride, y = y0 + (r + 0.5) * stride;
-        const size_t i = static_cast<size_t>(r) * cols + q;
-        dirs[i] = (camera_to_world *
-                   Eigen::Vector3d((x - camera.cx) / camera.fx, (y - camera.cy) / camera.fy, 1.0))
-                      .normalized()
-                      .cast<float>();
-        const RayHit hit = surfaces.Cast(eye, dirs[i]);
-        if (hit.hit) hits[i] = hit.distance;
-      }
-    }
-    const int reach = options.hole_rays;
-    for (int r = 0; r < rows; ++r) {
-      for (int q = 0; q < cols; ++q) {
-        const size_t i = static_cast<size_t>(r) * cols + q;
+    const RayFan fan = CastRayFan(camera, eye, window, stride, surfaces);
+    std::vector<uint8_t> seen(voxels, 0);
+    const float step = 0.5f * grid.voxel_;
+    for (int r = 0; r < fan.rows; ++r) {
+      for (int q = 0; q < fan.cols; ++q) {
+        const Eigen::Vector3f& dir = fan.dirs[static_cast<size_t>(r) * fan.cols + q];
         float t0, t1;
-        if (!ClipToBox(eye, dirs[i], lo, hi, &t0, &t1)) continue;
-        // A hole: all neighbours but hole_slack stop more than the margin before this ray; it then
-        // ends where the farthest of those does. (A silhouette has far fewer such neighbours.)
-        float nearest = hits[i];
-        if (reach > 0) {
-          int nearer = 0, neighbours = 0;
-          float farthest_nearer = 0;
-          for (int dr = -reach; dr <= reach; ++dr) {
-            for (int dq = -reach; dq <= reach; ++dq) {
-              const int rr = r + dr, qq = q + dq;
-              if ((dr == 0 && dq == 0) || rr < 0 || rr >= rows || qq < 0 || qq >= cols) continue;
-              ++neighbours;
-              const float h = hits[static_cast<size_t>(rr) * cols + qq];
-              if (h < hits[i] - options.margin_voxels * grid.voxel_) {
-                ++nearer;
-                farthest_nearer = std::max(farthest_nearer, h);
-              }
-            }
-          }
-          if (neighbours > 0 && nearer >= neighbours - options.hole_slack)
-            nearest = farthest_nearer;
-        }
-        const float end =
-            std::min(t1, nearest < kFar ? nearest - options.margin_voxels * grid.voxel_ : t1);
+        if (!ClipToBox(eye, dir, lo, hi, &t0, &t1)) continue;
+        const float nearest = HoleAwareHit(fan, r, q, options, grid.voxel_);
+        const float end = std::min(
+            t1, std::isfinite(nearest) ? nearest - options.margin_voxels * grid.voxel_ : t1);
         for (float t = t0 + 0.5f * step; t < end; t += step) {
-          const int64_t v = grid.VoxelOf(eye + t * dirs[i]);
+          const int64_t v = grid.VoxelOf(eye + t * dir);
           if (v >= 0) seen[v] = 1;
         }
       }
