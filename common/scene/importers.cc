@@ -14,8 +14,6 @@
 namespace instascene {
 namespace {
 
-using nlohmann::json;
-
 struct ColmapCamera {
   int model_id = -1;
   int width = 0, height = 0;
@@ -274,107 +272,6 @@ absl::StatusOr<ImportedCameras> ImportColmapModel(const std::string& model_dir,
     }
     out.views.push_back(std::move(view));
   }
-  SortByName(&out.views);
-  return out;
-}
-
-absl::StatusOr<ImportedCameras> ImportTransformsJson(const std::string& path,
-                                                     const ImportOptions& options) {
-  namespace fs = std::filesystem;
-  ASSIGN_OR_RETURN(std::string text, ReadFileBounded(path, size_t{256} << 20));
-  json root = json::parse(text, nullptr, false);
-  if (root.is_discarded() || !root.is_object())
-    return absl::InvalidArgumentError(absl::StrCat(path, ": not a JSON object"));
-  if (!root.contains("frames") || !root["frames"].is_array()) {
-    return absl::InvalidArgumentError(absl::StrCat(path, ": no \"frames\" array"));
-  }
-  const fs::path base = fs::path(path).parent_path();
-  ImportedCameras out;
-  int skipped = 0;
-  for (size_t i = 0; i < root["frames"].size(); ++i) {
-    const json& frame = root["frames"][i];
-    auto fail = [&](const std::string& what) {
-      return absl::InvalidArgumentError(absl::StrCat(path, ": frames[", i, "]: ", what));
-    };
-    // Per-frame values override the top-level ones (nerfstudio allows both).
-    auto number = [&](const char* key, double* value) {
-      const json* src = frame.contains(key)  ? &frame[key]
-                        : root.contains(key) ? &root[key]
-                                             : nullptr;
-      if (src == nullptr || !src->is_number()) return false;
-      *value = src->get<double>();
-      return true;
-    };
-    if (!frame.is_object() || !frame.contains("file_path") || !frame["file_path"].is_string()) {
-      return fail("missing \"file_path\"");
-    }
-    std::string file = frame["file_path"].get<std::string>();
-    if (!fs::exists(base / file)) {
-      for (const char* ext : {".png", ".jpg", ".jpeg"}) {  // NeRF synthetic omits extensions
-        if (fs::exists(base / (file + ext))) {
-          file += ext;
-          break;
-        }
-      }
-    }
-    double w = 0, h = 0, fl_x = 0, fl_y = 0, cx = 0, cy = 0, angle = 0;
-    if (!number("w", &w) || !number("h", &h)) return fail("missing image size \"w\"/\"h\"");
-    if (!number("fl_x", &fl_x)) {
-      if (!number("camera_angle_x", &angle)) return fail("missing \"fl_x\" or \"camera_angle_x\"");
-      fl_x = 0.5 * w / std::tan(0.5 * angle);
-    }
-    if (!number("fl_y", &fl_y)) fl_y = fl_x;
-    if (!number("cx", &cx)) cx = 0.5 * w;
-    if (!number("cy", &cy)) cy = 0.5 * h;
-    for (const char* key : {"k1", "k2", "k3", "k4", "p1", "p2"}) {
-      double k = 0;
-      if (number(key, &k) && k != 0.0 && !options.assume_undistorted) {
-        return fail(absl::StrCat("lens distortion ", key, " = ", k,
-                                 " is not supported; undistort the images, or pass "
-                                 "--assume-undistorted if they already are"));
-      }
-    }
-    if (!fs::exists(base / file)) {
-      ++skipped;
-      continue;
-    }
-    if (!frame.contains("transform_matrix") || !frame["transform_matrix"].is_array() ||
-        frame["transform_matrix"].size() < 3) {
-      return fail("missing 4x4 \"transform_matrix\"");
-    }
-    Eigen::Matrix<double, 3, 4> gl_world_from_camera;
-    try {
-      for (int r = 0; r < 3; ++r) {
-        for (int c = 0; c < 4; ++c)
-          gl_world_from_camera(r, c) = frame["transform_matrix"][r].at(c).get<double>();
-      }
-    } catch (const json::exception& e) {
-      return fail(absl::StrCat("bad \"transform_matrix\": ", e.what()));
-    }
-    // OpenGL camera axes (x right, y up, z backward) -> OpenCV (x right, y down, z forward).
-    gl_world_from_camera.col(1) *= -1.0;
-    gl_world_from_camera.col(2) *= -1.0;
-    absl::StatusOr<Rigid3d> world_from_camera = RigidFromMatrix(gl_world_from_camera);
-    if (!world_from_camera.ok()) return fail(std::string(world_from_camera.status().message()));
-    SceneView view;
-    view.name = fs::path(file).stem().string();
-    view.image = file;
-    view.camera.width = static_cast<int>(std::lround(w));
-    view.camera.height = static_cast<int>(std::lround(h));
-    view.camera.fx = fl_x;
-    view.camera.fy = fl_y;
-    view.camera.cx = cx;
-    view.camera.cy = cy;
-    view.camera.camera_from_world = world_from_camera->Inverse();
-    if (absl::Status s = view.camera.Validate(); !s.ok()) return fail(std::string(s.message()));
-    out.views.push_back(std::move(view));
-  }
-  if (skipped > 0) {
-    out.warnings.push_back(absl::StrCat(skipped, " of ", root["frames"].size(),
-                                        " frames skipped: image file missing"));
-  }
-  if (out.views.empty())
-    return absl::InvalidArgumentError(absl::StrCat(path, ": no frame has an existing image"));
   SortByName(&out.views);
   return out;
 }
