@@ -160,6 +160,85 @@ void CarveSilhouettes(const std::vector<DepthView>& views, int carve_views, doub
   });
 }
 
+// The n^3 voxel lattice of a UniformTSDFVolume (index x * n * n + y * n + z).
+struct Lattice {
+  int n;
+
+  template <typename Visit>
+  void ForNeighbours(int i, Visit&& visit) const {
+    const int x = i / (n * n), y = (i / n) % n, z = i % n;
+    if (x > 0) visit(i - n * n);
+    if (x + 1 < n) visit(i + n * n);
+    if (y > 0) visit(i - n);
+    if (y + 1 < n) visit(i + n);
+    if (z > 0) visit(i - 1);
+    if (z + 1 < n) visit(i + 1);
+  }
+  bool OnBorder(int i) const {
+    const int x = i / (n * n), y = (i / n) % n, z = i % n;
+    return x == 0 || y == 0 || z == 0 || x == n - 1 || y == n - 1 || z == n - 1;
+  }
+  // Breadth-first steps from the marked voxels of `reached` through voxels `may_enter` admits,
+  // at most `steps` deep (all when negative); marks what it reaches.
+  template <typename MayEnter>
+  void Spread(int steps, MayEnter&& may_enter, std::vector<uint8_t>* reached) const {
+    std::vector<int> queue, next;
+    for (size_t i = 0; i < reached->size(); ++i) {
+      if ((*reached)[i]) queue.push_back(static_cast<int>(i));
+    }
+    for (int step = 0; !queue.empty() && step != steps; ++step) {
+      next.clear();
+      for (int i : queue) {
+        ForNeighbours(i, [&](int j) {
+          if (!(*reached)[j] && may_enter(j)) {
+            (*reached)[j] = 1;
+            next.push_back(j);
+          }
+        });
+      }
+      queue.swap(next);
+    }
+  }
+};
+
+// What the grid's border reaches through passable voxels farther than `gap` voxels from a
+// blocked one, grown back by `gap` through passable voxels (an opening).
+template <typename Blocked>
+std::vector<uint8_t> OutsideVoxels(const Lattice& lattice, size_t count, int gap,
+                                   Blocked&& blocked) {
+  std::vector<uint8_t> near_block(count, 0);
+  for (size_t i = 0; i < count; ++i) near_block[i] = blocked(i);
+  lattice.Spread(
+      gap, [](int) { return true; }, &near_block);
+  std::vector<uint8_t> outside(count, 0);
+  for (size_t i = 0; i < count; ++i) outside[i] = lattice.OnBorder(static_cast<int>(i));
+  lattice.Spread(
+      -1, [&](int j) { return !near_block[j]; }, &outside);
+  lattice.Spread(
+      gap, [&](int j) { return !blocked(j); }, &outside);
+  return outside;
+}
+
+// Unobserved voxels take the colour of the nearest observed one (breadth first).
+void SpreadColours(const Lattice& lattice, const std::vector<uint8_t>& observed,
+                   std::vector<open3d::geometry::TSDFVoxel>* voxels) {
+  std::vector<uint8_t> coloured = observed;
+  std::vector<int> queue;
+  for (size_t i = 0; i < observed.size(); ++i) {
+    if (observed[i]) queue.push_back(static_cast<int>(i));
+  }
+  for (size_t head = 0; head < queue.size(); ++head) {
+    const Eigen::Vector3d color = (*voxels)[queue[head]].color_;
+    lattice.ForNeighbours(queue[head], [&](int j) {
+      if (!coloured[j]) {
+        coloured[j] = 1;
+        (*voxels)[j].color_ = color;
+        queue.push_back(j);
+      }
+    });
+  }
+}
+
 // Gives every voxel of `volume` a value (see DepthFusionOptions::closed_bounds). A voxel is
 // blocked when it lies behind an observed surface (tsdf <= 0), passable otherwise (unobserved, or
 // in front of a surface). The outside is what the grid's border reaches through passable voxels
@@ -170,99 +249,29 @@ void CarveSilhouettes(const std::vector<DepthView>& views, int carve_views, doub
 // Filled voxels take the colour of the nearest observed one (breadth first).
 void CloseVolume(int gap, const std::vector<uint8_t>& in_hull,
                  open3d::pipelines::integration::UniformTSDFVolume* volume) {
-  const int n = volume->resolution_;
+  const Lattice lattice{volume->resolution_};
   std::vector<open3d::geometry::TSDFVoxel>& voxels = volume->voxels_;
   const size_t count = voxels.size();
   // Behind an observed surface, or unobserved inside the renders' visual hull.
   auto blocked = [&](size_t i) {
     return (voxels[i].weight_ > 0 && voxels[i].tsdf_ <= 0) || (!in_hull.empty() && in_hull[i]);
   };
-  auto for_neighbours = [&](int i, auto&& visit) {
-    const int x = i / (n * n), y = (i / n) % n, z = i % n;
-    if (x > 0) visit(i - n * n);
-    if (x + 1 < n) visit(i + n * n);
-    if (y > 0) visit(i - n);
-    if (y + 1 < n) visit(i + n);
-    if (z > 0) visit(i - 1);
-    if (z + 1 < n) visit(i + 1);
-  };
-  // Breadth-first steps from `queue` through voxels `may_enter` admits, at most `steps` deep
-  // (all when negative); marks `reached`.
-  auto spread = [&](std::vector<int> queue, int steps, auto&& may_enter,
-                    std::vector<uint8_t>* reached) {
-    std::vector<int> next;
-    for (int step = 0; !queue.empty() && step != steps; ++step) {
-      next.clear();
-      for (int i : queue) {
-        for_neighbours(i, [&](int j) {
-          if (!(*reached)[j] && may_enter(j)) {
-            (*reached)[j] = 1;
-            next.push_back(j);
-          }
-        });
-      }
-      queue.swap(next);
-    }
-  };
-  std::vector<uint8_t> near_block(count, 0);
-  std::vector<int> seeds;
+  const std::vector<uint8_t> outside = OutsideVoxels(lattice, count, gap, blocked);
+  std::vector<uint8_t> observed(count, 0);
   for (size_t i = 0; i < count; ++i) {
-    if (blocked(i)) {
-      near_block[i] = 1;
-      seeds.push_back(static_cast<int>(i));
-    }
-  }
-  spread(
-      seeds, gap, [](int) { return true; }, &near_block);
-  auto on_border = [&](int i) {
-    const int x = i / (n * n), y = (i / n) % n, z = i % n;
-    return x == 0 || y == 0 || z == 0 || x == n - 1 || y == n - 1 || z == n - 1;
-  };
-  std::vector<uint8_t> outside(count, 0);
-  seeds.clear();
-  for (size_t i = 0; i < count; ++i) {
-    if (on_border(static_cast<int>(i))) {
-      outside[i] = 1;
-      seeds.push_back(static_cast<int>(i));
-    }
-  }
-  spread(
-      seeds, -1, [&](int j) { return !near_block[j]; }, &outside);
-  seeds.clear();
-  for (size_t i = 0; i < count; ++i) {
-    if (outside[i]) seeds.push_back(static_cast<int>(i));
-  }
-  spread(
-      seeds, gap, [&](int j) { return !blocked(j); }, &outside);
-  std::vector<uint8_t> coloured(count, 0);
-  seeds.clear();
-  for (size_t i = 0; i < count; ++i) {
-    const bool observed = voxels[i].weight_ > 0;
-    if (on_border(static_cast<int>(i))) {
+    observed[i] = voxels[i].weight_ > 0;
+    if (lattice.OnBorder(static_cast<int>(i))) {
       voxels[i].tsdf_ = 1.0f;
       voxels[i].weight_ = 1.0f;
-    } else if ((!blocked(i) || !observed) && !outside[i]) {
+    } else if ((!blocked(i) || !observed[i]) && !outside[i]) {
       voxels[i].tsdf_ = -1.0f;  // enclosed (or unobserved inside the visual hull)
       voxels[i].weight_ = 1.0f;
-    } else if (!observed) {
+    } else if (!observed[i]) {
       voxels[i].tsdf_ = 1.0f;  // the outside no view looked into
       voxels[i].weight_ = 1.0f;
     }
-    if (observed) {
-      coloured[i] = 1;
-      seeds.push_back(static_cast<int>(i));
-    }
   }
-  for (size_t head = 0; head < seeds.size(); ++head) {
-    const Eigen::Vector3d color = voxels[seeds[head]].color_;
-    for_neighbours(seeds[head], [&](int j) {
-      if (!coloured[j]) {
-        coloured[j] = 1;
-        voxels[j].color_ = color;
-        seeds.push_back(j);
-      }
-    });
-  }
+  SpreadColours(lattice, observed, &voxels);
 }
 
 std::shared_ptr<open3d::geometry::TriangleMesh> FuseClosed(const std::vector<DepthView>& views,
