@@ -128,13 +128,12 @@ absl::StatusOr<RenderResult> Render(const GaussianCloud& cloud, const PinholeCam
   return result;
 }
 
-absl::Status RenderInto(const GaussianCloud& cloud, const PinholeCamera& camera,
-                        const RenderOptions& options, RenderResult* result) {
-  Stopwatch total;
+namespace {
+
+absl::Status CheckRenderInputs(const GaussianCloud& cloud, const PinholeCamera& camera,
+                               const RenderOptions& options, bool surfel) {
   RETURN_IF_ERROR(camera.Validate());
   RETURN_IF_ERROR(options.Validate());
-  const SplatModel model = ResolveModel(cloud, options.model);
-  const bool surfel = model == SplatModel::kSurfel2d;
   if (surfel != (cloud.num_scales == 2)) {
     return absl::InvalidArgumentError(absl::StrCat(
         "splat model ", surfel ? "2DGS surfel" : "3DGS ellipsoid", " needs a ", surfel ? 2 : 3,
@@ -145,10 +144,14 @@ absl::Status RenderInto(const GaussianCloud& cloud, const PinholeCamera& camera,
   if (!options.trace.pixels.empty() && options.trace.pixels.back() >= num_pixels) {
     return absl::InvalidArgumentError("trace.pixels has ids outside the image");
   }
-  const ProjectionParams params = MakeProjectionParams(camera, options, cloud.sh_degree);
-  const size_t n = cloud.size();
-  // Every pixel of every buffer is overwritten below, so reused buffers need no clearing.
-  RenderResult& out = *result;
+  return absl::OkStatus();
+}
+
+// Sizes the output buffers. Every pixel of every buffer is overwritten by the blend, so reused
+// buffers need no clearing.
+void SizeOutputs(const PinholeCamera& camera, const RenderOptions& options, size_t n,
+                 RenderResult& out) {
+  const size_t num_pixels = static_cast<size_t>(camera.width) * camera.height;
   out.width = camera.width;
   out.height = camera.height;
   out.stats = RasterStats{};
@@ -161,87 +164,104 @@ absl::Status RenderInto(const GaussianCloud& cloud, const PinholeCamera& camera,
   out.features.resize(num_pixels * std::max(options.feature_dim, 0));
   if (!options.trace.enabled) out.trace = ContributorTrace{};
   out.visible.assign(n, 0);
+}
 
+// 1. Projects every Gaussian into the workspace's splats (and the visibility flags).
+void ProjectAll(const GaussianCloud& cloud, const ProjectionParams& params, bool surfel,
+                std::vector<ProjectedSplat>& splats, std::vector<uint8_t>& visible) {
+  splats.resize(cloud.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, cloud.size(), 4096),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      if (surfel) {
+                        ProjectSurfels(cloud, r.begin(), r.size(), params, &splats[r.begin()],
+                                       &visible[r.begin()]);
+                        return;
+                      }
+                      for (size_t i = r.begin(); i < r.end(); ++i) {
+                        visible[i] = ProjectEllipsoid(cloud, i, params, &splats[i]) ? 1 : 0;
+                      }
+                    });
+}
+
+// 3. Blends every tile; with tracing band by band (one row of tiles), each band's lists
+// scattered into the CSR while they are still in cache. Returns the assembly's milliseconds.
+double BlendTiles(const FrameContext& ctx, BlendFn blend, RasterWorkspace* ws,
+                  std::vector<TileCounters>& counters, RenderResult& out) {
+  const ProjectionParams& params = *ctx.params;
+  const RenderOptions& options = *ctx.options;
+  if (!options.trace.enabled) {
+    tbb::parallel_for(tbb::blocked_range<int>(0, params.tiles_x * params.tiles_y, 1),
+                      [&](const tbb::blocked_range<int>& r) {
+                        thread_local TileState state;
+                        for (int t = r.begin(); t < r.end(); ++t)
+                          blend(ctx, t, state, out, counters[t], nullptr);
+                      });
+    return 0;
+  }
+  double assembly_ms = 0;
+  std::vector<TileTrace>& band = ws->tile_traces;
+  band.resize(params.tiles_x);
+  TraceAssembler assembler(params, options.trace, &out.trace);
+  for (int ty = 0; ty < params.tiles_y; ++ty) {
+    tbb::parallel_for(tbb::blocked_range<int>(0, params.tiles_x, 1),
+                      [&](const tbb::blocked_range<int>& r) {
+                        thread_local TileState state;
+                        for (int tx = r.begin(); tx < r.end(); ++tx) {
+                          const int t = ty * params.tiles_x + tx;
+                          blend(ctx, t, state, out, counters[t], &band[tx]);
+                        }
+                      });
+    Stopwatch assembly;
+    assembler.AddBand(ty, band);
+    assembly_ms += assembly.ElapsedMs();
+  }
+  assembler.Finish();
+  return assembly_ms;
+}
+
+}  // namespace
+
+absl::Status RenderInto(const GaussianCloud& cloud, const PinholeCamera& camera,
+                        const RenderOptions& options, RenderResult* result) {
+  Stopwatch total;
+  const SplatModel model = ResolveModel(cloud, options.model);
+  const bool surfel = model == SplatModel::kSurfel2d;
+  RETURN_IF_ERROR(CheckRenderInputs(cloud, camera, options, surfel));
+  const ProjectionParams params = MakeProjectionParams(camera, options, cloud.sh_degree);
+  RenderResult& out = *result;
+  SizeOutputs(camera, options, cloud.size(), out);
   RasterWorkspace local_workspace;
   RasterWorkspace* ws = options.workspace != nullptr ? options.workspace : &local_workspace;
   RunWithThreads(options.num_threads, [&] {
-    // 1. Project every Gaussian.
     Stopwatch phase;
-    std::vector<ProjectedSplat>& splats = ws->splats;
-    splats.resize(n);
-    tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 4096),
-                      [&](const tbb::blocked_range<size_t>& r) {
-                        if (surfel) {
-                          ProjectSurfels(cloud, r.begin(), r.size(), params, &splats[r.begin()],
-                                         &out.visible[r.begin()]);
-                          return;
-                        }
-                        for (size_t i = r.begin(); i < r.end(); ++i) {
-                          out.visible[i] = ProjectEllipsoid(cloud, i, params, &splats[i]) ? 1 : 0;
-                        }
-                      });
+    ProjectAll(cloud, params, surfel, ws->splats, out.visible);
     out.stats.preprocess_ms = phase.ElapsedMs();
     phase.Restart();
-
     // 2. Bin (Gaussian, tile) pairs and sort every tile's list front to back.
-    const int num_tiles = params.tiles_x * params.tiles_y;
-    BinSplats(splats, out.visible, params, ws);
-    const std::vector<uint64_t>& keys = ws->keys;
-    const std::vector<uint64_t>& offsets = ws->tile_offsets;
+    BinSplats(ws->splats, out.visible, params, ws);
     out.stats.binning_ms = phase.ElapsedMs();
     phase.Restart();
-
-    // 3. Blend every tile.
     std::vector<uint8_t> trace_mask;
     if (options.trace.enabled && !options.trace.pixels.empty()) {
-      trace_mask.assign(num_pixels, 0);
+      trace_mask.assign(out.alpha.size(), 0);
       for (uint32_t pix : options.trace.pixels) trace_mask[pix] = 1;
     }
-    FrameContext ctx{&options, &params, &splats, &keys, &offsets, &trace_mask, {}};
+    FrameContext ctx{&options, &params, &ws->splats, &ws->keys, &ws->tile_offsets, &trace_mask, {}};
     const Eigen::Matrix3d world_from_camera = camera.camera_from_world.rotation.transpose();
     for (int r = 0; r < 3; ++r) {
       for (int c = 0; c < 3; ++c)
         ctx.world_from_camera[3 * r + c] = static_cast<float>(world_from_camera(r, c));
     }
-    const bool trace = options.trace.enabled;
     const bool features = options.feature_dim > 0;
-    BlendFn blend = surfel ? PickBlend<true>(options.trace, features)
-                           : PickBlend<false>(options.trace, features);
-    std::vector<TileCounters> counters(num_tiles);
-    double assembly_ms = 0;
-    if (!trace) {
-      tbb::parallel_for(tbb::blocked_range<int>(0, num_tiles, 1),
-                        [&](const tbb::blocked_range<int>& r) {
-                          thread_local TileState state;
-                          for (int t = r.begin(); t < r.end(); ++t)
-                            blend(ctx, t, state, out, counters[t], nullptr);
-                        });
-    } else {
-      // Band by band (one row of tiles): blend the band's tiles, then scatter their lists into
-      // the CSR while they are still in cache.
-      std::vector<TileTrace>& band = ws->tile_traces;
-      band.resize(params.tiles_x);
-      TraceAssembler assembler(params, options.trace, &out.trace);
-      for (int ty = 0; ty < params.tiles_y; ++ty) {
-        tbb::parallel_for(tbb::blocked_range<int>(0, params.tiles_x, 1),
-                          [&](const tbb::blocked_range<int>& r) {
-                            thread_local TileState state;
-                            for (int tx = r.begin(); tx < r.end(); ++tx) {
-                              const int t = ty * params.tiles_x + tx;
-                              blend(ctx, t, state, out, counters[t], &band[tx]);
-                            }
-                          });
-        Stopwatch assembly;
-        assembler.AddBand(ty, band);
-        assembly_ms += assembly.ElapsedMs();
-      }
-      assembler.Finish();
-    }
+    const BlendFn blend = surfel ? PickBlend<true>(options.trace, features)
+                                 : PickBlend<false>(options.trace, features);
+    std::vector<TileCounters> counters(params.tiles_x * params.tiles_y);
+    const double assembly_ms = BlendTiles(ctx, blend, ws, counters, out);
     for (const TileCounters& c : counters) {
       out.stats.evaluated_fragments += c.evaluated;
       out.stats.blended_fragments += c.blended;
     }
-    out.stats.gaussian_tile_pairs = keys.size();
+    out.stats.gaussian_tile_pairs = ws->keys.size();
     out.stats.blend_ms = phase.ElapsedMs() - assembly_ms;
     out.stats.trace_assembly_ms = assembly_ms;
   });
