@@ -133,6 +133,95 @@ using raster_internal::v4d;
 using raster_internal::v4f;
 using raster_internal::v4l;
 
+#define INSTASCENE_INLINE inline __attribute__((always_inline))
+
+// Screen AABB of the ellipse of squared cutoff c2 (compute_aabb of the 2DGS rasterizer): the
+// denominator d, the centre and the half extents.
+INSTASCENE_INLINE void ScreenBox4(v4d c2, const v4d tu[3], const v4d tv[3], const v4d tw[3], v4d* d,
+                                  v4d center[2], v4d extent[2]) {
+  using raster_internal::Max4d;
+  using raster_internal::Splat4d;
+  using raster_internal::Sqrt4d;
+  *d = c2 * tw[0] * tw[0] + c2 * tw[1] * tw[1] - tw[2] * tw[2];
+  const v4d inv_d = Splat4d(1.0) / *d;
+  const v4d f0 = c2 * inv_d, f2 = -inv_d;
+  center[0] = f0 * tu[0] * tw[0] + f0 * tu[1] * tw[1] + f2 * tu[2] * tw[2];
+  center[1] = f0 * tv[0] * tw[0] + f0 * tv[1] * tw[1] + f2 * tv[2] * tw[2];
+  const v4d sx = f0 * tu[0] * tu[0] + f0 * tu[1] * tu[1] + f2 * tu[2] * tu[2];
+  const v4d sy = f0 * tv[0] * tv[0] + f0 * tv[1] * tv[1] + f2 * tv[2] * tv[2];
+  extent[0] = Sqrt4d(Max4d(Splat4d(1e-4), center[0] * center[0] - sx));
+  extent[1] = Sqrt4d(Max4d(Splat4d(1e-4), center[1] * center[1] - sy));
+}
+
+// 4 surfels in the camera: the centres pv, the scaled tangent axes a, b and the normal n (camera
+// frame).
+INSTASCENE_INLINE void SurfelAxes4(const GaussianCloud& cloud, const size_t idx[4],
+                                   const ProjectionParams& p, v4d pv[3], v4d a[3], v4d b[3],
+                                   v4d n[3]) {
+  using raster_internal::Exp4f;
+  using raster_internal::Splat4d;
+  using raster_internal::ToDouble;
+  auto gather = [&](const std::vector<float>& v, int stride, int k) {
+    return v4d{v[stride * idx[0] + k], v[stride * idx[1] + k], v[stride * idx[2] + k],
+               v[stride * idx[3] + k]};
+  };
+  auto gatherf = [&](const std::vector<float>& v, int stride, int k) {
+    return v4f{v[stride * idx[0] + k], v[stride * idx[1] + k], v[stride * idx[2] + k],
+               v[stride * idx[3] + k]};
+  };
+  const v4d pos[3] = {gather(cloud.positions, 3, 0), gather(cloud.positions, 3, 1),
+                      gather(cloud.positions, 3, 2)};
+  for (int r = 0; r < 3; ++r) {
+    pv[r] = Splat4d(p.rotation[3 * r]) * pos[0] + Splat4d(p.rotation[3 * r + 1]) * pos[1] +
+            Splat4d(p.rotation[3 * r + 2]) * pos[2] + Splat4d(p.translation[r]);
+  }
+  v4d rot[9];
+  QuaternionToMatrix(gather(cloud.rotations, 4, 0), gather(cloud.rotations, 4, 1),
+                     gather(cloud.rotations, 4, 2), gather(cloud.rotations, 4, 3), rot);
+  const v4d su = ToDouble(Exp4f(gatherf(cloud.log_scales, 2, 0))) * Splat4d(p.scale_modifier);
+  const v4d sv = ToDouble(Exp4f(gatherf(cloud.log_scales, 2, 1))) * Splat4d(p.scale_modifier);
+  for (int r = 0; r < 3; ++r) {
+    const v4d r0 = Splat4d(p.rotation[3 * r]), r1 = Splat4d(p.rotation[3 * r + 1]),
+              r2 = Splat4d(p.rotation[3 * r + 2]);
+    a[r] = su * (r0 * rot[0] + r1 * rot[3] + r2 * rot[6]);
+    b[r] = sv * (r0 * rot[1] + r1 * rot[4] + r2 * rot[7]);
+    n[r] = r0 * rot[2] + r1 * rot[5] + r2 * rot[8];
+  }
+}
+
+// What the lanes hand to the one-lane finish (Finish, SetWindow).
+struct Surfel4 {
+  v4d pv[3], n[3], sign, tu[3], tv[3], tw[3], mean[2], ox, oy, rho_max, x_lo, x_hi, y_lo, y_hi;
+  v4f radius, opacity;
+};
+
+// Stores lane l into `o`; false when the splat is culled.
+INSTASCENE_INLINE bool StoreLane(const GaussianCloud& cloud, size_t g, const ProjectionParams& p,
+                                 const Surfel4& s, int l, ProjectedSplat* o) {
+  for (int r = 0; r < 3; ++r) o->normal_view[r] = static_cast<float>(s.sign[l] * s.n[r][l]);
+  o->mean_px[0] = static_cast<float>(s.mean[0][l]);
+  o->mean_px[1] = static_cast<float>(s.mean[1][l]);
+  o->opacity = s.opacity[l];
+  o->depth = static_cast<float>(s.pv[2][l]);
+  if (!Finish(cloud, g, p, s.radius[l], o)) return false;
+  o->origin_px[0] = static_cast<int32_t>(s.ox[l]);
+  o->origin_px[1] = static_cast<int32_t>(s.oy[l]);
+  for (int c = 0; c < 3; ++c) {
+    o->tu[c] = static_cast<float>(s.ox[l] * s.tw[c][l] - s.tu[c][l]);
+    o->tv[c] = static_cast<float>(s.oy[l] * s.tw[c][l] - s.tv[c][l]);
+    o->tw[c] = static_cast<float>(s.tw[c][l]);
+  }
+  if (!(s.rho_max[l] > 0.0)) {
+    NoWindow(o);
+    return true;
+  }
+  SetWindow(static_cast<float>(std::max(s.x_lo[l], -1e6)),
+            static_cast<float>(std::min(s.x_hi[l], 1e6)),
+            static_cast<float>(std::max(s.y_lo[l], -1e6)),
+            static_cast<float>(std::min(s.y_hi[l], 1e6)), p, o);
+  return true;
+}
+
 // Projects 4 surfels, lane l = Gaussian idx[l]; every lane computes exactly what a one-lane call
 // computes. Double precision for the transform and the bounding boxes keeps the stored planes
 // accurate for the float per-pixel loop; transcendentals of float inputs (scales, opacity) are
@@ -150,111 +239,51 @@ void ProjectSurfel4(const GaussianCloud& cloud, const size_t idx[4], const Proje
   using raster_internal::Sqrt4d;
   using raster_internal::ToDouble;
   using raster_internal::ToFloat;
-  auto gather = [&](const std::vector<float>& a, int stride, int k) {
-    return v4d{a[stride * idx[0] + k], a[stride * idx[1] + k], a[stride * idx[2] + k],
-               a[stride * idx[3] + k]};
-  };
-  auto gatherf = [&](const std::vector<float>& a, int stride, int k) {
-    return v4f{a[stride * idx[0] + k], a[stride * idx[1] + k], a[stride * idx[2] + k],
-               a[stride * idx[3] + k]};
-  };
-  const v4d pos[3] = {gather(cloud.positions, 3, 0), gather(cloud.positions, 3, 1),
-                      gather(cloud.positions, 3, 2)};
-  v4d pv[3];
-  for (int r = 0; r < 3; ++r) {
-    pv[r] = Splat4d(p.rotation[3 * r]) * pos[0] + Splat4d(p.rotation[3 * r + 1]) * pos[1] +
-            Splat4d(p.rotation[3 * r + 2]) * pos[2] + Splat4d(p.translation[r]);
-  }
-  v4l ok = pv[2] > Splat4d(p.near_plane);
-  v4d rot[9];
-  QuaternionToMatrix(gather(cloud.rotations, 4, 0), gather(cloud.rotations, 4, 1),
-                     gather(cloud.rotations, 4, 2), gather(cloud.rotations, 4, 3), rot);
-  const v4d one = Splat4d(1.0);
-  const v4d su = ToDouble(Exp4f(gatherf(cloud.log_scales, 2, 0))) * Splat4d(p.scale_modifier);
-  const v4d sv = ToDouble(Exp4f(gatherf(cloud.log_scales, 2, 1))) * Splat4d(p.scale_modifier);
-  v4d a[3], b[3], n[3];
-  for (int r = 0; r < 3; ++r) {
-    const v4d r0 = Splat4d(p.rotation[3 * r]), r1 = Splat4d(p.rotation[3 * r + 1]),
-              r2 = Splat4d(p.rotation[3 * r + 2]);
-    a[r] = su * (r0 * rot[0] + r1 * rot[3] + r2 * rot[6]);
-    b[r] = sv * (r0 * rot[1] + r1 * rot[4] + r2 * rot[7]);
-    n[r] = r0 * rot[2] + r1 * rot[5] + r2 * rot[8];
-  }
+  Surfel4 s;
+  v4d a[3], b[3];
+  SurfelAxes4(cloud, idx, p, s.pv, a, b, s.n);
+  v4l ok = s.pv[2] > Splat4d(p.near_plane);
   // Dual visibility: the normal always faces the camera.
-  const v4d cos = -(pv[0] * n[0] + pv[1] * n[1] + pv[2] * n[2]);
+  const v4d cos = -(s.pv[0] * s.n[0] + s.pv[1] * s.n[1] + s.pv[2] * s.n[2]);
   ok &= cos != Splat4d(0.0);
-  const v4d sign = cos > Splat4d(0.0) ? one : -one;
+  s.sign = cos > Splat4d(0.0) ? Splat4d(1.0) : -Splat4d(1.0);
   // M = K [a | b | pv]: rows Tu, Tv, Tw.
-  const v4d* cols[3] = {a, b, pv};
-  v4d tu[3], tv[3], tw[3];
+  const v4d* cols[3] = {a, b, s.pv};
   for (int c = 0; c < 3; ++c) {
-    tu[c] = Splat4d(p.fx) * cols[c][0] + Splat4d(p.cx) * cols[c][2];
-    tv[c] = Splat4d(p.fy) * cols[c][1] + Splat4d(p.cy) * cols[c][2];
-    tw[c] = cols[c][2];
+    s.tu[c] = Splat4d(p.fx) * cols[c][0] + Splat4d(p.cx) * cols[c][2];
+    s.tv[c] = Splat4d(p.fy) * cols[c][1] + Splat4d(p.cy) * cols[c][2];
+    s.tw[c] = cols[c][2];
   }
-  // Screen AABB of the ellipse of squared cutoff c2 (compute_aabb of the 2DGS rasterizer).
-  auto aabb = [&](v4d c2, v4d* d, v4d center[2], v4d extent[2]) {
-    *d = c2 * tw[0] * tw[0] + c2 * tw[1] * tw[1] - tw[2] * tw[2];
-    const v4d inv_d = one / *d;
-    const v4d f0 = c2 * inv_d, f2 = -inv_d;
-    center[0] = f0 * tu[0] * tw[0] + f0 * tu[1] * tw[1] + f2 * tu[2] * tw[2];
-    center[1] = f0 * tv[0] * tw[0] + f0 * tv[1] * tw[1] + f2 * tv[2] * tw[2];
-    const v4d sx = f0 * tu[0] * tu[0] + f0 * tu[1] * tu[1] + f2 * tu[2] * tu[2];
-    const v4d sy = f0 * tv[0] * tv[0] + f0 * tv[1] * tv[1] + f2 * tv[2] * tv[2];
-    extent[0] = Sqrt4d(Max4d(Splat4d(1e-4), center[0] * center[0] - sx));
-    extent[1] = Sqrt4d(Max4d(Splat4d(1e-4), center[1] * center[1] - sy));
-  };
-  v4d d, mean[2], extent[2];
-  aabb(Splat4d(kCutoff * kCutoff), &d, mean, extent);
+  v4d d, extent[2];
+  ScreenBox4(Splat4d(kCutoff * kCutoff), s.tu, s.tv, s.tw, &d, s.mean, extent);
   ok &= d != Splat4d(0.0);
-  const v4f radius =
-      ToFloat(Ceil4d(Max4d(Max4d(extent[0], extent[1]), Splat4d(kCutoff * kFilterSize))));
-  const v4f opacity = Splat4f(1.0f) / (Splat4f(1.0f) + Exp4f(-gatherf(cloud.opacity_logits, 1, 0)));
+  s.radius = ToFloat(Ceil4d(Max4d(Max4d(extent[0], extent[1]), Splat4d(kCutoff * kFilterSize))));
+  s.opacity =
+      Splat4f(1.0f) /
+      (Splat4f(1.0f) + Exp4f(-v4f{cloud.opacity_logits[idx[0]], cloud.opacity_logits[idx[1]],
+                                  cloud.opacity_logits[idx[2]], cloud.opacity_logits[idx[3]]}));
   // Integer origin pixel near the splat for the per-pixel planes.
-  const v4d ox = Min4d(Max4d(Floor4d(mean[0] + Splat4d(0.5)), Splat4d(-1e6)), Splat4d(1e6));
-  const v4d oy = Min4d(Max4d(Floor4d(mean[1] + Splat4d(0.5)), Splat4d(-1e6)), Splat4d(1e6));
+  s.ox = Min4d(Max4d(Floor4d(s.mean[0] + Splat4d(0.5)), Splat4d(-1e6)), Splat4d(1e6));
+  s.oy = Min4d(Max4d(Floor4d(s.mean[1] + Splat4d(0.5)), Splat4d(-1e6)), Splat4d(1e6));
   // Pixel window where alpha = opacity * max(G3d, G2d) >= 1/255 is possible:
   // rho <= rho_max = 2 ln(255 opacity); empty when the opacity alone is below 1/255.
-  const v4d rho_max = Splat4d(2.0) * ToDouble(Log4f(Splat4f(255.0f) * opacity));
-  const v4d r2d = Sqrt4d(Splat4d(0.5) * rho_max);  // low-pass disk: 2 |mu - x|^2 <= rho_max
+  s.rho_max = Splat4d(2.0) * ToDouble(Log4f(Splat4f(255.0f) * s.opacity));
+  const v4d r2d = Sqrt4d(Splat4d(0.5) * s.rho_max);  // low-pass disk: 2 |mu - x|^2 <= rho_max
   v4d d3, c3[2], e3[2];
-  aabb(rho_max, &d3, c3, e3);
+  ScreenBox4(s.rho_max, s.tu, s.tv, s.tw, &d3, c3, e3);
   // Bounded ellipse: its box is exact; otherwise (grazing, or crossing the camera plane) the
   // whole image.
   const v4l bounded = d3 < Splat4d(0.0);
-  const v4d x_lo = bounded ? Min4d(mean[0] - r2d, c3[0] - e3[0]) : Splat4d(0.0);
-  const v4d x_hi = bounded ? Max4d(mean[0] + r2d, c3[0] + e3[0]) : Splat4d(p.width);
-  const v4d y_lo = bounded ? Min4d(mean[1] - r2d, c3[1] - e3[1]) : Splat4d(0.0);
-  const v4d y_hi = bounded ? Max4d(mean[1] + r2d, c3[1] + e3[1]) : Splat4d(p.height);
-
+  s.x_lo = bounded ? Min4d(s.mean[0] - r2d, c3[0] - e3[0]) : Splat4d(0.0);
+  s.x_hi = bounded ? Max4d(s.mean[0] + r2d, c3[0] + e3[0]) : Splat4d(p.width);
+  s.y_lo = bounded ? Min4d(s.mean[1] - r2d, c3[1] - e3[1]) : Splat4d(0.0);
+  s.y_hi = bounded ? Max4d(s.mean[1] + r2d, c3[1] + e3[1]) : Splat4d(p.height);
   for (int l = 0; l < 4; ++l) {
-    ok_out[l] = false;
-    if (!ok[l]) continue;
-    ProjectedSplat* o = out[l];
-    for (int r = 0; r < 3; ++r) o->normal_view[r] = static_cast<float>(sign[l] * n[r][l]);
-    o->mean_px[0] = static_cast<float>(mean[0][l]);
-    o->mean_px[1] = static_cast<float>(mean[1][l]);
-    o->opacity = opacity[l];
-    o->depth = static_cast<float>(pv[2][l]);
-    if (!Finish(cloud, idx[l], p, radius[l], o)) continue;
-    ok_out[l] = true;
-    o->origin_px[0] = static_cast<int32_t>(ox[l]);
-    o->origin_px[1] = static_cast<int32_t>(oy[l]);
-    for (int c = 0; c < 3; ++c) {
-      o->tu[c] = static_cast<float>(ox[l] * tw[c][l] - tu[c][l]);
-      o->tv[c] = static_cast<float>(oy[l] * tw[c][l] - tv[c][l]);
-      o->tw[c] = static_cast<float>(tw[c][l]);
-    }
-    if (!(rho_max[l] > 0.0)) {
-      NoWindow(o);
-      continue;
-    }
-    SetWindow(static_cast<float>(std::max(x_lo[l], -1e6)),
-              static_cast<float>(std::min(x_hi[l], 1e6)),
-              static_cast<float>(std::max(y_lo[l], -1e6)),
-              static_cast<float>(std::min(y_hi[l], 1e6)), p, o);
+    ok_out[l] = ok[l] && StoreLane(cloud, idx[l], p, s, l, out[l]);
   }
 }
+
+#undef INSTASCENE_INLINE
 
 }  // namespace
 
