@@ -52,17 +52,94 @@ void PrintObject(const client::ObjectInfo& o) {
                 a.media_type.c_str());
 }
 
+struct ObjectArgs {
+  std::string server = kDefaultServer, store, scene, view, pixel, point, ray, out;
+  ConnectionFlags connection;
+  int64_t id = -1;
+  double max_distance = 0;
+  bool json = false;
+};
+
+// The one selector the flags give: --id, --point, --view with --pixel, or --ray.
+absl::StatusOr<client::ObjectSelector> SelectorOf(const ObjectArgs& a) {
+  const int given = (a.id >= 0) + !a.point.empty() + !a.pixel.empty() + !a.ray.empty();
+  if (given != 1)
+    return absl::InvalidArgumentError(
+        "give exactly one of --id, --point, --view with --pixel, or --ray");
+  if (a.pixel.empty() != a.view.empty())
+    return absl::InvalidArgumentError("--pixel and --view go together");
+  if (a.id >= 0) {
+    if (a.id > 0xffffffffLL) return absl::InvalidArgumentError("--id must be below 2^32");
+    return client::ObjectSelector::Id(static_cast<uint32_t>(a.id));
+  }
+  if (!a.point.empty()) {
+    ASSIGN_OR_RETURN(auto v, ParseNumbers(a.point, 3, "--point", "X,Y,Z"));
+    return client::ObjectSelector::Point({v[0], v[1], v[2]}, a.max_distance);
+  }
+  if (!a.pixel.empty()) {
+    ASSIGN_OR_RETURN(auto v, ParseNumbers(a.pixel, 2, "--pixel", "X,Y"));
+    return client::ObjectSelector::Click(a.view, static_cast<int>(v[0]), static_cast<int>(v[1]));
+  }
+  ASSIGN_OR_RETURN(auto v, ParseNumbers(a.ray, 6, "--ray", "OX,OY,OZ,DX,DY,DZ"));
+  return client::ObjectSelector::Ray({v[0], v[1], v[2]}, {v[3], v[4], v[5]});
+}
+
+absl::Status RunObject(const ObjectArgs& a) {
+  ASSIGN_OR_RETURN(const client::ObjectSelector selector, SelectorOf(a));
+  ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
+                   ConnectClient(a.connection, a.server, a.store));
+  ASSIGN_OR_RETURN(client::ObjectInfo object, c->GetObject(a.scene, selector));
+  PrintObject(object);
+  nlohmann::json out = ObjectJson(object);
+  if (!a.out.empty()) {
+    ASSIGN_OR_RETURN(client::Transfer t, c->DownloadObject(object, a.out));
+    std::printf("downloaded %lld files (%.2f MB, digests verified) into %s\n",
+                static_cast<long long>(t.files), t.bytes / 1e6, a.out.c_str());
+    out["downloaded"] = {{"files", t.files}, {"bytes", t.bytes}, {"out", a.out}};
+  }
+  if (a.json) PrintJsonLine(out.dump());
+  return absl::OkStatus();
+}
+
+struct ListArgs {
+  std::string server = kDefaultServer, scene;
+  ConnectionFlags connection;
+  bool json = false;
+};
+
+absl::Status RunListObjects(const ListArgs& a) {
+  ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectClient(a.connection, a.server));
+  ASSIGN_OR_RETURN(std::vector<client::ObjectInfo> objects, c->ListObjects(a.scene));
+  std::printf("%-5s %-9s %-26s %-30s %s\n", "ID", "SOURCE", "SIZE", "COMPLETION", "ARTEFACTS");
+  nlohmann::json all = nlohmann::json::array();
+  for (const client::ObjectInfo& o : objects) {
+    const std::string size = absl::StrFormat("%.3f x %.3f x %.3f %s", o.extent.x, o.extent.y,
+                                             o.extent.z, o.units == "metres" ? "m" : "u");
+    std::printf("%-5u %-9s %-26s %-30s %zu\n", o.id, o.source.c_str(), size.c_str(),
+                o.completion.substr(0, 30).c_str(), o.artefacts.size());
+    all.push_back(ObjectJson(o));
+  }
+  if (a.json) PrintJsonLine(nlohmann::json({{"objects", all}}).dump());
+  return absl::OkStatus();
+}
+
+void AddListObjectsCommand(CLI::App& app, Action* action) {
+  auto list = std::make_shared<ListArgs>();
+  CLI::App* ls = app.add_subcommand(
+      "objects", "The objects of a scene on a server: id, source, size, completion, artefacts");
+  ls->add_option("--scene", list->scene, "Scene name")->required();
+  ls->add_option("--server", list->server,
+                 "The Objects service's address (`instascene serve`, or instascene-objects)")
+      ->capture_default_str();
+  AddConnectionFlags(ls, &list->connection);
+  ls->add_flag("--json", list->json, "Print {\"objects\": [...]} as the last stdout line");
+  ls->callback([list, action] { *action = [list] { return RunListObjects(*list); }; });
+}
+
 }  // namespace
 
 void AddObjectCommands(CLI::App& app, Action* action) {
-  struct Args {
-    std::string server = kDefaultServer, store, scene, view, pixel, point, ray, out;
-    ConnectionFlags connection;
-    int64_t id = -1;
-    double max_distance = 0;
-    bool json = false;
-  };
-  auto args = std::make_shared<Args>();
+  auto args = std::make_shared<ObjectArgs>();
   CLI::App* cmd = app.add_subcommand(
       "object",
       "One object of a scene on a server, by --id, --point, --view + --pixel or --ray: its pose, "
@@ -82,78 +159,8 @@ void AddObjectCommands(CLI::App& app, Action* action) {
   cmd->add_option("--store", args->store, "Store address (default: --server)");
   AddConnectionFlags(cmd, &args->connection);
   cmd->add_flag("--json", args->json, "Print the object as one JSON line");
-  cmd->callback([args, action] {
-    *action = [args]() -> absl::Status {
-      const int given =
-          (args->id >= 0) + !args->point.empty() + !args->pixel.empty() + !args->ray.empty();
-      if (given != 1)
-        return absl::InvalidArgumentError(
-            "give exactly one of --id, --point, --view with --pixel, or --ray");
-      if (args->pixel.empty() != args->view.empty())
-        return absl::InvalidArgumentError("--pixel and --view go together");
-      client::ObjectSelector selector;
-      if (args->id >= 0) {
-        if (args->id > 0xffffffffLL) return absl::InvalidArgumentError("--id must be below 2^32");
-        selector = client::ObjectSelector::Id(static_cast<uint32_t>(args->id));
-      } else if (!args->point.empty()) {
-        ASSIGN_OR_RETURN(auto v, ParseNumbers(args->point, 3, "--point", "X,Y,Z"));
-        selector = client::ObjectSelector::Point({v[0], v[1], v[2]}, args->max_distance);
-      } else if (!args->pixel.empty()) {
-        ASSIGN_OR_RETURN(auto v, ParseNumbers(args->pixel, 2, "--pixel", "X,Y"));
-        selector = client::ObjectSelector::Click(args->view, static_cast<int>(v[0]),
-                                                 static_cast<int>(v[1]));
-      } else {
-        ASSIGN_OR_RETURN(auto v, ParseNumbers(args->ray, 6, "--ray", "OX,OY,OZ,DX,DY,DZ"));
-        selector = client::ObjectSelector::Ray({v[0], v[1], v[2]}, {v[3], v[4], v[5]});
-      }
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
-                       ConnectClient(args->connection, args->server, args->store));
-      ASSIGN_OR_RETURN(client::ObjectInfo object, c->GetObject(args->scene, selector));
-      PrintObject(object);
-      nlohmann::json out = ObjectJson(object);
-      if (!args->out.empty()) {
-        ASSIGN_OR_RETURN(client::Transfer t, c->DownloadObject(object, args->out));
-        std::printf("downloaded %lld files (%.2f MB, digests verified) into %s\n",
-                    static_cast<long long>(t.files), t.bytes / 1e6, args->out.c_str());
-        out["downloaded"] = {{"files", t.files}, {"bytes", t.bytes}, {"out", args->out}};
-      }
-      if (args->json) PrintJsonLine(out.dump());
-      return absl::OkStatus();
-    };
-  });
-
-  struct ListArgs {
-    std::string server = kDefaultServer, scene;
-    ConnectionFlags connection;
-    bool json = false;
-  };
-  auto list = std::make_shared<ListArgs>();
-  CLI::App* ls = app.add_subcommand(
-      "objects", "The objects of a scene on a server: id, source, size, completion, artefacts");
-  ls->add_option("--scene", list->scene, "Scene name")->required();
-  ls->add_option("--server", list->server,
-                 "The Objects service's address (`instascene serve`, or instascene-objects)")
-      ->capture_default_str();
-  AddConnectionFlags(ls, &list->connection);
-  ls->add_flag("--json", list->json, "Print {\"objects\": [...]} as the last stdout line");
-  ls->callback([list, action] {
-    *action = [list]() -> absl::Status {
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
-                       ConnectClient(list->connection, list->server));
-      ASSIGN_OR_RETURN(std::vector<client::ObjectInfo> objects, c->ListObjects(list->scene));
-      std::printf("%-5s %-9s %-26s %-30s %s\n", "ID", "SOURCE", "SIZE", "COMPLETION", "ARTEFACTS");
-      nlohmann::json all = nlohmann::json::array();
-      for (const client::ObjectInfo& o : objects) {
-        const std::string size = absl::StrFormat("%.3f x %.3f x %.3f %s", o.extent.x, o.extent.y,
-                                                 o.extent.z, o.units == "metres" ? "m" : "u");
-        std::printf("%-5u %-9s %-26s %-30s %zu\n", o.id, o.source.c_str(), size.c_str(),
-                    o.completion.substr(0, 30).c_str(), o.artefacts.size());
-        all.push_back(ObjectJson(o));
-      }
-      if (list->json) PrintJsonLine(nlohmann::json({{"objects", all}}).dump());
-      return absl::OkStatus();
-    };
-  });
+  cmd->callback([args, action] { *action = [args] { return RunObject(*args); }; });
+  AddListObjectsCommand(app, action);
 }
 
 }  // namespace instascene::cli

@@ -47,17 +47,100 @@ absl::StatusOr<std::vector<float>> Visualize(const RenderResult& r, const std::s
       absl::StrCat("unknown --mode '", mode, "' (color, depth, normal, alpha, labels, features)"));
 }
 
+namespace {
+
+struct RenderArgs {
+  std::string scene, view = "0", ply, out, mode = "color", up = "-y", feature_prefix = "segfeat_",
+                     result;
+  std::string orbit = "0,20";
+  int width = 800, height = 600, threads = 0;
+  double fov = 50.0, distance = 2.2;
+  bool surfels = false, json = false;
+  std::vector<float> background = {0, 0, 0};
+};
+
+// A bare splat file's orbit camera around its robust centre.
+absl::StatusOr<PinholeCamera> OrbitCameraFor(const GaussianCloud& cloud, const RenderArgs& a) {
+  std::vector<std::string> parts = absl::StrSplit(a.orbit, ',');
+  double az = 0, el = 0;
+  if (parts.size() != 2 || !absl::SimpleAtod(parts[0], &az) || !absl::SimpleAtod(parts[1], &el)) {
+    return absl::InvalidArgumentError("--orbit must be AZIMUTH,ELEVATION in degrees");
+  }
+  ASSIGN_OR_RETURN(Eigen::Vector3d up, ParseAxis(a.up));
+  const Eigen::AlignedBox3f box = RobustBounds(cloud);
+  const Eigen::Vector3d center = box.center().cast<double>();
+  const double radius = std::max(0.5 * static_cast<double>(box.diagonal().norm()), 1e-3);
+  return OrbitCamera(center, up, a.distance * radius, az, el, a.width, a.height, a.fov);
+}
+
+// The cloud and the camera: a scene's view, or a splat file from an orbit camera.
+absl::Status LoadRenderInput(const RenderArgs& a, GaussianCloud* cloud, PinholeCamera* camera) {
+  if (a.scene.empty() == a.ply.empty())
+    return absl::InvalidArgumentError("give exactly one of --scene or --ply");
+  if (!a.scene.empty()) {
+    ASSIGN_OR_RETURN(Scene scene, ReadScene(a.scene));
+    ASSIGN_OR_RETURN(int view, ResolveView(scene, a.view));
+    ASSIGN_OR_RETURN(*cloud, ReadSceneGaussians(scene));
+    *camera = scene.views[view].camera;
+  } else {
+    ASSIGN_OR_RETURN(*cloud, ReadSplatFile(a.ply));
+    if (cloud->size() == 0)
+      return absl::InvalidArgumentError(absl::StrCat(a.ply, ": no Gaussians"));
+    ASSIGN_OR_RETURN(*camera, OrbitCameraFor(*cloud, a));
+  }
+  if (a.surfels) *cloud = ToSurfels(*cloud);
+  return absl::OkStatus();
+}
+
+absl::Status RunRender(const RenderArgs& a) {
+  GaussianCloud cloud;
+  PinholeCamera camera;
+  RETURN_IF_ERROR(LoadRenderInput(a, &cloud, &camera));
+  RenderOptions options;
+  options.depth = a.mode == "depth";
+  options.normal = a.mode == "normal";
+  for (int c = 0; c < 3; ++c) options.background[c] = a.background[c];
+  options.num_threads = a.threads;
+  std::vector<float> features;
+  int dim = 0;
+  if (a.mode == "features") {
+    ASSIGN_OR_RETURN(features, cloud.GatherExtraGroup(a.feature_prefix, &dim));
+    if (dim == 0)
+      return absl::InvalidArgumentError(
+          absl::StrCat("the cloud has no '", a.feature_prefix, "*' channels"));
+    options.features = features.data();
+    options.feature_dim = dim;
+  }
+  std::vector<float> rgb;
+  RenderResult r;
+  if (a.mode == "labels") {
+    if (a.result.empty()) return absl::InvalidArgumentError("--mode labels needs --result DIR");
+    ASSIGN_OR_RETURN(SegmentationResult result, ReadResult(a.result, cloud.size()));
+    options.trace.enabled = true;
+    ASSIGN_OR_RETURN(r, Render(cloud, camera, options));
+    rgb = LabelsToRgb(LabelMapFromTrace(r, result.labels));
+  } else {
+    ASSIGN_OR_RETURN(r, Render(cloud, camera, options));
+    ASSIGN_OR_RETURN(rgb, Visualize(r, a.mode, dim));
+  }
+  RETURN_IF_ERROR(WriteImage(a.out, Image{r.width, r.height, 3, std::move(rgb)}));
+  std::fprintf(stderr, "render: %s (%dx%d, %zu Gaussians, %s) in %.1f ms\n", a.out.c_str(), r.width,
+               r.height, cloud.size(), a.mode.c_str(), r.stats.total_ms);
+  if (a.json) {
+    PrintJsonLine(nlohmann::json({{"out", a.out},
+                                  {"width", r.width},
+                                  {"height", r.height},
+                                  {"gaussians", cloud.size()},
+                                  {"ms", r.stats.total_ms}})
+                      .dump());
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 void AddRenderCommand(CLI::App& app, Action* action) {
-  struct Args {
-    std::string scene, view = "0", ply, out, mode = "color", up = "-y", feature_prefix = "segfeat_",
-                       result;
-    std::string orbit = "0,20";
-    int width = 800, height = 600, threads = 0;
-    double fov = 50.0, distance = 2.2;
-    bool surfels = false, json = false;
-    std::vector<float> background = {0, 0, 0};
-  };
-  auto args = std::make_shared<Args>();
+  auto args = std::make_shared<RenderArgs>();
   CLI::App* cmd = app.add_subcommand(
       "render", "Render a scene view, or a bare .ply from an orbit camera, to PNG");
   auto* scene_opt = cmd->add_option("--scene", args->scene, "Scene directory");
@@ -87,129 +170,69 @@ void AddRenderCommand(CLI::App& app, Action* action) {
                 "Render a 3DGS cloud as 2DGS surfels (drop the smallest axis)");
   cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");
   cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
-  cmd->callback([args, action] {
-    *action = [args]() -> absl::Status {
-      if (args->scene.empty() == args->ply.empty())
-        return absl::InvalidArgumentError("give exactly one of --scene or --ply");
-      GaussianCloud cloud;
-      PinholeCamera camera;
-      if (!args->scene.empty()) {
-        ASSIGN_OR_RETURN(Scene scene, ReadScene(args->scene));
-        ASSIGN_OR_RETURN(int view, ResolveView(scene, args->view));
-        ASSIGN_OR_RETURN(cloud, ReadSceneGaussians(scene));
-        camera = scene.views[view].camera;
-      } else {
-        ASSIGN_OR_RETURN(cloud, ReadSplatFile(args->ply));
-        if (cloud.size() == 0)
-          return absl::InvalidArgumentError(absl::StrCat(args->ply, ": no Gaussians"));
-        std::vector<std::string> parts = absl::StrSplit(args->orbit, ',');
-        double az = 0, el = 0;
-        if (parts.size() != 2 || !absl::SimpleAtod(parts[0], &az) ||
-            !absl::SimpleAtod(parts[1], &el)) {
-          return absl::InvalidArgumentError("--orbit must be AZIMUTH,ELEVATION in degrees");
-        }
-        ASSIGN_OR_RETURN(Eigen::Vector3d up, ParseAxis(args->up));
-        const Eigen::AlignedBox3f box = RobustBounds(cloud);
-        const Eigen::Vector3d center = box.center().cast<double>();
-        const double radius = std::max(0.5 * static_cast<double>(box.diagonal().norm()), 1e-3);
-        camera = OrbitCamera(center, up, args->distance * radius, az, el, args->width, args->height,
-                             args->fov);
-      }
-      if (args->surfels) cloud = ToSurfels(cloud);
-      RenderOptions options;
-      options.depth = args->mode == "depth";
-      options.normal = args->mode == "normal";
-      for (int c = 0; c < 3; ++c) options.background[c] = args->background[c];
-      options.num_threads = args->threads;
-      std::vector<float> features;
-      int dim = 0;
-      if (args->mode == "features") {
-        ASSIGN_OR_RETURN(features, cloud.GatherExtraGroup(args->feature_prefix, &dim));
-        if (dim == 0)
-          return absl::InvalidArgumentError(
-              absl::StrCat("the cloud has no '", args->feature_prefix, "*' channels"));
-        options.features = features.data();
-        options.feature_dim = dim;
-      }
-      std::vector<float> rgb;
-      RenderResult r;
-      if (args->mode == "labels") {
-        if (args->result.empty())
-          return absl::InvalidArgumentError("--mode labels needs --result DIR");
-        ASSIGN_OR_RETURN(SegmentationResult result, ReadResult(args->result, cloud.size()));
-        options.trace.enabled = true;
-        ASSIGN_OR_RETURN(r, Render(cloud, camera, options));
-        rgb = LabelsToRgb(LabelMapFromTrace(r, result.labels));
-      } else {
-        ASSIGN_OR_RETURN(r, Render(cloud, camera, options));
-        ASSIGN_OR_RETURN(rgb, Visualize(r, args->mode, dim));
-      }
-      RETURN_IF_ERROR(WriteImage(args->out, Image{r.width, r.height, 3, std::move(rgb)}));
-      std::fprintf(stderr, "render: %s (%dx%d, %zu Gaussians, %s) in %.1f ms\n", args->out.c_str(),
-                   r.width, r.height, cloud.size(), args->mode.c_str(), r.stats.total_ms);
-      if (args->json) {
-        PrintJsonLine(nlohmann::json({{"out", args->out},
-                                      {"width", r.width},
-                                      {"height", r.height},
-                                      {"gaussians", cloud.size()},
-                                      {"ms", r.stats.total_ms}})
-                          .dump());
-      }
-      return absl::OkStatus();
-    };
-  });
+  cmd->callback([args, action] { *action = [args] { return RunRender(*args); }; });
 }
 
+namespace {
+
+struct InfoArgs {
+  std::string scene, ply;
+  bool json = false;
+};
+
+// The scene's views, images, masks, size and ground truth; the cloud's size, SH and extras.
+absl::StatusOr<nlohmann::json> Describe(const InfoArgs& a) {
+  if (a.scene.empty() == a.ply.empty())
+    return absl::InvalidArgumentError("give exactly one of --scene or --ply");
+  nlohmann::json j;
+  GaussianCloud cloud;
+  if (!a.scene.empty()) {
+    ASSIGN_OR_RETURN(Scene scene, ReadScene(a.scene));
+    ASSIGN_OR_RETURN(cloud, ReadSceneGaussians(scene));
+    int masks = 0, images = 0;
+    for (const SceneView& v : scene.views) {
+      masks += !v.mask.empty();
+      images += !v.image.empty();
+    }
+    j["scene"] = a.scene;
+    j["views"] = scene.views.size();
+    j["images"] = images;
+    j["masks"] = masks;
+    if (!scene.views.empty()) {
+      j["width"] = scene.views[0].camera.width;
+      j["height"] = scene.views[0].camera.height;
+    }
+    j["ground_truth"] = scene.metadata.contains("gt");
+  } else {
+    ASSIGN_OR_RETURN(cloud, ReadSplatFile(a.ply));
+    j["ply"] = a.ply;
+  }
+  j["gaussians"] = cloud.size();
+  j["scales"] = cloud.num_scales;
+  j["sh_degree"] = cloud.sh_degree;
+  std::vector<std::string> extras;
+  for (const ExtraChannel& e : cloud.extras) extras.push_back(e.name);
+  j["extra_channels"] = extras;
+  Eigen::AlignedBox3f box;
+  for (size_t i = 0; i < cloud.size(); ++i) box.extend(Eigen::Vector3f(&cloud.positions[3 * i]));
+  if (!box.isEmpty()) {
+    j["bounds_min"] = {box.min().x(), box.min().y(), box.min().z()};
+    j["bounds_max"] = {box.max().x(), box.max().y(), box.max().z()};
+  }
+  return j;
+}
+
+}  // namespace
+
 void AddInfoCommand(CLI::App& app, Action* action) {
-  struct Args {
-    std::string scene, ply;
-    bool json = false;
-  };
-  auto args = std::make_shared<Args>();
+  auto args = std::make_shared<InfoArgs>();
   CLI::App* cmd = app.add_subcommand("info", "Describe a scene directory or a .ply");
   cmd->add_option("--scene", args->scene, "Scene directory");
   cmd->add_option("--ply", args->ply, "A splat file: Inria/2DGS or compressed .ply, .splat, .spz");
   cmd->add_flag("--json", args->json, "Print the description as one JSON line");
   cmd->callback([args, action] {
     *action = [args]() -> absl::Status {
-      if (args->scene.empty() == args->ply.empty())
-        return absl::InvalidArgumentError("give exactly one of --scene or --ply");
-      nlohmann::json j;
-      GaussianCloud cloud;
-      if (!args->scene.empty()) {
-        ASSIGN_OR_RETURN(Scene scene, ReadScene(args->scene));
-        ASSIGN_OR_RETURN(cloud, ReadSceneGaussians(scene));
-        int masks = 0, images = 0;
-        for (const SceneView& v : scene.views) {
-          masks += !v.mask.empty();
-          images += !v.image.empty();
-        }
-        j["scene"] = args->scene;
-        j["views"] = scene.views.size();
-        j["images"] = images;
-        j["masks"] = masks;
-        if (!scene.views.empty()) {
-          j["width"] = scene.views[0].camera.width;
-          j["height"] = scene.views[0].camera.height;
-        }
-        j["ground_truth"] = scene.metadata.contains("gt");
-      } else {
-        ASSIGN_OR_RETURN(cloud, ReadSplatFile(args->ply));
-        j["ply"] = args->ply;
-      }
-      j["gaussians"] = cloud.size();
-      j["scales"] = cloud.num_scales;
-      j["sh_degree"] = cloud.sh_degree;
-      std::vector<std::string> extras;
-      for (const ExtraChannel& e : cloud.extras) extras.push_back(e.name);
-      j["extra_channels"] = extras;
-      Eigen::AlignedBox3f box;
-      for (size_t i = 0; i < cloud.size(); ++i)
-        box.extend(Eigen::Vector3f(&cloud.positions[3 * i]));
-      if (!box.isEmpty()) {
-        j["bounds_min"] = {box.min().x(), box.min().y(), box.min().z()};
-        j["bounds_max"] = {box.max().x(), box.max().y(), box.max().z()};
-      }
+      ASSIGN_OR_RETURN(const nlohmann::json j, Describe(*args));
       if (args->json) {
         PrintJsonLine(j.dump());
       } else {

@@ -20,16 +20,86 @@
 
 namespace instascene::cli {
 
+namespace {
+
+struct SynthArgs {
+  std::string out, preset = "small", mask_noise = "medium", unseen = "keep";
+  std::vector<std::string> from_splats;
+  double object_height = 0.5, asymmetric = 0.0, gap = 0.03;
+  int64_t seed = -1, objects = -1, views = -1, width = -1, height = -1, gaussians = -1;
+  int threads = 0, table_detail = 3;
+  bool json = false;
+};
+
+// The preset with the flags that override it.
+absl::StatusOr<ClutterOptions> SynthOptions(const SynthArgs& a) {
+  ASSIGN_OR_RETURN(ClutterOptions options, ClutterPreset(a.preset));
+  if (a.seed >= 0) options.seed = static_cast<uint64_t>(a.seed);
+  if (a.objects >= 0) options.objects = static_cast<int>(a.objects);
+  if (a.views >= 0) options.views = static_cast<int>(a.views);
+  if (a.width >= 0) options.width = static_cast<int>(a.width);
+  if (a.height >= 0) options.height = static_cast<int>(a.height);
+  if (a.gaussians >= 0) options.gaussians = static_cast<size_t>(a.gaussians);
+  options.asymmetric_share = static_cast<float>(a.asymmetric);
+  options.table_detail = a.table_detail;
+  return options;
+}
+
+// Real captures composed into one scene (--from-splats).
+absl::StatusOr<ClutterScene> ComposeCaptures(const SynthArgs& a, const ClutterOptions& options) {
+  std::vector<GaussianCloud> clouds;
+  std::vector<std::string> names;
+  for (const std::string& path : a.from_splats) {
+    ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSplatFile(path));
+    clouds.push_back(std::move(cloud));
+    names.push_back(std::filesystem::path(path).stem().string());
+  }
+  CompositeOptions composite;
+  composite.seed = options.seed;
+  composite.views = options.views;
+  composite.width = options.width;
+  composite.height = options.height;
+  composite.object_height = static_cast<float>(a.object_height);
+  composite.gap = static_cast<float>(a.gap);
+  return ComposeSplats(clouds, names, composite);
+}
+
+absl::Status RunSynth(const SynthArgs& a) {
+  ASSIGN_OR_RETURN(ClutterOptions options, SynthOptions(a));
+  Stopwatch watch;
+  ClutterScene scene;
+  if (a.from_splats.empty()) {
+    ASSIGN_OR_RETURN(scene, GenerateClutterScene(options));
+  } else {
+    ASSIGN_OR_RETURN(scene, ComposeCaptures(a, options));
+    options.objects = static_cast<int>(a.from_splats.size());
+  }
+  if (a.unseen == "drop") RETURN_IF_ERROR(DropUnseenSurfels(&scene, 0.01f, a.threads));
+  ProgressBar bar("synth: rendering views");
+  SceneWriteOptions write;
+  write.num_threads = a.threads;
+  write.mask_noise = a.mask_noise;
+  write.seed = options.seed;
+  write.progress = [&bar](int done, int total) { bar.Update(done, total); };
+  RETURN_IF_ERROR(WriteClutterScene(scene, a.out, write));
+  std::fprintf(stderr, "synth: wrote %s: %zu Gaussians, %d objects, %zu views of %dx%d in %.1f s\n",
+               a.out.c_str(), scene.cloud.size(), options.objects, scene.cameras.size(),
+               options.width, options.height, watch.ElapsedSeconds());
+  if (a.json) {
+    nlohmann::json j = {{"scene", a.out},
+                        {"gaussians", scene.cloud.size()},
+                        {"objects", options.objects},
+                        {"views", scene.cameras.size()},
+                        {"seconds", watch.ElapsedSeconds()}};
+    PrintJsonLine(j.dump());
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 void AddSynthCommand(CLI::App& app, Action* action) {
-  struct Args {
-    std::string out, preset = "small", mask_noise = "medium", unseen = "keep";
-    std::vector<std::string> from_splats;
-    double object_height = 0.5, asymmetric = 0.0, gap = 0.03;
-    int64_t seed = -1, objects = -1, views = -1, width = -1, height = -1, gaussians = -1;
-    int threads = 0, table_detail = 3;
-    bool json = false;
-  };
-  auto args = std::make_shared<Args>();
+  auto args = std::make_shared<SynthArgs>();
   CLI::App* cmd =
       app.add_subcommand("synth", "Generate a synthetic cluttered scene with exact ground truth");
   cmd->add_option("--out", args->out, "Output scene directory")->required();
@@ -72,62 +142,7 @@ void AddSynthCommand(CLI::App& app, Action* action) {
       ->check(CLI::IsMember({"keep", "drop"}));
   cmd->add_option("--threads", args->threads, "Rendering threads (0 = all cores)");
   cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
-  cmd->callback([args, action] {
-    *action = [args]() -> absl::Status {
-      ASSIGN_OR_RETURN(ClutterOptions options, ClutterPreset(args->preset));
-      if (args->seed >= 0) options.seed = static_cast<uint64_t>(args->seed);
-      if (args->objects >= 0) options.objects = static_cast<int>(args->objects);
-      if (args->views >= 0) options.views = static_cast<int>(args->views);
-      if (args->width >= 0) options.width = static_cast<int>(args->width);
-      if (args->height >= 0) options.height = static_cast<int>(args->height);
-      if (args->gaussians >= 0) options.gaussians = static_cast<size_t>(args->gaussians);
-      options.asymmetric_share = static_cast<float>(args->asymmetric);
-      options.table_detail = args->table_detail;
-      Stopwatch watch;
-      ClutterScene scene;
-      if (args->from_splats.empty()) {
-        ASSIGN_OR_RETURN(scene, GenerateClutterScene(options));
-      } else {
-        std::vector<GaussianCloud> clouds;
-        std::vector<std::string> names;
-        for (const std::string& path : args->from_splats) {
-          ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSplatFile(path));
-          clouds.push_back(std::move(cloud));
-          names.push_back(std::filesystem::path(path).stem().string());
-        }
-        CompositeOptions composite;
-        composite.seed = options.seed;
-        composite.views = options.views;
-        composite.width = options.width;
-        composite.height = options.height;
-        composite.object_height = static_cast<float>(args->object_height);
-        composite.gap = static_cast<float>(args->gap);
-        ASSIGN_OR_RETURN(scene, ComposeSplats(clouds, names, composite));
-        options.objects = static_cast<int>(clouds.size());
-      }
-      if (args->unseen == "drop") RETURN_IF_ERROR(DropUnseenSurfels(&scene, 0.01f, args->threads));
-      ProgressBar bar("synth: rendering views");
-      SceneWriteOptions write;
-      write.num_threads = args->threads;
-      write.mask_noise = args->mask_noise;
-      write.seed = options.seed;
-      write.progress = [&bar](int done, int total) { bar.Update(done, total); };
-      RETURN_IF_ERROR(WriteClutterScene(scene, args->out, write));
-      std::fprintf(stderr,
-                   "synth: wrote %s: %zu Gaussians, %d objects, %zu views of %dx%d in %.1f s\n",
-                   args->out.c_str(), scene.cloud.size(), options.objects, scene.cameras.size(),
-                   options.width, options.height, watch.ElapsedSeconds());
-      if (args->json) {
-        nlohmann::json j = {{"scene", args->out},
-                            {"gaussians", scene.cloud.size()},
-                            {"objects", options.objects},
-                            {"views", scene.cameras.size()},
-                            {"seconds", watch.ElapsedSeconds()}};
-        PrintJsonLine(j.dump());
-      }
-      return absl::OkStatus();
-    };
-  });
+  cmd->callback([args, action] { *action = [args] { return RunSynth(*args); }; });
 }
 
 }  // namespace instascene::cli
