@@ -54,15 +54,76 @@ absl::Status EvaluateCompletionCommand(const std::string& scene, const std::stri
   return absl::OkStatus();
 }
 
+absl::Status EvaluateExportCommand(const std::string& scene, const std::string& export_dir,
+                                   bool json) {
+  ASSIGN_OR_RETURN(std::vector<objects::ExportObjectEval> evals,
+                   objects::EvaluateExport(scene, export_dir));
+  std::printf("%-6s %-16s %-26s %-26s %8s %10s\n", "object", "ground truth", "extent (m)",
+              "gt extent (m)", "error", "chamfer m");
+  for (const objects::ExportObjectEval& e : evals)
+    std::printf("%-6u %-16s %7.3f %7.3f %7.3f    %7.3f %7.3f %7.3f    %7.1f%% %10.4f\n", e.id,
+                e.gt_name.c_str(), e.extent.x(), e.extent.y(), e.extent.z(), e.gt_extent.x(),
+                e.gt_extent.y(), e.gt_extent.z(), 100 * e.extent_error, e.chamfer);
+  if (json) std::printf("%s\n", objects::ExportEvalJson(evals).dump().c_str());
+  return absl::OkStatus();
+}
+
+struct EvalArgs {
+  std::string scene, result, completion, export_dir;
+  ClickEvalOptions options;
+  bool labels_only = false, json = false;
+};
+
+absl::Status EvaluateClicksCommand(const EvalArgs& a) {
+  Stopwatch watch;
+  ClickEvalOptions options = a.options;
+  options.use_features = !a.labels_only;
+  ASSIGN_OR_RETURN(ClickEvaluation eval, EvaluateResultDirectory(a.scene, a.result, options));
+  std::printf("%-20s %6s %5s %8s\n", "object", "ref", "views", "IoU");
+  nlohmann::json objects = nlohmann::json::array();
+  for (const ObjectClickScore& o : eval.objects) {
+    std::printf("%-20s %6d %5d %8.4f\n", o.name.c_str(), o.reference_view, o.views, o.miou);
+    objects.push_back({{"id", o.id},
+                       {"name", o.name},
+                       {"reference_view", o.reference_view},
+                       {"views", o.views},
+                       {"miou", o.miou}});
+  }
+  std::printf(
+      "mIoU %.4f (%s, %zu objects); 3D: precision %.3f recall %.3f mean best IoU %.3f ARI %.3f "
+      "(%.1f s)\n",
+      eval.miou, eval.used_features ? "features" : "labels", eval.objects.size(),
+      eval.instances.precision, eval.instances.recall, eval.instances.mean_best_iou,
+      eval.adjusted_rand_index, watch.ElapsedSeconds());
+  if (a.json) {
+    PrintJsonLine(nlohmann::json({{"miou", eval.miou},
+                                  {"objects", objects},
+                                  {"mode", eval.used_features ? "features" : "labels"},
+                                  {"precision_3d", eval.instances.precision},
+                                  {"recall_3d", eval.instances.recall},
+                                  {"mean_best_iou_3d", eval.instances.mean_best_iou},
+                                  {"predicted_instances", eval.instances.predicted},
+                                  {"ari", eval.adjusted_rand_index},
+                                  {"observed_gaussians", eval.observed_gaussians}})
+                      .dump());
+  }
+  return absl::OkStatus();
+}
+
+absl::Status RunEval(const EvalArgs& a) {
+  if ((!a.result.empty()) + (!a.completion.empty()) + (!a.export_dir.empty()) != 1)
+    return absl::InvalidArgumentError("give exactly one of --result, --completion and --export");
+  if (!a.export_dir.empty()) return EvaluateExportCommand(a.scene, a.export_dir, a.json);
+  if (!a.completion.empty()) {
+    return EvaluateCompletionCommand(a.scene, a.completion, a.options.num_threads, a.json);
+  }
+  return EvaluateClicksCommand(a);
+}
+
 }  // namespace
 
 void AddEvalCommand(CLI::App& app, Action* action) {
-  struct Args {
-    std::string scene, result, completion, export_dir;
-    ClickEvalOptions options;
-    bool labels_only = false, json = false;
-  };
-  auto args = std::make_shared<Args>();
+  auto args = std::make_shared<EvalArgs>();
   CLI::App* cmd = app.add_subcommand("eval",
                                      "Click-protocol mIoU and 3D instance metrics of a result "
                                      "against the scene's ground truth (needs gt/)");
@@ -83,63 +144,7 @@ void AddEvalCommand(CLI::App& app, Action* action) {
   cmd->add_flag("--labels-only", args->labels_only, "Ignore the result's features; use its labels");
   cmd->add_option("--threads", args->options.num_threads, "Threads (0 = all cores)");
   cmd->add_flag("--json", args->json, "Print the scores as one JSON line (last stdout line)");
-  cmd->callback([args, action] {
-    *action = [args]() -> absl::Status {
-      Stopwatch watch;
-      if ((!args->result.empty()) + (!args->completion.empty()) + (!args->export_dir.empty()) != 1)
-        return absl::InvalidArgumentError(
-            "give exactly one of --result, --completion and --export");
-      if (!args->export_dir.empty()) {
-        ASSIGN_OR_RETURN(std::vector<objects::ExportObjectEval> evals,
-                         objects::EvaluateExport(args->scene, args->export_dir));
-        std::printf("%-6s %-16s %-26s %-26s %8s %10s\n", "object", "ground truth", "extent (m)",
-                    "gt extent (m)", "error", "chamfer m");
-        for (const objects::ExportObjectEval& e : evals)
-          std::printf("%-6u %-16s %7.3f %7.3f %7.3f    %7.3f %7.3f %7.3f    %7.1f%% %10.4f\n", e.id,
-                      e.gt_name.c_str(), e.extent.x(), e.extent.y(), e.extent.z(), e.gt_extent.x(),
-                      e.gt_extent.y(), e.gt_extent.z(), 100 * e.extent_error, e.chamfer);
-        if (args->json) std::printf("%s\n", objects::ExportEvalJson(evals).dump().c_str());
-        return absl::OkStatus();
-      }
-      if (!args->completion.empty()) {
-        return EvaluateCompletionCommand(args->scene, args->completion, args->options.num_threads,
-                                         args->json);
-      }
-      ClickEvalOptions options = args->options;
-      options.use_features = !args->labels_only;
-      ASSIGN_OR_RETURN(ClickEvaluation eval,
-                       EvaluateResultDirectory(args->scene, args->result, options));
-      std::printf("%-20s %6s %5s %8s\n", "object", "ref", "views", "IoU");
-      nlohmann::json objects = nlohmann::json::array();
-      for (const ObjectClickScore& o : eval.objects) {
-        std::printf("%-20s %6d %5d %8.4f\n", o.name.c_str(), o.reference_view, o.views, o.miou);
-        objects.push_back({{"id", o.id},
-                           {"name", o.name},
-                           {"reference_view", o.reference_view},
-                           {"views", o.views},
-                           {"miou", o.miou}});
-      }
-      std::printf(
-          "mIoU %.4f (%s, %zu objects); 3D: precision %.3f recall %.3f mean best IoU %.3f ARI %.3f "
-          "(%.1f s)\n",
-          eval.miou, eval.used_features ? "features" : "labels", eval.objects.size(),
-          eval.instances.precision, eval.instances.recall, eval.instances.mean_best_iou,
-          eval.adjusted_rand_index, watch.ElapsedSeconds());
-      if (args->json) {
-        PrintJsonLine(nlohmann::json({{"miou", eval.miou},
-                                      {"objects", objects},
-                                      {"mode", eval.used_features ? "features" : "labels"},
-                                      {"precision_3d", eval.instances.precision},
-                                      {"recall_3d", eval.instances.recall},
-                                      {"mean_best_iou_3d", eval.instances.mean_best_iou},
-                                      {"predicted_instances", eval.instances.predicted},
-                                      {"ari", eval.adjusted_rand_index},
-                                      {"observed_gaussians", eval.observed_gaussians}})
-                          .dump());
-      }
-      return absl::OkStatus();
-    };
-  });
+  cmd->callback([args, action] { *action = [args] { return RunEval(*args); }; });
 }
 
 }  // namespace instascene::cli
