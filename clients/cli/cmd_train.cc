@@ -170,6 +170,69 @@ void AddSegmentCommand(CLI::App& app, Action* action) {
   });
 }
 
+// The run's instance counts, coarse and final, from the stored results.
+absl::Status CountInstances(const std::string& scene_dir, const std::filesystem::path& out,
+                            size_t* coarse, size_t* final) {
+  ASSIGN_OR_RETURN(Scene scene, ReadScene(scene_dir));
+  ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
+  auto count = [&](const char* stage) -> absl::StatusOr<size_t> {
+    ASSIGN_OR_RETURN(SegmentationResult r, ReadResult((out / stage).string(), cloud.size()));
+    std::set<uint32_t> ids(r.labels.begin(), r.labels.end());
+    ids.erase(0);
+    return ids.size();
+  };
+  ASSIGN_OR_RETURN(*coarse, count("decomposition"));
+  ASSIGN_OR_RETURN(*final, count("segmentation"));
+  return absl::OkStatus();
+}
+
+// The same stages and DAG the service workers run (services/pipeline), in this process.
+absl::Status RunAllStages(const TrainArgs& run, const pipeline::StageRegistry& registry) {
+  Stopwatch watch;
+  const std::filesystem::path out(run.out);
+  ASSIGN_OR_RETURN(nlohmann::json parameters, run.flags.Parameters());
+  ASSIGN_OR_RETURN(std::vector<pipeline::PlannedStage> plan, registry.Plan(run.stages, parameters));
+  pipeline::LocalRunOptions options;
+  options.scene_dir = run.scene;
+  options.out_dir = run.out;
+  options.num_threads = run.threads;
+  std::unique_ptr<ProgressBar> bar;
+  std::string phase;
+  options.progress = [&](const std::string& kind, int64_t item, const pipeline::StageProgress& p) {
+    const std::string label = item < 0 ? absl::StrCat(kind, ": ", p.phase)
+                                       : absl::StrCat(kind, "[", item, "]: ", p.phase);
+    if (label != phase) {
+      phase = label;
+      bar = p.total > 1 ? std::make_unique<ProgressBar>(label) : nullptr;
+    }
+    if (bar) bar->Update(static_cast<int>(p.step), static_cast<int>(p.total));
+  };
+  ASSIGN_OR_RETURN(pipeline::LocalRunResult ran,
+                   pipeline::RunPipelineLocally(registry, plan, options));
+  nlohmann::json failed = nlohmann::json::object();
+  for (const auto& [job, status] : ran.failures) {
+    std::fprintf(stderr, "run: %s failed (the other items ran): %s\n", job.c_str(),
+                 status.ToString().c_str());
+    failed[job] = status.ToString();
+  }
+  const std::string result = (out / "segmentation").string();
+  size_t coarse = 0, final = 0;
+  RETURN_IF_ERROR(CountInstances(run.scene, out, &coarse, &final));
+  const nlohmann::json summary = {{"instances", final},
+                                  {"coarse_instances", coarse},
+                                  {"decomposition", (out / "decomposition").string()},
+                                  {"out", result},
+                                  {"objects", (out / "objects").string()},
+                                  {"failed", failed},
+                                  {"seconds", watch.ElapsedSeconds()}};
+  std::fprintf(stderr,
+               "run: %zu instances (%zu coarse) in %.1f s; results in %s (evaluate with "
+               "instascene eval --result %s)\n",
+               final, coarse, watch.ElapsedSeconds(), run.out.c_str(), result.c_str());
+  if (run.json) PrintJsonLine(summary.dump());
+  return absl::OkStatus();
+}
+
 // `run`: every stage offline, the stage code the services run.
 void AddRunCommand(CLI::App& app, Action* action) {
   auto run = std::make_shared<TrainArgs>();
@@ -194,62 +257,7 @@ void AddRunCommand(CLI::App& app, Action* action) {
   for (const std::string& kind : registry->Kinds()) run->flags.Add(r, registry->Find(kind)->spec);
   AddCommonOptions(r, run.get());
   r->callback([run, registry, action] {
-    *action = [run, registry]() -> absl::Status {
-      // The same stages and DAG the service workers run (services/pipeline), in this process.
-      Stopwatch watch;
-      const std::filesystem::path out(run->out);
-      ASSIGN_OR_RETURN(nlohmann::json parameters, run->flags.Parameters());
-      ASSIGN_OR_RETURN(std::vector<pipeline::PlannedStage> plan,
-                       registry->Plan(run->stages, parameters));
-      pipeline::LocalRunOptions options;
-      options.scene_dir = run->scene;
-      options.out_dir = run->out;
-      options.num_threads = run->threads;
-      std::unique_ptr<ProgressBar> bar;
-      std::string phase;
-      options.progress = [&](const std::string& kind, int64_t item,
-                             const pipeline::StageProgress& p) {
-        const std::string label = item < 0 ? absl::StrCat(kind, ": ", p.phase)
-                                           : absl::StrCat(kind, "[", item, "]: ", p.phase);
-        if (label != phase) {
-          phase = label;
-          bar = p.total > 1 ? std::make_unique<ProgressBar>(label) : nullptr;
-        }
-        if (bar) bar->Update(static_cast<int>(p.step), static_cast<int>(p.total));
-      };
-      ASSIGN_OR_RETURN(pipeline::LocalRunResult ran,
-                       pipeline::RunPipelineLocally(*registry, plan, options));
-      nlohmann::json failed = nlohmann::json::object();
-      for (const auto& [job, status] : ran.failures) {
-        std::fprintf(stderr, "run: %s failed (the other items ran): %s\n", job.c_str(),
-                     status.ToString().c_str());
-        failed[job] = status.ToString();
-      }
-      const std::string result = (out / "segmentation").string();
-      ASSIGN_OR_RETURN(Scene scene, ReadScene(run->scene));
-      ASSIGN_OR_RETURN(GaussianCloud cloud, ReadSceneGaussians(scene));
-      ASSIGN_OR_RETURN(SegmentationResult coarse,
-                       ReadResult((out / "decomposition").string(), cloud.size()));
-      ASSIGN_OR_RETURN(SegmentationResult final_result, ReadResult(result, cloud.size()));
-      std::set<uint32_t> coarse_ids(coarse.labels.begin(), coarse.labels.end());
-      std::set<uint32_t> final_ids(final_result.labels.begin(), final_result.labels.end());
-      coarse_ids.erase(0);
-      final_ids.erase(0);
-      const nlohmann::json summary = {{"instances", final_ids.size()},
-                                      {"coarse_instances", coarse_ids.size()},
-                                      {"decomposition", (out / "decomposition").string()},
-                                      {"out", result},
-                                      {"objects", (out / "objects").string()},
-                                      {"failed", failed},
-                                      {"seconds", watch.ElapsedSeconds()}};
-      std::fprintf(stderr,
-                   "run: %zu instances (%zu coarse) in %.1f s; results in %s (evaluate with "
-                   "instascene eval --result %s)\n",
-                   final_ids.size(), coarse_ids.size(), watch.ElapsedSeconds(), run->out.c_str(),
-                   result.c_str());
-      if (run->json) PrintJsonLine(summary.dump());
-      return absl::OkStatus();
-    };
+    *action = [run, registry] { return RunAllStages(*run, *registry); };
   });
 }
 
