@@ -24,16 +24,86 @@
 namespace instascene::cli {
 namespace {
 
+struct SubmitArgs {
+  std::string server = kDefaultServer, store, scene, name, params;
+  ConnectionFlags connection;
+  std::vector<std::string> stages;
+  int priority = 0, iterations = 0;
+  bool iterations_given = false;
+  bool json = false, wait = false;
+};
+
+// The stage parameters: --params, with --iterations as train.iterations.
+absl::StatusOr<nlohmann::json> SubmitParameters(const SubmitArgs& a) {
+  nlohmann::json params = nlohmann::json::object();
+  if (!a.params.empty()) {
+    params = nlohmann::json::parse(a.params, nullptr, false);
+    if (params.is_discarded() || !params.is_object())
+      return absl::InvalidArgumentError("--params is not a JSON object");
+  }
+  if (a.iterations_given) params["train"]["iterations"] = a.iterations;
+  return params;
+}
+
+// The submitted jobs, printed, as JSON; their ids into `ids`.
+nlohmann::json SubmittedJobs(const client::SubmitResult& submitted, std::vector<std::string>* ids) {
+  nlohmann::json jobs = nlohmann::json::array();
+  for (const client::SubmittedJob& j : submitted.jobs) {
+    std::fprintf(stderr, "job %s %-9s %s%s\n", j.id.c_str(), j.kind.c_str(), j.state.c_str(),
+                 j.created ? "" : " (existing job)");
+    jobs.push_back({{"id", j.id},
+                    {"kind", j.kind},
+                    {"item", j.item},
+                    {"scene", submitted.scene},
+                    {"state", j.state},
+                    {"created", j.created}});
+    ids->push_back(j.id);
+  }
+  return jobs;
+}
+
+absl::Status RunSubmit(const SubmitArgs& a) {
+  ASSIGN_OR_RETURN(const nlohmann::json params, SubmitParameters(a));
+  {  // every image and mask against its camera (headers only) before anything is sent
+    ASSIGN_OR_RETURN(Scene scene, ReadScene(a.scene));
+    RETURN_IF_ERROR(CheckViewFiles(scene));
+  }
+  ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
+                   ConnectClient(a.connection, a.server, a.store));
+  client::SubmitRequest request;
+  request.scene_dir = a.scene;
+  request.name = a.name;
+  request.parameters_json = params.dump();
+  request.stages = a.stages;
+  request.priority = a.priority;
+  ProgressBar bar("upload");
+  int64_t last_mb = -1;
+  ASSIGN_OR_RETURN(client::SubmitResult submitted,
+                   c->Submit(request, [&](int64_t done, int64_t total) {
+                     if (done / (1 << 20) == last_mb && done != total) return;
+                     last_mb = done / (1 << 20);
+                     bar.Update(static_cast<int>(done >> 10), static_cast<int>(total >> 10));
+                   }));
+  std::fprintf(stderr, "upload: %lld files (%.1f MB) sent, %lld already in the store\n",
+               static_cast<long long>(submitted.files_sent), submitted.bytes_sent / 1e6,
+               static_cast<long long>(submitted.files_skipped));
+  std::vector<std::string> ids;
+  nlohmann::json summary = {{"scene", submitted.scene},
+                            {"scene_manifest", submitted.scene_manifest},
+                            {"uploaded_files", submitted.files_sent},
+                            {"uploaded_bytes", submitted.bytes_sent},
+                            {"jobs", SubmittedJobs(submitted, &ids)}};
+  if (a.wait) {
+    ASSIGN_OR_RETURN(auto final_jobs, WatchJobs(*c, ids, ""));
+    summary["jobs"] = nlohmann::json::array();
+    for (const std::string& id : ids) summary["jobs"].push_back(JobJson(final_jobs[id]));
+  }
+  if (a.json) PrintJsonLine(summary.dump());
+  return absl::OkStatus();
+}
+
 // `submit`: uploads a scene and submits its pipeline.
 void AddSubmitCommand(CLI::App& app, Action* action) {
-  struct SubmitArgs {
-    std::string server = kDefaultServer, store, scene, name, params;
-    ConnectionFlags connection;
-    std::vector<std::string> stages;
-    int priority = 0, iterations = 0;
-    bool iterations_given = false;
-    bool json = false, wait = false;
-  };
   auto submit = std::make_shared<SubmitArgs>();
   CLI::App* s =
       app.add_subcommand("submit",
@@ -59,74 +129,80 @@ void AddSubmitCommand(CLI::App& app, Action* action) {
   s->add_flag("--json", submit->json, "Print {\"scene\", \"jobs\", ...} as the last stdout line");
   s->callback([submit, action, iterations] {
     submit->iterations_given = iterations->count() > 0;
-    *action = [submit]() -> absl::Status {
-      const SubmitArgs& a = *submit;
-      nlohmann::json params = nlohmann::json::object();
-      if (!a.params.empty()) {
-        params = nlohmann::json::parse(a.params, nullptr, false);
-        if (params.is_discarded() || !params.is_object())
-          return absl::InvalidArgumentError("--params is not a JSON object");
-      }
-      if (a.iterations_given) params["train"]["iterations"] = a.iterations;
-      {  // every image and mask against its camera (headers only) before anything is sent
-        ASSIGN_OR_RETURN(Scene scene, ReadScene(a.scene));
-        RETURN_IF_ERROR(CheckViewFiles(scene));
-      }
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
-                       ConnectClient(a.connection, a.server, a.store));
-      client::SubmitRequest request;
-      request.scene_dir = a.scene;
-      request.name = a.name;
-      request.parameters_json = params.dump();
-      request.stages = a.stages;
-      request.priority = a.priority;
-      ProgressBar bar("upload");
-      int64_t last_mb = -1;
-      ASSIGN_OR_RETURN(client::SubmitResult submitted,
-                       c->Submit(request, [&](int64_t done, int64_t total) {
-                         if (done / (1 << 20) == last_mb && done != total) return;
-                         last_mb = done / (1 << 20);
-                         bar.Update(static_cast<int>(done >> 10), static_cast<int>(total >> 10));
-                       }));
-      std::fprintf(stderr, "upload: %lld files (%.1f MB) sent, %lld already in the store\n",
-                   static_cast<long long>(submitted.files_sent), submitted.bytes_sent / 1e6,
-                   static_cast<long long>(submitted.files_skipped));
-      nlohmann::json jobs = nlohmann::json::array();
-      std::vector<std::string> ids;
-      for (const client::SubmittedJob& j : submitted.jobs) {
-        std::fprintf(stderr, "job %s %-9s %s%s\n", j.id.c_str(), j.kind.c_str(), j.state.c_str(),
-                     j.created ? "" : " (existing job)");
-        jobs.push_back({{"id", j.id},
-                        {"kind", j.kind},
-                        {"item", j.item},
-                        {"scene", submitted.scene},
-                        {"state", j.state},
-                        {"created", j.created}});
-        ids.push_back(j.id);
-      }
-      nlohmann::json summary = {{"scene", submitted.scene},
-                                {"scene_manifest", submitted.scene_manifest},
-                                {"uploaded_files", submitted.files_sent},
-                                {"uploaded_bytes", submitted.bytes_sent},
-                                {"jobs", jobs}};
-      if (a.wait) {
-        ASSIGN_OR_RETURN(auto final_jobs, WatchJobs(*c, ids, ""));
-        summary["jobs"] = nlohmann::json::array();
-        for (const std::string& id : ids) summary["jobs"].push_back(JobJson(final_jobs[id]));
-      }
-      if (a.json) PrintJsonLine(summary.dump());
-      return absl::OkStatus();
-    };
+    *action = [submit] { return RunSubmit(*submit); };
   });
+}
+
+struct FetchArgs {
+  std::string server = kDefaultServer, store, id, scene, out;
+  ConnectionFlags connection;
+  bool json = false;
+};
+
+// (stage output, target directory) pairs: a scene's latest output of every stage, or one
+// succeeded job's output.
+using Outputs = std::vector<std::pair<client::StageOutput, std::string>>;
+absl::StatusOr<Outputs> OutputsToFetch(const FetchArgs& a, client::Client& c) {
+  Outputs outputs;
+  if (!a.scene.empty()) {
+    ASSIGN_OR_RETURN(std::vector<client::StageOutput> stage_outputs, c.SceneOutputs(a.scene));
+    for (const client::StageOutput& o : stage_outputs) {
+      std::filesystem::path dir = std::filesystem::path(a.out) / o.kind;
+      if (o.item >= 0) dir /= std::to_string(o.item);
+      outputs.emplace_back(o, dir.string());
+    }
+    if (outputs.empty())
+      return absl::FailedPreconditionError(
+          absl::StrCat("scene ", a.scene, " has no finished stage yet"));
+    return outputs;
+  }
+  v1::GetJobRequest request;
+  request.set_job_id(a.id);
+  v1::Job job;
+  RETURN_IF_ERROR(client::Call(c, "scheduler", [&](grpc::ClientContext* context) {
+    return client::SchedulerStub(c).GetJob(context, request, &job);
+  }));
+  if (job.state() != v1::JOB_STATE_SUCCEEDED)
+    return absl::FailedPreconditionError(absl::StrCat("job ", a.id, " is ",
+                                                      scheduler::StateName(job.state()),
+                                                      ", not succeeded; nothing to fetch yet"));
+  outputs.emplace_back(
+      client::StageOutput{job.kind(), job.item(), job.id(), job.output_manifest().hash(),
+                          job.output_manifest().size_bytes()},
+      a.out);
+  return outputs;
+}
+
+absl::Status RunFetch(const FetchArgs& a) {
+  if (a.id.empty() == a.scene.empty())
+    return absl::InvalidArgumentError("give a job id or --scene NAME (one of them)");
+  ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
+                   ConnectClient(a.connection, a.server, a.store));
+  ASSIGN_OR_RETURN(const Outputs outputs, OutputsToFetch(a, *c));
+  nlohmann::json fetched = nlohmann::json::array();
+  int64_t files = 0, bytes = 0;
+  for (const auto& [o, dir] : outputs) {
+    ASSIGN_OR_RETURN(client::Transfer t, c->FetchOutput(o, dir));
+    files += t.files;
+    bytes += t.bytes;
+    fetched.push_back(
+        {{"kind", o.kind}, {"item", o.item}, {"job", o.job_id}, {"files", t.files}, {"out", dir}});
+  }
+  std::fprintf(stderr, "fetch: %lld files (%.1f MB) of %zu outputs into %s\n",
+               static_cast<long long>(files), bytes / 1e6, outputs.size(), a.out.c_str());
+  if (a.json)
+    PrintJsonLine(nlohmann::json({{"job", a.id},
+                                  {"scene", a.scene},
+                                  {"outputs", fetched},
+                                  {"files", files},
+                                  {"bytes", bytes},
+                                  {"out", a.out}})
+                      .dump());
+  return absl::OkStatus();
 }
 
 // `fetch`: downloads a scene's latest outputs or one job's.
 void AddFetchCommand(CLI::App& app, Action* action) {
-  struct FetchArgs {
-    std::string server = kDefaultServer, store, id, scene, out;
-    ConnectionFlags connection;
-    bool json = false;
-  };
   auto fetch = std::make_shared<FetchArgs>();
   CLI::App* f = app.add_subcommand(
       "fetch",
@@ -139,66 +215,7 @@ void AddFetchCommand(CLI::App& app, Action* action) {
   AddConnectionFlags(f, &fetch->connection);
   f->add_option("--store", fetch->store, "Store address (default: --server)");
   f->add_flag("--json", fetch->json, "Print a JSON summary as the last stdout line");
-  f->callback([fetch, action] {
-    *action = [fetch]() -> absl::Status {
-      if (fetch->id.empty() == fetch->scene.empty())
-        return absl::InvalidArgumentError("give a job id or --scene NAME (one of them)");
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
-                       ConnectClient(fetch->connection, fetch->server, fetch->store));
-      // (stage output, target directory)
-      std::vector<std::pair<client::StageOutput, std::string>> outputs;
-      if (!fetch->scene.empty()) {
-        ASSIGN_OR_RETURN(std::vector<client::StageOutput> stage_outputs,
-                         c->SceneOutputs(fetch->scene));
-        for (const client::StageOutput& o : stage_outputs) {
-          std::filesystem::path dir = std::filesystem::path(fetch->out) / o.kind;
-          if (o.item >= 0) dir /= std::to_string(o.item);
-          outputs.emplace_back(o, dir.string());
-        }
-        if (outputs.empty())
-          return absl::FailedPreconditionError(
-              absl::StrCat("scene ", fetch->scene, " has no finished stage yet"));
-      } else {
-        v1::GetJobRequest request;
-        request.set_job_id(fetch->id);
-        v1::Job job;
-        RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
-          return client::SchedulerStub(*c).GetJob(context, request, &job);
-        }));
-        if (job.state() != v1::JOB_STATE_SUCCEEDED)
-          return absl::FailedPreconditionError(
-              absl::StrCat("job ", fetch->id, " is ", scheduler::StateName(job.state()),
-                           ", not succeeded; nothing to fetch yet"));
-        outputs.emplace_back(
-            client::StageOutput{job.kind(), job.item(), job.id(), job.output_manifest().hash(),
-                                job.output_manifest().size_bytes()},
-            fetch->out);
-      }
-      nlohmann::json fetched = nlohmann::json::array();
-      int64_t files = 0, bytes = 0;
-      for (const auto& [o, dir] : outputs) {
-        ASSIGN_OR_RETURN(client::Transfer t, c->FetchOutput(o, dir));
-        files += t.files;
-        bytes += t.bytes;
-        fetched.push_back({{"kind", o.kind},
-                           {"item", o.item},
-                           {"job", o.job_id},
-                           {"files", t.files},
-                           {"out", dir}});
-      }
-      std::fprintf(stderr, "fetch: %lld files (%.1f MB) of %zu outputs into %s\n",
-                   static_cast<long long>(files), bytes / 1e6, outputs.size(), fetch->out.c_str());
-      if (fetch->json)
-        PrintJsonLine(nlohmann::json({{"job", fetch->id},
-                                      {"scene", fetch->scene},
-                                      {"outputs", fetched},
-                                      {"files", files},
-                                      {"bytes", bytes},
-                                      {"out", fetch->out}})
-                          .dump());
-      return absl::OkStatus();
-    };
-  });
+  f->callback([fetch, action] { *action = [fetch] { return RunFetch(*fetch); }; });
 }
 
 // `cancel`: cancels a job and its dependants, or a scene's unfinished jobs.

@@ -1,6 +1,7 @@
 // `instascene watch | jobs`: a running server's jobs, followed live or listed as a table.
 #include <cstdio>
 #include <map>
+#include <optional>
 
 #include <nlohmann/json.hpp>
 
@@ -56,14 +57,109 @@ void AddWatchCommand(CLI::App& app, Action* action) {
   });
 }
 
+namespace {
+
+struct JobsArgs {
+  std::string server = kDefaultServer, scene, state, page_token;
+  ConnectionFlags connection;
+  int limit = 50;
+  bool json = false;
+};
+
+absl::StatusOr<v1::ListJobsResponse> ListJobs(const JobsArgs& a, client::Client& c) {
+  v1::ListJobsRequest request;
+  request.set_scene(a.scene);
+  request.set_limit(a.limit);
+  request.set_page_token(a.page_token);
+  if (!a.state.empty()) {
+    for (int st = v1::JOB_STATE_QUEUED; st <= v1::JOB_STATE_CANCELLED; ++st) {
+      if (scheduler::StateName(static_cast<v1::JobState>(st)) == a.state)
+        request.set_state(static_cast<v1::JobState>(st));
+    }
+  }
+  v1::ListJobsResponse response;
+  RETURN_IF_ERROR(client::Call(c, "scheduler", [&](grpc::ClientContext* context) {
+    return client::SchedulerStub(c).ListJobs(context, request, &response);
+  }));
+  return response;
+}
+
+// Queue-wide figures are monitoring (admins); a client token lists its own jobs only: nullopt.
+absl::StatusOr<std::optional<v1::QueueStats>> QueueStats(client::Client& c) {
+  v1::QueueStats stats;
+  const absl::Status status = client::Call(c, "scheduler", [&](grpc::ClientContext* context) {
+    return client::SchedulerStub(c).GetQueueStats(context, v1::GetQueueStatsRequest(), &stats);
+  });
+  if (absl::IsPermissionDenied(status)) return std::nullopt;
+  RETURN_IF_ERROR(status);
+  return stats;
+}
+
+// Prints the jobs as a table (with --scene as their DAG: children indented under their first
+// input); returns them as JSON.
+nlohmann::json PrintJobTable(const v1::ListJobsResponse& response, bool as_tree) {
+  std::printf("%-17s %-22s %-16s %-9s %-3s %s\n", "JOB", "KIND", "SCENE", "STATE", "TRY",
+              "PROGRESS / ERROR");
+  nlohmann::json jobs = nlohmann::json::array();
+  std::vector<const v1::Job*> ordered;  // oldest first
+  for (auto it = response.jobs().rbegin(); it != response.jobs().rend(); ++it)
+    ordered.push_back(&*it);
+  std::vector<std::pair<int, const v1::Job*>> rows;
+  if (!as_tree) {
+    for (auto it = ordered.rbegin(); it != ordered.rend(); ++it) rows.emplace_back(0, *it);
+  } else {
+    rows = JobTree(ordered);
+  }
+  for (const auto& [depth, jp] : rows) {
+    const v1::Job& j = *jp;
+    std::string label = std::string(2 * depth, ' ') + (depth > 0 ? "└ " : "") + KindLabel(j);
+    if (j.dependencies_size() > 1) absl::StrAppend(&label, " (", j.dependencies_size(), " in)");
+    std::printf("%-17s %-22s %-16s %-9s %d/%d %s\n", j.id().c_str(), label.c_str(),
+                j.scene().substr(0, 16).c_str(), scheduler::StateName(j.state()).c_str(),
+                j.attempts(), j.max_attempts(),
+                j.error().empty() ? ProgressText(j).c_str() : j.error().c_str());
+    jobs.push_back(JobJson(j));
+  }
+  return jobs;
+}
+
+// Prints the queue's counts by state; returns the statistics as JSON.
+nlohmann::json PrintQueueStats(const v1::QueueStats& stats) {
+  nlohmann::json by_state = nlohmann::json::object();
+  std::string line;
+  for (const char* state : {"queued", "leased", "running", "succeeded", "failed", "cancelled"}) {
+    auto it = stats.jobs_by_state().find(state);
+    const int64_t n = it == stats.jobs_by_state().end() ? 0 : it->second;
+    by_state[state] = n;
+    absl::StrAppend(&line, state, " ", n, "  ");
+  }
+  std::printf("queue: %s| scenes %lld | oldest queued %.1f s\n", line.c_str(),
+              static_cast<long long>(stats.scenes()), stats.oldest_queued_age_ms() / 1000.0);
+  return {{"jobs_by_state", by_state},
+          {"scenes", stats.scenes()},
+          {"oldest_queued_age_ms", stats.oldest_queued_age_ms()}};
+}
+
+absl::Status RunJobs(const JobsArgs& a) {
+  ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectClient(a.connection, a.server));
+  ASSIGN_OR_RETURN(const v1::ListJobsResponse response, ListJobs(a, *c));
+  ASSIGN_OR_RETURN(const std::optional<v1::QueueStats> stats, QueueStats(*c));
+  const nlohmann::json jobs = PrintJobTable(response, !a.scene.empty());
+  const nlohmann::json stats_json = stats ? PrintQueueStats(*stats) : nlohmann::json(nullptr);
+  if (!response.next_page_token().empty())
+    std::printf("more: --page-token %s\n", response.next_page_token().c_str());
+  if (a.json)
+    PrintJsonLine(nlohmann::json({{"jobs", jobs},
+                                  {"next_page_token", response.next_page_token()},
+                                  {"stats", stats_json}})
+                      .dump());
+  return absl::OkStatus();
+}
+
+}  // namespace
+
 // `jobs`: the job queue as a table, with queue statistics.
 void AddJobsCommand(CLI::App& app, Action* action) {
-  struct JobsArgs {
-    std::string server = kDefaultServer, scene, state, page_token;
-    ConnectionFlags connection;
-    int limit = 50;
-    bool json = false;
-  };
   auto list = std::make_shared<JobsArgs>();
   CLI::App* l = app.add_subcommand("jobs", "The job queue as a table, with queue statistics");
   l->add_option("--server", list->server, "Scheduler address")->capture_default_str();
@@ -75,83 +171,7 @@ void AddJobsCommand(CLI::App& app, Action* action) {
   l->add_option("--page-token", list->page_token,
                 "Continue after the previous page (its next_page_token)");
   l->add_flag("--json", list->json, "Print {\"jobs\", \"stats\"} as the last stdout line");
-  l->callback([list, action] {
-    *action = [list]() -> absl::Status {
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
-                       ConnectClient(list->connection, list->server));
-      v1::ListJobsRequest request;
-      request.set_scene(list->scene);
-      request.set_limit(list->limit);
-      request.set_page_token(list->page_token);
-      if (!list->state.empty()) {
-        for (int st = v1::JOB_STATE_QUEUED; st <= v1::JOB_STATE_CANCELLED; ++st) {
-          if (scheduler::StateName(static_cast<v1::JobState>(st)) == list->state)
-            request.set_state(static_cast<v1::JobState>(st));
-        }
-      }
-      v1::ListJobsResponse response;
-      RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
-        return client::SchedulerStub(*c).ListJobs(context, request, &response);
-      }));
-      // Queue-wide figures are monitoring (admins); a client token lists its own jobs only.
-      v1::QueueStats stats;
-      const absl::Status stats_status =
-          client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
-            return client::SchedulerStub(*c).GetQueueStats(context, v1::GetQueueStatsRequest(),
-                                                           &stats);
-          });
-      if (!stats_status.ok() && !absl::IsPermissionDenied(stats_status)) return stats_status;
-      const bool has_stats = stats_status.ok();
-      std::printf("%-17s %-22s %-16s %-9s %-3s %s\n", "JOB", "KIND", "SCENE", "STATE", "TRY",
-                  "PROGRESS / ERROR");
-      nlohmann::json jobs = nlohmann::json::array();
-      std::vector<const v1::Job*> ordered;  // oldest first
-      for (auto it = response.jobs().rbegin(); it != response.jobs().rend(); ++it)
-        ordered.push_back(&*it);
-      // With --scene the jobs print as their DAG: children indented under their first input.
-      std::vector<std::pair<int, const v1::Job*>> rows;
-      if (list->scene.empty()) {
-        for (auto it = ordered.rbegin(); it != ordered.rend(); ++it) rows.emplace_back(0, *it);
-      } else {
-        rows = JobTree(ordered);
-      }
-      for (const auto& [depth, jp] : rows) {
-        const v1::Job& j = *jp;
-        std::string label = std::string(2 * depth, ' ') + (depth > 0 ? "└ " : "") + KindLabel(j);
-        if (j.dependencies_size() > 1) absl::StrAppend(&label, " (", j.dependencies_size(), " in)");
-        std::printf("%-17s %-22s %-16s %-9s %d/%d %s\n", j.id().c_str(), label.c_str(),
-                    j.scene().substr(0, 16).c_str(), scheduler::StateName(j.state()).c_str(),
-                    j.attempts(), j.max_attempts(),
-                    j.error().empty() ? ProgressText(j).c_str() : j.error().c_str());
-        jobs.push_back(JobJson(j));
-      }
-      nlohmann::json by_state = nlohmann::json::object();
-      std::string line;
-      for (const char* state :
-           {"queued", "leased", "running", "succeeded", "failed", "cancelled"}) {
-        auto it = stats.jobs_by_state().find(state);
-        const int64_t n = it == stats.jobs_by_state().end() ? 0 : it->second;
-        by_state[state] = n;
-        absl::StrAppend(&line, state, " ", n, "  ");
-      }
-      if (has_stats)
-        std::printf("queue: %s| scenes %lld | oldest queued %.1f s\n", line.c_str(),
-                    static_cast<long long>(stats.scenes()), stats.oldest_queued_age_ms() / 1000.0);
-      if (!response.next_page_token().empty())
-        std::printf("more: --page-token %s\n", response.next_page_token().c_str());
-      if (list->json)
-        PrintJsonLine(
-            nlohmann::json({{"jobs", jobs},
-                            {"next_page_token", response.next_page_token()},
-                            {"stats", has_stats ? nlohmann::json{{"jobs_by_state", by_state},
-                                                                 {"scenes", stats.scenes()},
-                                                                 {"oldest_queued_age_ms",
-                                                                  stats.oldest_queued_age_ms()}}
-                                                : nlohmann::json(nullptr)}})
-                .dump());
-      return absl::OkStatus();
-    };
-  });
+  l->callback([list, action] { *action = [list] { return RunJobs(*list); }; });
 }
 
 }  // namespace instascene::cli
