@@ -161,6 +161,87 @@ absl::StatusOr<TrainingData> PrepareTraining(const Scene& scene, const GaussianC
   return data;
 }
 
+namespace {
+
+// (a) single view: sampled pixels of `view` with their per-frame labels (raw or filtered masks).
+double SingleViewTerm(const TrainingData& data, const TrainingOptions& options,
+                      const std::vector<float>& unit, int view, std::mt19937_64& rng,
+                      std::vector<double>* grad_hat) {
+  const ViewData& v = data.views[view];
+  const std::vector<uint32_t>& labels =
+      options.supervision == Supervision::kNoisy2d ? v.raw_label : v.filtered_label;
+  std::vector<uint32_t> valid;
+  for (uint32_t p = 0; p < labels.size(); ++p) {
+    if (labels[p] != kIgnoredLabel && (options.consider_negative || labels[p] > 0))
+      valid.push_back(p);
+  }
+  std::vector<std::pair<int, uint32_t>> samples;
+  std::vector<uint32_t> sample_labels;
+  for (uint32_t p : SampleWithReplacement(valid, options.samples, rng)) {
+    samples.emplace_back(view, p);
+    sample_labels.push_back(labels[p]);
+  }
+  return PixelTerm(data, samples, sample_labels, unit, options.feature_dim,
+                   options.consider_negative, options.detach_sample_norm, options.lambda_single,
+                   grad_hat);
+}
+
+// (b) cross view: a window of consecutive views, pixels with a consistent instance id.
+double CrossViewTerm(const TrainingData& data, const TrainingOptions& options,
+                     const std::vector<float>& unit, std::mt19937_64& rng,
+                     std::vector<double>* grad_hat) {
+  const int num_views = static_cast<int>(data.views.size());
+  const int window = std::min(options.multi_view_window, num_views);
+  const int start =
+      num_views > window ? std::uniform_int_distribution<int>(0, num_views - window - 1)(rng) : 0;
+  std::vector<std::pair<int, uint32_t>> pool;
+  for (int w = start; w < start + window; ++w) {
+    for (uint32_t p = 0; p < data.views[w].sorted_label.size(); ++p) {
+      if (data.views[w].sorted_label[p] > 0) pool.emplace_back(w, p);
+    }
+  }
+  if (pool.empty()) return 0;
+  std::uniform_int_distribution<size_t> pick(0, pool.size() - 1);
+  std::vector<std::pair<int, uint32_t>> samples;
+  std::vector<uint32_t> sample_labels;
+  for (int i = 0; i < options.samples; ++i) {
+    samples.push_back(pool[pick(rng)]);
+    sample_labels.push_back(data.views[samples.back().first].sorted_label[samples.back().second]);
+  }
+  return PixelTerm(data, samples, sample_labels, unit, options.feature_dim, false,
+                   options.detach_sample_norm, options.lambda_multi, grad_hat);
+}
+
+// (c) 3D: visible Gaussians of `view` with a coarse instance label; gradients straight into
+// `grad` (through the 3D normalisation).
+double ThreeDTerm(const TrainingData& data, const TrainingOptions& options,
+                  const std::vector<float>& features, int view, std::mt19937_64& rng,
+                  std::vector<double>* grad) {
+  const int dim = options.feature_dim;
+  const std::vector<uint32_t> picked =
+      SampleWithReplacement(data.views[view].visible_labelled, options.samples, rng);
+  if (picked.empty()) return 0;
+  std::vector<float> x(picked.size() * dim);
+  std::vector<uint32_t> labels(picked.size());
+  for (size_t j = 0; j < picked.size(); ++j) {
+    Normalize(&features[static_cast<size_t>(picked[j]) * dim], dim, kThreeDEps, &x[j * dim]);
+    labels[j] = data.labels3d[picked[j]];
+  }
+  std::vector<double> gx;
+  ContrastiveLossOptions loss_options;
+  loss_options.detach_norm = options.detach_sample_norm;
+  const double loss = options.lambda_3d * ContrastiveLoss(x, dim, labels, loss_options, &gx);
+  for (size_t j = 0; j < picked.size(); ++j) {
+    std::vector<double> scaled(dim);
+    for (int d = 0; d < dim; ++d) scaled[d] = options.lambda_3d * gx[j * dim + d];
+    AddNormalizationBackward(&features[static_cast<size_t>(picked[j]) * dim], scaled.data(), dim,
+                             kThreeDEps, &(*grad)[static_cast<size_t>(picked[j]) * dim]);
+  }
+  return loss;
+}
+
+}  // namespace
+
 double LossAndGradient(const TrainingData& data, const TrainingOptions& options,
                        const std::vector<float>& features, int view, bool with_multi_view,
                        uint64_t seed, std::vector<double>* grad) {
@@ -172,72 +253,14 @@ double LossAndGradient(const TrainingData& data, const TrainingOptions& options,
   std::vector<double> grad_hat(features.size(), 0.0);
   grad->assign(features.size(), 0.0);
   double loss = 0;
-  const ViewData& v = data.views[view];
-  // (a) single view.
   if (options.supervision != Supervision::k3d) {
-    const std::vector<uint32_t>& labels =
-        options.supervision == Supervision::kNoisy2d ? v.raw_label : v.filtered_label;
-    std::vector<uint32_t> valid;
-    for (uint32_t p = 0; p < labels.size(); ++p) {
-      if (labels[p] != kIgnoredLabel && (options.consider_negative || labels[p] > 0))
-        valid.push_back(p);
-    }
-    std::vector<std::pair<int, uint32_t>> samples;
-    std::vector<uint32_t> sample_labels;
-    for (uint32_t p : SampleWithReplacement(valid, options.samples, rng)) {
-      samples.emplace_back(view, p);
-      sample_labels.push_back(labels[p]);
-    }
-    loss += PixelTerm(data, samples, sample_labels, unit, dim, options.consider_negative,
-                      options.detach_sample_norm, options.lambda_single, &grad_hat);
+    loss += SingleViewTerm(data, options, unit, view, rng, &grad_hat);
   }
-  // (b) cross view: a window of consecutive views, pixels with a consistent instance id.
   if (options.supervision == Supervision::kFull && with_multi_view) {
-    const int num_views = static_cast<int>(data.views.size());
-    const int window = std::min(options.multi_view_window, num_views);
-    const int start =
-        num_views > window ? std::uniform_int_distribution<int>(0, num_views - window - 1)(rng) : 0;
-    std::vector<std::pair<int, uint32_t>> pool;
-    for (int w = start; w < start + window; ++w) {
-      for (uint32_t p = 0; p < data.views[w].sorted_label.size(); ++p) {
-        if (data.views[w].sorted_label[p] > 0) pool.emplace_back(w, p);
-      }
-    }
-    if (!pool.empty()) {
-      std::uniform_int_distribution<size_t> pick(0, pool.size() - 1);
-      std::vector<std::pair<int, uint32_t>> samples;
-      std::vector<uint32_t> sample_labels;
-      for (int i = 0; i < options.samples; ++i) {
-        samples.push_back(pool[pick(rng)]);
-        sample_labels.push_back(
-            data.views[samples.back().first].sorted_label[samples.back().second]);
-      }
-      loss += PixelTerm(data, samples, sample_labels, unit, dim, false, options.detach_sample_norm,
-                        options.lambda_multi, &grad_hat);
-    }
+    loss += CrossViewTerm(data, options, unit, rng, &grad_hat);
   }
-  // (c) 3D: visible Gaussians with a coarse instance label.
   if (options.supervision != Supervision::kNoisy2d) {
-    const std::vector<uint32_t> picked =
-        SampleWithReplacement(v.visible_labelled, options.samples, rng);
-    if (!picked.empty()) {
-      std::vector<float> x(picked.size() * dim);
-      std::vector<uint32_t> labels(picked.size());
-      for (size_t j = 0; j < picked.size(); ++j) {
-        Normalize(&features[static_cast<size_t>(picked[j]) * dim], dim, kThreeDEps, &x[j * dim]);
-        labels[j] = data.labels3d[picked[j]];
-      }
-      std::vector<double> gx;
-      ContrastiveLossOptions loss_options;
-      loss_options.detach_norm = options.detach_sample_norm;
-      loss += options.lambda_3d * ContrastiveLoss(x, dim, labels, loss_options, &gx);
-      for (size_t j = 0; j < picked.size(); ++j) {
-        std::vector<double> scaled(dim);
-        for (int d = 0; d < dim; ++d) scaled[d] = options.lambda_3d * gx[j * dim + d];
-        AddNormalizationBackward(&features[static_cast<size_t>(picked[j]) * dim], scaled.data(),
-                                 dim, kThreeDEps, &(*grad)[static_cast<size_t>(picked[j]) * dim]);
-      }
-    }
+    loss += ThreeDTerm(data, options, features, view, rng, grad);
   }
   // Back through the splatting normalisation.
   for (size_t g = 0; g < n; ++g) {
