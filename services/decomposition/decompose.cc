@@ -21,18 +21,18 @@ std::vector<uint32_t> DecompositionResult::Labels() const {
   return InstanceOf(instances, trackers.num_gaussians);
 }
 
-absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const GaussianCloud& cloud,
-                                              const DecompositionOptions& options,
-                                              const ProgressFn& progress) {
-  RETURN_IF_ERROR(options.Validate());
+namespace {
+
+// Stage B's trackers (4.1-4.2) from the scene's masks; each view must have one.
+absl::StatusOr<TrackerSet> TrackScene(const Scene& scene, const GaussianCloud& cloud,
+                                      const DecompositionOptions& options,
+                                      const ProgressFn& progress) {
   std::vector<PinholeCamera> cameras;
   for (const SceneView& v : scene.views) {
     if (v.mask.empty())
       return absl::FailedPreconditionError(absl::StrCat("view '", v.name, "' has no mask"));
     cameras.push_back(v.camera);
   }
-  DecompositionResult result;
-  Stopwatch watch;
   MaskLoader loader = [&scene](int v) -> absl::StatusOr<std::vector<uint32_t>> {
     ASSIGN_OR_RETURN(LabelMap mask, ReadViewMask(scene, v));
     return std::vector<uint32_t>(mask.labels.begin(), mask.labels.end());
@@ -40,52 +40,83 @@ absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const Gaussian
   auto track_progress = [&](int done, int total) {
     if (progress) progress("tracking", done, total);
   };
-  ASSIGN_OR_RETURN(result.trackers, BuildTrackers(cloud, cameras, loader, options, track_progress));
-  result.tracking_seconds = watch.ElapsedSeconds();
-  watch.Restart();
-  const MaskJudgement judged = JudgeTrackers(result.trackers, options);
-  result.judgement = judged;
-  UndoUndersegmented(result.trackers, &result.judgement);
+  return BuildTrackers(cloud, cameras, loader, options, track_progress);
+}
+
+// Judgement, clustering and instances (4.3-4.7), re-judged against the instances found up to
+// rejudge_passes times; the last clustering's nodes set result.cluster_of. Returns the seconds
+// spent building instances (post-processing).
+absl::StatusOr<double> ClusterAndRejudge(const GaussianCloud& cloud,
+                                         const DecompositionOptions& options,
+                                         const ProgressFn& progress, DecompositionResult* result) {
+  const MaskJudgement judged = JudgeTrackers(result->trackers, options);
+  result->judgement = judged;
+  UndoUndersegmented(result->trackers, &result->judgement);
   if (progress) progress("clustering", 0, 1 + options.rejudge_passes);
-  double post_seconds = 0;  // instance building inside the re-judgement loop is post-processing
+  double post_seconds = 0;
   auto build_instances = [&](const std::vector<MaskNode>& nodes) {
     Stopwatch post;
-    result.instances =
-        BuildInstances(result.trackers, nodes, cloud, options, &result.judgement.undersegmented);
+    result->instances =
+        BuildInstances(result->trackers, nodes, cloud, options, &result->judgement.undersegmented);
     post_seconds += post.ElapsedSeconds();
   };
   std::vector<MaskNode> nodes =
-      ClusterMasks(result.trackers, result.judgement, options, &result.schedule);
+      ClusterMasks(result->trackers, result->judgement, options, &result->schedule);
   build_instances(nodes);
   std::vector<uint8_t> flags = judged.undersegmented;
   for (int pass = 0; pass < options.rejudge_passes; ++pass) {
     RETURN_IF_ERROR(CheckCancelled(options.cancel, "decompose"));
-    if (RejudgeUndersegmented(result.trackers, result.instances, options, &flags, &judged.frames) ==
-        0)
+    if (RejudgeUndersegmented(result->trackers, result->instances, options, &flags,
+                              &judged.frames) == 0)
       break;
-    result.judgement = judged;
-    result.judgement.undersegmented = flags;
-    UndoUndersegmented(result.trackers, &result.judgement);
-    nodes = ClusterMasks(result.trackers, result.judgement, options, &result.schedule);
+    result->judgement = judged;
+    result->judgement.undersegmented = flags;
+    UndoUndersegmented(result->trackers, &result->judgement);
+    nodes = ClusterMasks(result->trackers, result->judgement, options, &result->schedule);
     build_instances(nodes);
     if (progress) progress("clustering", pass + 2, 1 + options.rejudge_passes);
   }
   if (progress) progress("clustering", 1 + options.rejudge_passes, 1 + options.rejudge_passes);
-  result.cluster_of.assign(result.trackers.trackers.size(), -1);
+  result->cluster_of.assign(result->trackers.trackers.size(), -1);
   for (size_t k = 0; k < nodes.size(); ++k) {
-    for (uint32_t t : nodes[k].masks) result.cluster_of[t] = static_cast<int32_t>(k);
+    for (uint32_t t : nodes[k].masks) result->cluster_of[t] = static_cast<int32_t>(k);
   }
+  return post_seconds;
+}
+
+// After the clustering: unseparated instances merged, under-segmented masks remedied, orphan
+// and untraced Gaussians labelled.
+absl::Status PostProcess(const GaussianCloud& cloud, const DecompositionOptions& options,
+                         DecompositionResult* result) {
+  result->merged_instances =
+      MergeUnseparatedInstances(result->trackers, options, &result->instances);
+  result->undersegmented =
+      RemedyUndersegmented(result->trackers, result->judgement, options, &result->instances);
+  const float step = static_cast<float>(options.untraced_radius * RobustSceneDiagonal(cloud));
+  result->orphans_labelled =
+      LabelOrphanGaussians(result->trackers, cloud, step, options, &result->instances);
+  RETURN_IF_ERROR(CheckCancelled(options.cancel, "decompose"));
+  result->untraced_labelled = LabelUntracedGaussians(result->trackers, cloud, step,
+                                                     options.num_threads, &result->instances);
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<DecompositionResult> Decompose(const Scene& scene, const GaussianCloud& cloud,
+                                              const DecompositionOptions& options,
+                                              const ProgressFn& progress) {
+  RETURN_IF_ERROR(options.Validate());
+  DecompositionResult result;
+  Stopwatch watch;
+  ASSIGN_OR_RETURN(result.trackers, TrackScene(scene, cloud, options, progress));
+  result.tracking_seconds = watch.ElapsedSeconds();
+  watch.Restart();
+  // Instance building inside the re-judgement loop counts as post-processing.
+  ASSIGN_OR_RETURN(const double post_seconds, ClusterAndRejudge(cloud, options, progress, &result));
   result.clustering_seconds = watch.ElapsedSeconds() - post_seconds;
   watch.Restart();
-  result.merged_instances = MergeUnseparatedInstances(result.trackers, options, &result.instances);
-  result.undersegmented =
-      RemedyUndersegmented(result.trackers, result.judgement, options, &result.instances);
-  const float step = static_cast<float>(options.untraced_radius * RobustSceneDiagonal(cloud));
-  result.orphans_labelled =
-      LabelOrphanGaussians(result.trackers, cloud, step, options, &result.instances);
-  RETURN_IF_ERROR(CheckCancelled(options.cancel, "decompose"));
-  result.untraced_labelled =
-      LabelUntracedGaussians(result.trackers, cloud, step, options.num_threads, &result.instances);
+  RETURN_IF_ERROR(PostProcess(cloud, options, &result));
   result.post_seconds = post_seconds + watch.ElapsedSeconds();
   if (progress) progress("post-processing", 1, 1);
   return result;

@@ -31,30 +31,23 @@ size_t IntersectionSize(const std::vector<uint32_t>& a, const std::vector<uint32
   return n;
 }
 
-// Sub-objects of one node (4.7 steps 1-2).
-std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node,
-                                const GaussianCloud& cloud, const DecompositionOptions& options,
-                                float eps, const std::vector<uint8_t>* undersegmented) {
-  std::vector<Instance> out;
-  if (node.masks.size() < 2) return out;
-  // The node's Gaussians: the union of its trackers.
+// The node's Gaussians: the union of its trackers, sorted.
+std::vector<uint32_t> NodeGaussians(const TrackerSet& set, const MaskNode& node) {
   std::vector<uint32_t> points;
   for (uint32_t t : node.masks)
     points.insert(points.end(), set.trackers[t].gaussians.begin(), set.trackers[t].gaussians.end());
   std::sort(points.begin(), points.end());
   points.erase(std::unique(points.begin(), points.end()), points.end());
-  std::vector<Eigen::Vector3f> xyz(points.size());
-  for (size_t i = 0; i < points.size(); ++i)
-    xyz[i] = Eigen::Vector3f(&cloud.positions[3 * points[i]]);
-  const std::vector<int> cluster = Dbscan(xyz, eps, options.dbscan_min_points);
-  const int num_groups =
-      1 + *std::max_element(cluster.begin(), cluster.end()) + 1;  // noise is group 0
-  // Detection ratio over the node's visible frames.
-  std::vector<uint16_t> appear(points.size(), 0), detected(points.size(), 0);
-  // A frame where the point lies in a mask judged under-segmented (a merge of this object with
-  // its neighbour) says nothing about the point's object and does not count against it
-  // (DecompositionOptions::filter_skips_merged_frames).
-  const bool skip_merged = options.filter_skips_merged_frames && undersegmented != nullptr;
+  return points;
+}
+
+// Per point: the node's visible frames that trace it. A frame where the point lies in a mask
+// judged under-segmented (a merge of this object with its neighbour) says nothing about the
+// point's object and does not count against it (DecompositionOptions::filter_skips_merged_frames).
+std::vector<uint16_t> AppearCounts(const TrackerSet& set, const MaskNode& node,
+                                   const std::vector<uint32_t>& points, bool skip_merged,
+                                   const std::vector<uint8_t>* undersegmented) {
+  std::vector<uint16_t> appear(points.size(), 0);
   for (size_t i = 0; i < points.size(); ++i) {
     const uint16_t* frames = nullptr;
     const size_t count = set.FramesOf(points[i], &frames);
@@ -67,6 +60,13 @@ std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node,
         --appear[i];
     }
   }
+  return appear;
+}
+
+// Per point: the node's visible frames whose mask of the node holds it.
+std::vector<uint16_t> DetectedCounts(const TrackerSet& set, const MaskNode& node,
+                                     const std::vector<uint32_t>& points) {
+  std::vector<uint16_t> detected(points.size(), 0);
   std::vector<uint32_t> masks_by_view = node.masks;
   std::stable_sort(masks_by_view.begin(), masks_by_view.end(), [&](uint32_t a, uint32_t b) {
     return set.trackers[a].view < set.trackers[b].view;
@@ -84,6 +84,45 @@ std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node,
       }
     }
   }
+  return detected;
+}
+
+// Each mask goes to the sub-object it overlaps most; sub-objects with fewer than 2 masks go.
+void AssignMasks(const TrackerSet& set, const MaskNode& node, std::vector<Instance>* out) {
+  for (uint32_t t : node.masks) {
+    size_t best = 0, best_overlap = 0;
+    for (size_t s = 0; s < out->size(); ++s) {
+      const size_t overlap = IntersectionSize(set.trackers[t].gaussians, (*out)[s].gaussians);
+      if (overlap > best_overlap) {
+        best_overlap = overlap;
+        best = s;
+      }
+    }
+    if (best_overlap == 0) continue;
+    (*out)[best].masks.push_back(t);
+    (*out)[best].coverage.push_back(static_cast<float>(best_overlap) /
+                                    (*out)[best].gaussians.size());
+  }
+  std::erase_if(*out, [](const Instance& s) { return s.masks.size() < 2; });
+}
+
+// Sub-objects of one node (4.7 steps 1-2): DBSCAN groups of its Gaussians, each keeping the
+// points its masks detect in more than point_filter_threshold of the frames that show them.
+std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node,
+                                const GaussianCloud& cloud, const DecompositionOptions& options,
+                                float eps, const std::vector<uint8_t>* undersegmented) {
+  std::vector<Instance> out;
+  if (node.masks.size() < 2) return out;
+  const std::vector<uint32_t> points = NodeGaussians(set, node);
+  std::vector<Eigen::Vector3f> xyz(points.size());
+  for (size_t i = 0; i < points.size(); ++i)
+    xyz[i] = Eigen::Vector3f(&cloud.positions[3 * points[i]]);
+  const std::vector<int> cluster = Dbscan(xyz, eps, options.dbscan_min_points);
+  const int num_groups =
+      1 + *std::max_element(cluster.begin(), cluster.end()) + 1;  // noise is group 0
+  const bool skip_merged = options.filter_skips_merged_frames && undersegmented != nullptr;
+  const std::vector<uint16_t> appear = AppearCounts(set, node, points, skip_merged, undersegmented);
+  const std::vector<uint16_t> detected = DetectedCounts(set, node, points);
   for (int group = 0; group < num_groups; ++group) {
     Instance sub;
     for (size_t i = 0; i < points.size(); ++i) {
@@ -95,23 +134,7 @@ std::vector<Instance> SplitNode(const TrackerSet& set, const MaskNode& node,
     if (sub.gaussians.empty()) continue;
     out.push_back(std::move(sub));
   }
-  // Each mask goes to the sub-object it overlaps most.
-  for (uint32_t t : node.masks) {
-    size_t best = 0, best_overlap = 0;
-    for (size_t s = 0; s < out.size(); ++s) {
-      const size_t overlap = IntersectionSize(set.trackers[t].gaussians, out[s].gaussians);
-      if (overlap > best_overlap) {
-        best_overlap = overlap;
-        best = s;
-      }
-    }
-    if (best_overlap == 0) continue;
-    out[best].masks.push_back(t);
-    out[best].coverage.push_back(static_cast<float>(best_overlap) / out[best].gaussians.size());
-  }
-  out.erase(
-      std::remove_if(out.begin(), out.end(), [](const Instance& s) { return s.masks.size() < 2; }),
-      out.end());
+  AssignMasks(set, node, &out);
   return out;
 }
 
