@@ -15,40 +15,12 @@
 
 #include "absl/status/status.h"
 #include "absl/strings/str_cat.h"
-#include "absl/strings/str_split.h"
-#include "absl/strings/strip.h"
 #include "common/core/status.h"
 
 namespace instascene {
 namespace {
 
 constexpr float kMaxExactInteger = 16777216.0f;  // 2^24: integers beyond it do not fit a float
-
-bool ParseScalarType(absl::string_view s, ScalarType* type) {
-  struct Entry {
-    absl::string_view name;
-    ScalarType type;
-  };
-  static constexpr Entry kTypes[] = {
-      {"char", ScalarType::kInt8},      {"int8", ScalarType::kInt8},
-      {"uchar", ScalarType::kUint8},    {"uint8", ScalarType::kUint8},
-      {"short", ScalarType::kInt16},    {"int16", ScalarType::kInt16},
-      {"ushort", ScalarType::kUint16},  {"uint16", ScalarType::kUint16},
-      {"int", ScalarType::kInt32},      {"int32", ScalarType::kInt32},
-      {"uint", ScalarType::kUint32},    {"uint32", ScalarType::kUint32},
-      {"float", ScalarType::kFloat32},  {"float32", ScalarType::kFloat32},
-      {"double", ScalarType::kFloat64}, {"float64", ScalarType::kFloat64},
-  };
-  for (const Entry& e : kTypes) {
-    if (e.name == s) {
-      *type = e.type;
-      return true;
-    }
-  }
-  return false;
-}
-
-bool IsIntegerType(ScalarType t) { return t != ScalarType::kFloat32 && t != ScalarType::kFloat64; }
 
 // Decodes one binary scalar at p (which has at least ScalarTypeSize bytes) as double.
 double DecodeBinary(const char* p, ScalarType type, bool big_endian) {
@@ -190,6 +162,8 @@ std::string DescribeFormat(PlyFormat f) {
 
 }  // namespace
 
+bool IsIntegerType(ScalarType t) { return t != ScalarType::kFloat32 && t != ScalarType::kFloat64; }
+
 int ScalarTypeSize(ScalarType type) {
   switch (type) {
     case ScalarType::kInt8:
@@ -237,98 +211,58 @@ int PlyColumns::Find(absl::string_view name) const {
   return -1;
 }
 
-absl::StatusOr<PlyHeader> ParsePlyHeader(absl::string_view data, absl::string_view source,
-                                         const PlyLimits& limits) {
-  auto error = [&](int line, absl::string_view what) {
-    return absl::InvalidArgumentError(absl::StrCat(source, ": PLY header line ", line, ": ", what));
-  };
-  if (!absl::StartsWith(data, "ply\n") && !absl::StartsWith(data, "ply\r\n")) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(source, ": not a PLY file (missing 'ply' magic)"));
+namespace {
+
+// Empty columns, one per scalar property of `element` (lists are skipped), room for its rows.
+PlyColumns ColumnsFor(const PlyElement& element) {
+  PlyColumns out;
+  out.count = element.count;
+  for (const PlyProperty& p : element.properties) {
+    if (p.is_list) continue;
+    out.names.push_back(p.name);
+    out.types.push_back(p.type);
+    out.columns.emplace_back();
+    out.columns.back().reserve(element.count);
   }
-  const absl::string_view kEnd = "end_header";
-  size_t end = data.find(kEnd);
-  if (end == absl::string_view::npos || end > limits.max_header_bytes) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(source, ": PLY header has no 'end_header' within ", limits.max_header_bytes,
-                     " bytes (truncated file?)"));
-  }
-  size_t newline = data.find('\n', end);
-  if (newline == absl::string_view::npos) {
-    return absl::InvalidArgumentError(
-        absl::StrCat(source, ": PLY header not terminated by newline"));
-  }
-  PlyHeader header;
-  header.data_offset = newline + 1;
-  bool have_format = false;
-  int line_no = 0;
-  for (absl::string_view line : absl::StrSplit(data.substr(0, end), '\n')) {
-    ++line_no;
-    line = absl::StripTrailingAsciiWhitespace(line);
-    std::vector<absl::string_view> tok = absl::StrSplit(line, ' ', absl::SkipEmpty());
-    if (tok.empty() || tok[0] == "ply") continue;
-    if (tok[0] == "comment" || tok[0] == "obj_info") {
-      header.comments.emplace_back(absl::StripPrefix(line, tok[0]));
+  return out;
+}
+
+// Reads row `i` of `element` into `out`'s columns, or skips it when `out` is null. Lists are
+// skipped (their length bounded); integers beyond 2^24 and values beyond float are refused.
+absl::Status ReadRow(DataCursor& cursor, const PlyElement& element, int64_t i,
+                     absl::string_view source, const PlyLimits& limits, PlyColumns* out) {
+  int column = 0;
+  for (const PlyProperty& p : element.properties) {
+    auto fail = [&](absl::string_view what) {
+      return absl::InvalidArgumentError(absl::StrCat(source, ": element '", element.name, "' #", i,
+                                                     " property '", p.name, "': ", what));
+    };
+    double v = 0.0;
+    if (p.is_list) {
+      if (!cursor.Read(p.count_type, &v)) return fail("truncated or malformed list length");
+      if (v < 0 || v > static_cast<double>(limits.max_list_length)) {
+        return fail(absl::StrCat("list length ", v, " out of range"));
+      }
+      if (!cursor.Skip(p.type, static_cast<int64_t>(v))) return fail("truncated list");
       continue;
     }
-    if (tok[0] == "format") {
-      if (tok.size() != 3) return error(line_no, "malformed 'format' line");
-      if (tok[1] == "ascii")
-        header.format = PlyFormat::kAscii;
-      else if (tok[1] == "binary_little_endian")
-        header.format = PlyFormat::kBinaryLittleEndian;
-      else if (tok[1] == "binary_big_endian")
-        header.format = PlyFormat::kBinaryBigEndian;
-      else
-        return error(line_no, absl::StrCat("unknown format '", tok[1], "'"));
-      have_format = true;
-    } else if (tok[0] == "element") {
-      int64_t count = -1;
-      const char* count_end = tok.size() == 3 ? tok[2].data() + tok[2].size() : nullptr;
-      std::from_chars_result parsed{};
-      if (tok.size() == 3) parsed = std::from_chars(tok[2].data(), count_end, count);
-      // The whole token must be the count: "8e3" is not 8.
-      if (tok.size() != 3 || parsed.ec != std::errc() || parsed.ptr != count_end || count < 0) {
-        return error(line_no, "malformed 'element' line (expected: element NAME COUNT)");
-      }
-      header.elements.push_back({std::string(tok[1]), count, {}});
-    } else if (tok[0] == "property") {
-      if (header.elements.empty()) return error(line_no, "property before any element");
-      PlyElement& element = header.elements.back();
-      if (static_cast<int>(element.properties.size()) >= limits.max_properties) {
-        return error(line_no, absl::StrCat("more than ", limits.max_properties, " properties"));
-      }
-      PlyProperty prop;
-      if (tok.size() == 5 && tok[1] == "list") {
-        prop.is_list = true;
-        if (!ParseScalarType(tok[2], &prop.count_type) || !ParseScalarType(tok[3], &prop.type) ||
-            !IsIntegerType(prop.count_type)) {
-          return error(line_no, absl::StrCat("unknown list property type in '", line, "'"));
-        }
-        prop.name = std::string(tok[4]);
-      } else if (tok.size() == 3) {
-        if (!ParseScalarType(tok[1], &prop.type)) {
-          return error(line_no, absl::StrCat("unknown property type '", tok[1], "' of property '",
-                                             tok[2], "'"));
-        }
-        prop.name = std::string(tok[2]);
-      } else {
-        return error(line_no, absl::StrCat("malformed property line '", line, "'"));
-      }
-      for (const PlyProperty& other : element.properties) {
-        if (other.name == prop.name) {
-          return error(line_no, absl::StrCat("duplicate property '", prop.name, "'"));
-        }
-      }
-      element.properties.push_back(std::move(prop));
-    } else {
-      return error(line_no, absl::StrCat("unknown keyword '", tok[0], "'"));
+    if (out == nullptr) {
+      if (!cursor.Skip(p.type, 1)) return fail("truncated data");
+      continue;
     }
+    if (!cursor.Read(p.type, &v)) return fail("truncated data or malformed value");
+    if (IsIntegerType(p.type) && std::abs(v) > kMaxExactInteger) {
+      return fail(absl::StrCat("integer value ", v, " exceeds 2^24 and cannot be kept exactly"));
+    }
+    if (std::isfinite(v) && std::abs(v) > std::numeric_limits<float>::max()) {
+      return fail(absl::StrCat("value ", v, " overflows float"));
+    }
+    out->columns[column++].push_back(static_cast<float>(v));
   }
-  if (!have_format)
-    return absl::InvalidArgumentError(absl::StrCat(source, ": PLY header has no format line"));
-  return header;
+  return absl::OkStatus();
 }
+
+}  // namespace
 
 absl::StatusOr<PlyColumns> ReadPlyElement(absl::string_view data, const PlyHeader& header,
                                           absl::string_view element_name, absl::string_view source,
@@ -352,47 +286,9 @@ absl::StatusOr<PlyColumns> ReadPlyElement(absl::string_view data, const PlyHeade
       empty.count = element.count;
       return empty;
     }
-    PlyColumns out;
-    if (wanted) {
-      out.count = element.count;
-      for (const PlyProperty& p : element.properties) {
-        if (p.is_list) continue;
-        out.names.push_back(p.name);
-        out.types.push_back(p.type);
-        out.columns.emplace_back();
-        out.columns.back().reserve(element.count);
-      }
-    }
+    PlyColumns out = wanted ? ColumnsFor(element) : PlyColumns{};
     for (int64_t i = 0; i < element.count; ++i) {
-      int column = 0;
-      for (const PlyProperty& p : element.properties) {
-        auto fail = [&](absl::string_view what) {
-          return absl::InvalidArgumentError(absl::StrCat(source, ": element '", element.name, "' #",
-                                                         i, " property '", p.name, "': ", what));
-        };
-        double v = 0.0;
-        if (p.is_list) {
-          if (!cursor.Read(p.count_type, &v)) return fail("truncated or malformed list length");
-          if (v < 0 || v > static_cast<double>(limits.max_list_length)) {
-            return fail(absl::StrCat("list length ", v, " out of range"));
-          }
-          if (!cursor.Skip(p.type, static_cast<int64_t>(v))) return fail("truncated list");
-          continue;
-        }
-        if (!wanted) {
-          if (!cursor.Skip(p.type, 1)) return fail("truncated data");
-          continue;
-        }
-        if (!cursor.Read(p.type, &v)) return fail("truncated data or malformed value");
-        if (IsIntegerType(p.type) && std::abs(v) > kMaxExactInteger) {
-          return fail(
-              absl::StrCat("integer value ", v, " exceeds 2^24 and cannot be kept exactly"));
-        }
-        if (std::isfinite(v) && std::abs(v) > std::numeric_limits<float>::max()) {
-          return fail(absl::StrCat("value ", v, " overflows float"));
-        }
-        out.columns[column++].push_back(static_cast<float>(v));
-      }
+      RETURN_IF_ERROR(ReadRow(cursor, element, i, source, limits, wanted ? &out : nullptr));
     }
     if (wanted) return out;
   }

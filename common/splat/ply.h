@@ -21,6 +21,7 @@ enum class PlyFormat { kAscii, kBinaryLittleEndian, kBinaryBigEndian };
 enum class ScalarType { kInt8, kUint8, kInt16, kUint16, kInt32, kUint32, kFloat32, kFloat64 };
 
 int ScalarTypeSize(ScalarType type);
+bool IsIntegerType(ScalarType type);                // every type but float and double
 absl::string_view ScalarTypeName(ScalarType type);  // PLY spelling: "float", "uchar", ...
 
 struct PlyProperty {
