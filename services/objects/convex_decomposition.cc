@@ -110,6 +110,70 @@ std::vector<std::vector<Cell>> Components(const std::vector<Cell>& cells, const 
   return out;
 }
 
+// The mesh's voxel grid: a cube of resolution^3 around its box, one voxel of margin, inside by
+// ray parity.
+absl::StatusOr<Grid> VoxelGrid(const TriangleMesh& mesh, int resolution) {
+  Eigen::AlignedBox3f box;
+  for (const Eigen::Vector3f& v : mesh.vertices) box.extend(v);
+  Grid grid;
+  grid.n = resolution;
+  grid.size = box.sizes().maxCoeff() / static_cast<float>(grid.n - 2);
+  grid.origin = box.center() - Eigen::Vector3f::Constant(0.5f * grid.size * grid.n);
+  const Eigen::AlignedBox3f cube(grid.origin,
+                                 grid.origin + Eigen::Vector3f::Constant(grid.size * grid.n));
+  ASSIGN_OR_RETURN(grid.inside, VoxelizeByRayParity(mesh, cube, grid.n));
+  return grid;
+}
+
+// The part whose hull wastes the most volume, if it is not convex enough; -1 when none.
+int WorstPart(const std::vector<Part>& parts, double max_concavity) {
+  int worst = -1;
+  double worst_waste = 0;
+  for (size_t p = 0; p < parts.size(); ++p) {
+    const double waste = parts[p].concavity * parts[p].hull_volume;
+    if (!parts[p].final && parts[p].concavity > max_concavity && parts[p].cells.size() >= 8 &&
+        waste > worst_waste) {
+      worst = static_cast<int>(p);
+      worst_waste = waste;
+    }
+  }
+  return worst;
+}
+
+// The cut of `part` along an axis at one of split_candidates planes whose halves' hulls (their
+// connected components') hold the least volume, if less than the part's own hull; empty if none.
+std::vector<Part> BestSplit(const Part& part, const Grid& grid, int split_candidates) {
+  double best_cost = part.hull_volume;
+  std::vector<Part> best;
+  for (int axis = 0; axis < 3; ++axis) {
+    int lo = grid.n, hi = -1;
+    for (const Cell& c : part.cells) {
+      lo = std::min(lo, c[axis]);
+      hi = std::max(hi, c[axis]);
+    }
+    for (int s = 1; s <= split_candidates; ++s) {
+      const int cut = lo + (hi - lo + 1) * s / (split_candidates + 1);
+      if (cut <= lo || cut > hi) continue;
+      std::vector<Cell> below, above;
+      for (const Cell& c : part.cells) (c[axis] < cut ? below : above).push_back(c);
+      std::vector<Part> halves;
+      double cost = 0;
+      for (auto* half : {&below, &above})
+        for (std::vector<Cell>& component : Components(*half, grid)) {
+          absl::StatusOr<Part> piece = MakePart(std::move(component), grid);
+          if (!piece.ok()) continue;  // a flat sliver: covered by its neighbour's hull
+          cost += piece->hull_volume;
+          halves.push_back(*std::move(piece));
+        }
+      if (!halves.empty() && cost < best_cost - 1e-12) {
+        best_cost = cost;
+        best = std::move(halves);
+      }
+    }
+  }
+  return best;
+}
+
 }  // namespace
 
 absl::Status ConvexDecompositionOptions::Validate() const {
@@ -128,15 +192,7 @@ absl::StatusOr<std::vector<TriangleMesh>> ConvexDecomposition(
     const TriangleMesh& mesh, const ConvexDecompositionOptions& options) {
   RETURN_IF_ERROR(options.Validate());
   if (mesh.triangles.empty()) return absl::InvalidArgumentError("empty mesh: nothing to decompose");
-  Eigen::AlignedBox3f box;
-  for (const Eigen::Vector3f& v : mesh.vertices) box.extend(v);
-  Grid grid;
-  grid.n = options.resolution;
-  grid.size = box.sizes().maxCoeff() / static_cast<float>(grid.n - 2);
-  grid.origin = box.center() - Eigen::Vector3f::Constant(0.5f * grid.size * grid.n);
-  const Eigen::AlignedBox3f cube(grid.origin,
-                                 grid.origin + Eigen::Vector3f::Constant(grid.size * grid.n));
-  ASSIGN_OR_RETURN(grid.inside, VoxelizeByRayParity(mesh, cube, grid.n));
+  ASSIGN_OR_RETURN(const Grid grid, VoxelGrid(mesh, options.resolution));
   std::vector<Cell> all;
   for (int k = 0; k < grid.n; ++k)
     for (int j = 0; j < grid.n; ++j)
@@ -152,47 +208,10 @@ absl::StatusOr<std::vector<TriangleMesh>> ConvexDecomposition(
     if (part.ok()) parts.push_back(*std::move(part));  // a one-voxel-thin sliver spans no volume
   }
   while (static_cast<int>(parts.size()) < options.max_parts) {
-    // The part whose hull wastes the most volume, if it is not convex enough.
-    int worst = -1;
-    double worst_waste = 0;
-    for (size_t p = 0; p < parts.size(); ++p) {
-      const double waste = parts[p].concavity * parts[p].hull_volume;
-      if (!parts[p].final && parts[p].concavity > options.max_concavity &&
-          parts[p].cells.size() >= 8 && waste > worst_waste) {
-        worst = static_cast<int>(p);
-        worst_waste = waste;
-      }
-    }
+    const int worst = WorstPart(parts, options.max_concavity);
     if (worst < 0) break;
-    const std::vector<Cell> cells = parts[static_cast<size_t>(worst)].cells;
-    double best_cost = parts[static_cast<size_t>(worst)].hull_volume;
-    std::vector<Part> best;
-    for (int axis = 0; axis < 3; ++axis) {
-      int lo = grid.n, hi = -1;
-      for (const Cell& c : cells) {
-        lo = std::min(lo, c[axis]);
-        hi = std::max(hi, c[axis]);
-      }
-      for (int s = 1; s <= options.split_candidates; ++s) {
-        const int cut = lo + (hi - lo + 1) * s / (options.split_candidates + 1);
-        if (cut <= lo || cut > hi) continue;
-        std::vector<Cell> below, above;
-        for (const Cell& c : cells) (c[axis] < cut ? below : above).push_back(c);
-        std::vector<Part> halves;
-        double cost = 0;
-        for (auto* half : {&below, &above})
-          for (std::vector<Cell>& component : Components(*half, grid)) {
-            absl::StatusOr<Part> part = MakePart(std::move(component), grid);
-            if (!part.ok()) continue;  // a flat sliver: covered by its neighbour's hull
-            cost += part->hull_volume;
-            halves.push_back(*std::move(part));
-          }
-        if (!halves.empty() && cost < best_cost - 1e-12) {
-          best_cost = cost;
-          best = std::move(halves);
-        }
-      }
-    }
+    std::vector<Part> best =
+        BestSplit(parts[static_cast<size_t>(worst)], grid, options.split_candidates);
     if (best.empty() || static_cast<int>(parts.size() + best.size()) - 1 > options.max_parts) {
       parts[static_cast<size_t>(worst)].final = true;
       continue;
