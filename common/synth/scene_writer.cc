@@ -55,28 +55,16 @@ LabelMap GroundTruthInstanceMap(const RenderResult& traced,
   return LabelMap{traced.width, traced.height, std::vector<uint16_t>(map.begin(), map.end())};
 }
 
-absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& directory,
-                               const SceneWriteOptions& options) {
-  namespace fs = std::filesystem;
+namespace {
+namespace fs = std::filesystem;
+
+// gt/: per-Gaussian ids (gt/ is itself a result directory, result.json + labels.ply:
+// `instascene eval --result <scene>/gt` scores the ground truth, 1.0 by construction), the
+// objects, their meshes and complete surfels, the stuff mesh.
+absl::Status WriteGroundTruth(const ClutterScene& scene, const Scene& out,
+                              const SegmentationResult& gt_result) {
+  const std::string& directory = out.directory;
   std::error_code ec;
-  fs::create_directories(fs::path(directory) / "images", ec);
-  if (ec) return absl::UnavailableError(absl::StrCat(directory, ": cannot create: ", ec.message()));
-  Scene out;
-  out.directory = directory;
-  ASSIGN_OR_RETURN(MaskNoiseOptions noise, MaskNoiseOptions::Level(options.mask_noise));
-  for (const char* sub : {"masks", "gt/masks", "gt/meshes"}) {
-    fs::create_directories(fs::path(directory) / sub, ec);
-    if (ec)
-      return absl::UnavailableError(
-          absl::StrCat(directory, "/", sub, ": cannot create: ", ec.message()));
-  }
-  RETURN_IF_ERROR(WriteGaussianPly(out.Path(out.gaussians), scene.cloud));
-  // Ground truth: per-Gaussian ids, objects, meshes.
-  // gt/ is itself a result directory (result.json + labels.ply): `instascene eval --result
-  // <scene>/gt` scores the ground truth (1.0 by construction).
-  SegmentationResult gt_result;
-  gt_result.stage = "ground-truth";
-  gt_result.labels.assign(scene.instance_ids.begin(), scene.instance_ids.end());
   RETURN_IF_ERROR(WriteResult(out.Path("gt"), gt_result, scene.cloud));
   nlohmann::json objects = nlohmann::json::array();
   for (size_t k = 0; k < scene.objects.size(); ++k) {
@@ -99,8 +87,11 @@ absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& dir
   if (!scene.stuff_mesh.triangles.empty()) {
     RETURN_IF_ERROR(WriteMeshPly(out.Path("gt/meshes/stuff.ply"), scene.stuff_mesh));
   }
-  out.meters_per_unit = 1.0;  // the synthetic world is in metres (cluttered_scene.h)
-  out.metadata["gt"] = {
+  return absl::OkStatus();
+}
+
+nlohmann::json GroundTruthMetadata(const ClutterScene& scene, const SceneWriteOptions& options) {
+  return {
       {"format", "instascene.gt/1"},
       {"objects", "gt/objects.json"},
       {"gaussian_instances", "gt/labels.ply"},
@@ -111,24 +102,57 @@ absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& dir
       {"unseen_surfels", scene.complete_surfels.empty() ? "kept" : "dropped"},
       {"mask_noise", options.mask_noise},
       {"seed", options.seed}};
+}
+
+// View v: its image, its ground-truth instance map and the simulated segmenter's masks.
+absl::StatusOr<SceneView> WriteView(const ClutterScene& scene, const Scene& out, int v,
+                                    const std::vector<uint32_t>& gt_labels,
+                                    const MaskNoiseOptions& noise,
+                                    const SceneWriteOptions& options) {
   RenderOptions render;
   render.num_threads = options.num_threads;
-  render.trace.enabled =
-      true;  // every contribution: the ground-truth masks sum weights per instance
+  render.trace.enabled = true;  // every contribution: the ground-truth masks sum weights
+  SceneView view;
+  view.name = absl::StrFormat("%04d", v);
+  view.image = absl::StrCat("images/", view.name, ".png");
+  view.camera = scene.cameras[v];
+  view.mask = absl::StrCat("masks/", view.name, ".png");
+  ASSIGN_OR_RETURN(RenderResult r, Render(scene.cloud, view.camera, render));
+  const LabelMap gt = GroundTruthInstanceMap(r, gt_labels);
+  RETURN_IF_ERROR(WriteLabelMap(out.Path(absl::StrCat("gt/masks/", view.name, ".png")), gt));
+  RETURN_IF_ERROR(
+      WriteLabelMap(out.Path(view.mask), SimulateSegmenter(gt, noise, options.seed * 1000003 + v)));
+  Image image{r.width, r.height, 3, std::move(r.color)};
+  RETURN_IF_ERROR(WriteImage(out.Path(view.image), image));
+  return view;
+}
+
+}  // namespace
+
+absl::Status WriteClutterScene(const ClutterScene& scene, const std::string& directory,
+                               const SceneWriteOptions& options) {
+  std::error_code ec;
+  fs::create_directories(fs::path(directory) / "images", ec);
+  if (ec) return absl::UnavailableError(absl::StrCat(directory, ": cannot create: ", ec.message()));
+  Scene out;
+  out.directory = directory;
+  ASSIGN_OR_RETURN(MaskNoiseOptions noise, MaskNoiseOptions::Level(options.mask_noise));
+  for (const char* sub : {"masks", "gt/masks", "gt/meshes"}) {
+    fs::create_directories(fs::path(directory) / sub, ec);
+    if (ec)
+      return absl::UnavailableError(
+          absl::StrCat(directory, "/", sub, ": cannot create: ", ec.message()));
+  }
+  RETURN_IF_ERROR(WriteGaussianPly(out.Path(out.gaussians), scene.cloud));
+  SegmentationResult gt_result;
+  gt_result.stage = "ground-truth";
+  gt_result.labels.assign(scene.instance_ids.begin(), scene.instance_ids.end());
+  RETURN_IF_ERROR(WriteGroundTruth(scene, out, gt_result));
+  out.meters_per_unit = 1.0;  // the synthetic world is in metres (cluttered_scene.h)
+  out.metadata["gt"] = GroundTruthMetadata(scene, options);
   const int total = static_cast<int>(scene.cameras.size());
   for (int v = 0; v < total; ++v) {
-    SceneView view;
-    view.name = absl::StrFormat("%04d", v);
-    view.image = absl::StrCat("images/", view.name, ".png");
-    view.camera = scene.cameras[v];
-    view.mask = absl::StrCat("masks/", view.name, ".png");
-    ASSIGN_OR_RETURN(RenderResult r, Render(scene.cloud, view.camera, render));
-    const LabelMap gt = GroundTruthInstanceMap(r, gt_result.labels);
-    RETURN_IF_ERROR(WriteLabelMap(out.Path(absl::StrCat("gt/masks/", view.name, ".png")), gt));
-    RETURN_IF_ERROR(WriteLabelMap(out.Path(view.mask),
-                                  SimulateSegmenter(gt, noise, options.seed * 1000003 + v)));
-    Image image{r.width, r.height, 3, std::move(r.color)};
-    RETURN_IF_ERROR(WriteImage(out.Path(view.image), image));
+    ASSIGN_OR_RETURN(SceneView view, WriteView(scene, out, v, gt_result.labels, noise, options));
     out.views.push_back(std::move(view));
     if (options.progress) options.progress(v + 1, total);
   }

@@ -7,7 +7,68 @@
 #include "absl/strings/str_cat.h"
 
 namespace instascene {
-namespace {}  // namespace
+namespace {
+
+// A capture's scale (to the object height), footprint radius and bottom centre (its frame).
+struct Placement {
+  float scale, radius;
+  Eigen::Vector3f bottom_center;
+};
+
+Placement PlaceCapture(const GaussianCloud& c, float object_height) {
+  const Eigen::AlignedBox3f box = RobustBounds(c);
+  const float x0 = box.min().x(), x1 = box.max().x(), y0 = box.min().y(), y1 = box.max().y();
+  const float z0 = box.min().z(), z1 = box.max().z();
+  const float scale = object_height / std::max(y1 - y0, 1e-6f);
+  const float radius = 0.5f * scale * std::hypot(x1 - x0, z1 - z0);  // circumscribed: no overlap
+  return {scale, radius, Eigen::Vector3f(0.5f * (x0 + x1), y1, 0.5f * (z0 + z1))};
+}
+
+// Appends `source` scaled by p.scale about its bottom centre and moved to `offset`.
+void AppendPlaced(const GaussianCloud& source, const Placement& p, const Eigen::Vector3f& offset,
+                  GaussianCloud* cloud) {
+  const int stride = cloud->sh_stride();
+  const size_t base = cloud->size(), n = source.size();
+  cloud->positions.resize(3 * (base + n));
+  cloud->log_scales.resize(cloud->num_scales * (base + n));
+  cloud->rotations.resize(4 * (base + n));
+  cloud->opacity_logits.resize(base + n);
+  cloud->sh.resize(static_cast<size_t>(stride) * (base + n), 0.0f);
+  const float log_scale = std::log(p.scale);
+  const int source_stride = source.sh_stride();
+  for (size_t i = 0; i < n; ++i) {
+    const Eigen::Vector3f pos(&source.positions[3 * i]);
+    const Eigen::Vector3f placed = p.scale * (pos - p.bottom_center) + offset;
+    for (int a = 0; a < 3; ++a) cloud->positions[3 * (base + i) + a] = placed[a];
+    for (int a = 0; a < cloud->num_scales; ++a) {
+      cloud->log_scales[cloud->num_scales * (base + i) + a] =
+          source.log_scales[source.num_scales * i + a] + log_scale;
+    }
+    std::copy_n(&source.rotations[4 * i], 4, &cloud->rotations[4 * (base + i)]);
+    cloud->opacity_logits[base + i] = source.opacity_logits[i];
+    std::copy_n(&source.sh[static_cast<size_t>(source_stride) * i], source_stride,
+                &cloud->sh[static_cast<size_t>(stride) * (base + i)]);
+  }
+}
+
+// Cameras all around, at several heights, looking at the middle of the row (up is -y).
+void AddOrbitCameras(const CompositeOptions& options, float row_length, std::mt19937_64& rng,
+                     ClutterScene* scene) {
+  std::uniform_real_distribution<float> uni(0.0f, 1.0f);
+  scene->focus = Eigen::Vector3d(0, -0.5 * options.object_height, 0);
+  const double extent = 0.5 * row_length + options.object_height;
+  const double tan_half = std::tan(0.5 * options.fov_x_deg * 3.14159265358979 / 180.0);
+  for (int v = 0; v < options.views; ++v) {
+    const float azimuth = 360.0f * static_cast<float>(v) / options.views + 6.0f * (uni(rng) - 0.5f);
+    const float elevation = 8.0f + 12.0f * (v % 3) + 4.0f * (uni(rng) - 0.5f);
+    const double distance = 0.8 * extent / tan_half * (1.0 + 0.15 * uni(rng));
+    scene->cameras.push_back(OrbitCamera(scene->focus, Eigen::Vector3d(0, -1, 0), distance, azimuth,
+                                         elevation, options.width, options.height,
+                                         options.fov_x_deg));
+  }
+}
+
+}  // namespace
 
 absl::StatusOr<ClutterScene> ComposeSplats(const std::vector<GaussianCloud>& input,
                                            const std::vector<std::string>& names,
@@ -29,24 +90,14 @@ absl::StatusOr<ClutterScene> ComposeSplats(const std::vector<GaussianCloud>& inp
   ClutterScene scene;
   scene.cloud.num_scales = to_surfels || any_surfel ? 2 : 3;
   scene.cloud.sh_degree = sh_degree;
-  const int stride = scene.cloud.sh_stride();
   std::mt19937_64 rng(options.seed);
   std::uniform_real_distribution<float> uni(0.0f, 1.0f);
   // Scale and footprint of each capture.
-  struct Placement {
-    float scale, radius;
-    Eigen::Vector3f bottom_center;  // in the capture's frame
-  };
   std::vector<Placement> placements;
   float row_length = 0;
   for (const GaussianCloud& c : input) {
-    const Eigen::AlignedBox3f box = RobustBounds(c);
-    const float x0 = box.min().x(), x1 = box.max().x(), y0 = box.min().y(), y1 = box.max().y();
-    const float z0 = box.min().z(), z1 = box.max().z();
-    const float scale = options.object_height / std::max(y1 - y0, 1e-6f);
-    const float radius = 0.5f * scale * std::hypot(x1 - x0, z1 - z0);  // circumscribed: no overlap
-    placements.push_back({scale, radius, Eigen::Vector3f(0.5f * (x0 + x1), y1, 0.5f * (z0 + z1))});
-    row_length += 2 * radius + options.gap * options.object_height;
+    placements.push_back(PlaceCapture(c, options.object_height));
+    row_length += 2 * placements.back().radius + options.gap * options.object_height;
   }
   float cursor = -0.5f * row_length;
   for (size_t k = 0; k < input.size(); ++k) {
@@ -65,42 +116,11 @@ absl::StatusOr<ClutterScene> ComposeSplats(const std::vector<GaussianCloud>& inp
     obj.scale = p.scale;
     obj.world_from_object = {Eigen::Matrix3d::Identity(),
                              (offset - p.scale * p.bottom_center).cast<double>()};
-    const size_t base = scene.cloud.size(), n = source.size();
-    scene.cloud.positions.resize(3 * (base + n));
-    scene.cloud.log_scales.resize(scene.cloud.num_scales * (base + n));
-    scene.cloud.rotations.resize(4 * (base + n));
-    scene.cloud.opacity_logits.resize(base + n);
-    scene.cloud.sh.resize(static_cast<size_t>(stride) * (base + n), 0.0f);
-    const float log_scale = std::log(p.scale);
-    const int source_stride = source.sh_stride();
-    for (size_t i = 0; i < n; ++i) {
-      const Eigen::Vector3f pos(&source.positions[3 * i]);
-      const Eigen::Vector3f placed = p.scale * (pos - p.bottom_center) + offset;
-      for (int a = 0; a < 3; ++a) scene.cloud.positions[3 * (base + i) + a] = placed[a];
-      for (int a = 0; a < scene.cloud.num_scales; ++a) {
-        scene.cloud.log_scales[scene.cloud.num_scales * (base + i) + a] =
-            source.log_scales[source.num_scales * i + a] + log_scale;
-      }
-      std::copy_n(&source.rotations[4 * i], 4, &scene.cloud.rotations[4 * (base + i)]);
-      scene.cloud.opacity_logits[base + i] = source.opacity_logits[i];
-      std::copy_n(&source.sh[static_cast<size_t>(source_stride) * i], source_stride,
-                  &scene.cloud.sh[static_cast<size_t>(stride) * (base + i)]);
-    }
+    AppendPlaced(source, p, offset, &scene.cloud);
     scene.instance_ids.resize(scene.cloud.size(), static_cast<uint16_t>(obj.id));
     scene.objects.push_back(std::move(obj));
   }
-  // Cameras all around, at several heights, looking at the middle of the row (up is -y).
-  scene.focus = Eigen::Vector3d(0, -0.5 * options.object_height, 0);
-  const double extent = 0.5 * row_length + options.object_height;
-  const double tan_half = std::tan(0.5 * options.fov_x_deg * 3.14159265358979 / 180.0);
-  for (int v = 0; v < options.views; ++v) {
-    const float azimuth = 360.0f * static_cast<float>(v) / options.views + 6.0f * (uni(rng) - 0.5f);
-    const float elevation = 8.0f + 12.0f * (v % 3) + 4.0f * (uni(rng) - 0.5f);
-    const double distance = 0.8 * extent / tan_half * (1.0 + 0.15 * uni(rng));
-    scene.cameras.push_back(OrbitCamera(scene.focus, Eigen::Vector3d(0, -1, 0), distance, azimuth,
-                                        elevation, options.width, options.height,
-                                        options.fov_x_deg));
-  }
+  AddOrbitCameras(options, row_length, rng, &scene);
   return scene;
 }
 
