@@ -144,19 +144,71 @@ absl::Status CheckViews(const std::vector<RefinementView>& views, int sh_degree)
   return absl::OkStatus();
 }
 
-}  // namespace
+// One view's loss and the object's gradients (the frozen context's dropped).
+absl::StatusOr<double> ViewStep(const GaussianCloud& work, const RefinementView& view,
+                                const RefinementOptions& options, RasterWorkspace* ws,
+                                GaussianCloud* scratch, SurfelGradients* grad) {
+  const RenderOptions ro = ViewOptions(view, options, ws);
+  const GaussianCloud& scene = WithContext(work, view, scratch);
+  ASSIGN_OR_RETURN(RenderResult render, RenderForBackward(scene, view.camera, ro));
+  ViewGradients image_grad(render);
+  ASSIGN_OR_RETURN(const double loss, ViewLoss(view, render, options, &image_grad));
+  ASSIGN_OR_RETURN(*grad, TileBackward(scene, view.camera, ro, render, image_grad.Adjoints()));
+  if (view.context.size() > 0) {  // the context is frozen: keep the object's gradients
+    const size_t n = work.size();
+    grad->positions.resize(3 * n);
+    grad->log_scales.resize(2 * n);
+    grad->rotations.resize(4 * n);
+    grad->opacity_logits.resize(n);
+    grad->sh.resize(static_cast<size_t>(work.sh_stride()) * n);
+  }
+  return loss;
+}
 
-absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
-                                                 const std::vector<RefinementView>& views,
-                                                 const RefinementOptions& options,
-                                                 const RefinementProgress& progress) {
-  if (cloud->num_scales != 2) return absl::InvalidArgumentError("refinement needs 2DGS surfels");
+// Adam per parameter group, with 2DGS's learning rates (the position's on its exponential
+// schedule, no delay; the SH's DC and rest rates per value).
+class Optimizer {
+ public:
+  Optimizer(const RefinementOptions& options, int sh_stride)
+      : options_(options), sh_lr_(sh_stride, options.sh_rest_lr) {
+    for (int k = 0; k < 3; ++k) sh_lr_[k] = options.sh_dc_lr;
+  }
+  void Step(const SurfelGradients& grad, int it, GaussianCloud* work) {
+    const RefinementOptions& o = options_;
+    const double t = o.iterations > 1 ? (it - 1.0) / (o.iterations - 1.0) : 0.0;
+    const double pos_lr = o.spatial_scale * std::exp(std::log(o.position_lr_init) * (1 - t) +
+                                                     std::log(o.position_lr_final) * t);
+    pos_.Step(&work->positions, grad.positions, it, {pos_lr});
+    scale_.Step(&work->log_scales, grad.log_scales, it, {o.scaling_lr});
+    rot_.Step(&work->rotations, grad.rotations, it, {o.rotation_lr});
+    opacity_.Step(&work->opacity_logits, grad.opacity_logits, it, {o.opacity_lr});
+    sh_.Step(&work->sh, grad.sh, it, sh_lr_);
+  }
+
+ private:
+  const RefinementOptions& options_;
+  std::vector<double> sh_lr_;
+  Adam pos_, scale_, rot_, opacity_, sh_;
+};
+
+absl::Status CheckRefinementOptions(const GaussianCloud& cloud, const RefinementOptions& options) {
+  if (cloud.num_scales != 2) return absl::InvalidArgumentError("refinement needs 2DGS surfels");
   if (options.iterations < 0 || options.fixed_view_every < 1 || options.curve_every < 1 ||
       !(options.spatial_scale > 0) || !(options.lambda_normal >= 0)) {
     return absl::InvalidArgumentError(
         "refinement: needs iterations >= 0, fixed_view_every >= 1, curve_every >= 1, "
         "spatial_scale > 0, lambda_normal >= 0");
   }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
+                                                 const std::vector<RefinementView>& views,
+                                                 const RefinementOptions& options,
+                                                 const RefinementProgress& progress) {
+  RETURN_IF_ERROR(CheckRefinementOptions(*cloud, options));
   RETURN_IF_ERROR(CheckViews(views, cloud->sh_degree));
   const auto start = std::chrono::steady_clock::now();
   RefinementReport report;
@@ -168,12 +220,9 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
   if (views.empty() || options.iterations == 0 || cloud->size() == 0) return report;
 
   GaussianCloud work = *cloud;  // the caller's cloud changes only on success
-  Adam adam_pos, adam_scale, adam_rot, adam_opacity, adam_sh;
+  Optimizer optimizer(options, work.sh_stride());
   std::mt19937_64 rng(options.seed);
   std::uniform_int_distribution<size_t> pick(0, views.size() - 1);
-  const int stride = work.sh_stride();
-  std::vector<double> sh_lr(stride, options.sh_rest_lr);  // per SH value of one Gaussian
-  for (int k = 0; k < 3; ++k) sh_lr[k] = options.sh_dc_lr;
   double curve_sum = 0;
   int curve_count = 0;
   GaussianCloud scratch;
@@ -181,32 +230,9 @@ absl::StatusOr<RefinementReport> RefineGaussians(GaussianCloud* cloud,
     RETURN_IF_ERROR(CheckCancelled(options.cancel, "refinement"));
     const size_t chosen = pick(rng);
     const size_t k = it % options.fixed_view_every == 0 ? 0 : chosen;
-    const RefinementView& view = views[k];
-    const RenderOptions ro = ViewOptions(view, options, &ws);
-    const GaussianCloud& scene = WithContext(work, view, &scratch);
-    ASSIGN_OR_RETURN(RenderResult render, RenderForBackward(scene, view.camera, ro));
-    ViewGradients image_grad(render);
-    ASSIGN_OR_RETURN(const double loss, ViewLoss(view, render, options, &image_grad));
-    ASSIGN_OR_RETURN(SurfelGradients grad,
-                     TileBackward(scene, view.camera, ro, render, image_grad.Adjoints()));
-    if (view.context.size() > 0) {  // the context is frozen: keep the object's gradients
-      const size_t n = work.size();
-      grad.positions.resize(3 * n);
-      grad.log_scales.resize(2 * n);
-      grad.rotations.resize(4 * n);
-      grad.opacity_logits.resize(n);
-      grad.sh.resize(static_cast<size_t>(stride) * n);
-    }
-    // 2DGS's exponential position schedule (no delay).
-    const double t = options.iterations > 1 ? (it - 1.0) / (options.iterations - 1.0) : 0.0;
-    const double pos_lr =
-        options.spatial_scale * std::exp(std::log(options.position_lr_init) * (1 - t) +
-                                         std::log(options.position_lr_final) * t);
-    adam_pos.Step(&work.positions, grad.positions, it, {pos_lr});
-    adam_scale.Step(&work.log_scales, grad.log_scales, it, {options.scaling_lr});
-    adam_rot.Step(&work.rotations, grad.rotations, it, {options.rotation_lr});
-    adam_opacity.Step(&work.opacity_logits, grad.opacity_logits, it, {options.opacity_lr});
-    adam_sh.Step(&work.sh, grad.sh, it, sh_lr);
+    SurfelGradients grad;
+    ASSIGN_OR_RETURN(const double loss, ViewStep(work, views[k], options, &ws, &scratch, &grad));
+    optimizer.Step(grad, it, &work);
     curve_sum += loss;
     if (++curve_count == options.curve_every || it == options.iterations) {
       report.loss_curve.push_back(curve_sum / curve_count);
