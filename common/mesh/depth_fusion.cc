@@ -16,6 +16,7 @@
 #include <vector>
 
 #include "absl/strings/str_cat.h"
+#include "common/mesh/silhouette_carving.h"
 
 namespace instascene {
 namespace {
@@ -83,81 +84,6 @@ void Integrate(const DepthView& view, float depth_trunc,
   extrinsic.topLeftCorner<3, 3>() = camera.camera_from_world.rotation;
   extrinsic.topRightCorner<3, 1>() = camera.camera_from_world.translation;
   volume->Integrate(*rgbd, intrinsic, extrinsic);
-}
-
-// Silhouette carving (DepthFusionOptions::carve_views): raises each voxel to the
-// `carve_views`-th largest outside distance the views' empty pixels give it.
-void CarveSilhouettes(const std::vector<DepthView>& views, int carve_views, double sdf_trunc,
-                      open3d::pipelines::integration::UniformTSDFVolume* volume,
-                      const std::function<bool(const Eigen::Vector3f&)>& seen_empty,
-                      std::vector<uint8_t>* in_hull) {
-  const int n = volume->resolution_;
-  const double voxel = volume->voxel_length_;
-  // Per carving view: pixel-homogeneous coordinates (u z, v z, z) = K (R p + t), affine in p.
-  std::vector<const DepthView*> carving;
-  std::vector<Eigen::Matrix<double, 3, 4>> projections;
-  for (const DepthView& view : views) {
-    if (view.empty_distance_px.empty()) continue;
-    const PinholeCamera& c = view.camera;
-    Eigen::Matrix3d k;
-    k << c.fx, 0, c.cx, 0, c.fy, c.cy, 0, 0, 1;
-    Eigen::Matrix<double, 3, 4> m;
-    m.leftCols<3>() = k * c.camera_from_world.rotation.cast<double>();
-    m.col(3) = k * c.camera_from_world.translation.cast<double>();
-    carving.push_back(&view);
-    projections.push_back(m);
-  }
-  if (static_cast<int>(carving.size()) < carve_views) return;
-  if (in_hull != nullptr) in_hull->assign(volume->voxels_.size(), 0);
-  // Each voxel is independent: parallel over x slabs, the same result for any thread count.
-  tbb::parallel_for(0, n, [&](int x) {
-    std::vector<float> distances;
-    distances.reserve(carving.size());
-    std::vector<Eigen::Vector3d> start(carving.size());
-    for (int y = 0; y < n; ++y) {
-      const Eigen::Vector3d p0 = volume->origin_ + voxel * Eigen::Vector3d(x + 0.5, y + 0.5, 0.5);
-      for (size_t i = 0; i < carving.size(); ++i) {
-        start[i] = projections[i].leftCols<3>() * p0 + projections[i].col(3);
-      }
-      for (int z = 0; z < n; ++z) {
-        open3d::geometry::TSDFVoxel& voxel_value = volume->voxels_[volume->IndexOf(x, y, z)];
-        // Observed free space (the views' truncated +1) cannot be raised further.
-        if (voxel_value.weight_ > 0 && voxel_value.tsdf_ >= 1.0f) continue;
-        distances.clear();
-        size_t shown = 0;
-        for (size_t i = 0; i < carving.size(); ++i) {
-          const Eigen::Vector3d q = start[i] + (z * voxel) * projections[i].col(2);
-          if (!(q.z() > 0)) continue;
-          const PinholeCamera& c = carving[i]->camera;
-          const double u = q.x() / q.z(), v = q.y() / q.z();
-          if (!(u >= 0 && v >= 0 && u < c.width && v < c.height)) continue;
-          const float d =
-              carving[i]
-                  ->empty_distance_px[static_cast<size_t>(v) * c.width + static_cast<size_t>(u)];
-          if (d > 0) {
-            distances.push_back(static_cast<float>(d * q.z() / c.fx / sdf_trunc));
-          } else {
-            ++shown;
-          }
-        }
-        // Unobserved, shown by every view, not seen empty by the capture: inside.
-        if (in_hull != nullptr && shown == carving.size() && voxel_value.weight_ <= 0 &&
-            !seen_empty((p0 + (z * voxel) * Eigen::Vector3d::UnitZ()).cast<float>())) {
-          (*in_hull)[volume->IndexOf(x, y, z)] = 1;
-        }
-        if (static_cast<int>(distances.size()) < carve_views) continue;
-        std::nth_element(distances.begin(), distances.begin() + (carve_views - 1), distances.end(),
-                         std::greater<float>());
-        const float carve = std::min(1.0f, distances[carve_views - 1]);
-        if (voxel_value.weight_ <= 0) {
-          voxel_value.tsdf_ = carve;
-          voxel_value.weight_ = 1.0f;
-        } else {
-          voxel_value.tsdf_ = std::max(voxel_value.tsdf_, carve);
-        }
-      }
-    }
-  });
 }
 
 // The n^3 voxel lattice of a UniformTSDFVolume (index x * n * n + y * n + z).

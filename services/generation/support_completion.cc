@@ -113,42 +113,50 @@ std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& p
   return out;
 }
 
-std::vector<SurfelCandidate> SupportCap(const std::vector<Eigen::Vector3f>& positions,
-                                        const std::vector<uint32_t>& sources,
-                                        const ObjectFrame& frame, const FreeSpaceGrid& free_space) {
-  std::vector<SurfelCandidate> out;
-  if (!frame.has_support || positions.empty()) return out;
+namespace {
+
+// A square grid of cells on the support plane around the object (frame basis x, y).
+struct CapGrid {
+  float cell = 0;
+  int half = 0, side = 0;
+  bool Cell(const Eigen::Vector3f& q, int* i, int* j) const {
+    *i = static_cast<int>(std::floor(q.x() / cell)) + half;
+    *j = static_cast<int>(std::floor(q.y() / cell)) + half;
+    return *i >= 0 && *j >= 0 && *i < side && *j < side;
+  }
+};
+
+// The cells the lower quarter of the object covers seen from above (its walls, once extended
+// down to the support), and those surfels with their sources.
+std::vector<uint8_t> LowCells(const std::vector<Eigen::Vector3f>& positions,
+                              const std::vector<uint32_t>& sources, const ObjectFrame& frame,
+                              const CapGrid& grid, std::vector<Eigen::Vector3f>* low,
+                              std::vector<uint32_t>* low_sources) {
   const Eigen::Matrix3f basis = frame.Basis();
-  const float cell = std::max(1.5f * frame.spacing, frame.radius / 64.0f);
-  const int half = static_cast<int>(std::ceil(1.5f * frame.radius / cell));
-  const int side = 2 * half + 1;
-  std::vector<uint8_t> occupied(static_cast<size_t>(side) * side, 0);
-  // The footprint: what the lower quarter of the object covers seen from above (its walls, once
-  // extended down to the support), with holes filled.
+  std::vector<uint8_t> occupied(static_cast<size_t>(grid.side) * grid.side, 0);
   float top = -std::numeric_limits<float>::infinity();
   for (const Eigen::Vector3f& p : positions) top = std::max(top, frame.up.dot(p));
   const float contact = frame.support_height + 0.25f * (top - frame.support_height);
-  std::vector<Eigen::Vector3f> low;
-  std::vector<uint32_t> low_sources;
   for (size_t k = 0; k < positions.size(); ++k) {
     if (frame.up.dot(positions[k]) > contact) continue;
-    low.push_back(positions[k]);
-    low_sources.push_back(sources[k]);
-    const Eigen::Vector3f q = basis.transpose() * (positions[k] - frame.center);
-    const int i = static_cast<int>(std::floor(q.x() / cell)) + half;
-    const int j = static_cast<int>(std::floor(q.y() / cell)) + half;
-    if (i >= 0 && j >= 0 && i < side && j < side) occupied[j * side + i] = 1;
+    low->push_back(positions[k]);
+    low_sources->push_back(sources[k]);
+    int i = 0, j = 0;
+    if (grid.Cell(basis.transpose() * (positions[k] - frame.center), &i, &j))
+      occupied[j * grid.side + i] = 1;
   }
-  if (low.empty()) return out;
-  // The footprint is the convex hull of those cells: a completed wall may keep gaps (candidates
-  // refused near silhouettes), through which filling the outline's holes leaked and left boxes
-  // without a bottom. Concave footprints lose nothing real: where the hull spans space a view saw
-  // empty (a torus' hole, an L's inner corner), the free-space check below drops the cell.
-  const std::vector<uint8_t> seen = occupied;
+  return occupied;
+}
+
+// The cells outside the convex hull of the occupied ones: a completed wall may keep gaps
+// (candidates refused near silhouettes), through which filling the outline's holes leaked and
+// left boxes without a bottom. Concave footprints lose nothing real: where the hull spans space
+// a view saw empty (a torus' hole, an L's inner corner), the free-space check drops the cell.
+std::vector<uint8_t> OutsideHull(const std::vector<uint8_t>& occupied, int side) {
   std::vector<cv::Point> cells;
   for (int j = 0; j < side; ++j) {
     for (int i = 0; i < side; ++i) {
-      if (seen[j * side + i]) cells.emplace_back(i, j);
+      if (occupied[j * side + i]) cells.emplace_back(i, j);
     }
   }
   std::vector<cv::Point> hull;
@@ -159,34 +167,57 @@ std::vector<SurfelCandidate> SupportCap(const std::vector<Eigen::Vector3f>& posi
   for (int j = 0; j < side; ++j) {
     for (int i = 0; i < side; ++i) outside[j * side + i] = !footprint.at<uint8_t>(j, i);
   }
+  return outside;
+}
+
+// Whether a cell touches the outside (or the grid's edge) among its 8 neighbours.
+bool NextToOutside(const std::vector<uint8_t>& outside, int side, int i, int j) {
+  for (int dj = -1; dj <= 1; ++dj) {
+    for (int di = -1; di <= 1; ++di) {
+      const int ni = i + di, nj = j + dj;
+      if (ni < 0 || nj < 0 || ni >= side || nj >= side || outside[nj * side + ni]) return true;
+    }
+  }
+  return false;
+}
+
+}  // namespace
+
+std::vector<SurfelCandidate> SupportCap(const std::vector<Eigen::Vector3f>& positions,
+                                        const std::vector<uint32_t>& sources,
+                                        const ObjectFrame& frame, const FreeSpaceGrid& free_space) {
+  std::vector<SurfelCandidate> out;
+  if (!frame.has_support || positions.empty()) return out;
+  const Eigen::Matrix3f basis = frame.Basis();
+  CapGrid grid;
+  grid.cell = std::max(1.5f * frame.spacing, frame.radius / 64.0f);
+  grid.half = static_cast<int>(std::ceil(1.5f * frame.radius / grid.cell));
+  grid.side = 2 * grid.half + 1;
+  std::vector<Eigen::Vector3f> low;
+  std::vector<uint32_t> low_sources;
+  const std::vector<uint8_t> seen = LowCells(positions, sources, frame, grid, &low, &low_sources);
+  if (low.empty()) return out;
+  const std::vector<uint8_t> outside = OutsideHull(seen, grid.side);
   const PointIndex3 low_index(low);
   const Eigen::Vector3f plane_origin =
       frame.center +
       (frame.support_height + 0.25f * frame.spacing - frame.up.dot(frame.center)) * frame.up;
-  // A cell on the hull's rim is footprint only where a surfel lies in it, else the cap would
-  // overhang the walls by a cell.
-  auto next_to_outside = [&](int i, int j) {
-    for (int dj = -1; dj <= 1; ++dj) {
-      for (int di = -1; di <= 1; ++di) {
-        const int ni = i + di, nj = j + dj;
-        if (ni < 0 || nj < 0 || ni >= side || nj >= side || outside[nj * side + ni]) return true;
-      }
-    }
-    return false;
-  };
   const float lift = 3.0f * free_space.voxel();
+  const int side = grid.side, half = grid.half;
   for (int j = 0; j < side; ++j) {
     for (int i = 0; i < side; ++i) {
       if (outside[j * side + i]) continue;
-      if (!seen[j * side + i] && next_to_outside(i, j)) continue;
+      // A cell on the hull's rim is footprint only where a surfel lies in it, else the cap would
+      // overhang the walls by a cell.
+      if (!seen[j * side + i] && NextToOutside(outside, side, i, j)) continue;
       SurfelCandidate c;
-      c.position = plane_origin + basis.col(0) * ((i - half + 0.5f) * cell) +
-                   basis.col(1) * ((j - half + 0.5f) * cell);
+      c.position = plane_origin + basis.col(0) * ((i - half + 0.5f) * grid.cell) +
+                   basis.col(1) * ((j - half + 0.5f) * grid.cell);
       if (free_space.IsFree(c.position + lift * frame.up)) continue;  // seen through: a hole
       c.rotation = basis;
       c.source = low_sources[low_index.Nearest(c.position).first];
       c.has_scale = true;
-      c.log_scale_u = c.log_scale_v = std::log(0.6f * cell);
+      c.log_scale_u = c.log_scale_v = std::log(0.6f * grid.cell);
       out.push_back(c);
     }
   }
