@@ -184,6 +184,73 @@ std::vector<double> ObserverSchedule(const MaskJudgement& j, const std::vector<u
   return schedule;
 }
 
+namespace {
+
+// Each node's partners b > a: pairs sharing a container with supporter / observer >= the view
+// consensus and observer >= `threshold`. Each node finds its partners independently.
+std::vector<std::vector<uint32_t>> ConsensusPartners(const TrackerSet& set,
+                                                     const std::vector<MaskNode>& nodes,
+                                                     double threshold,
+                                                     const DecompositionOptions& options) {
+  const size_t n = nodes.size();
+  // Inverted index: container mask -> nodes it contains.
+  std::vector<std::vector<uint32_t>> by_container(set.trackers.size());
+  for (uint32_t a = 0; a < n; ++a) {
+    for (uint32_t c : nodes[a].contained) by_container[c].push_back(a);
+  }
+  std::vector<std::vector<uint32_t>> partners(n);
+  RunWithThreads(options.num_threads, [&] {
+    tbb::parallel_for(tbb::blocked_range<uint32_t>(0, static_cast<uint32_t>(n), 64),
+                      [&](const tbb::blocked_range<uint32_t>& r) {
+                        std::vector<uint32_t> support(n, 0), touched;
+                        for (uint32_t a = r.begin(); a < r.end(); ++a) {
+                          touched.clear();
+                          for (uint32_t c : nodes[a].contained) {
+                            for (uint32_t b : by_container[c]) {
+                              if (b <= a) continue;
+                              if (support[b]++ == 0) touched.push_back(b);
+                            }
+                          }
+                          std::sort(touched.begin(), touched.end());
+                          for (uint32_t b : touched) {
+                            const double observer = nodes[a].visible.CountCommon(nodes[b].visible);
+                            const double rate = support[b] / (observer + 1e-7);
+                            if (rate >= options.view_consensus_threshold && observer >= threshold)
+                              partners[a].push_back(b);
+                            support[b] = 0;
+                          }
+                        }
+                      });
+  });
+  return partners;
+}
+
+// The connected components of the partner graph (union-find, serial), each one node: masks
+// concatenated, visible frames and containers united.
+std::vector<MaskNode> MergePartners(const TrackerSet& set, const std::vector<MaskNode>& nodes,
+                                    const std::vector<std::vector<uint32_t>>& partners) {
+  const size_t n = nodes.size();
+  UnionFind sets(n);
+  for (uint32_t a = 0; a < n; ++a) {
+    for (uint32_t b : partners[a]) sets.Union(a, b);
+  }
+  std::vector<MaskNode> merged;
+  const std::vector<uint32_t> component = sets.Components();
+  for (uint32_t a = 0; a < n; ++a) {
+    if (component[a] == merged.size()) merged.push_back({{}, ViewSet(set.num_views), {}});
+    MaskNode& target = merged[component[a]];
+    target.masks.insert(target.masks.end(), nodes[a].masks.begin(), nodes[a].masks.end());
+    target.visible.Or(nodes[a].visible);
+    std::vector<uint32_t> uni;
+    std::set_union(target.contained.begin(), target.contained.end(), nodes[a].contained.begin(),
+                   nodes[a].contained.end(), std::back_inserter(uni));
+    target.contained.swap(uni);
+  }
+  return merged;
+}
+
+}  // namespace
+
 std::vector<MaskNode> ClusterMasks(const TrackerSet& set, const MaskJudgement& j,
                                    const DecompositionOptions& options,
                                    std::vector<double>* schedule_out) {
@@ -199,56 +266,7 @@ std::vector<MaskNode> ClusterMasks(const TrackerSet& set, const MaskJudgement& j
     schedule.push_back(options.observer_floor);
   if (schedule_out) *schedule_out = schedule;
   for (double threshold : schedule) {
-    const size_t n = nodes.size();
-    // Inverted index: container mask -> nodes it contains.
-    std::vector<std::vector<uint32_t>> by_container(set.trackers.size());
-    for (uint32_t a = 0; a < n; ++a) {
-      for (uint32_t c : nodes[a].contained) by_container[c].push_back(a);
-    }
-    // Edges: pairs sharing a container with supporter / observer >= consensus and observer >= th.
-    // Each node finds its partners b > a independently; the union-find below is serial.
-    std::vector<std::vector<uint32_t>> partners(n);
-    RunWithThreads(options.num_threads, [&] {
-      tbb::parallel_for(tbb::blocked_range<uint32_t>(0, static_cast<uint32_t>(n), 64),
-                        [&](const tbb::blocked_range<uint32_t>& r) {
-                          std::vector<uint32_t> support(n, 0), touched;
-                          for (uint32_t a = r.begin(); a < r.end(); ++a) {
-                            touched.clear();
-                            for (uint32_t c : nodes[a].contained) {
-                              for (uint32_t b : by_container[c]) {
-                                if (b <= a) continue;
-                                if (support[b]++ == 0) touched.push_back(b);
-                              }
-                            }
-                            std::sort(touched.begin(), touched.end());
-                            for (uint32_t b : touched) {
-                              const double observer =
-                                  nodes[a].visible.CountCommon(nodes[b].visible);
-                              const double rate = support[b] / (observer + 1e-7);
-                              if (rate >= options.view_consensus_threshold && observer >= threshold)
-                                partners[a].push_back(b);
-                              support[b] = 0;
-                            }
-                          }
-                        });
-    });
-    UnionFind sets(n);
-    for (uint32_t a = 0; a < n; ++a) {
-      for (uint32_t b : partners[a]) sets.Union(a, b);
-    }
-    std::vector<MaskNode> merged;
-    const std::vector<uint32_t> component = sets.Components();
-    for (uint32_t a = 0; a < n; ++a) {
-      if (component[a] == merged.size()) merged.push_back({{}, ViewSet(set.num_views), {}});
-      MaskNode& target = merged[component[a]];
-      target.masks.insert(target.masks.end(), nodes[a].masks.begin(), nodes[a].masks.end());
-      target.visible.Or(nodes[a].visible);
-      std::vector<uint32_t> uni;
-      std::set_union(target.contained.begin(), target.contained.end(), nodes[a].contained.begin(),
-                     nodes[a].contained.end(), std::back_inserter(uni));
-      target.contained.swap(uni);
-    }
-    nodes.swap(merged);
+    nodes = MergePartners(set, nodes, ConsensusPartners(set, nodes, threshold, options));
   }
   return nodes;
 }
