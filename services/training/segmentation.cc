@@ -17,6 +17,39 @@
 namespace instascene::training {
 namespace {
 
+constexpr uint32_t kNone = 0xffffffffu;
+
+// The keep step's candidates: Gaussians of a coarse instance left unlabelled, each with the
+// neighbours it needs carrying its instance (half, or with its feature below keep_min_dot,
+// keep_surrounded of them).
+struct KeepCandidates {
+  std::vector<uint32_t> gaussians, index_of;  // index_of: per Gaussian, its candidate or kNone
+  std::vector<size_t> need;
+};
+
+KeepCandidates FindCandidates(const std::vector<uint32_t>& coarse,
+                              const std::vector<double>& own_dot, const SegmentOptions& options,
+                              const std::vector<uint32_t>& labels) {
+  const size_t k = static_cast<size_t>(options.keep_neighbours);
+  const size_t surrounded =
+      static_cast<size_t>(std::ceil(options.keep_surrounded * static_cast<double>(k) - 1e-9));
+  KeepCandidates c;
+  c.index_of.assign(coarse.size(), kNone);
+  for (uint32_t g = 0; g < coarse.size(); ++g) {
+    if (labels[g] != 0 || coarse[g] == 0) continue;
+    if (own_dot[g] >= options.keep_min_dot) {
+      c.need.push_back((k + 1) / 2);
+    } else if (surrounded <= k) {
+      c.need.push_back(surrounded);
+    } else {
+      continue;
+    }
+    c.index_of[g] = static_cast<uint32_t>(c.gaussians.size());
+    c.gaussians.push_back(g);
+  }
+  return c;
+}
+
 // SegmentOptions' keep step. Candidates: Gaussians of a coarse instance left unlabelled whose
 // feature matches their own instance's mean at least keep_min_dot. In rounds, a candidate is kept
 // once at least half its nearest Gaussians carry its instance in the labels the previous round
@@ -27,64 +60,81 @@ namespace {
 void KeepUnclaimed(const std::vector<uint32_t>& coarse, const std::vector<double>& own_dot,
                    const std::vector<float>& positions, const SegmentOptions& options,
                    std::vector<uint32_t>* labels) {
-  const size_t n = coarse.size();
-  constexpr uint32_t kNone = 0xffffffffu;
-  const size_t k = static_cast<size_t>(options.keep_neighbours);
-  // Neighbours a candidate needs carrying its instance: half, or (its feature below
-  // keep_min_dot) keep_surrounded of them.
-  const size_t surrounded =
-      static_cast<size_t>(std::ceil(options.keep_surrounded * static_cast<double>(k) - 1e-9));
-  std::vector<uint32_t> candidates, candidate_of(n, kNone);
-  std::vector<size_t> need;
-  for (uint32_t g = 0; g < n; ++g) {
-    if ((*labels)[g] != 0 || coarse[g] == 0) continue;
-    if (own_dot[g] >= options.keep_min_dot) {
-      need.push_back((k + 1) / 2);
-    } else if (surrounded <= k) {
-      need.push_back(surrounded);
-    } else {
-      continue;
-    }
-    candidate_of[g] = static_cast<uint32_t>(candidates.size());
-    candidates.push_back(g);
-  }
-  if (candidates.empty()) return;
+  const KeepCandidates c = FindCandidates(coarse, own_dot, options, *labels);
+  if (c.gaussians.empty()) return;
+  const size_t n = coarse.size(), k = static_cast<size_t>(options.keep_neighbours);
   std::vector<Eigen::Vector3f> points(n);
   for (size_t g = 0; g < n; ++g) points[g] = Eigen::Vector3f(&positions[3 * g]);
   const PointIndex3 index(std::move(points));
-  std::vector<size_t> carrying(candidates.size(), 0);
-  std::vector<std::vector<uint32_t>> watchers(candidates.size());  // candidates neighbouring one
-  for (uint32_t i = 0; i < candidates.size(); ++i) {
-    const uint32_t g = candidates[i];
+  std::vector<size_t> carrying(c.gaussians.size(), 0);
+  std::vector<std::vector<uint32_t>> watchers(c.gaussians.size());  // candidates neighbouring one
+  for (uint32_t i = 0; i < c.gaussians.size(); ++i) {
+    const uint32_t g = c.gaussians[i];
     size_t taken = 0;
     for (const auto& match : index.KNearest(index.points()[g], k + 1)) {
       if (match.first == g || taken == k) continue;
       ++taken;
       carrying[i] += (*labels)[match.first] == coarse[g];
-      if (candidate_of[match.first] != kNone) watchers[candidate_of[match.first]].push_back(i);
+      if (c.index_of[match.first] != kNone) watchers[c.index_of[match.first]].push_back(i);
     }
   }
-  std::vector<uint8_t> queued(candidates.size(), 0);
+  std::vector<uint8_t> queued(c.gaussians.size(), 0);
   std::vector<uint32_t> round;
-  for (uint32_t i = 0; i < candidates.size(); ++i) {
-    if (carrying[i] >= need[i]) {
+  for (uint32_t i = 0; i < c.gaussians.size(); ++i) {
+    if (carrying[i] >= c.need[i]) {
       round.push_back(i);
       queued[i] = 1;
     }
   }
   while (!round.empty()) {
-    for (uint32_t i : round) (*labels)[candidates[i]] = coarse[candidates[i]];
+    for (uint32_t i : round) (*labels)[c.gaussians[i]] = coarse[c.gaussians[i]];
     std::vector<uint32_t> next;
     for (uint32_t i : round) {
       for (uint32_t j : watchers[i]) {
-        if (queued[j] || coarse[candidates[j]] != coarse[candidates[i]]) continue;
-        if (++carrying[j] >= need[j]) {
+        if (queued[j] || coarse[c.gaussians[j]] != coarse[c.gaussians[i]]) continue;
+        if (++carrying[j] >= c.need[j]) {
           next.push_back(j);
           queued[j] = 1;
         }
       }
     }
     round.swap(next);
+  }
+}
+
+// Each coarse instance's mean unit feature (not re-normalised) and its Gaussian count.
+void InstanceMeans(const std::vector<double>& unit, int dim, const std::vector<uint32_t>& coarse,
+                   std::map<uint32_t, std::vector<double>>* mean,
+                   std::map<uint32_t, double>* count) {
+  for (size_t g = 0; g < coarse.size(); ++g) {
+    if (coarse[g] == 0) continue;
+    std::vector<double>& m = (*mean)[coarse[g]];
+    m.resize(dim, 0.0);
+    for (int d = 0; d < dim; ++d) m[d] += unit[g * dim + d];
+    (*count)[coarse[g]] += 1;
+  }
+  for (auto& [id, m] : *mean) {
+    for (double& v : m) v /= (*count)[id];
+  }
+}
+
+// Instances that select (almost) nothing, or far more than their coarse mask, keep that mask;
+// what such an instance selected outside its coarse mask returns to its own coarse label.
+void FallBackToCoarse(const std::vector<uint32_t>& coarse, const std::map<uint32_t, double>& count,
+                      const SegmentOptions& options, std::vector<uint32_t>* labels) {
+  std::map<uint32_t, size_t> selected;
+  for (uint32_t label : *labels) {
+    if (label != 0) ++selected[label];
+  }
+  std::map<uint32_t, bool> fallback;
+  for (const auto& [id, c] : count) {
+    fallback[id] = selected[id] == 0 || selected[id] < options.min_kept_share * c ||
+                   (options.max_growth > 0 && selected[id] > options.max_growth * c);
+  }
+  for (size_t g = 0; g < coarse.size(); ++g) {
+    uint32_t& label = (*labels)[g];
+    if (label != 0 && fallback[label] && label != coarse[g]) label = coarse[g];
+    if (coarse[g] != 0 && fallback[coarse[g]]) label = coarse[g];
   }
 }
 
@@ -104,16 +154,7 @@ std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int 
   }
   std::map<uint32_t, std::vector<double>> mean;
   std::map<uint32_t, double> count;
-  for (size_t g = 0; g < n; ++g) {
-    if (coarse[g] == 0) continue;
-    std::vector<double>& m = mean[coarse[g]];
-    m.resize(dim, 0.0);
-    for (int d = 0; d < dim; ++d) m[d] += unit[g * dim + d];
-    count[coarse[g]] += 1;
-  }
-  for (auto& [id, m] : mean) {
-    for (double& v : m) v /= count[id];
-  }
+  InstanceMeans(unit, dim, coarse, &mean, &count);
   std::vector<uint32_t> labels(n, 0);
   std::vector<double> own_dot(n, -1e30);  // with the Gaussian's own coarse instance's mean
   for (size_t g = 0; g < n; ++g) {
@@ -132,21 +173,7 @@ std::vector<uint32_t> SegmentByFeatures(const std::vector<float>& features, int 
   }
   if (options.keep_neighbours > 0 && positions.size() == 3 * n)
     KeepUnclaimed(coarse, own_dot, positions, options, &labels);
-  std::map<uint32_t, size_t> selected;
-  for (uint32_t label : labels) {
-    if (label != 0) ++selected[label];
-  }
-  // Instances that select (almost) nothing, or far more than their coarse mask, keep that mask.
-  std::map<uint32_t, bool> fallback;
-  for (const auto& [id, c] : count) {
-    fallback[id] = selected[id] == 0 || selected[id] < options.min_kept_share * c ||
-                   (options.max_growth > 0 && selected[id] > options.max_growth * c);
-  }
-  // What a fallen-back instance selected outside its coarse mask returns to its own coarse label.
-  for (size_t g = 0; g < n; ++g) {
-    if (labels[g] != 0 && fallback[labels[g]] && labels[g] != coarse[g]) labels[g] = coarse[g];
-    if (coarse[g] != 0 && fallback[coarse[g]]) labels[g] = coarse[g];
-  }
+  FallBackToCoarse(coarse, count, options, &labels);
   return labels;
 }
 
