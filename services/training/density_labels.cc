@@ -35,6 +35,61 @@ std::vector<uint32_t> AssignVoxels(const std::vector<Eigen::Vector3f>& unit, dou
   return voxel_of;
 }
 
+// Centres in [-1, 1] by the robust box.
+std::vector<Eigen::Vector3f> UnitCentres(const GaussianCloud& cloud) {
+  const Eigen::AlignedBox3f box = RobustBounds(cloud);
+  const Eigen::Vector3f centre = box.center();
+  const float half = std::max(0.5f * box.sizes().maxCoeff(), 1e-6f);
+  std::vector<Eigen::Vector3f> unit(cloud.size());
+  for (size_t g = 0; g < cloud.size(); ++g) {
+    const Eigen::Vector3f p(&cloud.positions[3 * g]);
+    unit[g] = ((p - centre) / half).cwiseMax(-1.0f).cwiseMin(1.0f);
+  }
+  return unit;
+}
+
+// Per voxel: the mean normalised feature and the mean centre of its Gaussians.
+void VoxelMeans(const std::vector<float>& features, int dim,
+                const std::vector<Eigen::Vector3f>& unit, const std::vector<uint32_t>& voxel_of,
+                size_t voxels, std::vector<float>* mean, std::vector<Eigen::Vector3f>* centres) {
+  mean->assign(voxels * dim, 0.0f);
+  centres->assign(voxels, Eigen::Vector3f::Zero());
+  std::vector<uint32_t> members(voxels, 0);
+  for (size_t g = 0; g < unit.size(); ++g) {
+    const float* f = &features[g * dim];
+    double norm = 0;
+    for (int d = 0; d < dim; ++d) norm += double(f[d]) * f[d];
+    const float inv = static_cast<float>(1.0 / (std::sqrt(norm) + 1e-9));
+    float* m = &(*mean)[voxel_of[g] * dim];
+    for (int d = 0; d < dim; ++d) m[d] += f[d] * inv;
+    (*centres)[voxel_of[g]] += unit[g];
+    ++members[voxel_of[g]];
+  }
+  for (size_t v = 0; v < voxels; ++v) {
+    for (int d = 0; d < dim; ++d) (*mean)[v * dim + d] /= static_cast<float>(members[v]);
+    (*centres)[v] /= static_cast<float>(members[v]);
+  }
+}
+
+// Noise voxels (cluster < 0) take the cluster of the nearest clustered voxel; false when no
+// voxel is clustered.
+bool AssignNoise(const std::vector<Eigen::Vector3f>& centres, std::vector<int>* clusters) {
+  std::vector<Eigen::Vector3f> clustered;
+  std::vector<int> clustered_label;
+  for (size_t v = 0; v < centres.size(); ++v) {
+    if ((*clusters)[v] < 0) continue;
+    clustered.push_back(centres[v]);
+    clustered_label.push_back((*clusters)[v]);
+  }
+  if (clustered.empty()) return false;
+  PointIndex3 index(std::move(clustered));
+  for (size_t v = 0; v < centres.size(); ++v) {
+    if ((*clusters)[v] >= 0) continue;
+    (*clusters)[v] = clustered_label[index.Nearest(centres[v]).first];
+  }
+  return true;
+}
+
 }  // namespace
 
 absl::StatusOr<DensityLabels> LabelByDensity(const GaussianCloud& cloud,
@@ -50,15 +105,7 @@ absl::StatusOr<DensityLabels> LabelByDensity(const GaussianCloud& cloud,
   DensityLabels out;
   out.labels.assign(n, 0);
   if (n < 2) return out;
-  // Centres in [-1, 1] by the robust box.
-  const Eigen::AlignedBox3f box = RobustBounds(cloud);
-  const Eigen::Vector3f centre = box.center();
-  const float half = std::max(0.5f * box.sizes().maxCoeff(), 1e-6f);
-  std::vector<Eigen::Vector3f> unit(n);
-  for (size_t g = 0; g < n; ++g) {
-    const Eigen::Vector3f p(&cloud.positions[3 * g]);
-    unit[g] = ((p - centre) / half).cwiseMax(-1.0f).cwiseMin(1.0f);
-  }
+  const std::vector<Eigen::Vector3f> unit = UnitCentres(cloud);
   double voxel = options.voxel;
   size_t voxels = 0;
   std::vector<uint32_t> voxel_of = AssignVoxels(unit, voxel, &voxels);
@@ -66,42 +113,14 @@ absl::StatusOr<DensityLabels> LabelByDensity(const GaussianCloud& cloud,
     voxel *= 2;
     voxel_of = AssignVoxels(unit, voxel, &voxels);
   }
-  // Mean normalised feature and centre per voxel.
-  std::vector<float> mean(voxels * dim, 0.0f);
-  std::vector<Eigen::Vector3f> centres(voxels, Eigen::Vector3f::Zero());
-  std::vector<uint32_t> members(voxels, 0);
-  for (size_t g = 0; g < n; ++g) {
-    const float* f = &features[g * dim];
-    double norm = 0;
-    for (int d = 0; d < dim; ++d) norm += double(f[d]) * f[d];
-    const float inv = static_cast<float>(1.0 / (std::sqrt(norm) + 1e-9));
-    float* m = &mean[voxel_of[g] * dim];
-    for (int d = 0; d < dim; ++d) m[d] += f[d] * inv;
-    centres[voxel_of[g]] += unit[g];
-    ++members[voxel_of[g]];
-  }
-  for (size_t v = 0; v < voxels; ++v) {
-    for (int d = 0; d < dim; ++d) mean[v * dim + d] /= static_cast<float>(members[v]);
-    centres[v] /= static_cast<float>(members[v]);
-  }
+  std::vector<float> mean;
+  std::vector<Eigen::Vector3f> centres;
+  VoxelMeans(features, dim, unit, voxel_of, voxels, &mean, &centres);
   out.clustered_points = voxels;
   out.voxel = voxel;
   if (voxels < 2) return out;
   ASSIGN_OR_RETURN(std::vector<int> clusters, Hdbscan(mean.data(), voxels, dim, options.hdbscan));
-  // Noise voxels take the cluster of the nearest clustered voxel.
-  std::vector<Eigen::Vector3f> clustered;
-  std::vector<int> clustered_label;
-  for (size_t v = 0; v < voxels; ++v) {
-    if (clusters[v] < 0) continue;
-    clustered.push_back(centres[v]);
-    clustered_label.push_back(clusters[v]);
-  }
-  if (clustered.empty()) return out;  // nothing clustered: every Gaussian stays 0
-  PointIndex3 index(std::move(clustered));
-  for (size_t v = 0; v < voxels; ++v) {
-    if (clusters[v] >= 0) continue;
-    clusters[v] = clustered_label[index.Nearest(centres[v]).first];
-  }
+  if (!AssignNoise(centres, &clusters)) return out;  // nothing clustered: every Gaussian stays 0
   out.clusters = static_cast<size_t>(*std::max_element(clusters.begin(), clusters.end()) + 1);
   for (size_t g = 0; g < n; ++g) out.labels[g] = static_cast<uint32_t>(clusters[voxel_of[g]] + 1);
   return out;
