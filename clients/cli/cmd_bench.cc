@@ -263,6 +263,22 @@ absl::Status BenchTrain(const BenchArgs& args) {
   return absl::OkStatus();
 }
 
+absl::Status RunBench(const BenchArgs& a) {
+  if (a.what == "decompose") return BenchDecompose(a);
+  if (a.what == "train") return BenchTrain(a);
+  if (a.what != "complete") return BenchRaster(a);
+  CompleteBenchArgs c;
+  if (a.gaussians_set) c.gaussians = a.gaussians;
+  if (a.iterations > 0) c.iterations = a.iterations;
+  if (a.width != 1280) c.width = a.width;
+  if (a.height != 720) c.height = a.height;
+  c.threads = a.threads;
+  c.lambda_normal = a.lambda_normal;
+  c.seed = a.seed;
+  c.json = a.json;
+  return BenchComplete(c);
+}
+
 }  // namespace
 
 void AddBenchCommand(CLI::App& app, Action* action) {
@@ -306,25 +322,7 @@ void AddBenchCommand(CLI::App& app, Action* action) {
   cmd->add_option("--threads", args->threads, "Threads (0 = all cores)");
   cmd->add_option("--seed", args->seed, "Scene seed");
   cmd->add_flag("--json", args->json, "Print the figures as one JSON line (last stdout line)");
-  cmd->callback([args, action] {
-    *action = [args]() -> absl::Status {
-      if (args->what == "decompose") return BenchDecompose(*args);
-      if (args->what == "train") return BenchTrain(*args);
-      if (args->what == "complete") {
-        CompleteBenchArgs c;
-        if (args->gaussians_set) c.gaussians = args->gaussians;
-        if (args->iterations > 0) c.iterations = args->iterations;
-        if (args->width != 1280) c.width = args->width;
-        if (args->height != 720) c.height = args->height;
-        c.threads = args->threads;
-        c.lambda_normal = args->lambda_normal;
-        c.seed = args->seed;
-        c.json = args->json;
-        return BenchComplete(c);
-      }
-      return BenchRaster(*args);
-    };
-  });
+  cmd->callback([args, action] { *action = [args] { return RunBench(*args); }; });
 }
 
 }  // namespace instascene::cli
