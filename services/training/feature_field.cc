@@ -85,6 +85,58 @@ double PixelTerm(const TrainingData& data, const std::vector<std::pair<int, uint
   return lambda * loss;
 }
 
+// One view's training data: a fixed pool of pixel_pool pixels (seeded per view), traced, with
+// their raw, filtered and sorted labels, and the view's visible Gaussians with a coarse label.
+absl::StatusOr<ViewData> PrepareView(const Scene& scene, const GaussianCloud& cloud, int v,
+                                     const std::string& decomposition_dir,
+                                     const std::vector<uint32_t>& labels3d,
+                                     const TrainingOptions& options) {
+  RETURN_IF_ERROR(CheckCancelled(options.cancel, "training preparation"));
+  const SceneView& view = scene.views[v];
+  ASSIGN_OR_RETURN(LabelMap raw, ReadViewMask(scene, v));
+  const std::filesystem::path dir(decomposition_dir);
+  ASSIGN_OR_RETURN(LabelMap filtered,
+                   ReadLabelMap((dir / "masks_filtered" / (view.name + ".png")).string()));
+  ASSIGN_OR_RETURN(LabelMap sorted,
+                   ReadLabelMap((dir / "masks_sorted" / (view.name + ".png")).string()));
+  const size_t pixels = static_cast<size_t>(view.camera.width) * view.camera.height;
+  if (filtered.labels.size() != pixels || sorted.labels.size() != pixels) {
+    return absl::InvalidArgumentError(
+        absl::StrCat("decomposition maps of view '", view.name, "' do not match its camera"));
+  }
+  std::vector<uint32_t> all(pixels);
+  std::iota(all.begin(), all.end(), 0u);
+  std::vector<uint32_t> pool;
+  std::mt19937_64 rng(options.seed * 7919 + static_cast<uint64_t>(v));
+  std::sample(all.begin(), all.end(), std::back_inserter(pool), options.pixel_pool,
+              rng);  // sorted output
+  RenderOptions render;
+  render.color = false;
+  render.trace.enabled = true;
+  render.trace.pixels = pool;
+  ASSIGN_OR_RETURN(RenderResult r, Render(cloud, view.camera, render));
+  ViewData out;
+  out.offsets = r.trace.offsets;
+  out.gaussians.reserve(r.trace.entries.size());
+  out.weights.reserve(r.trace.entries.size());
+  for (const Contribution& c : r.trace.entries) {
+    out.gaussians.push_back(c.gaussian);
+    out.weights.push_back(c.weight);
+  }
+  for (uint32_t p : pool) {
+    out.raw_label.push_back(raw.labels[p]);
+    // A removed (under-segmented) mask's pixels: left out, or the background class.
+    const bool removed = raw.labels[p] > 0 && filtered.labels[p] == 0;
+    out.filtered_label.push_back(removed && options.ignore_removed_masks ? kIgnoredLabel
+                                                                         : filtered.labels[p]);
+    out.sorted_label.push_back(sorted.labels[p]);
+  }
+  for (uint32_t g = 0; g < cloud.size(); ++g) {
+    if (r.visible[g] && labels3d[g] > 0) out.visible_labelled.push_back(g);
+  }
+  return out;
+}
+
 }  // namespace
 
 absl::StatusOr<TrainingData> PrepareTraining(const Scene& scene, const GaussianCloud& cloud,
@@ -105,52 +157,13 @@ absl::StatusOr<TrainingData> PrepareTraining(const Scene& scene, const GaussianC
   std::mutex mutex;
   RunWithThreads(options.num_threads, [&] {
     tbb::parallel_for(0, num_views, [&](int v) {
-      status[v] = [&]() -> absl::Status {
-        RETURN_IF_ERROR(CheckCancelled(options.cancel, "training preparation"));
-        const SceneView& view = scene.views[v];
-        ASSIGN_OR_RETURN(LabelMap raw, ReadViewMask(scene, v));
-        const std::filesystem::path dir(decomposition_dir);
-        ASSIGN_OR_RETURN(LabelMap filtered,
-                         ReadLabelMap((dir / "masks_filtered" / (view.name + ".png")).string()));
-        ASSIGN_OR_RETURN(LabelMap sorted,
-                         ReadLabelMap((dir / "masks_sorted" / (view.name + ".png")).string()));
-        const size_t pixels = static_cast<size_t>(view.camera.width) * view.camera.height;
-        if (filtered.labels.size() != pixels || sorted.labels.size() != pixels) {
-          return absl::InvalidArgumentError(
-              absl::StrCat("decomposition maps of view '", view.name, "' do not match its camera"));
-        }
-        std::vector<uint32_t> all(pixels);
-        std::iota(all.begin(), all.end(), 0u);
-        std::vector<uint32_t> pool;
-        std::mt19937_64 rng(options.seed * 7919 + static_cast<uint64_t>(v));
-        std::sample(all.begin(), all.end(), std::back_inserter(pool), options.pixel_pool,
-                    rng);  // sorted output
-        RenderOptions render;
-        render.color = false;
-        render.trace.enabled = true;
-        render.trace.pixels = pool;
-        ASSIGN_OR_RETURN(RenderResult r, Render(cloud, view.camera, render));
-        ViewData& out = data.views[v];
-        out.offsets = r.trace.offsets;
-        out.gaussians.reserve(r.trace.entries.size());
-        out.weights.reserve(r.trace.entries.size());
-        for (const Contribution& c : r.trace.entries) {
-          out.gaussians.push_back(c.gaussian);
-          out.weights.push_back(c.weight);
-        }
-        for (uint32_t p : pool) {
-          out.raw_label.push_back(raw.labels[p]);
-          // A removed (under-segmented) mask's pixels: left out, or the background class.
-          const bool removed = raw.labels[p] > 0 && filtered.labels[p] == 0;
-          out.filtered_label.push_back(
-              removed && options.ignore_removed_masks ? kIgnoredLabel : filtered.labels[p]);
-          out.sorted_label.push_back(sorted.labels[p]);
-        }
-        for (uint32_t g = 0; g < cloud.size(); ++g) {
-          if (r.visible[g] && data.labels3d[g] > 0) out.visible_labelled.push_back(g);
-        }
-        return absl::OkStatus();
-      }();
+      absl::StatusOr<ViewData> prepared =
+          PrepareView(scene, cloud, v, decomposition_dir, data.labels3d, options);
+      if (prepared.ok()) {
+        data.views[v] = *std::move(prepared);
+      } else {
+        status[v] = prepared.status();
+      }
       if (progress) {
         std::lock_guard<std::mutex> lock(mutex);
         progress(++done, num_views);
