@@ -18,6 +18,51 @@ absl::StatusOr<PlyColumns> ReadVertexColumns(const std::string& path) {
   return ReadPlyElement(data, header, "vertex", path);
 }
 
+// The per-Gaussian feature columns f_0 .. f_{dim-1}.
+PlyColumns FeatureColumns(const SegmentationResult& result) {
+  const size_t n = result.labels.size();
+  PlyColumns features;
+  features.count = static_cast<int64_t>(n);
+  for (int d = 0; d < result.feature_dim; ++d) {
+    features.names.push_back(absl::StrCat("f_", d));
+    features.types.push_back(ScalarType::kFloat32);
+    std::vector<float> column(n);
+    for (size_t i = 0; i < n; ++i) column[i] = result.features[i * result.feature_dim + d];
+    features.columns.push_back(std::move(column));
+  }
+  return features;
+}
+
+// Per instance: its Gaussian count, centroid and bounds.
+nlohmann::json InstanceSummaries(const SegmentationResult& result, const GaussianCloud& cloud) {
+  // Eigen's vectors are not zeroed by their default constructor: every member starts explicitly.
+  struct Summary {
+    size_t count = 0;
+    Eigen::AlignedBox3f box;  // empty
+    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
+  };
+  std::map<uint32_t, Summary> instances;
+  for (size_t i = 0; i < result.labels.size(); ++i) {
+    if (result.labels[i] == 0) continue;
+    const Eigen::Vector3f p(&cloud.positions[3 * i]);
+    Summary& entry = instances[result.labels[i]];
+    ++entry.count;
+    entry.box.extend(p);
+    entry.sum += p.cast<double>();
+  }
+  nlohmann::json list = nlohmann::json::array();
+  for (const auto& [id, entry] : instances) {
+    const Eigen::Vector3d c = entry.sum / static_cast<double>(entry.count);
+    list.push_back(
+        {{"id", id},
+         {"gaussians", entry.count},
+         {"centroid", {c.x(), c.y(), c.z()}},
+         {"bounds_min", {entry.box.min().x(), entry.box.min().y(), entry.box.min().z()}},
+         {"bounds_max", {entry.box.max().x(), entry.box.max().y(), entry.box.max().z()}}});
+  }
+  return list;
+}
+
 }  // namespace
 
 absl::Status WriteResult(const std::string& directory, const SegmentationResult& result,
@@ -49,45 +94,11 @@ absl::Status WriteResult(const std::string& directory, const SegmentationResult&
   j["labels"] = "labels.ply";
   j["feature_dim"] = result.feature_dim;
   if (result.feature_dim > 0) {
-    PlyColumns features;
-    features.count = static_cast<int64_t>(n);
-    for (int d = 0; d < result.feature_dim; ++d) {
-      features.names.push_back(absl::StrCat("f_", d));
-      features.types.push_back(ScalarType::kFloat32);
-      std::vector<float> column(n);
-      for (size_t i = 0; i < n; ++i) column[i] = result.features[i * result.feature_dim + d];
-      features.columns.push_back(std::move(column));
-    }
-    RETURN_IF_ERROR(
-        WriteFileAtomically((dir / "features.ply").string(), EncodePlyBinary("vertex", features)));
+    RETURN_IF_ERROR(WriteFileAtomically((dir / "features.ply").string(),
+                                        EncodePlyBinary("vertex", FeatureColumns(result))));
     j["features"] = "features.ply";
   }
-  // Eigen's vectors are not zeroed by their default constructor: every member starts explicitly.
-  struct Summary {
-    size_t count = 0;
-    Eigen::AlignedBox3f box;  // empty
-    Eigen::Vector3d sum = Eigen::Vector3d::Zero();
-  };
-  std::map<uint32_t, Summary> instances;
-  for (size_t i = 0; i < n; ++i) {
-    if (result.labels[i] == 0) continue;
-    const Eigen::Vector3f p(&cloud.positions[3 * i]);
-    Summary& entry = instances[result.labels[i]];
-    ++entry.count;
-    entry.box.extend(p);
-    entry.sum += p.cast<double>();
-  }
-  nlohmann::json list = nlohmann::json::array();
-  for (const auto& [id, entry] : instances) {
-    const Eigen::Vector3d c = entry.sum / static_cast<double>(entry.count);
-    list.push_back(
-        {{"id", id},
-         {"gaussians", entry.count},
-         {"centroid", {c.x(), c.y(), c.z()}},
-         {"bounds_min", {entry.box.min().x(), entry.box.min().y(), entry.box.min().z()}},
-         {"bounds_max", {entry.box.max().x(), entry.box.max().y(), entry.box.max().z()}}});
-  }
-  j["instances"] = list;
+  j["instances"] = InstanceSummaries(result, cloud);
   return WriteFileAtomically((dir / "result.json").string(), j.dump(1));
 }
 
