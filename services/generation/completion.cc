@@ -51,8 +51,61 @@ double CameraExtent(const std::vector<PinholeCamera>& cameras) {
   return radius > 0 ? 1.1 * radius : 1.0;
 }
 
-// Joint refinement of o->object (ALGORITHM.md 7.9): real-view crops first (view 0 is the best
-// training view), then the ring's generated views. Returns the manifest's `refinement`.
+// The real views' crops for refinement (view 0 is the best training view); views without an
+// image, or where the object does not show, are counted in `skipped`.
+absl::StatusOr<std::vector<RefinementView>> RealViews(const CompletedObject& o,
+                                                      const std::vector<PinholeCamera>& cameras,
+                                                      const GaussianCloud& surfels,
+                                                      const std::vector<uint32_t>& instance,
+                                                      const CompletionOptions& options,
+                                                      int* skipped) {
+  std::vector<RefinementView> views;
+  if (!options.load_view) return views;
+  for (int v : o.training_views) {
+    absl::StatusOr<Image> image = options.load_view(v);
+    if (absl::IsNotFound(image.status())) {  // a view without an image
+      ++*skipped;
+      continue;
+    }
+    RETURN_IF_ERROR(image.status());
+    ASSIGN_OR_RETURN(std::optional<RefinementView> view,
+                     RealRefinementView(cameras[v], *image, o.object, surfels, instance, o.frame,
+                                        options.refine_view_max_side, options.num_threads));
+    if (view.has_value()) {
+      views.push_back(std::move(*view));
+    } else {
+      ++*skipped;
+    }
+  }
+  return views;
+}
+
+nlohmann::json RefinementManifest(const RefinementReport& r, const RefinementOptions& ro,
+                                  const CompletedObject& o, const CompletionOptions& options,
+                                  int skipped) {
+  return nlohmann::json{
+      {"status", "done"},
+      {"iterations", r.iterations},
+      {"real_views", r.real_views},
+      {"real_views_skipped", skipped},
+      {"real_images", static_cast<bool>(options.load_view)},
+      {"generated_views", r.generated_views},
+      {"generated_from", o.prior.generated.empty() ? "the object's own renders before refinement"
+                                                   : "the prior's images"},
+      {"initial_loss", r.initial_loss},
+      {"final_loss", r.final_loss},
+      {"loss_curve", r.loss_curve},
+      {"curve_every", ro.curve_every},
+      {"spatial_scale", ro.spatial_scale},
+      {"seconds", r.seconds},
+      {"terms",
+       "real: L1 over the crop, the object rendered in situ (the rest of the scene "
+       "frozen); generated: 0.8 L1 + 0.2 D-SSIM + 0.1 BCE(alpha, mask)"},
+      {"not_implemented", "normal consistency (needs the depth/normal backward)"}};
+}
+
+// Joint refinement of o->object (ALGORITHM.md 7.9): real-view crops first, then the ring's
+// generated views. Returns the manifest's `refinement`.
 absl::StatusOr<nlohmann::json> Refine(CompletedObject* o, const std::vector<PinholeCamera>& cameras,
                                       const GaussianCloud& surfels,
                                       const std::vector<uint32_t>& instance,
@@ -61,27 +114,9 @@ absl::StatusOr<nlohmann::json> Refine(CompletedObject* o, const std::vector<Pinh
   if (options.refinement.iterations == 0) {
     return nlohmann::json{{"status", "not run"}, {"reason", "refinement iterations = 0"}};
   }
-  std::vector<RefinementView> views;
   int skipped = 0;
-  if (options.load_view) {
-    for (int v : o->training_views) {
-      absl::StatusOr<Image> image = options.load_view(v);
-      if (absl::IsNotFound(image.status())) {  // a view without an image
-        ++skipped;
-        continue;
-      }
-      RETURN_IF_ERROR(image.status());
-      ASSIGN_OR_RETURN(
-          std::optional<RefinementView> view,
-          RealRefinementView(cameras[v], *image, o->object, surfels, instance, o->frame,
-                             options.refine_view_max_side, options.num_threads));
-      if (view.has_value()) {
-        views.push_back(std::move(*view));
-      } else {
-        ++skipped;
-      }
-    }
-  }
+  ASSIGN_OR_RETURN(std::vector<RefinementView> views,
+                   RealViews(*o, cameras, surfels, instance, options, &skipped));
   ASSIGN_OR_RETURN(std::vector<RefinementView> generated,
                    GeneratedRefinementViews(o->object, o->ring, o->frame, o->prior.generated,
                                             options.num_threads));
@@ -95,25 +130,7 @@ absl::StatusOr<nlohmann::json> Refine(CompletedObject* o, const std::vector<Pinh
                    RefineGaussians(&o->object, views, ro, [&](int it, int total, double loss) {
                      if (progress) progress(absl::StrCat("refining: loss ", loss), it, total);
                    }));
-  return nlohmann::json{
-      {"status", "done"},
-      {"iterations", r.iterations},
-      {"real_views", r.real_views},
-      {"real_views_skipped", skipped},
-      {"real_images", static_cast<bool>(options.load_view)},
-      {"generated_views", r.generated_views},
-      {"generated_from", o->prior.generated.empty() ? "the object's own renders before refinement"
-                                                    : "the prior's images"},
-      {"initial_loss", r.initial_loss},
-      {"final_loss", r.final_loss},
-      {"loss_curve", r.loss_curve},
-      {"curve_every", ro.curve_every},
-      {"spatial_scale", ro.spatial_scale},
-      {"seconds", r.seconds},
-      {"terms",
-       "real: L1 over the crop, the object rendered in situ (the rest of the scene "
-       "frozen); generated: 0.8 L1 + 0.2 D-SSIM + 0.1 BCE(alpha, mask)"},
-      {"not_implemented", "normal consistency (needs the depth/normal backward)"}};
+  return RefinementManifest(r, ro, *o, options, skipped);
 }
 
 // The instance, its strays and support surfels moved to the occluders, and its frame (into
