@@ -1,6 +1,7 @@
 #include "services/objects/export_eval.h"
 
 #include <filesystem>
+#include <optional>
 
 #include <Eigen/Geometry>
 
@@ -23,14 +24,9 @@ struct GtObject {
   std::vector<Eigen::Vector3f> vertices;  // metres, world
 };
 
-}  // namespace
-
-absl::StatusOr<std::vector<ExportObjectEval>> EvaluateExport(const std::string& scene_dir,
-                                                             const std::string& export_dir) {
-  ASSIGN_OR_RETURN(Scene scene, ReadScene(scene_dir));
-  if (!scene.meters_per_unit)
-    return absl::FailedPreconditionError(absl::StrCat(scene_dir, ": no meters_per_unit"));
-  const double mpu = *scene.meters_per_unit;
+// The scene's ground-truth objects with meshes, in metres.
+absl::StatusOr<std::vector<GtObject>> GroundTruthObjects(const Scene& scene,
+                                                         const std::string& scene_dir, double mpu) {
   ASSIGN_OR_RETURN(json gt_list, ReadJsonFile(scene.Path("gt/objects.json"), 64 << 20));
   if (!gt_list.is_array())
     return absl::FailedPreconditionError(absl::StrCat(scene_dir, ": no ground truth objects"));
@@ -46,48 +42,77 @@ absl::StatusOr<std::vector<ExportObjectEval>> EvaluateExport(const std::string& 
     g.vertices = mesh.vertices;
     gts.push_back(std::move(g));
   }
+  return gts;
+}
+
+// world_from_object of an export manifest.
+Eigen::Isometry3d ManifestPose(const json& m) {
+  const json& pose = m["world_from_object"];
+  const json& q = pose["quaternion_xyzw"];
+  const Eigen::Quaterniond rotation(q[3].get<double>(), q[0].get<double>(), q[1].get<double>(),
+                                    q[2].get<double>());
+  Eigen::Isometry3d out = Eigen::Isometry3d::Identity();
+  out.linear() = rotation.normalized().toRotationMatrix();
+  out.translation() =
+      Eigen::Vector3d(pose["translation"][0].get<double>(), pose["translation"][1].get<double>(),
+                      pose["translation"][2].get<double>());
+  return out;
+}
+
+// One exported object against the ground-truth object nearest its placed mesh (Chamfer); its
+// extents against that object's in the exported object's frame. nullopt without ground truth.
+absl::StatusOr<std::optional<ExportObjectEval>> EvaluateOne(const std::string& dir,
+                                                            const std::vector<GtObject>& gts) {
+  ASSIGN_OR_RETURN(json m, ReadJsonFile(dir + "/manifest.json", 64 << 20));
+  ASSIGN_OR_RETURN(TriangleMesh mesh, ReadMeshPly(dir + "/mesh.ply"));
+  const Eigen::Isometry3d pose = ManifestPose(m);
+  const Eigen::Matrix3d r = pose.linear();
+  const Eigen::Vector3d t = pose.translation();
+  TriangleMesh placed = mesh;
+  for (Eigen::Vector3f& v : placed.vertices) v = (r * v.cast<double>() + t).cast<float>();
+  const std::vector<Eigen::Vector3f> samples = SampleSurface(placed, 4000, 7);
+  ExportObjectEval e;
+  e.id = m.value("id", 0u);
+  e.chamfer = std::numeric_limits<double>::infinity();
+  const GtObject* best = nullptr;
+  for (const GtObject& g : gts) {
+    const double c = ComparePointClouds(samples, g.samples, 0.01).chamfer;
+    if (c < e.chamfer) {
+      e.chamfer = c;
+      best = &g;
+    }
+  }
+  if (best == nullptr) return std::nullopt;
+  e.gt_id = best->id;
+  e.gt_name = best->name;
+  Eigen::AlignedBox3d gt_box, box;
+  for (const Eigen::Vector3f& v : best->vertices)
+    gt_box.extend(r.transpose() * (v.cast<double>() - t));
+  for (const Eigen::Vector3f& v : mesh.vertices) box.extend(v.cast<double>());
+  e.extent = box.sizes();
+  e.gt_extent = gt_box.sizes();
+  for (int a = 0; a < 3; ++a)
+    e.extent_error = std::max(
+        e.extent_error, std::abs(e.extent[a] - e.gt_extent[a]) / std::max(e.gt_extent[a], 1e-6));
+  return e;
+}
+
+}  // namespace
+
+absl::StatusOr<std::vector<ExportObjectEval>> EvaluateExport(const std::string& scene_dir,
+                                                             const std::string& export_dir) {
+  ASSIGN_OR_RETURN(Scene scene, ReadScene(scene_dir));
+  if (!scene.meters_per_unit)
+    return absl::FailedPreconditionError(absl::StrCat(scene_dir, ": no meters_per_unit"));
+  ASSIGN_OR_RETURN(const std::vector<GtObject> gts,
+                   GroundTruthObjects(scene, scene_dir, *scene.meters_per_unit));
   ASSIGN_OR_RETURN(json catalogue,
                    ReadJsonFile((fs::path(export_dir) / "objects.json").string(), 64 << 20));
   std::vector<ExportObjectEval> out;
   for (const json& entry : catalogue.value("objects", json::array())) {
-    const std::string dir = (fs::path(export_dir) / entry.value("dir", "")).string();
-    ASSIGN_OR_RETURN(json m, ReadJsonFile(dir + "/manifest.json", 64 << 20));
-    ASSIGN_OR_RETURN(TriangleMesh mesh, ReadMeshPly(dir + "/mesh.ply"));
-    const json& pose = m["world_from_object"];
-    const json& q = pose["quaternion_xyzw"];
-    const Eigen::Quaterniond rotation(q[3].get<double>(), q[0].get<double>(), q[1].get<double>(),
-                                      q[2].get<double>());
-    const Eigen::Matrix3d r = rotation.normalized().toRotationMatrix();
-    const Eigen::Vector3d t(pose["translation"][0].get<double>(),
-                            pose["translation"][1].get<double>(),
-                            pose["translation"][2].get<double>());
-    TriangleMesh placed = mesh;
-    for (Eigen::Vector3f& v : placed.vertices) v = (r * v.cast<double>() + t).cast<float>();
-    const std::vector<Eigen::Vector3f> samples = SampleSurface(placed, 4000, 7);
-    ExportObjectEval e;
-    e.id = m.value("id", 0u);
-    e.chamfer = std::numeric_limits<double>::infinity();
-    const GtObject* best = nullptr;
-    for (const GtObject& g : gts) {
-      const double c = ComparePointClouds(samples, g.samples, 0.01).chamfer;
-      if (c < e.chamfer) {
-        e.chamfer = c;
-        best = &g;
-      }
-    }
-    if (best == nullptr) continue;
-    e.gt_id = best->id;
-    e.gt_name = best->name;
-    Eigen::AlignedBox3d gt_box, box;
-    for (const Eigen::Vector3f& v : best->vertices)
-      gt_box.extend(r.transpose() * (v.cast<double>() - t));
-    for (const Eigen::Vector3f& v : mesh.vertices) box.extend(v.cast<double>());
-    e.extent = box.sizes();
-    e.gt_extent = gt_box.sizes();
-    for (int a = 0; a < 3; ++a)
-      e.extent_error = std::max(
-          e.extent_error, std::abs(e.extent[a] - e.gt_extent[a]) / std::max(e.gt_extent[a], 1e-6));
-    out.push_back(e);
+    ASSIGN_OR_RETURN(std::optional<ExportObjectEval> e,
+                     EvaluateOne((fs::path(export_dir) / entry.value("dir", "")).string(), gts));
+    if (e) out.push_back(*e);
   }
   return out;
 }
