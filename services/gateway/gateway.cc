@@ -7,6 +7,7 @@
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "common/core/status.h"
 #include "instascene/v1/objects.grpc.pb.h"
 #include "instascene/v1/scheduler.grpc.pb.h"
 #include "instascene/v1/store.grpc.pb.h"
@@ -27,26 +28,40 @@ std::string DefaultWebRoot() {
   return "";
 }
 
-absl::StatusOr<std::unique_ptr<Gateway>> Gateway::Start(const GatewayOptions& options,
-                                                        std::shared_ptr<grpc::Channel> scheduler,
-                                                        std::shared_ptr<grpc::Channel> store,
-                                                        std::shared_ptr<grpc::Channel> objects) {
-  const size_t colon = options.listen.rfind(':');
-  int port = -1;
-  if (colon == std::string::npos || !absl::SimpleAtoi(options.listen.substr(colon + 1), &port) ||
-      port < 0 || port > 65535)
+namespace {
+
+// HOST and PORT of HOST:PORT (port 0: any free port).
+absl::Status ParseListen(const std::string& listen, std::string* host, int* port) {
+  const size_t colon = listen.rfind(':');
+  if (colon == std::string::npos || !absl::SimpleAtoi(listen.substr(colon + 1), port) ||
+      *port < 0 || *port > 65535)
     return absl::InvalidArgumentError(
-        absl::StrCat("gateway address '", options.listen.substr(0, 80), "': expected HOST:PORT"));
-  if (options.max_body_bytes <= 0 || options.threads < 1)
-    return absl::InvalidArgumentError("gateway: max_body_bytes and threads must be positive");
-  const std::string host = options.listen.substr(0, colon);
-  auto stubs = std::make_shared<Stubs>();
-  stubs->scheduler = v1::Scheduler::NewStub(scheduler);
-  stubs->store = v1::ContentStore::NewStub(store);
-  stubs->objects = v1::Objects::NewStub(objects);
-  std::unique_ptr<Gateway> gateway(new Gateway());
-  gateway->server_ = std::make_unique<httplib::Server>();
-  httplib::Server& http = *gateway->server_;
+        absl::StrCat("gateway address '", listen.substr(0, 80), "': expected HOST:PORT"));
+  *host = listen.substr(0, colon);
+  return absl::OkStatus();
+}
+
+// httplib's own refusals (no route, body over the limit, malformed request) in the same shape
+// as the API's errors.
+void SendHttplibError(const httplib::Request&, httplib::Response& res) {
+  if (!res.body.empty()) return;
+  const int status = res.status;
+  if (status == 413)
+    SendError(res,
+              grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
+                           "request body over the gateway's limit (uploads: chunks with "
+                           "Content-Type application/octet-stream)"),
+              413);
+  else if (status == 404)
+    SendError(res, grpc::Status(grpc::StatusCode::NOT_FOUND, "no such endpoint (docs/SERVICES.md)"),
+              404);
+  else
+    SendError(res, grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "malformed HTTP request"),
+              status);
+}
+
+// The server's thread pool, body limit, socket options and error shape.
+void ConfigureServer(const GatewayOptions& options, httplib::Server& http) {
   const int threads = options.threads;
   http.new_task_queue = [threads] { return new httplib::ThreadPool(threads); };
   http.set_payload_max_length(static_cast<size_t>(options.max_body_bytes));
@@ -55,24 +70,28 @@ absl::StatusOr<std::unique_ptr<Gateway>> Gateway::Start(const GatewayOptions& op
     int yes = 1;
     setsockopt(sock, SOL_SOCKET, SO_REUSEADDR, reinterpret_cast<const void*>(&yes), sizeof(yes));
   });
-  // httplib's own refusals (no route, body over the limit, malformed request) in the same shape.
-  http.set_error_handler([](const httplib::Request&, httplib::Response& res) {
-    if (!res.body.empty()) return;
-    const int status = res.status;
-    if (status == 413)
-      SendError(res,
-                grpc::Status(grpc::StatusCode::RESOURCE_EXHAUSTED,
-                             "request body over the gateway's limit (uploads: chunks with "
-                             "Content-Type application/octet-stream)"),
-                413);
-    else if (status == 404)
-      SendError(res,
-                grpc::Status(grpc::StatusCode::NOT_FOUND, "no such endpoint (docs/SERVICES.md)"),
-                404);
-    else
-      SendError(res, grpc::Status(grpc::StatusCode::INVALID_ARGUMENT, "malformed HTTP request"),
-                status);
-  });
+  http.set_error_handler(SendHttplibError);
+}
+
+}  // namespace
+
+absl::StatusOr<std::unique_ptr<Gateway>> Gateway::Start(const GatewayOptions& options,
+                                                        std::shared_ptr<grpc::Channel> scheduler,
+                                                        std::shared_ptr<grpc::Channel> store,
+                                                        std::shared_ptr<grpc::Channel> objects) {
+  std::string host;
+  int port = -1;
+  RETURN_IF_ERROR(ParseListen(options.listen, &host, &port));
+  if (options.max_body_bytes <= 0 || options.threads < 1)
+    return absl::InvalidArgumentError("gateway: max_body_bytes and threads must be positive");
+  auto stubs = std::make_shared<Stubs>();
+  stubs->scheduler = v1::Scheduler::NewStub(scheduler);
+  stubs->store = v1::ContentStore::NewStub(store);
+  stubs->objects = v1::Objects::NewStub(objects);
+  std::unique_ptr<Gateway> gateway(new Gateway());
+  gateway->server_ = std::make_unique<httplib::Server>();
+  httplib::Server& http = *gateway->server_;
+  ConfigureServer(options, http);
   AddRoutes(http, stubs);
   AddSceneUploadRoutes(http, stubs);
   AddHttpMetrics(http);
