@@ -154,9 +154,9 @@ void StageWorker::Loop() {
   }
 }
 
-absl::Status StageWorker::Execute(const v1::LeaseJobResponse& lease, const std::string& job_dir,
-                                  CancelFlag* cancel, const ProgressFn& progress,
-                                  store::Digest* output, int64_t* items) {
+absl::StatusOr<store::Digest> StageWorker::FetchInputs(const v1::LeaseJobResponse& lease,
+                                                       const ProgressFn& progress,
+                                                       pipeline::StageContext* context) {
   const v1::Job& job = lease.job();
   // Scene and inputs, cached by digest: a scene is fetched once per worker, not once per job.
   // Each worker has its own cache (the workers of one process share work_dir).
@@ -164,14 +164,13 @@ absl::Status StageWorker::Execute(const v1::LeaseJobResponse& lease, const std::
   const fs::path cache = fs::path(options_.work_dir) / absl::StrJoin(options_.kinds, "+");
   const std::string scenes_root = (cache / "scenes").string();
   const std::string results_root = (cache / "results").string();
-  pipeline::StageContext context;
-  context.scene_dir = (fs::path(scenes_root) / scene_digest.hash).string();
-  std::set<std::string> keep = {context.scene_dir};
+  context->scene_dir = (fs::path(scenes_root) / scene_digest.hash).string();
+  std::set<std::string> keep = {context->scene_dir};
   std::map<std::string, store::Digest> inputs;
   for (const auto& [name, digest] : lease.inputs()) {
     ASSIGN_OR_RETURN(inputs[name], rpc::ParseProtoDigest(digest, absl::StrCat("input ", name)));
-    context.inputs[name] = (fs::path(results_root) / digest.hash()).string();
-    keep.insert(context.inputs[name]);
+    context->inputs[name] = (fs::path(results_root) / digest.hash()).string();
+    keep.insert(context->inputs[name]);
   }
   ASSIGN_OR_RETURN(EvictionReport evicted,
                    EvictCache({scenes_root, results_root}, options_.cache_bytes, keep));
@@ -183,14 +182,35 @@ absl::Status StageWorker::Execute(const v1::LeaseJobResponse& lease, const std::
   progress({"fetching inputs", 0, 1, 0});
   ASSIGN_OR_RETURN(store::Manifest scene, store::ReadManifest(*store_, scene_digest));
   RETURN_IF_ERROR(
-      Annotate(store::MaterializeManifest(*store_, scene, context.scene_dir), "fetching scene"));
-  TouchCacheEntry(context.scene_dir);
+      Annotate(store::MaterializeManifest(*store_, scene, context->scene_dir), "fetching scene"));
+  TouchCacheEntry(context->scene_dir);
   for (const auto& [name, digest] : inputs) {
     ASSIGN_OR_RETURN(store::Manifest manifest, store::ReadManifest(*store_, digest));
-    RETURN_IF_ERROR(Annotate(store::MaterializeManifest(*store_, manifest, context.inputs[name]),
+    RETURN_IF_ERROR(Annotate(store::MaterializeManifest(*store_, manifest, context->inputs[name]),
                              absl::StrCat("fetching input ", name)));
-    TouchCacheEntry(context.inputs[name]);
+    TouchCacheEntry(context->inputs[name]);
   }
+  return scene_digest;
+}
+
+absl::StatusOr<store::Digest> StageWorker::UploadOutput(const v1::Job& job,
+                                                        const std::string& job_dir,
+                                                        const store::Digest& scene, int64_t items) {
+  ASSIGN_OR_RETURN(store::Manifest manifest, store::ManifestFromDirectory(job_dir, job.kind()));
+  manifest.metadata["job"] = job.id();
+  manifest.metadata["scene_manifest"] = scene.ToString();
+  if (job.item() >= 0) manifest.metadata["item"] = job.item();
+  if (items >= 0) manifest.metadata["items"] = items;
+  ASSIGN_OR_RETURN(store::UploadReport report, store::UploadManifest(*store_, manifest, job_dir));
+  return report.manifest;
+}
+
+absl::Status StageWorker::Execute(const v1::LeaseJobResponse& lease, const std::string& job_dir,
+                                  CancelFlag* cancel, const ProgressFn& progress,
+                                  store::Digest* output, int64_t* items) {
+  const v1::Job& job = lease.job();
+  pipeline::StageContext context;
+  ASSIGN_OR_RETURN(const store::Digest scene_digest, FetchInputs(lease, progress, &context));
   context.out_dir = job_dir;
   context.parameters = nlohmann::json::parse(job.parameters_json(), nullptr, false);
   if (context.parameters.is_discarded())
@@ -205,13 +225,7 @@ absl::Status StageWorker::Execute(const v1::LeaseJobResponse& lease, const std::
   RETURN_IF_ERROR(CheckCancelled(cancel, job.kind()));
   *items = result.items;
   progress({"uploading", 0, 1, 0});
-  ASSIGN_OR_RETURN(store::Manifest manifest, store::ManifestFromDirectory(job_dir, job.kind()));
-  manifest.metadata["job"] = job.id();
-  manifest.metadata["scene_manifest"] = scene_digest.ToString();
-  if (job.item() >= 0) manifest.metadata["item"] = job.item();
-  if (result.items >= 0) manifest.metadata["items"] = result.items;
-  ASSIGN_OR_RETURN(store::UploadReport report, store::UploadManifest(*store_, manifest, job_dir));
-  *output = report.manifest;
+  ASSIGN_OR_RETURN(*output, UploadOutput(job, job_dir, scene_digest, result.items));
   return absl::OkStatus();
 }
 

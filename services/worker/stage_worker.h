@@ -82,6 +82,14 @@ class StageWorker {
   const char* ReportOutcome(const v1::LeaseJobResponse& lease, const JobOutcome& outcome,
                             double seconds);
   using ProgressFn = std::function<void(const pipeline::StageProgress&)>;
+  // The job's scene and inputs, from the worker's input cache (fetched on a miss; the cache
+  // evicted to its budget first): their directories into `context`; returns the scene's digest.
+  absl::StatusOr<store::Digest> FetchInputs(const v1::LeaseJobResponse& lease,
+                                            const ProgressFn& progress,
+                                            pipeline::StageContext* context);
+  // The job directory's output manifest (with the job, scene and items), uploaded.
+  absl::StatusOr<store::Digest> UploadOutput(const v1::Job& job, const std::string& job_dir,
+                                             const store::Digest& scene, int64_t items);
   // Fetches inputs, runs the stage, uploads the output manifest.
   absl::Status Execute(const v1::LeaseJobResponse& lease, const std::string& job_dir,
                        CancelFlag* cancel, const ProgressFn& progress, store::Digest* output,
