@@ -41,42 +41,43 @@ struct GaussianColumns {
   std::vector<int> rest;  // f_rest_*, channel-major
   int num_scales, sh_degree;
 };
-absl::StatusOr<GaussianColumns> FindGaussianColumns(const PlyColumns& cols,
-                                                    absl::string_view source) {
-  auto require = [&](const std::string& name) -> absl::StatusOr<int> {
-    int c = cols.Find(name);
-    if (c < 0) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(source, ": missing required vertex property '", name, "'"));
-    }
-    return c;
-  };
-  // Count indexed groups and check they are contiguous.
-  auto count_group = [&](absl::string_view prefix) -> absl::StatusOr<int> {
-    int count = 0, max_index = -1;
-    for (const std::string& n : cols.names) {
-      int idx = IndexedSuffix(n, prefix);
-      if (idx >= 0) {
-        ++count;
-        max_index = std::max(max_index, idx);
-      }
-    }
-    if (count != max_index + 1) {
-      return absl::InvalidArgumentError(
-          absl::StrCat(source, ": properties '", prefix, "*' are not numbered 0..", max_index));
-    }
-    return count;
-  };
-  GaussianColumns out;
-  ASSIGN_OR_RETURN(int num_rest, count_group("f_rest_"));
-  ASSIGN_OR_RETURN(int num_scales, count_group("scale_"));
-  ASSIGN_OR_RETURN(int num_rot, count_group("rot_"));
-  ASSIGN_OR_RETURN(int num_dc, count_group("f_dc_"));
-  int sh_degree = -1;
-  for (int d = 0; d <= 3; ++d) {
-    if (num_rest == 3 * (NumShCoeffs(d) - 1)) sh_degree = d;
+// The column of a required property.
+absl::StatusOr<int> RequireColumn(const PlyColumns& cols, const std::string& name,
+                                  absl::string_view source) {
+  const int c = cols.Find(name);
+  if (c < 0) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(source, ": missing required vertex property '", name, "'"));
   }
-  if (sh_degree < 0) {
+  return c;
+}
+
+// How many properties `prefix`<n> there are; they must be numbered 0..count-1.
+absl::StatusOr<int> CountGroup(const PlyColumns& cols, absl::string_view prefix,
+                               absl::string_view source) {
+  int count = 0, max_index = -1;
+  for (const std::string& n : cols.names) {
+    const int idx = IndexedSuffix(n, prefix);
+    if (idx >= 0) {
+      ++count;
+      max_index = std::max(max_index, idx);
+    }
+  }
+  if (count != max_index + 1) {
+    return absl::InvalidArgumentError(
+        absl::StrCat(source, ": properties '", prefix, "*' are not numbered 0..", max_index));
+  }
+  return count;
+}
+
+// The group sizes must make an SH degree 0-3, 2 or 3 scales, a quaternion and RGB.
+absl::Status CheckGroupSizes(int num_rest, int num_scales, int num_rot, int num_dc,
+                             absl::string_view source, int* sh_degree) {
+  *sh_degree = -1;
+  for (int d = 0; d <= 3; ++d) {
+    if (num_rest == 3 * (NumShCoeffs(d) - 1)) *sh_degree = d;
+  }
+  if (*sh_degree < 0) {
     return absl::InvalidArgumentError(absl::StrCat(
         source, ": ", num_rest, " f_rest_* properties; expected 0, 9, 24 or 45 (SH degree 0-3)"));
   }
@@ -92,8 +93,19 @@ absl::StatusOr<GaussianColumns> FindGaussianColumns(const PlyColumns& cols,
     return absl::InvalidArgumentError(
         absl::StrCat(source, ": ", num_dc, " f_dc_* properties; expected 3 (R, G, B)"));
   }
+  return absl::OkStatus();
+}
+
+absl::StatusOr<GaussianColumns> FindGaussianColumns(const PlyColumns& cols,
+                                                    absl::string_view source) {
+  auto require = [&](const std::string& name) { return RequireColumn(cols, name, source); };
+  GaussianColumns out;
+  ASSIGN_OR_RETURN(int num_rest, CountGroup(cols, "f_rest_", source));
+  ASSIGN_OR_RETURN(int num_scales, CountGroup(cols, "scale_", source));
+  ASSIGN_OR_RETURN(int num_rot, CountGroup(cols, "rot_", source));
+  ASSIGN_OR_RETURN(int num_dc, CountGroup(cols, "f_dc_", source));
+  RETURN_IF_ERROR(CheckGroupSizes(num_rest, num_scales, num_rot, num_dc, source, &out.sh_degree));
   out.num_scales = num_scales;
-  out.sh_degree = sh_degree;
   ASSIGN_OR_RETURN(out.pos[0], require("x"));
   ASSIGN_OR_RETURN(out.pos[1], require("y"));
   ASSIGN_OR_RETURN(out.pos[2], require("z"));
