@@ -305,19 +305,17 @@ void ProjectSurfels(const GaussianCloud& cloud, size_t first, size_t count,
   }
 }
 
-bool ProjectEllipsoid(const GaussianCloud& cloud, size_t i, const ProjectionParams& p,
-                      ProjectedSplat* out) {
-  const float* pos = &cloud.positions[3 * i];
-  float t[3];
-  RotateToView(p, pos, t);
-  for (int r = 0; r < 3; ++r) t[r] += p.translation[r];
-  if (t[2] <= p.near_plane) return false;
-  float rot[9];
+namespace {
+
+// The screen covariance (0,0), (0,1), (1,1) of Gaussian i at camera-frame centre t by EWA:
+// J (the perspective map's Jacobian, clamped at 1.3x the fov) W (the camera rotation) Sigma
+// (R S S^T R^T) (JW)^T, dilated by the low-pass filter. `rot` and `s` receive its rotation and
+// scales.
+void ScreenCovariance(const GaussianCloud& cloud, size_t i, const ProjectionParams& p,
+                      const float t[3], float rot[9], float s[3], float c2d[3]) {
   const float* q = &cloud.rotations[4 * i];
   QuaternionToMatrix(q[0], q[1], q[2], q[3], rot);
-  float s[3];
   for (int k = 0; k < 3; ++k) s[k] = std::exp(cloud.log_scales[3 * i + k]) * p.scale_modifier;
-  // World covariance Sigma = R S S^T R^T.
   float cov[9];
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 3; ++c) {
@@ -326,7 +324,6 @@ bool ProjectEllipsoid(const GaussianCloud& cloud, size_t i, const ProjectionPara
       cov[3 * r + c] = v;
     }
   }
-  // EWA: J (Jacobian of the perspective map, clamped at 1.3x the fov) times W (camera rotation).
   const float limx = 1.3f * p.tan_fov_x, limy = 1.3f * p.tan_fov_y;
   const float tx = std::min(limx, std::max(-limx, t[0] / t[2])) * t[2];
   const float ty = std::min(limy, std::max(-limy, t[1] / t[2])) * t[2];
@@ -337,7 +334,7 @@ bool ProjectEllipsoid(const GaussianCloud& cloud, size_t i, const ProjectionPara
     jw[0][c] = j00 * p.rotation[c] + j02 * p.rotation[6 + c];
     jw[1][c] = j11 * p.rotation[3 + c] + j12 * p.rotation[6 + c];
   }
-  float c2d[3] = {0, 0, 0};  // (0,0), (0,1), (1,1) of JW Sigma (JW)^T
+  c2d[0] = c2d[1] = c2d[2] = 0;
   for (int r = 0; r < 3; ++r) {
     for (int c = 0; c < 3; ++c) {
       c2d[0] += jw[0][r] * cov[3 * r + c] * jw[0][c];
@@ -347,6 +344,19 @@ bool ProjectEllipsoid(const GaussianCloud& cloud, size_t i, const ProjectionPara
   }
   c2d[0] += kDilation;
   c2d[2] += kDilation;
+}
+
+}  // namespace
+
+bool ProjectEllipsoid(const GaussianCloud& cloud, size_t i, const ProjectionParams& p,
+                      ProjectedSplat* out) {
+  const float* pos = &cloud.positions[3 * i];
+  float t[3];
+  RotateToView(p, pos, t);
+  for (int r = 0; r < 3; ++r) t[r] += p.translation[r];
+  if (t[2] <= p.near_plane) return false;
+  float rot[9], s[3], c2d[3];
+  ScreenCovariance(cloud, i, p, t, rot, s, c2d);
   const float det = c2d[0] * c2d[2] - c2d[1] * c2d[1];
   if (det == 0.0f) return false;
   out->tu[0] = c2d[2] / det;

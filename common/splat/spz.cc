@@ -34,13 +34,40 @@ absl::Status CheckSpzHeader(const SpzHeader& h, absl::string_view name) {
   return absl::OkStatus();
 }
 
+// Quaternion (x, y, z, w) of splat i: v3+ packs the smallest three components (9 bits and a
+// sign each, 2 bits naming the largest), v2 stores x, y, z as bytes.
+void SpzRotation(const std::string& rotations, size_t i, bool smallest_three, float q[4]) {
+  if (smallest_three) {
+    const auto* r = reinterpret_cast<const uint8_t*>(&rotations[4 * i]);
+    uint32_t comp = r[0] | (r[1] << 8) | (r[2] << 16) | (static_cast<uint32_t>(r[3]) << 24);
+    const int largest = static_cast<int>(comp >> 30);
+    float sum = 0;
+    for (int k = 3; k >= 0; --k) {
+      if (k == largest) continue;
+      const uint32_t mag = comp & 511u;
+      const bool negative = (comp >> 9) & 1u;
+      comp >>= 10;
+      q[k] = static_cast<float>(M_SQRT1_2) * static_cast<float>(mag) / 511.0f * (negative ? -1 : 1);
+      sum += q[k] * q[k];
+    }
+    q[largest] = std::sqrt(std::max(0.0f, 1 - sum));
+    return;
+  }
+  const auto* r = reinterpret_cast<const uint8_t*>(&rotations[3 * i]);
+  float sum = 0;
+  for (int k = 0; k < 3; ++k) {
+    q[k] = r[k] / 127.5f - 1;
+    sum += q[k] * q[k];
+  }
+  q[3] = std::sqrt(std::max(0.0f, 1 - sum));
+}
+
 absl::StatusOr<GaussianCloud> UnpackSpz(const SpzHeader& h, const std::string& positions,
                                         const std::string& alphas, const std::string& colors,
                                         const std::string& scales, const std::string& rotations,
                                         const std::string& sh, absl::string_view name) {
   const size_t n = h.points;
   const int dim = SpzShDim(h.sh_degree);
-  const bool smallest_three = h.version >= 3;
   GaussianCloud cloud;
   cloud.num_scales = 3;
   cloud.sh_degree = h.sh_degree;
@@ -62,30 +89,7 @@ absl::StatusOr<GaussianCloud> UnpackSpz(const SpzHeader& h, const std::string& p
     }
     cloud.opacity_logits[i] = AlphaLogit(static_cast<uint8_t>(alphas[i]) / 255.0);
     float q[4];  // x, y, z, w
-    if (smallest_three) {
-      const auto* r = reinterpret_cast<const uint8_t*>(&rotations[4 * i]);
-      uint32_t comp = r[0] | (r[1] << 8) | (r[2] << 16) | (static_cast<uint32_t>(r[3]) << 24);
-      const int largest = static_cast<int>(comp >> 30);
-      float sum = 0;
-      for (int k = 3; k >= 0; --k) {
-        if (k == largest) continue;
-        const uint32_t mag = comp & 511u;
-        const bool negative = (comp >> 9) & 1u;
-        comp >>= 10;
-        q[k] =
-            static_cast<float>(M_SQRT1_2) * static_cast<float>(mag) / 511.0f * (negative ? -1 : 1);
-        sum += q[k] * q[k];
-      }
-      q[largest] = std::sqrt(std::max(0.0f, 1 - sum));
-    } else {
-      const auto* r = reinterpret_cast<const uint8_t*>(&rotations[3 * i]);
-      float sum = 0;
-      for (int k = 0; k < 3; ++k) {
-        q[k] = r[k] / 127.5f - 1;
-        sum += q[k] * q[k];
-      }
-      q[3] = std::sqrt(std::max(0.0f, 1 - sum));
-    }
+    SpzRotation(rotations, i, h.version >= 3, q);
     float* rot = &cloud.rotations[4 * i];
     rot[0] = q[3];
     for (int k = 0; k < 3; ++k) rot[1 + k] = q[k] * axis[k];

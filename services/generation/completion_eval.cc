@@ -268,54 +268,59 @@ absl::StatusOr<std::vector<ObjectCompletionEval>> EvaluateCompletion(
   }
 }
 
-nlohmann::json CompletionEvalJson(const std::vector<ObjectCompletionEval>& objects,
-                                  const CompletionEvalOptions& o) {
-  auto version = [&](const VersionScores& v) {
-    nlohmann::json f1 = nlohmann::json::object();
-    for (size_t t = 0; t < v.f1.size(); ++t) f1[absl::StrCat(o.tau_fractions[t])] = v.f1[t];
-    return nlohmann::json{{"chamfer", v.chamfer},
-                          {"f1", f1},
-                          {"volume_iou", v.volume_iou},
-                          {"hidden_recall", v.hidden_recall},
-                          {"psnr_known", v.psnr_known},
-                          {"psnr_unknown", v.psnr_unknown},
-                          {"ssim_known", v.ssim_known},
-                          {"ssim_unknown", v.ssim_unknown},
-                          {"free_space_violations", v.free_space_violations}};
-  };
-  nlohmann::json list = nlohmann::json::array();
-  std::map<std::string, std::vector<double>> sums;
-  int matched = 0;
-  for (const ObjectCompletionEval& e : objects) {
-    list.push_back({{"id", e.id},
-                    {"gt_id", e.gt_id},
-                    {"gt_name", e.gt_name},
-                    {"shape", e.shape},
-                    {"abstained", e.abstained},
-                    {"completed_share", e.completed_share},
-                    {"hidden_share", e.hidden_share},
-                    {"known_views", e.known_views},
-                    {"unknown_views", e.unknown_views},
-                    {"raw", version(e.raw)},
-                    {"closed", version(e.closed)},
-                    {"completed", version(e.completed)}});
-    if (e.gt_id == 0) continue;
-    ++matched;
-    for (const auto& [name, v] :
-         {std::pair{"raw", &e.raw}, {"closed", &e.closed}, {"completed", &e.completed}}) {
-      auto& s = sums[name];
-      s.resize(8 + v->f1.size(), 0.0);
-      s[0] += v->chamfer;
-      s[1] += v->volume_iou;
-      s[2] += v->hidden_recall;
-      s[3] += v->psnr_known;
-      s[4] += v->psnr_unknown;
-      s[5] += v->ssim_known;
-      s[6] += v->ssim_unknown;
-      s[7] += v->free_space_violations;
-      for (size_t t = 0; t < v->f1.size(); ++t) s[8 + t] += v->f1[t];
-    }
+namespace {
+
+nlohmann::json VersionJson(const VersionScores& v, const CompletionEvalOptions& o) {
+  nlohmann::json f1 = nlohmann::json::object();
+  for (size_t t = 0; t < v.f1.size(); ++t) f1[absl::StrCat(o.tau_fractions[t])] = v.f1[t];
+  return nlohmann::json{{"chamfer", v.chamfer},
+                        {"f1", f1},
+                        {"volume_iou", v.volume_iou},
+                        {"hidden_recall", v.hidden_recall},
+                        {"psnr_known", v.psnr_known},
+                        {"psnr_unknown", v.psnr_unknown},
+                        {"ssim_known", v.ssim_known},
+                        {"ssim_unknown", v.ssim_unknown},
+                        {"free_space_violations", v.free_space_violations}};
+}
+
+nlohmann::json ObjectJson(const ObjectCompletionEval& e, const CompletionEvalOptions& o) {
+  return {{"id", e.id},
+          {"gt_id", e.gt_id},
+          {"gt_name", e.gt_name},
+          {"shape", e.shape},
+          {"abstained", e.abstained},
+          {"completed_share", e.completed_share},
+          {"hidden_share", e.hidden_share},
+          {"known_views", e.known_views},
+          {"unknown_views", e.unknown_views},
+          {"raw", VersionJson(e.raw, o)},
+          {"closed", VersionJson(e.closed, o)},
+          {"completed", VersionJson(e.completed, o)}};
+}
+
+// Per version: the sums of its scores (chamfer, volume IoU, hidden recall, PSNR and SSIM known /
+// unknown, violations, then F1 per tau) over the matched objects.
+using VersionSums = std::map<std::string, std::vector<double>>;
+void AddToSums(const ObjectCompletionEval& e, VersionSums* sums) {
+  for (const auto& [name, v] :
+       {std::pair{"raw", &e.raw}, {"closed", &e.closed}, {"completed", &e.completed}}) {
+    auto& s = (*sums)[name];
+    s.resize(8 + v->f1.size(), 0.0);
+    s[0] += v->chamfer;
+    s[1] += v->volume_iou;
+    s[2] += v->hidden_recall;
+    s[3] += v->psnr_known;
+    s[4] += v->psnr_unknown;
+    s[5] += v->ssim_known;
+    s[6] += v->ssim_unknown;
+    s[7] += v->free_space_violations;
+    for (size_t t = 0; t < v->f1.size(); ++t) s[8 + t] += v->f1[t];
   }
+}
+
+// The means per version (violations summed).
+nlohmann::json MeansJson(const VersionSums& sums, int matched, const CompletionEvalOptions& o) {
   nlohmann::json mean = nlohmann::json::object();
   for (const auto& [name, s] : sums) {
     nlohmann::json f1 = nlohmann::json::object();
@@ -330,9 +335,25 @@ nlohmann::json CompletionEvalJson(const std::vector<ObjectCompletionEval>& objec
                   {"free_space_violations", s[7]},
                   {"f1", f1}};
   }
+  return mean;
+}
+
+}  // namespace
+
+nlohmann::json CompletionEvalJson(const std::vector<ObjectCompletionEval>& objects,
+                                  const CompletionEvalOptions& o) {
+  nlohmann::json list = nlohmann::json::array();
+  VersionSums sums;
+  int matched = 0;
+  for (const ObjectCompletionEval& e : objects) {
+    list.push_back(ObjectJson(e, o));
+    if (e.gt_id == 0) continue;
+    ++matched;
+    AddToSums(e, &sums);
+  }
   return {{"objects", list},
           {"matched", matched},
-          {"mean", mean},
+          {"mean", MeansJson(sums, matched, o)},
           {"tau_fractions", o.tau_fractions},
           {"hidden_tau_fraction", o.hidden_tau_fraction}};
 }

@@ -73,14 +73,15 @@ double MaskedL1(const std::vector<float>& render, const std::vector<float>& targ
   return sum * scale;
 }
 
-double Dssim(const std::vector<float>& render, const std::vector<float>& target, int width,
-             int height, double weight, std::vector<float>* d_render) {
-  const size_t pixels = static_cast<size_t>(width) * height;
-  if (pixels == 0) return 0.0;
-  const double norm = 1.0 / (3.0 * pixels);
-  // Where render and target are equal over a whole window, SSIM is 1 and its gradient 0 (equality
-  // is its maximum), zero padding included: only the box of differing pixels grown by two window
-  // radii needs computing; the pixels outside it add exactly 1 each.
+namespace {
+
+// The box of pixels where render and target differ, grown by two window radii and clipped;
+// false when they are equal everywhere.
+struct PixelBox {
+  int x0, y0, w, h;
+};
+bool DifferingBox(const std::vector<float>& render, const std::vector<float>& target, int width,
+                  int height, PixelBox* box) {
   int x0 = width, x1 = -1, y0 = height, y1 = -1;
   for (int y = 0; y < height; ++y) {
     for (int x = 0; x < width; ++x) {
@@ -94,59 +95,84 @@ double Dssim(const std::vector<float>& render, const std::vector<float>& target,
       }
     }
   }
-  if (x1 < 0) return 0.0;
+  if (x1 < 0) return false;
   x0 = std::max(0, x0 - 2 * kRadius);
   y0 = std::max(0, y0 - 2 * kRadius);
   x1 = std::min(width - 1, x1 + 2 * kRadius);
   y1 = std::min(height - 1, y1 + 2 * kRadius);
-  const int w = x1 - x0 + 1, h = y1 - y0 + 1;
+  *box = {x0, y0, x1 - x0 + 1, y1 - y0 + 1};
+  return true;
+}
+
+// Channel c of the box: the sum of its SSIM map, and d(-weight * norm * SSIM)/d render added to
+// d_render.
+double ChannelSsim(const std::vector<float>& render, const std::vector<float>& target, int width,
+                   const PixelBox& b, int c, double scale, std::vector<float>* d_render) {
+  const int w = b.w, h = b.h;
   const size_t box = static_cast<size_t>(w) * h;
+  std::vector<double> x(box), y(box), xx(box), yy(box), xy(box);
+  for (int r = 0; r < h; ++r) {
+    for (int q = 0; q < w; ++q) {
+      const size_t i = static_cast<size_t>(b.y0 + r) * width + b.x0 + q,
+                   j = static_cast<size_t>(r) * w + q;
+      x[j] = render[3 * i + c];
+      y[j] = target[3 * i + c];
+      xx[j] = x[j] * x[j];
+      yy[j] = y[j] * y[j];
+      xy[j] = x[j] * y[j];
+    }
+  }
+  const std::vector<double> mx = Blur(x, w, h), my = Blur(y, w, h), mxx = Blur(xx, w, h),
+                            myy = Blur(yy, w, h), mxy = Blur(xy, w, h);
+  // S = A1 A2 / (B1 B2); its partials with respect to the blurred moments m_x, m_xx, m_xy.
+  double sum = 0;
+  std::vector<double> d_mx(box), d_mxx(box), d_mxy(box);
+  for (size_t i = 0; i < box; ++i) {
+    const double sxx = mxx[i] - mx[i] * mx[i], syy = myy[i] - my[i] * my[i],
+                 sxy = mxy[i] - mx[i] * my[i];
+    const double a1 = 2 * mx[i] * my[i] + kC1, a2 = 2 * sxy + kC2;
+    const double b1 = mx[i] * mx[i] + my[i] * my[i] + kC1, b2 = sxx + syy + kC2;
+    const double s = a1 * a2 / (b1 * b2);
+    sum += s;
+    const double ds_dmu = 2 * my[i] * a2 / (b1 * b2) - s * 2 * mx[i] / b1;  // direct
+    const double ds_dsxx = -s / b2, ds_dsxy = 2 * a1 / (b1 * b2);
+    d_mx[i] = ds_dmu + ds_dsxx * (-2 * mx[i]) + ds_dsxy * (-my[i]);
+    d_mxx[i] = ds_dsxx;
+    d_mxy[i] = ds_dsxy;
+  }
+  const std::vector<double> g_mx = Blur(d_mx, w, h), g_mxx = Blur(d_mxx, w, h),
+                            g_mxy = Blur(d_mxy, w, h);
+  for (int r = 0; r < h; ++r) {
+    for (int q = 0; q < w; ++q) {
+      const size_t i = static_cast<size_t>(b.y0 + r) * width + b.x0 + q,
+                   j = static_cast<size_t>(r) * w + q;
+      const double d_ssim = g_mx[j] + 2 * x[j] * g_mxx[j] + y[j] * g_mxy[j];
+      (*d_render)[3 * i + c] += static_cast<float>(-scale * d_ssim);
+    }
+  }
+  return sum;
+}
+
+}  // namespace
+
+double Dssim(const std::vector<float>& render, const std::vector<float>& target, int width,
+             int height, double weight, std::vector<float>* d_render) {
+  const size_t pixels = static_cast<size_t>(width) * height;
+  if (pixels == 0) return 0.0;
+  const double norm = 1.0 / (3.0 * pixels);
+  // Where render and target are equal over a whole window, SSIM is 1 and its gradient 0 (equality
+  // is its maximum), zero padding included: only the box of differing pixels grown by two window
+  // radii needs computing; the pixels outside it add exactly 1 each.
+  PixelBox b;
+  if (!DifferingBox(render, target, width, height, &b)) return 0.0;
+  const size_t box = static_cast<size_t>(b.w) * b.h;
   // The box touches the image border only where it is the border, so its zero padding is the
   // image's own there, and elsewhere it lies over equal values (see above).
   double ssim_sum = 3.0 * static_cast<double>(pixels - box);
   // The three channels are independent: one task each, their sums added in channel order.
   double channel_sum[3] = {0, 0, 0};
   tbb::parallel_for(0, 3, [&](int c) {
-    double& sum = channel_sum[c];
-    std::vector<double> x(box), y(box), xx(box), yy(box), xy(box);
-    for (int r = 0; r < h; ++r) {
-      for (int q = 0; q < w; ++q) {
-        const size_t i = static_cast<size_t>(y0 + r) * width + x0 + q,
-                     j = static_cast<size_t>(r) * w + q;
-        x[j] = render[3 * i + c];
-        y[j] = target[3 * i + c];
-        xx[j] = x[j] * x[j];
-        yy[j] = y[j] * y[j];
-        xy[j] = x[j] * y[j];
-      }
-    }
-    const std::vector<double> mx = Blur(x, w, h), my = Blur(y, w, h), mxx = Blur(xx, w, h),
-                              myy = Blur(yy, w, h), mxy = Blur(xy, w, h);
-    // S = A1 A2 / (B1 B2); its partials with respect to the blurred moments m_x, m_xx, m_xy.
-    std::vector<double> d_mx(box), d_mxx(box), d_mxy(box);
-    for (size_t i = 0; i < box; ++i) {
-      const double sxx = mxx[i] - mx[i] * mx[i], syy = myy[i] - my[i] * my[i],
-                   sxy = mxy[i] - mx[i] * my[i];
-      const double a1 = 2 * mx[i] * my[i] + kC1, a2 = 2 * sxy + kC2;
-      const double b1 = mx[i] * mx[i] + my[i] * my[i] + kC1, b2 = sxx + syy + kC2;
-      const double s = a1 * a2 / (b1 * b2);
-      sum += s;
-      const double ds_dmu = 2 * my[i] * a2 / (b1 * b2) - s * 2 * mx[i] / b1;  // direct
-      const double ds_dsxx = -s / b2, ds_dsxy = 2 * a1 / (b1 * b2);
-      d_mx[i] = ds_dmu + ds_dsxx * (-2 * mx[i]) + ds_dsxy * (-my[i]);
-      d_mxx[i] = ds_dsxx;
-      d_mxy[i] = ds_dsxy;
-    }
-    const std::vector<double> g_mx = Blur(d_mx, w, h), g_mxx = Blur(d_mxx, w, h),
-                              g_mxy = Blur(d_mxy, w, h);
-    for (int r = 0; r < h; ++r) {
-      for (int q = 0; q < w; ++q) {
-        const size_t i = static_cast<size_t>(y0 + r) * width + x0 + q,
-                     j = static_cast<size_t>(r) * w + q;
-        const double d_ssim = g_mx[j] + 2 * x[j] * g_mxx[j] + y[j] * g_mxy[j];
-        (*d_render)[3 * i + c] += static_cast<float>(-weight * norm * d_ssim);
-      }
-    }
+    channel_sum[c] = ChannelSsim(render, target, width, b, c, weight * norm, d_render);
   });
   for (double sum : channel_sum) ssim_sum += sum;
   return 1.0 - ssim_sum * norm;

@@ -4,6 +4,7 @@
 #include <random>
 
 #include "absl/strings/str_cat.h"
+#include "common/core/status.h"
 
 namespace instascene::generation::diffusion {
 
@@ -27,6 +28,52 @@ std::vector<int> DdimTimesteps(const NoiseSchedule& schedule, int steps) {
   return out;
 }
 
+namespace {
+
+// The denoiser's noise for target n's latent at timestep t under `condition` (-1: none),
+// checked: latent_size finite values.
+absl::StatusOr<std::vector<float>> PredictChecked(const Denoiser& denoiser,
+                                                  const std::vector<float>& latent, int n, int t,
+                                                  int condition, int latent_size) {
+  NoiseQuery q{&latent, t, n, condition};
+  absl::StatusOr<std::vector<float>> eps = denoiser.PredictNoise(q);
+  if (!eps.ok()) return eps.status();
+  const std::string where =
+      absl::StrCat("denoiser answer for target ", n, ", condition ", condition, ", timestep ", t);
+  if (eps->size() != static_cast<size_t>(latent_size))
+    return absl::InvalidArgumentError(
+        absl::StrCat(where, ": ", eps->size(), " values, expected ", latent_size));
+  for (float v : *eps) {
+    if (!std::isfinite(v)) return absl::InvalidArgumentError(absl::StrCat(where, ": not finite"));
+  }
+  return eps;
+}
+
+// Eq. 9: target n's (guided) noise averaged over the condition views.
+absl::StatusOr<std::vector<double>> AveragedNoise(const Denoiser& denoiser,
+                                                  const std::vector<float>& latent, int n, int t,
+                                                  const std::vector<int>& conditions,
+                                                  double guidance) {
+  const int latent_size = static_cast<int>(latent.size());
+  const bool guided = guidance != 1.0;
+  std::vector<double> eps(latent_size, 0.0);
+  std::vector<float> uncond;
+  if (guided) {
+    ASSIGN_OR_RETURN(uncond, PredictChecked(denoiser, latent, n, t, -1, latent_size));
+  }
+  for (int condition : conditions) {
+    ASSIGN_OR_RETURN(const std::vector<float> c,
+                     PredictChecked(denoiser, latent, n, t, condition, latent_size));
+    for (int j = 0; j < latent_size; ++j) {
+      eps[j] += guided ? uncond[j] + guidance * (c[j] - uncond[j]) : c[j];
+    }
+  }
+  for (double& e : eps) e /= static_cast<double>(conditions.size());
+  return eps;
+}
+
+}  // namespace
+
 absl::StatusOr<std::vector<std::vector<float>>> SampleDdim(
     const Denoiser& denoiser, const NoiseSchedule& schedule, int targets, int latent_size,
     const std::vector<int>& conditions, const DdimOptions& options, const StepHook& hook) {
@@ -39,26 +86,11 @@ absl::StatusOr<std::vector<std::vector<float>>> SampleDdim(
   const std::vector<int> timesteps = DdimTimesteps(schedule, options.steps);
   std::vector<std::mt19937_64> rngs;
   for (int n = 0; n < targets; ++n) rngs.emplace_back(options.seed * 1000003ULL + n);
-  std::normal_distribution<double> normal(0.0, 1.0);
+  std::normal_distribution<double> normal(0.0, 1.0);  // one, shared in this order by every target
   std::vector<std::vector<float>> x(targets, std::vector<float>(latent_size));
   for (int n = 0; n < targets; ++n) {
     for (float& v : x[n]) v = static_cast<float>(normal(rngs[n]));
   }
-  auto predict = [&](int n, int t, int condition) -> absl::StatusOr<std::vector<float>> {
-    NoiseQuery q{&x[n], t, n, condition};
-    absl::StatusOr<std::vector<float>> eps = denoiser.PredictNoise(q);
-    if (!eps.ok()) return eps.status();
-    const std::string where =
-        absl::StrCat("denoiser answer for target ", n, ", condition ", condition, ", timestep ", t);
-    if (eps->size() != static_cast<size_t>(latent_size))
-      return absl::InvalidArgumentError(
-          absl::StrCat(where, ": ", eps->size(), " values, expected ", latent_size));
-    for (float v : *eps) {
-      if (!std::isfinite(v)) return absl::InvalidArgumentError(absl::StrCat(where, ": not finite"));
-    }
-    return eps;
-  };
-  const bool guided = options.guidance != 1.0;
   for (size_t i = 0; i < timesteps.size(); ++i) {
     const int t = timesteps[i];
     const double a_t = schedule.alphas_cumprod[t];
@@ -68,22 +100,8 @@ absl::StatusOr<std::vector<std::vector<float>>> SampleDdim(
         options.eta * std::sqrt((1.0 - a_prev) / (1.0 - a_t) * (1.0 - a_t / a_prev));
     const double dir = std::sqrt(std::max(0.0, 1.0 - a_prev - sigma * sigma));
     for (int n = 0; n < targets; ++n) {
-      // Eq. 9: the (guided) noise averaged over the condition views.
-      std::vector<double> eps(latent_size, 0.0);
-      std::vector<float> uncond;
-      if (guided) {
-        absl::StatusOr<std::vector<float>> u = predict(n, t, -1);
-        if (!u.ok()) return u.status();
-        uncond = std::move(*u);
-      }
-      for (int condition : conditions) {
-        absl::StatusOr<std::vector<float>> c = predict(n, t, condition);
-        if (!c.ok()) return c.status();
-        for (int j = 0; j < latent_size; ++j) {
-          eps[j] += guided ? uncond[j] + options.guidance * ((*c)[j] - uncond[j]) : (*c)[j];
-        }
-      }
-      for (double& e : eps) e /= static_cast<double>(conditions.size());
+      ASSIGN_OR_RETURN(const std::vector<double> eps,
+                       AveragedNoise(denoiser, x[n], n, t, conditions, options.guidance));
       for (int j = 0; j < latent_size; ++j) {
         const double x0 = (x[n][j] - std::sqrt(1.0 - a_t) * eps[j]) / std::sqrt(a_t);
         double next = std::sqrt(a_prev) * x0 + dir * eps[j];
