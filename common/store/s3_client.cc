@@ -116,6 +116,20 @@ void SignHeaders(const std::string& method, const std::string& url,
       SignS3RequestV4(method, path, canonical_query, signed_headers, region, credentials)));
 }
 
+// The request's method on the handle; a body goes as "POST fields" under the real method, so
+// that curl signs its hash. The handle refers to r.body until the request is performed.
+void SetMethodAndBody(CURL* curl, const S3Request& r) {
+  if (r.method == "HEAD") {
+    curl_easy_setopt(curl, CURLOPT_NOBODY, 1L);
+  } else if (r.method == "GET") {
+    curl_easy_setopt(curl, CURLOPT_HTTPGET, 1L);
+  } else {
+    curl_easy_setopt(curl, CURLOPT_CUSTOMREQUEST, r.method.c_str());
+    curl_easy_setopt(curl, CURLOPT_POSTFIELDSIZE_LARGE, static_cast<curl_off_t>(r.body.size()));
+    curl_easy_setopt(curl, CURLOPT_POSTFIELDS, r.body.empty() ? "" : r.body.data());
+  }
+}
+
 }  // namespace
 
 S3Client::S3Client(S3Location location, S3Credentials credentials, S3ClientOptions options)
@@ -184,16 +198,7 @@ absl::StatusOr<S3Response> S3Client::SendOnce(const S3Request& r) {
   curl_easy_setopt(curl, CURLOPT_WRITEDATA, &response.body);
   curl_easy_setopt(curl, CURLOPT_HEADERFUNCTION, &WriteHeader);
   curl_easy_setopt(curl, CURLOPT_HEADERDATA, &response.headers);
-  if (r.method == "HEAD") {
-    curl_easy_setopt(curl, CURLOPT_NOBODY, 1L);
-  } else if (r.method == "GET") {
-    curl_easy_setopt(curl, CURLOPT_HTTPGET, 1L);
-  } else {
-    // The body goes as "POST fields" under the real method, so that curl signs its hash.
-    curl_easy_setopt(curl, CURLOPT_CUSTOMREQUEST, r.method.c_str());
-    curl_easy_setopt(curl, CURLOPT_POSTFIELDSIZE_LARGE, static_cast<curl_off_t>(r.body.size()));
-    curl_easy_setopt(curl, CURLOPT_POSTFIELDS, r.body.empty() ? "" : r.body.data());
-  }
+  SetMethodAndBody(curl, r);
   const CURLcode rc = curl_easy_perform(curl);
   curl_easy_getinfo(curl, CURLINFO_RESPONSE_CODE, &response.status);
   curl_easy_setopt(curl, CURLOPT_HTTPHEADER, nullptr);

@@ -98,6 +98,28 @@ absl::StatusOr<std::map<std::string, store::Digest>> ParseFiles(const std::strin
   return files;
 }
 
+// The answer to a manifest's creation: its digest, every file's digest, and which files (and
+// how many bytes) the store still misses.
+nlohmann::json ManifestAnswer(const store::Digest& digest, const store::Manifest& manifest,
+                              const v1::FindMissingBlobsResponse& found) {
+  std::set<std::string> missing_hashes;
+  for (const v1::Digest& d : found.missing()) missing_hashes.insert(d.hash());
+  nlohmann::json answer = {
+      {"scene_manifest", {{"hash", digest.hash}, {"size_bytes", digest.size_bytes}}},
+      {"files", nlohmann::json::object()},
+      {"missing", nlohmann::json::array()}};
+  int64_t missing_bytes = 0;
+  for (const auto& [path, d] : manifest.files) {
+    answer["files"][path] = {{"hash", d.hash}, {"size_bytes", d.size_bytes}};
+    if (missing_hashes.count(d.hash)) {
+      answer["missing"].push_back(path);
+      missing_bytes += d.size_bytes;
+    }
+  }
+  answer["missing_bytes"] = missing_bytes;
+  return answer;
+}
+
 void CreateSceneManifest(const httplib::Request& req, httplib::Response& res, Stubs& stubs) {
   absl::StatusOr<std::map<std::string, store::Digest>> files = ParseFiles(req.body);
   if (!files.ok()) return SendError(res, rpc::ToGrpcStatus(files.status()));
@@ -132,21 +154,7 @@ void CreateSceneManifest(const httplib::Request& req, httplib::Response& res, St
     if (grpc::Status s = stubs.store->FindMissingBlobs(&context, find, &found); !s.ok())
       return SendError(res, s);
   }
-  std::set<std::string> missing_hashes;
-  for (const v1::Digest& d : found.missing()) missing_hashes.insert(d.hash());
-  nlohmann::json answer = {
-      {"scene_manifest", {{"hash", digest.hash}, {"size_bytes", digest.size_bytes}}},
-      {"files", nlohmann::json::object()},
-      {"missing", nlohmann::json::array()}};
-  int64_t missing_bytes = 0;
-  for (const auto& [path, d] : manifest->files) {
-    answer["files"][path] = {{"hash", d.hash}, {"size_bytes", d.size_bytes}};
-    if (missing_hashes.count(d.hash)) {
-      answer["missing"].push_back(path);
-      missing_bytes += d.size_bytes;
-    }
-  }
-  answer["missing_bytes"] = missing_bytes;
+  const nlohmann::json answer = ManifestAnswer(digest, *manifest, found);
   res.set_content(answer.dump(-1, ' ', false, nlohmann::json::error_handler_t::replace) + "\n",
                   "application/json");
 }

@@ -99,42 +99,62 @@ std::string SceneOutputs::Key() const {
   return key;
 }
 
+absl::Status SceneObjects::LoadScene(store::BlobStore& store, const std::string& work_dir) {
+  // scene.json and the splat only.
+  ASSIGN_OR_RETURN(store::Manifest scene_manifest,
+                   store::ReadManifest(store, outputs_.scene_manifest));
+  ASSIGN_OR_RETURN(json scene_json,
+                   ReadJsonBlob(store, scene_manifest, "scene.json", "the scene manifest"));
+  const std::string splat = scene_json.value("gaussians", std::string("gaussians.ply"));
+  const std::string scene_dir =
+      (fs::path(work_dir) / "scenes" / outputs_.scene_manifest.hash).string();
+  RETURN_IF_ERROR(MaterializeFiles(store, scene_manifest, {"scene.json", splat}, scene_dir,
+                                   "the scene manifest"));
+  ASSIGN_OR_RETURN(scene_, ReadScene(scene_dir));
+  ASSIGN_OR_RETURN(cloud_, ReadSceneGaussians(scene_));
+  meters_per_unit_ = scene_.meters_per_unit;
+  return absl::OkStatus();
+}
+
+absl::Status SceneObjects::IndexLabels(store::BlobStore& store, const store::Manifest& segment,
+                                       const std::string& work_dir) {
+  ASSIGN_OR_RETURN(json result_json,
+                   ReadJsonBlob(store, segment, "result.json", "the segment output"));
+  const std::string labels_file = result_json.value("labels", std::string("labels.ply"));
+  const std::string result_dir = (fs::path(work_dir) / "results" / outputs_.segment.hash).string();
+  RETURN_IF_ERROR(
+      MaterializeFiles(store, segment, {labels_file}, result_dir, "the segment output"));
+  SegmentationResult result;
+  ASSIGN_OR_RETURN(
+      result.labels,
+      ReadGaussianInstanceIds((fs::path(result_dir) / labels_file).string(), cloud_.size()));
+  ASSIGN_OR_RETURN(index_, QueryIndex::Build(scene_, cloud_, result, 0, /*eager=*/false));
+  const float diagonal = RobustBounds(cloud_).diagonal().norm();
+  default_radius_ = 0.02f * diagonal;
+  max_radius_ = diagonal;
+  return absl::OkStatus();
+}
+
+size_t SceneObjects::HeldBytes() const {
+  // The cloud, label maps, labels + members + k-d tree, the answers.
+  const GaussianCloud& c = cloud_;
+  size_t bytes = sizeof(float) * (c.positions.size() + c.log_scales.size() + c.rotations.size() +
+                                  c.opacity_logits.size() + c.sh.size()) +
+                 index_->ByteSize();
+  for (const ExtraChannel& e : c.extras) bytes += sizeof(float) * e.values.size();
+  for (const auto& [id, o] : objects_) bytes += o.SpaceUsedLong();
+  return bytes;
+}
+
 absl::StatusOr<std::unique_ptr<SceneObjects>> SceneObjects::Load(store::BlobStore& store,
                                                                  const SceneOutputs& outputs,
                                                                  const std::string& work_dir) {
   auto loaded = std::unique_ptr<SceneObjects>(new SceneObjects());
   SceneObjects& s = *loaded;
   s.outputs_ = outputs;
-  // The scene: scene.json and the splat only.
-  ASSIGN_OR_RETURN(store::Manifest scene_manifest,
-                   store::ReadManifest(store, outputs.scene_manifest));
-  ASSIGN_OR_RETURN(json scene_json,
-                   ReadJsonBlob(store, scene_manifest, "scene.json", "the scene manifest"));
-  const std::string splat = scene_json.value("gaussians", std::string("gaussians.ply"));
-  const std::string scene_dir =
-      (fs::path(work_dir) / "scenes" / outputs.scene_manifest.hash).string();
-  RETURN_IF_ERROR(MaterializeFiles(store, scene_manifest, {"scene.json", splat}, scene_dir,
-                                   "the scene manifest"));
-  ASSIGN_OR_RETURN(s.scene_, ReadScene(scene_dir));
-  ASSIGN_OR_RETURN(s.cloud_, ReadSceneGaussians(s.scene_));
-  s.meters_per_unit_ = s.scene_.meters_per_unit;
-  // The labels of the segmentation.
+  RETURN_IF_ERROR(s.LoadScene(store, work_dir));
   ASSIGN_OR_RETURN(store::Manifest segment, store::ReadManifest(store, outputs.segment));
-  ASSIGN_OR_RETURN(json result_json,
-                   ReadJsonBlob(store, segment, "result.json", "the segment output"));
-  const std::string labels_file = result_json.value("labels", std::string("labels.ply"));
-  const std::string result_dir = (fs::path(work_dir) / "results" / outputs.segment.hash).string();
-  RETURN_IF_ERROR(
-      MaterializeFiles(store, segment, {labels_file}, result_dir, "the segment output"));
-  SegmentationResult result;
-  ASSIGN_OR_RETURN(
-      result.labels,
-      ReadGaussianInstanceIds((fs::path(result_dir) / labels_file).string(), s.cloud_.size()));
-  ASSIGN_OR_RETURN(s.index_, QueryIndex::Build(s.scene_, s.cloud_, result, 0, /*eager=*/false));
-  const float diagonal = RobustBounds(s.cloud_).diagonal().norm();
-  s.default_radius_ = 0.02f * diagonal;
-  s.max_radius_ = diagonal;
-
+  RETURN_IF_ERROR(s.IndexLabels(store, segment, work_dir));
   if (outputs.exported) {
     RETURN_IF_ERROR(s.LoadExport(store, *outputs.exported));
   } else if (!outputs.complete.empty()) {
@@ -142,15 +162,7 @@ absl::StatusOr<std::unique_ptr<SceneObjects>> SceneObjects::Load(store::BlobStor
   }
   s.AddSegmentOnly(segment);  // instances neither exported nor completed
   RETURN_IF_ERROR(s.AddSplats(store, segment, outputs.complete));
-
-  // What the index holds: the cloud, label maps, labels + members + k-d tree, the answers.
-  const GaussianCloud& c = s.cloud_;
-  size_t bytes = sizeof(float) * (c.positions.size() + c.log_scales.size() + c.rotations.size() +
-                                  c.opacity_logits.size() + c.sh.size()) +
-                 s.index_->ByteSize();
-  for (const ExtraChannel& e : c.extras) bytes += sizeof(float) * e.values.size();
-  for (const auto& [id, o] : s.objects_) bytes += o.SpaceUsedLong();
-  s.bytes_ = bytes;
+  s.bytes_ = s.HeldBytes();
   s.warm_up_ = std::thread([&s] {
     for (int v = 0; v < s.Views() && !s.stop_; ++v) {
       (void)s.index_->Click(v, 0, 0);  // renders the view's label map (errors resurface on clicks)

@@ -61,6 +61,12 @@ class SceneObjects {
 
  private:
   SceneObjects() = default;
+  // Load's steps: the scene (scene.json and the splat), the segment output's labels into the
+  // query index, and what the loaded scene holds in memory.
+  absl::Status LoadScene(store::BlobStore& store, const std::string& work_dir);
+  absl::Status IndexLabels(store::BlobStore& store, const store::Manifest& segment,
+                           const std::string& work_dir);
+  size_t HeldBytes() const;
   absl::Status LoadExport(store::BlobStore& store, const store::Digest& digest);
   absl::Status LoadCompleted(store::BlobStore& store,
                              const std::map<int64_t, store::Digest>& items);

@@ -42,6 +42,19 @@ absl::StatusOr<PlanStage> ParsePlanStage(const nlohmann::json& j) {
   return s;
 }
 
+// A failed or cancelled job submitted again starts afresh: no attempts, error, cancellation,
+// backoff or progress; the new request's priority and attempt budget.
+void ResetForResubmit(const SubmitRequest& request, int pending, Job* job) {
+  job->attempts = 0;
+  job->error.clear();
+  job->cancel_requested = false;
+  job->not_before_ms = 0;
+  job->progress = {};
+  job->pending = pending;
+  job->priority = request.priority;
+  job->max_attempts = request.max_attempts;
+}
+
 }  // namespace
 
 absl::StatusOr<SubmitResult> JobQueue::SubmitOne(QueueTx& tx, const SubmitRequest& request,
@@ -68,14 +81,7 @@ absl::StatusOr<SubmitResult> JobQueue::SubmitOne(QueueTx& tx, const SubmitReques
   if (existing) {
     if (existing->state == JobState::kFailed || existing->state == JobState::kCancelled) {
       RETURN_IF_ERROR(Apply(&*existing, JobEvent::kResubmit));
-      existing->attempts = 0;
-      existing->error.clear();
-      existing->cancel_requested = false;
-      existing->not_before_ms = 0;
-      existing->progress = {};
-      existing->pending = pending;
-      existing->priority = request.priority;
-      existing->max_attempts = request.max_attempts;
+      ResetForResubmit(request, pending, &*existing);
       RETURN_IF_ERROR(tx.Update(*existing));
     }
     return SubmitResult{*std::move(existing), false};

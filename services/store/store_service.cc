@@ -34,6 +34,25 @@ absl::StatusOr<std::vector<store::Digest>> ParseDigests(
   return digests;
 }
 
+// Where a caller's upload goes: a tenant's upload is its own (BlobStore::Tenant*); everyone
+// else's is the shared one.
+struct UploadSpace {
+  store::BlobStore* store;
+  std::string tenant;  // "" = shared
+
+  absl::StatusOr<int64_t> CommittedSize(const store::Digest& d) const {
+    return tenant.empty() ? store->CommittedSize(d) : store->TenantCommittedSize(tenant, d);
+  }
+  absl::StatusOr<int64_t> Append(const store::Digest& d, int64_t offset,
+                                 absl::string_view data) const {
+    return tenant.empty() ? store->Append(d, offset, data)
+                          : store->TenantAppend(tenant, d, offset, data);
+  }
+  absl::Status Finish(const store::Digest& d) const {
+    return tenant.empty() ? store->FinishUpload(d) : store->TenantFinishUpload(tenant, d);
+  }
+};
+
 }  // namespace
 
 absl::StatusOr<auth::Identity> StoreService::Caller(grpc::ServerContext* context) const {
@@ -119,18 +138,7 @@ grpc::Status StoreService::Write(grpc::ServerContext* context,
                                  v1::WriteResponse* response) {
   absl::StatusOr<auth::Identity> who = Caller(context);
   if (!who.ok()) return ToGrpcStatus(who.status());
-  // A tenant's upload is its own (BlobStore::Tenant*); everyone else's is the shared one.
-  const std::string tenant = who->tenant;
-  auto committed_size = [&](const store::Digest& d) {
-    return tenant.empty() ? store_->CommittedSize(d) : store_->TenantCommittedSize(tenant, d);
-  };
-  auto append = [&](const store::Digest& d, int64_t offset, absl::string_view data) {
-    return tenant.empty() ? store_->Append(d, offset, data)
-                          : store_->TenantAppend(tenant, d, offset, data);
-  };
-  auto finish = [&](const store::Digest& d) {
-    return tenant.empty() ? store_->FinishUpload(d) : store_->TenantFinishUpload(tenant, d);
-  };
+  const UploadSpace uploads{store_, who->tenant};
   v1::WriteRequest request;
   if (!reader->Read(&request))
     return ToGrpcStatus(absl::InvalidArgumentError("Write: empty stream"));
@@ -140,7 +148,7 @@ grpc::Status StoreService::Write(grpc::ServerContext* context,
     return ToGrpcStatus(absl::ResourceExhaustedError(
         absl::StrCat("blob ", d->ToString(), " is larger than the store's limit of ",
                      store_->options().max_blob_bytes, " bytes")));
-  absl::StatusOr<int64_t> committed = committed_size(*d);
+  absl::StatusOr<int64_t> committed = uploads.CommittedSize(*d);
   if (!committed.ok()) return ToGrpcStatus(committed.status());
   bool finished = false;
   do {
@@ -149,18 +157,18 @@ grpc::Status StoreService::Write(grpc::ServerContext* context,
       if (*committed == d->size_bytes && request.data().empty()) {
         // Already complete (e.g. resumed after the final chunk landed): nothing to append.
       } else {
-        committed = append(*d, request.write_offset(), request.data());
+        committed = uploads.Append(*d, request.write_offset(), request.data());
         if (!committed.ok()) return ToGrpcStatus(committed.status());
       }
     }
     if (request.finish_write()) {
-      if (absl::Status s = finish(*d); !s.ok()) return ToGrpcStatus(s);
+      if (absl::Status s = uploads.Finish(*d); !s.ok()) return ToGrpcStatus(s);
       finished = true;
     }
   } while (reader->Read(&request));
   if (!finished && *committed == d->size_bytes) {
     // All bytes arrived but the client did not say finish: publish anyway (verified).
-    if (absl::Status s = finish(*d); !s.ok()) return ToGrpcStatus(s);
+    if (absl::Status s = uploads.Finish(*d); !s.ok()) return ToGrpcStatus(s);
   }
   response->set_committed_size(*committed);
   return grpc::Status::OK;

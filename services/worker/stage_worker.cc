@@ -56,6 +56,25 @@ v1::FailureKind FailureFor(absl::StatusCode code) {
   }
 }
 
+// Why a job did not succeed, as the scheduler and clients read it: cancelled, handed back
+// (draining) or failed with its error (paths scrubbed). Returns the outcome's metrics label.
+const char* SetFailure(bool cancel_requested, bool handed_back, const absl::Status& status,
+                       const std::string& worker_id, v1::FailJobRequest* request) {
+  if (cancel_requested) {
+    request->set_kind(v1::FAILURE_KIND_CANCELLED);
+    request->set_error("cancelled by request");
+    return "cancelled";
+  }
+  if (handed_back) {
+    request->set_kind(v1::FAILURE_KIND_RELEASED);
+    request->set_error(absl::StrCat("handed back by worker ", worker_id, " (draining)"));
+    return "handed_back";
+  }
+  request->set_kind(FailureFor(status.code()));
+  request->set_error(rpc::ScrubPaths(status.ToString()));  // read by clients
+  return "failed";
+}
+
 }  // namespace
 
 absl::Status WorkerOptions::Validate(const pipeline::StageRegistry& stages) const {
@@ -306,19 +325,8 @@ const char* StageWorker::ReportOutcome(const v1::LeaseJobResponse& lease, const 
     v1::FailJobRequest request;
     request.set_job_id(job.id());
     request.set_lease_token(lease.lease_token());
-    if (outcome.cancel_requested) {
-      label = "cancelled";
-      request.set_kind(v1::FAILURE_KIND_CANCELLED);
-      request.set_error("cancelled by request");
-    } else if (outcome.handed_back) {
-      label = "handed_back";
-      request.set_kind(v1::FAILURE_KIND_RELEASED);
-      request.set_error(absl::StrCat("handed back by worker ", options_.worker_id, " (draining)"));
-    } else {
-      label = "failed";
-      request.set_kind(FailureFor(outcome.status.code()));
-      request.set_error(rpc::ScrubPaths(outcome.status.ToString()));  // read by clients
-    }
+    label = SetFailure(outcome.cancel_requested, outcome.handed_back, outcome.status,
+                       options_.worker_id, &request);
     v1::FailJobResponse response;
     reply = scheduler_->FailJob(&context, request, &response);
     ++failed_;
