@@ -74,6 +74,19 @@ absl::StatusOr<BottleScene> MakeBottleScene(const CompleteBenchArgs& args) {
                      table};
 }
 
+// The completion's defaults but for the benchmark's refinement, threads and seed; the views'
+// images come from the bench scene (which must outlive the options).
+generation::CompletionOptions BenchOptions(const CompleteBenchArgs& args,
+                                           const BottleScene& bench) {
+  generation::CompletionOptions options;
+  options.refinement.iterations = args.iterations;
+  options.refinement.lambda_normal = args.lambda_normal;
+  options.num_threads = args.threads;
+  options.seed = args.seed;
+  options.load_view = [&bench](int view) -> absl::StatusOr<Image> { return bench.images.at(view); };
+  return options;
+}
+
 }  // namespace
 
 absl::Status BenchComplete(const CompleteBenchArgs& args) {
@@ -87,12 +100,7 @@ absl::Status BenchComplete(const CompleteBenchArgs& args) {
   const std::vector<PinholeCamera>& cameras = bench.cameras;
   const std::vector<uint32_t>& labels = bench.labels;
   const size_t table = bench.table;
-  generation::CompletionOptions options;
-  options.refinement.iterations = args.iterations;
-  options.refinement.lambda_normal = args.lambda_normal;
-  options.num_threads = args.threads;
-  options.seed = args.seed;
-  options.load_view = [&](int view) -> absl::StatusOr<Image> { return bench.images.at(view); };
+  const generation::CompletionOptions options = BenchOptions(args, bench);
   std::fprintf(stderr,
                "bench complete: a bottle of %zu observed surfels on a table, %zu views of %dx%d, "
                "%d refinement iterations, %d threads\n",

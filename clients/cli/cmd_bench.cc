@@ -81,6 +81,33 @@ absl::StatusOr<RasterFrames> MeasureFrames(const ClutterScene& scene, const Benc
   return f;
 }
 
+// The --json line of `bench raster`.
+nlohmann::json RasterJson(const BenchArgs& args, size_t gaussians, const RasterFrames& f) {
+  const double median = Median(f.ms), trace_median = Median(f.trace_ms);
+  return {{"benchmark", "raster"},
+          {"gaussians", gaussians},
+          {"width", args.width},
+          {"height", args.height},
+          {"frames", args.frames},
+          {"threads", args.threads > 0 ? args.threads : DefaultThreadCount()},
+          {"median_ms", median},
+          {"trace_median_ms", trace_median},
+          {"preprocess_ms", Median(f.pre)},
+          {"binning_ms", Median(f.bin)},
+          {"blend_ms", Median(f.blend)},
+          {"visible_gaussians", f.visible},
+          {"gaussian_tile_pairs", f.pairs},
+          {"evaluated_fragments", f.evaluated},
+          {"blended_fragments", f.blended},
+          {"pairs_per_s", f.pairs / median * 1e3},
+          {"blended_fragments_per_s", f.blended / median * 1e3},
+          {"trace_entries", f.entries},
+          {"trace_blend_ms", Median(f.trace_blend)},
+          {"trace_assembly_ms", Median(f.trace_assembly)},
+          {"tracker_trace_median_ms", Median(f.tracker_ms)},
+          {"tracker_trace_entries", f.tracker_entries}};
+}
+
 absl::Status BenchRaster(const BenchArgs& args) {
   ClutterOptions options;
   options.seed = args.seed;
@@ -109,31 +136,7 @@ absl::Status BenchRaster(const BenchArgs& args) {
                trace_median / median, Median(f.trace_blend), Median(f.trace_assembly), f.visible,
                f.pairs, f.evaluated, f.blended, f.pairs / median / 1e3, f.blended / median / 1e3,
                f.entries, Median(f.tracker_ms), Median(f.tracker_ms) / median, f.tracker_entries);
-  if (args.json) {
-    nlohmann::json j = {{"benchmark", "raster"},
-                        {"gaussians", scene.cloud.size()},
-                        {"width", args.width},
-                        {"height", args.height},
-                        {"frames", args.frames},
-                        {"threads", args.threads > 0 ? args.threads : DefaultThreadCount()},
-                        {"median_ms", median},
-                        {"trace_median_ms", trace_median},
-                        {"preprocess_ms", Median(f.pre)},
-                        {"binning_ms", Median(f.bin)},
-                        {"blend_ms", Median(f.blend)},
-                        {"visible_gaussians", f.visible},
-                        {"gaussian_tile_pairs", f.pairs},
-                        {"evaluated_fragments", f.evaluated},
-                        {"blended_fragments", f.blended},
-                        {"pairs_per_s", f.pairs / median * 1e3},
-                        {"blended_fragments_per_s", f.blended / median * 1e3},
-                        {"trace_entries", f.entries},
-                        {"trace_blend_ms", Median(f.trace_blend)},
-                        {"trace_assembly_ms", Median(f.trace_assembly)},
-                        {"tracker_trace_median_ms", Median(f.tracker_ms)},
-                        {"tracker_trace_entries", f.tracker_entries}};
-    PrintJsonLine(j.dump());
-  }
+  if (args.json) PrintJsonLine(RasterJson(args, scene.cloud.size(), f).dump());
   return absl::OkStatus();
 }
 

@@ -218,12 +218,48 @@ void AddFetchCommand(CLI::App& app, Action* action) {
   f->callback([fetch, action] { *action = [fetch] { return RunFetch(*fetch); }; });
 }
 
+struct CancelArgs {
+  std::string server = kDefaultServer, id, scene;
+  ConnectionFlags connection;
+};
+
+// `cancel`'s work: the scene's unfinished jobs or one job and its dependants, then each state.
+absl::Status RunCancel(const CancelArgs& args) {
+  if (args.id.empty() == args.scene.empty())
+    return absl::InvalidArgumentError("give a job id or --scene NAME (one of them)");
+  ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c, ConnectClient(args.connection, args.server));
+  std::vector<v1::Job> jobs;
+  if (!args.scene.empty()) {
+    v1::CancelSceneRequest request;
+    request.set_scene(args.scene);
+    v1::CancelSceneResponse response;
+    RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
+      return client::SchedulerStub(*c).CancelScene(context, request, &response);
+    }));
+    jobs.assign(response.jobs().begin(), response.jobs().end());
+    std::fprintf(stderr, "scene %s: %zu unfinished jobs cancelled or asked to stop\n",
+                 args.scene.c_str(), jobs.size());
+  } else {
+    v1::CancelJobRequest request;
+    request.set_job_id(args.id);
+    v1::Job job;
+    RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
+      return client::SchedulerStub(*c).CancelJob(context, request, &job);
+    }));
+    jobs.push_back(job);
+  }
+  for (const v1::Job& job : jobs) {
+    std::fprintf(stderr, "job %s %s: %s%s\n", job.id().c_str(), KindLabel(job).c_str(),
+                 scheduler::StateName(job.state()).c_str(),
+                 job.cancel_requested() && !IsFinalState(job.state())
+                     ? " (cancellation requested; the worker stops at its next heartbeat)"
+                     : "");
+  }
+  return absl::OkStatus();
+}
+
 // `cancel`: cancels a job and its dependants, or a scene's unfinished jobs.
 void AddCancelCommand(CLI::App& app, Action* action) {
-  struct CancelArgs {
-    std::string server = kDefaultServer, id, scene;
-    ConnectionFlags connection;
-  };
   auto cancel = std::make_shared<CancelArgs>();
   CLI::App* k = app.add_subcommand(
       "cancel",
@@ -233,42 +269,7 @@ void AddCancelCommand(CLI::App& app, Action* action) {
   k->add_option("--scene", cancel->scene, "Scene name: cancel all its unfinished jobs");
   k->add_option("--server", cancel->server, "Scheduler address")->capture_default_str();
   AddConnectionFlags(k, &cancel->connection);
-  k->callback([cancel, action] {
-    *action = [cancel]() -> absl::Status {
-      if (cancel->id.empty() == cancel->scene.empty())
-        return absl::InvalidArgumentError("give a job id or --scene NAME (one of them)");
-      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
-                       ConnectClient(cancel->connection, cancel->server));
-      std::vector<v1::Job> jobs;
-      if (!cancel->scene.empty()) {
-        v1::CancelSceneRequest request;
-        request.set_scene(cancel->scene);
-        v1::CancelSceneResponse response;
-        RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
-          return client::SchedulerStub(*c).CancelScene(context, request, &response);
-        }));
-        jobs.assign(response.jobs().begin(), response.jobs().end());
-        std::fprintf(stderr, "scene %s: %zu unfinished jobs cancelled or asked to stop\n",
-                     cancel->scene.c_str(), jobs.size());
-      } else {
-        v1::CancelJobRequest request;
-        request.set_job_id(cancel->id);
-        v1::Job job;
-        RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
-          return client::SchedulerStub(*c).CancelJob(context, request, &job);
-        }));
-        jobs.push_back(job);
-      }
-      for (const v1::Job& job : jobs) {
-        std::fprintf(stderr, "job %s %s: %s%s\n", job.id().c_str(), KindLabel(job).c_str(),
-                     scheduler::StateName(job.state()).c_str(),
-                     job.cancel_requested() && !IsFinalState(job.state())
-                         ? " (cancellation requested; the worker stops at its next heartbeat)"
-                         : "");
-      }
-      return absl::OkStatus();
-    };
-  });
+  k->callback([cancel, action] { *action = [cancel] { return RunCancel(*cancel); }; });
 }
 
 }  // namespace

@@ -37,6 +37,22 @@ void AddCommonOptions(CLI::App* cmd, TrainArgs* args) {
   cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
 }
 
+// The training-free baseline (`--method vote`): labels by weighted 2D-mask voting.
+absl::Status VoteAndWrite(const TrainArgs& args, const Scene& scene, const GaussianCloud& cloud,
+                          const std::string& decomposition_dir, nlohmann::json* summary) {
+  Stopwatch watch;
+  SegmentationResult result;
+  result.stage = "vote";
+  ASSIGN_OR_RETURN(result.labels,
+                   training::VoteLabels(scene, cloud, decomposition_dir, args.threads));
+  RETURN_IF_ERROR(WriteResult(args.out, result, cloud));
+  RETURN_IF_ERROR(training::ExportInstances(args.out, cloud, result.labels));
+  std::fprintf(stderr, "vote: labels by weighted 2D-mask voting in %.1f s; wrote %s\n",
+               watch.ElapsedSeconds(), args.out.c_str());
+  (*summary)["out"] = args.out;
+  return absl::OkStatus();
+}
+
 // Trains on a decomposition and writes the segmented result (result format + instances).
 absl::Status TrainAndSegment(const TrainArgs& args, const Scene& scene, const GaussianCloud& cloud,
                              const std::string& decomposition_dir, nlohmann::json* summary) {
@@ -48,19 +64,7 @@ absl::Status TrainAndSegment(const TrainArgs& args, const Scene& scene, const Ga
       training::SegmentStageOptions segment,
       training::SegmentCodec().Decode(parameters.value("segment", nlohmann::json::object())));
   train.num_threads = args.threads;
-  if (train.method == "vote") {
-    Stopwatch watch;
-    SegmentationResult result;
-    result.stage = "vote";
-    ASSIGN_OR_RETURN(result.labels,
-                     training::VoteLabels(scene, cloud, decomposition_dir, args.threads));
-    RETURN_IF_ERROR(WriteResult(args.out, result, cloud));
-    RETURN_IF_ERROR(training::ExportInstances(args.out, cloud, result.labels));
-    std::fprintf(stderr, "vote: labels by weighted 2D-mask voting in %.1f s; wrote %s\n",
-                 watch.ElapsedSeconds(), args.out.c_str());
-    (*summary)["out"] = args.out;
-    return absl::OkStatus();
-  }
+  if (train.method == "vote") return VoteAndWrite(args, scene, cloud, decomposition_dir, summary);
   const training::TrainingOptions& options = train;
   ProgressBar prepare_bar("train: tracing pixel pools");
   ASSIGN_OR_RETURN(

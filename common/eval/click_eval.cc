@@ -177,6 +177,33 @@ absl::Status EvaluateObservedGaussians(const Scene& scene, const GaussianCloud& 
   return absl::OkStatus();
 }
 
+absl::Status CheckClickInputs(const Scene& scene, const GaussianCloud& cloud,
+                              const std::vector<std::vector<uint32_t>>& gt_masks,
+                              const std::vector<uint32_t>& gt_ids,
+                              const SegmentationResult& result) {
+  if (gt_masks.size() != scene.views.size())
+    return absl::InvalidArgumentError("one GT mask per view is required");
+  if (result.labels.size() != cloud.size() || gt_ids.size() != cloud.size()) {
+    return absl::InvalidArgumentError(
+        "labels, GT ids and the cloud disagree on the Gaussian count");
+  }
+  return absl::OkStatus();
+}
+
+// Per object the mean IoU over the views it is visible in; the scene's mIoU is the mean over
+// objects (Gaussian Grouping's averaging).
+void AverageObjects(std::map<uint32_t, Selection>& selections, std::map<uint32_t, double>& iou_sum,
+                    std::map<uint32_t, ObjectClickScore>* scores, ClickEvaluation* eval) {
+  double total = 0;
+  for (auto& [id, s] : *scores) {
+    s.selected_label = selections[id].label;
+    s.miou = s.views > 0 ? iou_sum[id] / s.views : 0.0;
+    total += s.miou;
+    eval->objects.push_back(s);
+  }
+  eval->miou = eval->objects.empty() ? 0.0 : total / static_cast<double>(eval->objects.size());
+}
+
 }  // namespace
 
 absl::StatusOr<ClickEvaluation> EvaluateClicks(const Scene& scene, const GaussianCloud& cloud,
@@ -185,12 +212,7 @@ absl::StatusOr<ClickEvaluation> EvaluateClicks(const Scene& scene, const Gaussia
                                                const SegmentationResult& result,
                                                const std::vector<std::string>& names,
                                                const ClickEvalOptions& options) {
-  if (gt_masks.size() != scene.views.size())
-    return absl::InvalidArgumentError("one GT mask per view is required");
-  if (result.labels.size() != cloud.size() || gt_ids.size() != cloud.size()) {
-    return absl::InvalidArgumentError(
-        "labels, GT ids and the cloud disagree on the Gaussian count");
-  }
+  RETURN_IF_ERROR(CheckClickInputs(scene, cloud, gt_masks, gt_ids, result));
   ClickEvaluation eval;
   eval.used_features = options.use_features && result.feature_dim > 0;
   const bool features = eval.used_features;
@@ -222,14 +244,7 @@ absl::StatusOr<ClickEvaluation> EvaluateClicks(const Scene& scene, const Gaussia
       ++scores[id].views;
     }
   }
-  double total = 0;
-  for (auto& [id, s] : scores) {
-    s.selected_label = selections[id].label;
-    s.miou = s.views > 0 ? iou_sum[id] / s.views : 0.0;
-    total += s.miou;
-    eval.objects.push_back(s);
-  }
-  eval.miou = eval.objects.empty() ? 0.0 : total / static_cast<double>(eval.objects.size());
+  AverageObjects(selections, iou_sum, &scores, &eval);
   RETURN_IF_ERROR(EvaluateObservedGaussians(scene, cloud, gt_ids, result, options, &eval));
   return eval;
 }

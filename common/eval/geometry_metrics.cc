@@ -35,6 +35,23 @@ PointCloudComparison ComparePointClouds(const std::vector<Eigen::Vector3f>& pred
   return out;
 }
 
+namespace {
+
+// Where the line {(t, py, pz)} crosses triangle abc (barycentric coordinates of (py, pz) in the
+// triangle's yz projection); false when it misses or the projection is degenerate.
+bool CrossingX(const Eigen::Vector3d& a, const Eigen::Vector3d& b, const Eigen::Vector3d& c,
+               double py, double pz, double* x) {
+  const double d = (b.y() - a.y()) * (c.z() - a.z()) - (c.y() - a.y()) * (b.z() - a.z());
+  if (d == 0.0) return false;
+  const double u = ((py - a.y()) * (c.z() - a.z()) - (c.y() - a.y()) * (pz - a.z())) / d;
+  const double v = ((b.y() - a.y()) * (pz - a.z()) - (py - a.y()) * (b.z() - a.z())) / d;
+  if (u < 0 || v < 0 || u + v > 1) return false;
+  *x = a.x() + u * (b.x() - a.x()) + v * (c.x() - a.x());
+  return true;
+}
+
+}  // namespace
+
 std::vector<uint8_t> VoxelizeClosedMesh(const TriangleMesh& mesh, const Eigen::AlignedBox3f& box,
                                         int resolution) {
   const int r = resolution;
@@ -62,15 +79,10 @@ std::vector<uint8_t> VoxelizeClosedMesh(const TriangleMesh& mesh, const Eigen::A
         std::min(r - 1, static_cast<int>(std::ceil((zmax - box.min().z()) / cell.z() - kOffset)));
     for (int j = j0; j <= j1; ++j) {
       for (int k = k0; k <= k1; ++k) {
-        const double py = row_y(j), pz = row_z(k);
-        // Barycentric coordinates of (py, pz) in the triangle's yz projection.
-        const double d = (b.y() - a.y()) * (c.z() - a.z()) - (c.y() - a.y()) * (b.z() - a.z());
-        if (d == 0.0) continue;
-        const double u = ((py - a.y()) * (c.z() - a.z()) - (c.y() - a.y()) * (pz - a.z())) / d;
-        const double v = ((b.y() - a.y()) * (pz - a.z()) - (py - a.y()) * (b.z() - a.z())) / d;
-        if (u < 0 || v < 0 || u + v > 1) continue;
-        hits[static_cast<size_t>(j) * r + k].push_back(a.x() + u * (b.x() - a.x()) +
-                                                       v * (c.x() - a.x()));
+        double x;
+        if (CrossingX(a, b, c, row_y(j), row_z(k), &x)) {
+          hits[static_cast<size_t>(j) * r + k].push_back(x);
+        }
       }
     }
   }

@@ -200,6 +200,30 @@ void CloseVolume(int gap, const std::vector<uint8_t>& in_hull,
   SpreadColours(lattice, observed, &voxels);
 }
 
+// Below the plane n·p = d (outside_below = (n, d)) every voxel is outside, whatever the visual
+// hull says: the renders show the object's underside there, and the capture could not see under
+// the table.
+void MarkOutsideBelow(const Eigen::Vector4f& outside_below, double voxel,
+                      open3d::pipelines::integration::UniformTSDFVolume* volume,
+                      std::vector<uint8_t>* in_hull) {
+  const Eigen::Vector3d normal = outside_below.head<3>().cast<double>();
+  const Eigen::Vector3d origin = volume->origin_;
+  const int resolution = volume->resolution_;
+  for (int x = 0; x < resolution; ++x) {
+    for (int y = 0; y < resolution; ++y) {
+      for (int z = 0; z < resolution; ++z) {
+        const Eigen::Vector3d p = origin + voxel * Eigen::Vector3d(x + 0.5, y + 0.5, z + 0.5);
+        if (normal.dot(p) >= outside_below[3]) continue;
+        const int i = volume->IndexOf(x, y, z);
+        open3d::geometry::TSDFVoxel& v = volume->voxels_[i];
+        v.tsdf_ = 1.0f;
+        v.weight_ = std::max(v.weight_, 1.0f);
+        if (!in_hull->empty()) (*in_hull)[i] = 0;
+      }
+    }
+  }
+}
+
 std::shared_ptr<open3d::geometry::TriangleMesh> FuseClosed(const std::vector<DepthView>& views,
                                                            const DepthFusionOptions& options,
                                                            double sdf_trunc) {
@@ -224,23 +248,7 @@ std::shared_ptr<open3d::geometry::TriangleMesh> FuseClosed(const std::vector<Dep
                      options.seen_empty ? &in_hull : nullptr);
   }
   if (!options.outside_below.isZero()) {
-    const Eigen::Vector3d normal = options.outside_below.head<3>().cast<double>();
-    const Eigen::Vector3d origin = volume.origin_;
-    for (int x = 0; x < resolution; ++x) {
-      for (int y = 0; y < resolution; ++y) {
-        for (int z = 0; z < resolution; ++z) {
-          const Eigen::Vector3d p = origin + voxel * Eigen::Vector3d(x + 0.5, y + 0.5, z + 0.5);
-          if (normal.dot(p) >= options.outside_below[3]) continue;
-          const int i = volume.IndexOf(x, y, z);
-          open3d::geometry::TSDFVoxel& v = volume.voxels_[i];
-          v.tsdf_ = 1.0f;
-          v.weight_ = std::max(v.weight_, 1.0f);
-          // Below the support is outside whatever the visual hull says (the renders show the
-          // object's underside there, and the capture could not see under the table).
-          if (!in_hull.empty()) in_hull[i] = 0;
-        }
-      }
-    }
+    MarkOutsideBelow(options.outside_below, voxel, &volume, &in_hull);
   }
   CloseVolume(options.closed_gap_voxels, in_hull, &volume);
   // The inset shifts the zero level: the fused TSDF is projective (distances along each view's

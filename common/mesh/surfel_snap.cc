@@ -169,6 +169,28 @@ std::vector<Eigen::Vector3f> PullTowardsSurfels(const TriangleMesh& mesh, const 
   return pull;
 }
 
+// Per vertex, the signed move along its normal onto the surfels facing its way (snapped = 1),
+// or none.
+void SnapMoves(const TriangleMesh& mesh, const std::vector<Eigen::Vector3f>& vertex_normals,
+               const std::function<bool(size_t)>& is_fixed, const PointIndex3& index,
+               const std::vector<Eigen::Vector3f>& points,
+               const std::vector<Eigen::Vector3f>& normals, const SurfelSnapOptions& options,
+               std::vector<float>* move, std::vector<uint8_t>* snapped) {
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, mesh.vertices.size(), 256),
+                    [&](const tbb::blocked_range<size_t>& r) {
+                      std::vector<Facing> facing;
+                      for (size_t v = r.begin(); v != r.end(); ++v) {
+                        if (vertex_normals[v].isZero()) continue;
+                        const std::optional<float> offset =
+                            SnapOffset(mesh.vertices[v], vertex_normals[v], is_fixed(v), index,
+                                       points, normals, options, facing);
+                        if (!offset) continue;
+                        (*move)[v] = *offset;
+                        (*snapped)[v] = 1;
+                      }
+                    });
+}
+
 }  // namespace
 
 size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
@@ -188,19 +210,7 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
   // Each vertex's signed move along its normal (0 where too few surfels face its way).
   std::vector<float> move(n, 0.0f);
   std::vector<uint8_t> snapped(n, 0);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, n, 256),
-                    [&](const tbb::blocked_range<size_t>& r) {
-                      std::vector<Facing> facing;
-                      for (size_t v = r.begin(); v != r.end(); ++v) {
-                        if (vertex_normals[v].isZero()) continue;
-                        const std::optional<float> offset =
-                            SnapOffset(mesh->vertices[v], vertex_normals[v], is_fixed(v), index,
-                                       points, normals, options, facing);
-                        if (!offset) continue;
-                        move[v] = *offset;
-                        snapped[v] = 1;
-                      }
-                    });
+  SnapMoves(*mesh, vertex_normals, is_fixed, index, points, normals, options, &move, &snapped);
   // Smooth the moves over each vertex's 1-ring (a vertex that did not snap counts as not moving).
   // Fixed vertices that do not slide (a zero direction) stay. Without a slide they count as not
   // moving (the surface near a fixed base moves less); with one, the rim slides and the inside of

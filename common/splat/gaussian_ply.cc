@@ -127,6 +127,14 @@ absl::StatusOr<GaussianColumns> FindGaussianColumns(const PlyColumns& cols,
   return out;
 }
 
+// 2DGS exports write a constant log(1e-6) third scale: such "ellipsoids" are surfels.
+bool SurfelThirdScale(const std::vector<float>& third_log_scale) {
+  for (float s : third_log_scale) {
+    if (!(std::abs(s - kSurfelThirdLogScale) < 1e-3f)) return false;
+  }
+  return true;
+}
+
 }  // namespace
 
 float OpacityLogit(float logit) {
@@ -152,14 +160,7 @@ absl::StatusOr<GaussianCloud> ParseGaussianPly(absl::string_view data, absl::str
   const int opacity = gc.opacity, sh_degree = gc.sh_degree;
   int num_scales = gc.num_scales;
   const size_t n = static_cast<size_t>(cols.count);
-  // 2DGS exports with a constant log(1e-6) third scale are surfels.
-  if (num_scales == 3 && n > 0) {
-    bool constant_tiny = true;
-    for (size_t i = 0; i < n && constant_tiny; ++i) {
-      constant_tiny = std::abs(cols.columns[scale[2]][i] - kSurfelThirdLogScale) < 1e-3f;
-    }
-    if (constant_tiny) num_scales = 2;
-  }
+  if (num_scales == 3 && n > 0 && SurfelThirdScale(cols.columns[scale[2]])) num_scales = 2;
 
   GaussianCloud cloud;
   cloud.num_scales = num_scales;

@@ -81,6 +81,18 @@ bool Fits(const Layout& layout, const std::vector<Placement>& placed, const Eige
   return true;
 }
 
+// Appends a copy of surfel i of `from` at p with both scales log_sigma (rotation, opacity and
+// colour kept).
+void AppendSurfelCopy(const GaussianCloud& from, size_t i, const Eigen::Vector3f& p,
+                      float log_sigma, GaussianCloud* out) {
+  const int stride = from.sh_stride();
+  for (int a = 0; a < 3; ++a) out->positions.push_back(p[a]);
+  for (int a = 0; a < from.num_scales; ++a) out->log_scales.push_back(log_sigma);
+  for (int a = 0; a < 4; ++a) out->rotations.push_back(from.rotations[4 * i + a]);
+  out->opacity_logits.push_back(from.opacity_logits[i]);
+  out->sh.insert(out->sh.end(), from.sh.begin() + stride * i, from.sh.begin() + stride * (i + 1));
+}
+
 // Splits every table-top surfel whose 2-sigma disc reaches an object's footprint circle into
 // detail x detail surfels of sigma / detail tiling its sampling cell (same orientation, opacity and
 // colour); the parts an object stands over (never seen) are dropped. Surfels are
@@ -106,15 +118,9 @@ absl::Status RefineTableNearObjects(const std::vector<Placement>& placed,
   GaussianCloud out;
   out.num_scales = cloud->num_scales;
   out.sh_degree = cloud->sh_degree;
-  const int stride = cloud->sh_stride();
   std::vector<size_t> source;  // per output surfel, the surfel it came from
   auto append = [&](size_t i, const Eigen::Vector3f& p, float log_sigma) {
-    for (int a = 0; a < 3; ++a) out.positions.push_back(p[a]);
-    for (int a = 0; a < cloud->num_scales; ++a) out.log_scales.push_back(log_sigma);
-    for (int a = 0; a < 4; ++a) out.rotations.push_back(cloud->rotations[4 * i + a]);
-    out.opacity_logits.push_back(cloud->opacity_logits[i]);
-    out.sh.insert(out.sh.end(), cloud->sh.begin() + stride * i,
-                  cloud->sh.begin() + stride * (i + 1));
+    AppendSurfelCopy(*cloud, i, p, log_sigma, &out);
     source.push_back(i);
   };
   for (size_t i = 0; i < cloud->size(); ++i) {
@@ -136,7 +142,7 @@ absl::Status RefineTableNearObjects(const std::vector<Placement>& placed,
     }
   }
   out.extras = cloud->extras;
-  for (ExtraChannel& e : out.extras) {
+  for (ExtraChannel& e : out.extras) {  // each output surfel's value is its source's
     std::vector<float> values(source.size());
     for (size_t k = 0; k < source.size(); ++k) values[k] = e.values[source[k]];
     e.values = std::move(values);
@@ -145,13 +151,36 @@ absl::Status RefineTableNearObjects(const std::vector<Placement>& placed,
   return absl::OkStatus();
 }
 
+// A free spot for a footprint of `radius` (up to 400 tries): next in the duplicates' touching
+// row, touching a placed neighbour (60 % of the first 200 tries), or anywhere (duplicates in the
+// table's back left quarter). Draws from `rng` in the same order whatever it finds.
+bool FindSpot(const Layout& layout, const std::vector<Placement>& placed, bool is_dup,
+              bool row_continues, float radius, Rng& rng, Eigen::Vector2f* xy) {
+  const float kTableHalfX = layout.half_x(), kTableHalfY = layout.half_y(),
+              kWallY = layout.wall_y();
+  bool ok = false;
+  for (int attempt = 0; attempt < 400 && !ok; ++attempt) {
+    if (row_continues) {  // a touching row
+      *xy = placed.back().xy + Eigen::Vector2f(placed.back().radius + radius + 0.003f, 0);
+    } else if (!placed.empty() && attempt < 200 && rng.Uniform(0, 1) < 0.6f) {  // touch a neighbour
+      const Placement& n = placed[rng.Int(0, static_cast<int>(placed.size()) - 1)];
+      const float a = rng.Uniform(0, 2 * std::numbers::pi_v<float>);
+      *xy = n.xy + (n.radius + radius + 0.003f) * Eigen::Vector2f(std::cos(a), std::sin(a));
+    } else if (is_dup) {
+      *xy = {rng.Uniform(-0.6f * kTableHalfX, -0.1f), rng.Uniform(0.0f, 0.6f * kTableHalfY)};
+    } else {
+      *xy = {rng.Uniform(-kTableHalfX, kTableHalfX), rng.Uniform(-kTableHalfY, kWallY)};
+    }
+    ok = Fits(layout, placed, *xy, radius);
+  }
+  return ok;
+}
+
 // 1. Objects: shapes, appearances, placements on the table top (their footprints in `placed`).
 absl::Status PlaceObjects(const ClutterOptions& options, const Layout& layout, Rng& rng,
                           ClutterScene* out, std::vector<Placement>* out_placed) {
   ClutterScene& scene = *out;
   std::vector<Placement>& placed = *out_placed;
-  const float kTableHalfX = layout.half_x(), kTableHalfY = layout.half_y(),
-              kWallY = layout.wall_y();
   const int dup = options.duplicates >= 2 ? std::min(options.duplicates, options.objects) : 0;
   ShapeSpec dup_shape{ShapeKind::kBottle, {0.035f, 0, 0.22f}};
   Appearance dup_look = RandomAppearance(rng, options.sh_degree);
@@ -170,22 +199,8 @@ absl::Status PlaceObjects(const ClutterOptions& options, const Layout& layout, R
       obj.appearance.color_a = scene.objects.back().appearance.color_a;
     const float radius = obj.shape.FootprintRadius();
     Eigen::Vector2f xy;
-    bool ok = false;
-    for (int attempt = 0; attempt < 400 && !ok; ++attempt) {
-      if (is_dup && k > 0) {  // a touching row
-        xy = placed.back().xy + Eigen::Vector2f(placed.back().radius + radius + 0.003f, 0);
-      } else if (!placed.empty() && attempt < 200 &&
-                 rng.Uniform(0, 1) < 0.6f) {  // touch a neighbour
-        const Placement& n = placed[rng.Int(0, static_cast<int>(placed.size()) - 1)];
-        const float a = rng.Uniform(0, 2 * std::numbers::pi_v<float>);
-        xy = n.xy + (n.radius + radius + 0.003f) * Eigen::Vector2f(std::cos(a), std::sin(a));
-      } else if (is_dup) {
-        xy = {rng.Uniform(-0.6f * kTableHalfX, -0.1f), rng.Uniform(0.0f, 0.6f * kTableHalfY)};
-      } else {
-        xy = {rng.Uniform(-kTableHalfX, kTableHalfX), rng.Uniform(-kTableHalfY, kWallY)};
-      }
-      ok = Fits(layout, placed, xy, radius);
-    }
+    const bool ok =
+        FindSpot(layout, placed, is_dup, /*row_continues=*/is_dup && k > 0, radius, rng, &xy);
     if (!ok) {
       return absl::ResourceExhaustedError(absl::StrCat("could not place ", options.objects,
                                                        " objects on the table; use fewer objects"));

@@ -5,6 +5,7 @@
 #include <random>
 
 #include "absl/strings/str_cat.h"
+#include "common/core/status.h"
 
 namespace instascene {
 namespace {
@@ -68,28 +69,44 @@ void AddOrbitCameras(const CompositeOptions& options, float row_length, std::mt1
   }
 }
 
-}  // namespace
+// What the composite is made of: surfels when any input is (3DGS inputs are then turned into
+// surfels), the highest SH degree.
+struct CompositeKind {
+  int num_scales = 3;
+  int sh_degree = 0;
+  bool to_surfels = false;  // 2DGS and 3DGS inputs mixed
+};
 
-absl::StatusOr<ClutterScene> ComposeSplats(const std::vector<GaussianCloud>& input,
-                                           const std::vector<std::string>& names,
-                                           const CompositeOptions& options) {
+absl::StatusOr<CompositeKind> InspectInputs(const std::vector<GaussianCloud>& input,
+                                            const std::vector<std::string>& names) {
   if (input.empty()) return absl::InvalidArgumentError("no splats to compose");
   if (names.size() != input.size())
     return absl::InvalidArgumentError("one name per splat is required");
   if (input.size() > 1000) return absl::InvalidArgumentError("at most 1000 splats per composite");
   bool any_surfel = false, any_ellipsoid = false;
-  int sh_degree = 0;
+  CompositeKind kind;
   for (size_t k = 0; k < input.size(); ++k) {
     if (input[k].size() < 10)
       return absl::InvalidArgumentError(absl::StrCat(names[k], ": fewer than 10 Gaussians"));
     any_surfel |= input[k].num_scales == 2;
     any_ellipsoid |= input[k].num_scales == 3;
-    sh_degree = std::max(sh_degree, input[k].sh_degree);
+    kind.sh_degree = std::max(kind.sh_degree, input[k].sh_degree);
   }
-  const bool to_surfels = any_surfel && any_ellipsoid;
+  kind.to_surfels = any_surfel && any_ellipsoid;
+  kind.num_scales = kind.to_surfels || any_surfel ? 2 : 3;
+  return kind;
+}
+
+}  // namespace
+
+absl::StatusOr<ClutterScene> ComposeSplats(const std::vector<GaussianCloud>& input,
+                                           const std::vector<std::string>& names,
+                                           const CompositeOptions& options) {
+  ASSIGN_OR_RETURN(const CompositeKind kind, InspectInputs(input, names));
+  const bool to_surfels = kind.to_surfels;
   ClutterScene scene;
-  scene.cloud.num_scales = to_surfels || any_surfel ? 2 : 3;
-  scene.cloud.sh_degree = sh_degree;
+  scene.cloud.num_scales = kind.num_scales;
+  scene.cloud.sh_degree = kind.sh_degree;
   std::mt19937_64 rng(options.seed);
   std::uniform_real_distribution<float> uni(0.0f, 1.0f);
   // Scale and footprint of each capture.

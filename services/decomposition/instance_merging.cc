@@ -88,14 +88,12 @@ std::unordered_map<uint64_t, std::pair<uint32_t, uint32_t>> Glimpses(
 
 }  // namespace
 
-int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions& options,
-                              std::vector<Instance>* instances) {
-  const size_t n = instances->size();
-  if (options.merge_min_joins <= 0 || n < 2) return 0;
-  const std::vector<uint32_t> instance_of = InstanceOf(*instances, set.num_gaussians);
-  // Per pair a < b (key a * n + b): frames holding them together, frames holding them apart.
+namespace {
+
+// Per pair a < b (key a * n + b): frames holding them together, frames holding them apart.
+std::unordered_map<uint64_t, std::pair<uint32_t, uint32_t>> HoldEvidence(
+    const std::vector<std::vector<int64_t>>& holders, size_t n) {
   std::unordered_map<uint64_t, std::pair<uint32_t, uint32_t>> evidence;
-  const std::vector<std::vector<int64_t>> holders = HoldersPerFrame(set, instance_of, n, options);
   for (const std::vector<int64_t>& holder : holders) {
     std::vector<uint32_t> held;  // instances held by one mask in this frame
     for (size_t a = 0; a < n; ++a) {
@@ -109,6 +107,41 @@ int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions&
       }
     }
   }
+  return evidence;
+}
+
+// Each set of the union becomes one instance (at its first member's place): the union of the
+// Gaussians, every member's masks and coverage, the joined box.
+std::vector<Instance> MergeSets(UnionFind& sets, std::vector<Instance>* instances) {
+  std::vector<Instance> merged;
+  const std::vector<uint32_t> component = sets.Components();
+  for (uint32_t a = 0; a < instances->size(); ++a) {
+    if (component[a] == merged.size()) {  // its set's first member
+      merged.push_back(std::move((*instances)[a]));
+      continue;
+    }
+    Instance& target = merged[component[a]];
+    Instance& source = (*instances)[a];
+    std::vector<uint32_t> uni;
+    std::set_union(target.gaussians.begin(), target.gaussians.end(), source.gaussians.begin(),
+                   source.gaussians.end(), std::back_inserter(uni));
+    target.gaussians.swap(uni);
+    target.masks.insert(target.masks.end(), source.masks.begin(), source.masks.end());
+    target.coverage.insert(target.coverage.end(), source.coverage.begin(), source.coverage.end());
+    target.box.extend(source.box);
+  }
+  return merged;
+}
+
+}  // namespace
+
+int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions& options,
+                              std::vector<Instance>* instances) {
+  const size_t n = instances->size();
+  if (options.merge_min_joins <= 0 || n < 2) return 0;
+  const std::vector<uint32_t> instance_of = InstanceOf(*instances, set.num_gaussians);
+  const std::vector<std::vector<int64_t>> holders = HoldersPerFrame(set, instance_of, n, options);
+  const auto evidence = HoldEvidence(holders, n);
   UnionFind sets(n);
   int merges = 0;
   for (const auto& [key, e] : evidence) {  // components do not depend on the visiting order
@@ -127,23 +160,7 @@ int MergeUnseparatedInstances(const TrackerSet& set, const DecompositionOptions&
     }
   }
   if (merges == 0) return 0;
-  std::vector<Instance> merged;
-  const std::vector<uint32_t> component = sets.Components();
-  for (uint32_t a = 0; a < n; ++a) {
-    if (component[a] == merged.size()) {  // its set's first member
-      merged.push_back(std::move((*instances)[a]));
-      continue;
-    }
-    Instance& target = merged[component[a]];
-    Instance& source = (*instances)[a];
-    std::vector<uint32_t> uni;
-    std::set_union(target.gaussians.begin(), target.gaussians.end(), source.gaussians.begin(),
-                   source.gaussians.end(), std::back_inserter(uni));
-    target.gaussians.swap(uni);
-    target.masks.insert(target.masks.end(), source.masks.begin(), source.masks.end());
-    target.coverage.insert(target.coverage.end(), source.coverage.begin(), source.coverage.end());
-    target.box.extend(source.box);
-  }
+  std::vector<Instance> merged = MergeSets(sets, instances);
   instances->swap(merged);
   return merges;
 }

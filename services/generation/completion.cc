@@ -238,6 +238,32 @@ absl::Status MeshCompleted(const FreeSpaceGrid& free_space, const CompletionOpti
   return absl::OkStatus();
 }
 
+absl::Status CheckArenaInputs(const GaussianCloud& surfels, const std::vector<uint32_t>& labels) {
+  if (labels.size() != surfels.size()) {
+    return absl::InvalidArgumentError(absl::StrCat("segmentation has ", labels.size(),
+                                                   " labels for ", surfels.size(), " Gaussians"));
+  }
+  if (surfels.num_scales != 2) return absl::InvalidArgumentError("completion needs 2DGS surfels");
+  return absl::OkStatus();
+}
+
+// What the prior is given (pointers into `out` and the arena's tests; the ring views are added
+// by AddRingViews).
+PriorInput PriorInputOf(const CompletedObject& out, const FreeSpaceGrid& free_space,
+                        const std::optional<SeenThroughTest>& seen_through,
+                        const std::vector<uint8_t>& neighbour_labelled,
+                        const CompletionOptions& options) {
+  PriorInput input;
+  input.instance = &out.raw;
+  input.frame = out.frame;
+  input.free_space = &free_space;
+  input.seen_through = seen_through ? &*seen_through : nullptr;
+  input.neighbour_labelled = &neighbour_labelled;
+  input.seed = options.seed;
+  input.cancel = options.cancel;
+  return input;
+}
+
 absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<PinholeCamera>& cameras,
                                                 const GaussianCloud& surfels,
                                                 const std::vector<uint32_t>& labels, uint32_t id,
@@ -246,11 +272,7 @@ absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<PinholeCamera>
   auto report = [&](const std::string& phase, int step, int total) {
     if (progress) progress(phase, step, total);
   };
-  if (labels.size() != surfels.size()) {
-    return absl::InvalidArgumentError(absl::StrCat("segmentation has ", labels.size(),
-                                                   " labels for ", surfels.size(), " Gaussians"));
-  }
-  if (surfels.num_scales != 2) return absl::InvalidArgumentError("completion needs 2DGS surfels");
+  RETURN_IF_ERROR(CheckArenaInputs(surfels, labels));
   ASSIGN_OR_RETURN(
       std::unique_ptr<CompletionPrior> prior,
       MakePrior(options.prior, options.denoiser, options.diffusion, &options.geometric));
@@ -272,14 +294,7 @@ absl::StatusOr<CompletedObject> CompleteInArena(const std::vector<PinholeCamera>
   report("rendering conditions", 3, 7);
   const std::vector<uint8_t> neighbour_labelled =
       NeighbourLabelled(surfels, labels, split, out.frame);
-  PriorInput input;
-  input.instance = &out.raw;
-  input.frame = out.frame;
-  input.free_space = &free_space;
-  input.seen_through = seen_through ? &*seen_through : nullptr;
-  input.neighbour_labelled = &neighbour_labelled;
-  input.seed = options.seed;
-  input.cancel = options.cancel;
+  PriorInput input = PriorInputOf(out, free_space, seen_through, neighbour_labelled, options);
   RETURN_IF_ERROR(AddRingViews(out, options.num_threads, &input));
   report("completing", 4, 7);
   ASSIGN_OR_RETURN(out.prior, prior->Complete(input));

@@ -133,6 +133,41 @@ double FreeSpaceGrid::FreeFraction() const {
   return static_cast<double>(free) / free_views_.size();
 }
 
+std::vector<uint8_t> FreeSpaceGrid::SeenFrom(const PinholeCamera& camera, const RayCaster& surfaces,
+                                             const ObjectFrame& frame,
+                                             const FreeSpaceOptions& options) const {
+  const float half = options.extent_radii * frame.radius;  // as Carve placed the grid
+  const Eigen::Vector3f lo = origin_, hi = origin_ + Eigen::Vector3f::Constant(2 * half);
+  const Eigen::Vector3f eye = camera.CenterInWorld().cast<float>();
+  const double distance = std::max(1e-6f, (frame.center - eye).norm());
+  const PixelWindow window = BoxFootprint(camera, lo, hi);
+  // Rays about half a voxel apart at the object (every pixel when pixels are coarser), bounded
+  // by the per-view ray budget.
+  double stride = std::max(1.0, 0.5 * voxel_ * camera.fx / distance);
+  const double area = std::max(0.0, (window.x1 - window.x0) * (window.y1 - window.y0));
+  stride = std::max(stride, std::sqrt(area / options.max_rays_per_view));
+  // Cast every ray of the grid first, so that each ray can end at the nearest hit among its
+  // neighbours: a ray slipping through a hole between surfel discs must not carve the inside.
+  const RayFan fan = CastRayFan(camera, eye, window, stride, surfaces);
+  std::vector<uint8_t> seen(free_views_.size(), 0);
+  const float step = 0.5f * voxel_;
+  for (int r = 0; r < fan.rows; ++r) {
+    for (int q = 0; q < fan.cols; ++q) {
+      const Eigen::Vector3f& dir = fan.dirs[static_cast<size_t>(r) * fan.cols + q];
+      float t0, t1;
+      if (!ClipToBox(eye, dir, lo, hi, &t0, &t1)) continue;
+      const float nearest = HoleAwareHit(fan, r, q, options, voxel_);
+      const float end =
+          std::min(t1, std::isfinite(nearest) ? nearest - options.margin_voxels * voxel_ : t1);
+      for (float t = t0 + 0.5f * step; t < end; t += step) {
+        const int64_t v = VoxelOf(eye + t * dir);
+        if (v >= 0) seen[v] = 1;
+      }
+    }
+  }
+  return seen;
+}
+
 absl::StatusOr<FreeSpaceGrid> FreeSpaceGrid::Carve(const std::vector<PinholeCamera>& cameras,
                                                    const RayCaster& surfaces,
                                                    const ObjectFrame& frame,
@@ -152,37 +187,9 @@ absl::StatusOr<FreeSpaceGrid> FreeSpaceGrid::Carve(const std::vector<PinholeCame
   const size_t voxels =
       static_cast<size_t>(options.resolution) * options.resolution * options.resolution;
   grid.free_views_.assign(voxels, 0);
-  const Eigen::Vector3f lo = grid.origin_, hi = grid.origin_ + Eigen::Vector3f::Constant(2 * half);
   std::mutex merge;
   tbb::parallel_for(size_t{0}, cameras.size(), [&](size_t c) {
-    const PinholeCamera& camera = cameras[c];
-    const Eigen::Vector3f eye = camera.CenterInWorld().cast<float>();
-    const double distance = std::max(1e-6f, (frame.center - eye).norm());
-    const PixelWindow window = BoxFootprint(camera, lo, hi);
-    // Rays about half a voxel apart at the object (every pixel when pixels are coarser), bounded
-    // by the per-view ray budget.
-    double stride = std::max(1.0, 0.5 * grid.voxel_ * camera.fx / distance);
-    const double area = std::max(0.0, (window.x1 - window.x0) * (window.y1 - window.y0));
-    stride = std::max(stride, std::sqrt(area / options.max_rays_per_view));
-    // Cast every ray of the grid first, so that each ray can end at the nearest hit among its
-    // neighbours: a ray slipping through a hole between surfel discs must not carve the inside.
-    const RayFan fan = CastRayFan(camera, eye, window, stride, surfaces);
-    std::vector<uint8_t> seen(voxels, 0);
-    const float step = 0.5f * grid.voxel_;
-    for (int r = 0; r < fan.rows; ++r) {
-      for (int q = 0; q < fan.cols; ++q) {
-        const Eigen::Vector3f& dir = fan.dirs[static_cast<size_t>(r) * fan.cols + q];
-        float t0, t1;
-        if (!ClipToBox(eye, dir, lo, hi, &t0, &t1)) continue;
-        const float nearest = HoleAwareHit(fan, r, q, options, grid.voxel_);
-        const float end = std::min(
-            t1, std::isfinite(nearest) ? nearest - options.margin_voxels * grid.voxel_ : t1);
-        for (float t = t0 + 0.5f * step; t < end; t += step) {
-          const int64_t v = grid.VoxelOf(eye + t * dir);
-          if (v >= 0) seen[v] = 1;
-        }
-      }
-    }
+    const std::vector<uint8_t> seen = grid.SeenFrom(cameras[c], surfaces, frame, options);
     std::lock_guard<std::mutex> lock(merge);  // integer sums: the order does not matter
     for (size_t v = 0; v < voxels; ++v) {
       if (seen[v] && grid.free_views_[v] < std::numeric_limits<uint16_t>::max()) {

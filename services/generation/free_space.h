@@ -47,6 +47,9 @@ class FreeSpaceGrid {
 
  private:
   int64_t VoxelOf(const Eigen::Vector3f& p) const;  // -1 outside
+  // The voxels one camera's rays cross before the surfaces (1 = seen empty).
+  std::vector<uint8_t> SeenFrom(const PinholeCamera& camera, const RayCaster& surfaces,
+                                const ObjectFrame& frame, const FreeSpaceOptions& options) const;
   Eigen::Vector3f origin_ = Eigen::Vector3f::Zero();
   float voxel_ = 0;
   int resolution_ = 0;

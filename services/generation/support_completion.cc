@@ -52,6 +52,37 @@ bool CurvedWallCandidates(const Eigen::Vector3f& position, const Eigen::Matrix3f
   return true;
 }
 
+// Azimuth sectors (5 degrees) around the object's centre, in its frame.
+class AzimuthSectors {
+ public:
+  static constexpr int kCount = 72;
+  explicit AzimuthSectors(const ObjectFrame& frame)
+      : basis_(frame.Basis()), center_(frame.center) {}
+  int Of(const Eigen::Vector3f& p) const {
+    const Eigen::Vector3f q = basis_.transpose() * (p - center_);
+    const float angle = std::atan2(q.y(), q.x());  // [-pi, pi]
+    return std::clamp(static_cast<int>((angle + 3.14159265f) / (2 * 3.14159265f) * kCount), 0,
+                      kCount - 1);
+  }
+
+ private:
+  Eigen::Matrix3f basis_;
+  Eigen::Vector3f center_;
+};
+
+// Copies of a surfel every `step` along `down` (per unit of height) while above `floor`.
+void AppendDrop(const Eigen::Vector3f& position, const Eigen::Matrix3f& rotation, uint32_t source,
+                const Eigen::Vector3f& down, float height, float floor, float step,
+                std::vector<SurfelCandidate>& out) {
+  for (float drop = step; height - drop >= floor; drop += step) {
+    SurfelCandidate c;
+    c.position = position + drop * down;
+    c.rotation = rotation;
+    c.source = source;
+    out.push_back(c);
+  }
+}
+
 }  // namespace
 
 std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& positions,
@@ -62,17 +93,10 @@ std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& p
   std::vector<SurfelCandidate> out;
   if (!frame.has_support || positions.empty()) return out;
   // The lowest surfel per azimuth sector around the centre: how far down each side was seen.
-  constexpr int kSectors = 72;
-  const Eigen::Matrix3f basis = frame.Basis();
-  auto sector_of = [&](const Eigen::Vector3f& p) {
-    const Eigen::Vector3f q = basis.transpose() * (p - frame.center);
-    const float angle = std::atan2(q.y(), q.x());  // [-pi, pi]
-    return std::clamp(static_cast<int>((angle + 3.14159265f) / (2 * 3.14159265f) * kSectors), 0,
-                      kSectors - 1);
-  };
-  std::vector<float> lowest(kSectors, std::numeric_limits<float>::infinity());
+  const AzimuthSectors sectors(frame);
+  std::vector<float> lowest(AzimuthSectors::kCount, std::numeric_limits<float>::infinity());
   for (const Eigen::Vector3f& p : positions) {
-    float& l = lowest[sector_of(p)];
+    float& l = lowest[sectors.Of(p)];
     l = std::min(l, frame.up.dot(p));
   }
   const float step = std::max(frame.spacing, 1e-6f);
@@ -80,7 +104,7 @@ std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& p
   const float band = std::max(3.0f * step, 0.05f * frame.radius);
   for (size_t i = 0; i < positions.size(); ++i) {
     const float h = frame.up.dot(positions[i]);
-    const float sector_lowest = lowest[sector_of(positions[i])];
+    const float sector_lowest = lowest[sectors.Of(positions[i])];
     if (h > sector_lowest + band || sector_lowest - floor < step) continue;
     const Eigen::Vector3f normal = rotations[i].col(2);
     const float lean = normal.dot(frame.up);
@@ -102,13 +126,7 @@ std::vector<SurfelCandidate> WallExtension(const std::vector<Eigen::Vector3f>& p
       continue;
     }
     if (narrowing) down = descent / -descent.dot(frame.up);
-    for (float drop = step; h - drop >= floor; drop += step) {
-      SurfelCandidate c;
-      c.position = positions[i] + drop * down;
-      c.rotation = rotations[i];
-      c.source = sources[i];
-      out.push_back(c);
-    }
+    AppendDrop(positions[i], rotations[i], sources[i], down, h, floor, step, out);
   }
   return out;
 }

@@ -63,24 +63,26 @@ struct CondensedRow {
   size_t child_size;
 };
 
+// The points under a node of the single-linkage hierarchy (leaves are points 0..n-1).
+void PointsUnder(const std::vector<Merge>& merges, size_t n, size_t node,
+                 std::vector<size_t>* out) {
+  std::vector<size_t> stack = {node};
+  while (!stack.empty()) {
+    const size_t x = stack.back();
+    stack.pop_back();
+    if (x < n) {
+      out->push_back(x);
+    } else {
+      stack.push_back(merges[x - n].right);
+      stack.push_back(merges[x - n].left);
+    }
+  }
+}
+
 std::vector<CondensedRow> Condense(const std::vector<Merge>& merges, size_t n,
                                    size_t min_cluster_size) {
   const size_t root = 2 * n - 2;
   auto count = [&](size_t node) { return node < n ? size_t{1} : merges[node - n].size; };
-  // Points under a hierarchy node.
-  auto points_under = [&](size_t node, std::vector<size_t>* out) {
-    std::vector<size_t> stack = {node};
-    while (!stack.empty()) {
-      const size_t x = stack.back();
-      stack.pop_back();
-      if (x < n) {
-        out->push_back(x);
-      } else {
-        stack.push_back(merges[x - n].right);
-        stack.push_back(merges[x - n].left);
-      }
-    }
-  };
   std::vector<CondensedRow> rows;
   std::vector<size_t> relabel(2 * n - 1, 0);
   relabel[root] = n;
@@ -96,7 +98,7 @@ std::vector<CondensedRow> Condense(const std::vector<Merge>& merges, size_t n,
     const size_t label = relabel[node];
     auto fall_out = [&](size_t child) {
       std::vector<size_t> points;
-      points_under(child, &points);
+      PointsUnder(merges, n, child, &points);
       for (size_t p : points) rows.push_back({label, p, lambda, 1});
     };
     auto keep = [&](size_t child, size_t child_label) {

@@ -5,6 +5,7 @@
 #include <cmath>
 
 #include "absl/strings/str_cat.h"
+#include "common/core/status.h"
 
 namespace instascene::generation::diffusion {
 namespace {
@@ -26,11 +27,8 @@ void Sample(const KnownView& view, int channels, const Eigen::Vector2d& px, floa
   }
 }
 
-}  // namespace
-
-absl::StatusOr<WarpResult> WarpIntoTarget(const RayCaster& mesh,
-                                          const std::vector<KnownView>& known,
-                                          const PinholeCamera& target, const WarpOptions& options) {
+absl::Status CheckWarpInputs(const std::vector<KnownView>& known, const PinholeCamera& target,
+                             const WarpOptions& options) {
   if (absl::Status s = target.Validate(); !s.ok()) return s;
   if (options.channels < 1) return absl::InvalidArgumentError("warp: channels < 1");
   for (size_t k = 0; k < known.size(); ++k) {
@@ -40,6 +38,29 @@ absl::StatusOr<WarpResult> WarpIntoTarget(const RayCaster& mesh,
       return absl::InvalidArgumentError(
           absl::StrCat("warp: known view ", k, "'s values do not match its camera"));
   }
+  return absl::OkStatus();
+}
+
+// Whether a known view sees the mesh's surface point x (normal n): in its image, not at a
+// grazing angle, and the first hit of its ray to x (within the tolerance).
+bool SeesSurfacePoint(const RayCaster& mesh, const PinholeCamera& camera, const Eigen::Vector3f& x,
+                      const Eigen::Vector3f& n, const WarpOptions& options,
+                      Eigen::Vector3d* in_camera) {
+  if (!camera.SeesPoint(x.cast<double>(), in_camera)) return false;
+  const Eigen::Vector3f o = camera.CenterInWorld().cast<float>();
+  const float distance = (x - o).norm();
+  if (n.dot(o - x) < options.min_known_cosine * distance) return false;  // grazing
+  const RayHit from_known = mesh.Cast(o, (x - o) / distance);
+  return from_known.hit &&
+         !(std::abs(from_known.distance - distance) > options.visibility_tolerance * distance);
+}
+
+}  // namespace
+
+absl::StatusOr<WarpResult> WarpIntoTarget(const RayCaster& mesh,
+                                          const std::vector<KnownView>& known,
+                                          const PinholeCamera& target, const WarpOptions& options) {
+  RETURN_IF_ERROR(CheckWarpInputs(known, target, options));
   const int w = target.width, h = target.height, channels = options.channels;
   WarpResult out;
   out.values.assign(static_cast<size_t>(w) * h * channels, 0.0f);
@@ -63,14 +84,7 @@ absl::StatusOr<WarpResult> WarpIntoTarget(const RayCaster& mesh,
       fate[i] = 2;
       for (const KnownView& view : known) {
         Eigen::Vector3d in_camera;
-        if (!view.camera.SeesPoint(x.cast<double>(), &in_camera)) continue;
-        const Eigen::Vector3f o = view.camera.CenterInWorld().cast<float>();
-        const float distance = (x - o).norm();
-        if (hit.normal.dot(o - x) < options.min_known_cosine * distance) continue;  // grazing
-        const RayHit from_known = mesh.Cast(o, (x - o) / distance);
-        if (!from_known.hit ||
-            std::abs(from_known.distance - distance) > options.visibility_tolerance * distance)
-          continue;
+        if (!SeesSurfacePoint(mesh, view.camera, x, hit.normal, options, &in_camera)) continue;
         Sample(view, channels, view.camera.ProjectFromCamera(in_camera), &out.values[i * channels]);
         out.known[i] = 1;
         fate[i] = 3;
