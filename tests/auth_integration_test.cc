@@ -58,7 +58,7 @@ class AuthTest : public ::testing::Test {
         [](const std::string& scene) -> absl::StatusOr<v1::Scene> {
           return absl::NotFoundError("scene " + scene + " has no results");
         },
-        root + "/objects", objects_options);
+        objects_options);
     decomposition_ = std::make_unique<decomposition::DecompositionService>(nullptr, auth_.get());
     training_ = std::make_unique<training::TrainingService>(nullptr, auth_.get());
     generation_ = std::make_unique<generation::GenerationService>(nullptr, auth_.get());

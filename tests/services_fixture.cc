@@ -71,16 +71,14 @@ void ServicesTest::SetUp() {
   scheduler_service_ = std::make_unique<scheduler::SchedulerService>(
       queue_.get(), store_.get(), &stages_, scheduler::SchedulerServiceOptions{});
   objects_service_ = std::make_unique<objects::ObjectsService>(
-      store_.get(),
-      [this](const std::string& scene) -> absl::StatusOr<v1::Scene> {
+      store_.get(), [this](const std::string& scene) -> absl::StatusOr<v1::Scene> {
         v1::GetSceneRequest request;
         request.set_scene(scene);
         v1::Scene answer;
         grpc::ClientContext context;
         RETURN_IF_ERROR(rpc::FromGrpcStatus(scheduler_->GetScene(&context, request, &answer)));
         return answer;
-      },
-      root_ + "/objects");
+      });
   auto server = rpc::Server::Start(
       {"127.0.0.1:0"}, {store_service_.get(), scheduler_service_.get(), objects_service_.get()},
       {"instascene.v1.ContentStore", "instascene.v1.Scheduler", "instascene.v1.Objects"});

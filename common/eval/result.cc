@@ -151,25 +151,33 @@ absl::StatusOr<SegmentationResult> ReadResult(const std::string& directory,
   return result;
 }
 
-absl::StatusOr<std::vector<uint32_t>> ReadGaussianInstanceIds(const std::string& path,
-                                                              size_t expected_gaussians) {
-  ASSIGN_OR_RETURN(PlyColumns cols, ReadVertexColumns(path));
+absl::StatusOr<std::vector<uint32_t>> ParseGaussianInstanceIds(absl::string_view data,
+                                                               absl::string_view source,
+                                                               size_t expected_gaussians) {
+  ASSIGN_OR_RETURN(PlyHeader header, ParsePlyHeader(data, source));
+  ASSIGN_OR_RETURN(PlyColumns cols, ReadPlyElement(data, header, "vertex", source));
   const int c = cols.Find("instance_id");
-  if (c < 0) return absl::InvalidArgumentError(absl::StrCat(path, ": no 'instance_id' property"));
+  if (c < 0) return absl::InvalidArgumentError(absl::StrCat(source, ": no 'instance_id' property"));
   if (static_cast<size_t>(cols.count) != expected_gaussians) {
     return absl::InvalidArgumentError(
-        absl::StrCat(path, ": ", cols.count, " labels for ", expected_gaussians, " Gaussians"));
+        absl::StrCat(source, ": ", cols.count, " labels for ", expected_gaussians, " Gaussians"));
   }
   std::vector<uint32_t> ids(cols.count);
   for (int64_t i = 0; i < cols.count; ++i) {
     const float v = cols.columns[c][i];
     if (!(v >= 0.0f) || v != std::floor(v)) {
       return absl::InvalidArgumentError(
-          absl::StrCat(path, ": element #", i, " has invalid instance_id ", v));
+          absl::StrCat(source, ": element #", i, " has invalid instance_id ", v));
     }
     ids[i] = static_cast<uint32_t>(v);
   }
   return ids;
+}
+
+absl::StatusOr<std::vector<uint32_t>> ReadGaussianInstanceIds(const std::string& path,
+                                                              size_t expected_gaussians) {
+  ASSIGN_OR_RETURN(std::string data, ReadFileBounded(path, size_t{8} << 30));
+  return ParseGaussianInstanceIds(data, path, expected_gaussians);
 }
 
 }  // namespace instascene

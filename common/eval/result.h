@@ -16,6 +16,7 @@
 #include <nlohmann/json.hpp>
 
 #include "absl/status/statusor.h"
+#include "absl/strings/string_view.h"
 #include "common/splat/gaussian_cloud.h"
 
 namespace instascene {
@@ -38,8 +39,13 @@ absl::Status WriteResult(const std::string& directory, const SegmentationResult&
 absl::StatusOr<SegmentationResult> ReadResult(const std::string& directory,
                                               size_t expected_gaussians);
 
-// Per-Gaussian ground-truth instance ids of a synthetic scene (gt/instances.ply).
+// Per-Gaussian instance ids (a PLY with an `instance_id` vertex property: labels.ply of a
+// result, gt/instances.ply of a synthetic scene); fails unless there are `expected_gaussians`
+// whole non-negative ids. `source` names the bytes in errors.
 absl::StatusOr<std::vector<uint32_t>> ReadGaussianInstanceIds(const std::string& path,
                                                               size_t expected_gaussians);
+absl::StatusOr<std::vector<uint32_t>> ParseGaussianInstanceIds(absl::string_view data,
+                                                               absl::string_view source,
+                                                               size_t expected_gaussians);
 
 }  // namespace instascene

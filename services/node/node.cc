@@ -269,7 +269,6 @@ absl::Status Node::AddStageWorkers(const std::vector<const StageService*>& hoste
     StageServiceContext context;
     context.worker = workers_.back().get();
     context.store = store_.get();
-    context.work_dir = (fs::path(work_dir) / hosted_service->name).string();
     context.scheduler = get_scheduler;
     context.index_cache_bytes = options_.index_cache_bytes;
     context.auth = authenticator_.get();

@@ -82,7 +82,6 @@ struct NodeOptions {
 struct StageServiceContext {
   const worker::StageWorker* worker = nullptr;  // null when the service leases no stage
   store::BlobStore* store = nullptr;
-  std::string work_dir;  // the service's own scratch folder
   // The scheduler's channel once the node serves (in-process, or --scheduler's address); null
   // before. Services that ask the scheduler (the Objects service resolving scene names) call it
   // per request.

@@ -53,8 +53,7 @@ StageService ObjectsStageService() {
             objects::ObjectsServiceOptions options;
             options.cache_bytes = c.index_cache_bytes;
             options.auth = c.auth;
-            return std::make_unique<objects::ObjectsService>(c.store, std::move(lookup), c.work_dir,
-                                                             options);
+            return std::make_unique<objects::ObjectsService>(c.store, std::move(lookup), options);
           }};
 }
 

@@ -35,12 +35,9 @@ absl::StatusOr<SceneOutputs> OutputsOf(const v1::Scene& scene) {
   return out;
 }
 
-ObjectsService::ObjectsService(store::BlobStore* store, SceneLookup lookup, std::string work_dir,
+ObjectsService::ObjectsService(store::BlobStore* store, SceneLookup lookup,
                                ObjectsServiceOptions options)
-    : store_(store),
-      lookup_(std::move(lookup)),
-      work_dir_(std::move(work_dir)),
-      options_(options) {}
+    : store_(store), lookup_(std::move(lookup)), options_(options) {}
 
 namespace {
 
@@ -56,11 +53,9 @@ absl::Status CheckSceneName(const std::string& scene) {
 // stored manifest of the wrong shape) fails this load only.
 absl::StatusOr<std::shared_ptr<const SceneObjects>> LoadGuarded(store::BlobStore& store,
                                                                 const SceneOutputs& outputs,
-                                                                const std::string& work_dir,
                                                                 const std::string& scene) {
   try {
-    absl::StatusOr<std::unique_ptr<SceneObjects>> built =
-        SceneObjects::Load(store, outputs, work_dir);
+    absl::StatusOr<std::unique_ptr<SceneObjects>> built = SceneObjects::Load(store, outputs);
     if (built.ok()) return std::shared_ptr<const SceneObjects>(std::move(*built));
     return absl::Status(built.status().code(),
                         absl::StrCat("scene '", scene, "': ", built.status().message()));
@@ -106,7 +101,7 @@ ObjectsService::Loaded ObjectsService::Index(const std::string& scene, bool* fre
   }
   if (!*fresh) return future.get();
   // Load outside the lock.
-  const Loaded loaded = LoadGuarded(*store_, outputs, work_dir_, scene);
+  const Loaded loaded = LoadGuarded(*store_, outputs, scene);
   promise.set_value(loaded);
   std::list<Entry> evicted;  // destroyed after the lock is released
   {

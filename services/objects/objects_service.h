@@ -37,9 +37,9 @@ struct ObjectsServiceOptions {
 
 class ObjectsService final : public v1::Objects::Service {
  public:
-  // `store` must outlive the service; `work_dir` receives materialised splats and labels.
-  ObjectsService(store::BlobStore* store, SceneLookup lookup, std::string work_dir,
-                 ObjectsServiceOptions options = {});
+  // `store` must outlive the service. Indexes are read from the store into memory (nothing on
+  // disk): a cold load reads the scene's splat and labels again.
+  ObjectsService(store::BlobStore* store, SceneLookup lookup, ObjectsServiceOptions options = {});
 
   grpc::Status ListObjects(grpc::ServerContext*, const v1::ListObjectsRequest* request,
                            v1::ListObjectsResponse* response) override;
@@ -66,7 +66,6 @@ class ObjectsService final : public v1::Objects::Service {
 
   store::BlobStore* store_;
   SceneLookup lookup_;
-  std::string work_dir_;
   ObjectsServiceOptions options_;
   mutable std::mutex mutex_;
   std::list<Entry> lru_;  // most recent first

@@ -108,10 +108,9 @@ struct Serving {
   std::shared_ptr<grpc::Channel> in_process;
   std::mutex mutex;
 
-  Serving(Fixture& f, const std::string& work) : scheduler(f.scene) {
+  explicit Serving(Fixture& f) : scheduler(f.scene) {
     objects = std::make_unique<ObjectsService>(
-        f.store.get(),
-        [this](const std::string& name) -> absl::StatusOr<v1::Scene> {
+        f.store.get(), [this](const std::string& name) -> absl::StatusOr<v1::Scene> {
           std::shared_ptr<grpc::Channel> channel;
           {
             std::lock_guard<std::mutex> lock(mutex);
@@ -125,8 +124,7 @@ struct Serving {
               v1::Scheduler::NewStub(channel)->GetScene(&context, request, &answer);
           if (!s.ok()) return rpc::FromGrpcStatus(s);
           return answer;
-        },
-        work);
+        });
     server = std::move(*rpc::Server::Start({"127.0.0.1:0"}, {&scheduler, objects.get()},
                                            {"instascene.v1.Scheduler", "instascene.v1.Objects"}));
     {
@@ -159,7 +157,7 @@ void Percentiles(benchmark::State& state, std::vector<double> ms) {
 
 void Warm(benchmark::State& state, const std::vector<v1::ObjectSelector>& queries) {
   Fixture& f = Shared();
-  Serving serving(f, f.temp.Sub("work-warm"));
+  Serving serving(f);
   // The index fully loaded: a click in every view waits for (or renders) its label map.
   for (const std::string& view : f.views) {
     v1::ObjectSelector click;
@@ -186,18 +184,15 @@ BENCHMARK(BM_PointQueryIndexLoaded)->Iterations(2000)->Unit(benchmark::kMicrosec
 // The first query of a fresh server (by id): the index is loaded before it is answered.
 void BM_FirstQueryAfterColdStart(benchmark::State& state) {
   Fixture& f = Shared();
-  int run = 0;
   for (auto _ : state) {
     state.PauseTiming();
-    const std::string work = f.temp.Sub("work-cold-" + std::to_string(run++));
-    auto serving = std::make_unique<Serving>(f, work);
+    auto serving = std::make_unique<Serving>(f);
     state.ResumeTiming();
     v1::ObjectSelector id;
     id.set_id(1);
     if (!serving->Query(id)) state.SkipWithError("cold query failed");
     state.PauseTiming();
     serving.reset();
-    std::filesystem::remove_all(work);
     state.ResumeTiming();
   }
 }

@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <filesystem>
 #include <fstream>
 #include <thread>
@@ -71,7 +72,7 @@ class ObjectsServiceTest : public ::testing::Test {
           if (it == scenes_.end()) return absl::NotFoundError("scene '" + name + "' not found");
           return it->second;
         },
-        temp_.Sub("work"), options);
+        options);
   }
 
   grpc::Status Get(ObjectsService& service, const std::string& scene,
@@ -260,6 +261,42 @@ TEST_F(ObjectsServiceTest, AMalformedStoredExportIsDataLossNotACrash) {
   EXPECT_NE(status.error_message().find("malformed"), std::string::npos);
   EXPECT_EQ(service->cache_stats().entries, 0);        // not cached: the next query tries again
   EXPECT_TRUE(Get(*service, "s1", id, &answer).ok());  // the service goes on
+}
+
+TEST_F(ObjectsServiceTest, ADamagedStoredBlobIsDataLossAndNothingIsWrittenToDisk) {
+  auto listing = [&] {
+    std::vector<std::string> paths;
+    for (const auto& e : std::filesystem::recursive_directory_iterator(temp_.path()))
+      paths.push_back(e.path().string());
+    std::sort(paths.begin(), paths.end());
+    return paths;
+  };
+  const std::vector<std::string> before = listing();
+  // Scene s2's labels damaged in the store: one byte of the last label flipped on disk.
+  absl::StatusOr<store::Manifest> segment =
+      store::ReadManifest(*store_, rpc::FromProto(scenes_["s2"].outputs(0).output_manifest()));
+  ASSERT_TRUE(segment.ok()) << segment.status();
+  const std::string blob = store_->BlobPath(segment->files.at("labels.ply"));
+  std::filesystem::permissions(blob, std::filesystem::perms::owner_write,
+                               std::filesystem::perm_options::add);
+  {
+    std::fstream file(blob, std::ios::in | std::ios::out | std::ios::binary);
+    file.seekg(-1, std::ios::end);
+    const char last = static_cast<char>(file.get());
+    file.seekp(-1, std::ios::end);
+    file.put(static_cast<char>(last ^ 0x01));
+  }
+  auto service = Service();
+  v1::ObjectSelector id;
+  id.set_id(1);
+  v1::Object answer;
+  const grpc::Status status = Get(*service, "s2", id, &answer);
+  EXPECT_EQ(status.error_code(), grpc::StatusCode::DATA_LOSS) << status.error_message();
+  EXPECT_NE(status.error_message().find("labels.ply"), std::string::npos) << status.error_message();
+  EXPECT_EQ(service->cache_stats().entries, 0);
+  ASSERT_TRUE(Get(*service, "s1", id, &answer).ok());  // the undamaged scene is answered
+  EXPECT_EQ(answer.id(), 1u);
+  EXPECT_EQ(listing(), before);  // indexes live in memory only
 }
 
 TEST_F(ObjectsServiceTest, ListObjectsPaginatesInIdOrder) {

@@ -12,6 +12,8 @@
 #include "common/core/status.h"
 #include "common/eval/result.h"
 #include "common/rpc/status.h"
+#include "common/scene/scene.h"
+#include "common/splat/splat_formats.h"
 #include "common/store/manifest.h"
 
 namespace instascene::objects {
@@ -20,6 +22,7 @@ namespace fs = std::filesystem;
 using json = nlohmann::json;
 
 constexpr int64_t kMaxJsonBytes = 64 << 20;
+constexpr int64_t kMaxSplatBytes = int64_t{8} << 30;  // as ReadSplatFile's default
 
 std::string MediaType(const std::string& path) {
   const std::string ext = fs::path(path).extension().string();
@@ -33,18 +36,23 @@ std::string MediaType(const std::string& path) {
   return "application/octet-stream";
 }
 
-// Writes only the named files of a manifest under `directory` (verified downloads).
-absl::Status MaterializeFiles(store::BlobStore& store, const store::Manifest& manifest,
-                              const std::vector<std::string>& files, const std::string& directory,
-                              const std::string& what) {
-  store::Manifest subset;
-  subset.kind = manifest.kind;
-  for (const std::string& f : files) {
-    auto it = manifest.files.find(f);
-    if (it == manifest.files.end()) return absl::DataLossError(absl::StrCat(what, " has no ", f));
-    subset.files.emplace(f, it->second);
+// A manifest file's bytes, read whole from the store and verified against its digest (a
+// damaged blob is DATA_LOSS, never parsed).
+absl::StatusOr<std::string> ReadVerifiedFile(store::BlobStore& store,
+                                             const store::Manifest& manifest,
+                                             const std::string& file, int64_t max_bytes,
+                                             const std::string& what) {
+  auto it = manifest.files.find(file);
+  if (it == manifest.files.end()) return absl::DataLossError(absl::StrCat(what, " has no ", file));
+  if (it->second.size_bytes > max_bytes) {
+    return absl::ResourceExhaustedError(
+        absl::StrCat(what, "/", file, ": ", it->second.size_bytes, " bytes, at most ", max_bytes));
   }
-  return store::MaterializeManifest(store, subset, directory);
+  ASSIGN_OR_RETURN(std::string bytes, store.Read(it->second));
+  if (absl::Status s = store::VerifyBlobBytes(it->second, bytes); !s.ok()) {
+    return absl::DataLossError(absl::StrCat(what, "/", file, ": ", s.message()));
+  }
+  return bytes;
 }
 
 absl::StatusOr<json> ReadJsonBlob(store::BlobStore& store, const store::Manifest& manifest,
@@ -99,35 +107,30 @@ std::string SceneOutputs::Key() const {
   return key;
 }
 
-absl::Status SceneObjects::LoadScene(store::BlobStore& store, const std::string& work_dir) {
-  // scene.json and the splat only.
+absl::Status SceneObjects::LoadScene(store::BlobStore& store) {
+  // scene.json and the splat only, straight from the store (nothing is written to disk).
   ASSIGN_OR_RETURN(store::Manifest scene_manifest,
                    store::ReadManifest(store, outputs_.scene_manifest));
-  ASSIGN_OR_RETURN(json scene_json,
-                   ReadJsonBlob(store, scene_manifest, "scene.json", "the scene manifest"));
-  const std::string splat = scene_json.value("gaussians", std::string("gaussians.ply"));
-  const std::string scene_dir =
-      (fs::path(work_dir) / "scenes" / outputs_.scene_manifest.hash).string();
-  RETURN_IF_ERROR(MaterializeFiles(store, scene_manifest, {"scene.json", splat}, scene_dir,
-                                   "the scene manifest"));
-  ASSIGN_OR_RETURN(scene_, ReadScene(scene_dir));
-  ASSIGN_OR_RETURN(cloud_, ReadSceneGaussians(scene_));
+  constexpr char kWhat[] = "the scene manifest";
+  ASSIGN_OR_RETURN(const std::string scene_text,
+                   ReadVerifiedFile(store, scene_manifest, "scene.json", kMaxJsonBytes, kWhat));
+  ASSIGN_OR_RETURN(scene_, ParseSceneJson(scene_text, "scene.json"));
+  ASSIGN_OR_RETURN(
+      const std::string splat,
+      ReadVerifiedFile(store, scene_manifest, scene_.gaussians, kMaxSplatBytes, kWhat));
+  ASSIGN_OR_RETURN(cloud_, ParseSplatFile(splat, scene_.gaussians));
   meters_per_unit_ = scene_.meters_per_unit;
   return absl::OkStatus();
 }
 
-absl::Status SceneObjects::IndexLabels(store::BlobStore& store, const store::Manifest& segment,
-                                       const std::string& work_dir) {
-  ASSIGN_OR_RETURN(json result_json,
-                   ReadJsonBlob(store, segment, "result.json", "the segment output"));
+absl::Status SceneObjects::IndexLabels(store::BlobStore& store, const store::Manifest& segment) {
+  constexpr char kWhat[] = "the segment output";
+  ASSIGN_OR_RETURN(json result_json, ReadJsonBlob(store, segment, "result.json", kWhat));
   const std::string labels_file = result_json.value("labels", std::string("labels.ply"));
-  const std::string result_dir = (fs::path(work_dir) / "results" / outputs_.segment.hash).string();
-  RETURN_IF_ERROR(
-      MaterializeFiles(store, segment, {labels_file}, result_dir, "the segment output"));
+  ASSIGN_OR_RETURN(const std::string labels_ply,
+                   ReadVerifiedFile(store, segment, labels_file, kMaxSplatBytes, kWhat));
   SegmentationResult result;
-  ASSIGN_OR_RETURN(
-      result.labels,
-      ReadGaussianInstanceIds((fs::path(result_dir) / labels_file).string(), cloud_.size()));
+  ASSIGN_OR_RETURN(result.labels, ParseGaussianInstanceIds(labels_ply, labels_file, cloud_.size()));
   ASSIGN_OR_RETURN(index_, QueryIndex::Build(scene_, cloud_, result, 0, /*eager=*/false));
   const float diagonal = RobustBounds(cloud_).diagonal().norm();
   default_radius_ = 0.02f * diagonal;
@@ -147,14 +150,13 @@ size_t SceneObjects::HeldBytes() const {
 }
 
 absl::StatusOr<std::unique_ptr<SceneObjects>> SceneObjects::Load(store::BlobStore& store,
-                                                                 const SceneOutputs& outputs,
-                                                                 const std::string& work_dir) {
+                                                                 const SceneOutputs& outputs) {
   auto loaded = std::unique_ptr<SceneObjects>(new SceneObjects());
   SceneObjects& s = *loaded;
   s.outputs_ = outputs;
-  RETURN_IF_ERROR(s.LoadScene(store, work_dir));
+  RETURN_IF_ERROR(s.LoadScene(store));
   ASSIGN_OR_RETURN(store::Manifest segment, store::ReadManifest(store, outputs.segment));
-  RETURN_IF_ERROR(s.IndexLabels(store, segment, work_dir));
+  RETURN_IF_ERROR(s.IndexLabels(store, segment));
   if (outputs.exported) {
     RETURN_IF_ERROR(s.LoadExport(store, *outputs.exported));
   } else if (!outputs.complete.empty()) {

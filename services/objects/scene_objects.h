@@ -6,7 +6,8 @@
 //   - its `export` output when there is one (objects.json and each object's manifest.json: pose,
 //     metric size, artefact digests), else its `complete` outputs (the completed objects), else
 //     the segmentation's per-instance summary (a raw crop, no artefacts but the instance's splat).
-// Immutable once loaded: queries are const and safe from many threads.
+// Every file is read from the store into memory and verified against its digest; nothing is
+// written to disk. Immutable once loaded: queries are const and safe from many threads.
 #pragma once
 
 #include <atomic>
@@ -39,10 +40,8 @@ struct SceneOutputs {
 
 class SceneObjects {
  public:
-  // `work_dir` receives the scene's splat and the labels (content-addressed folders; reused).
   static absl::StatusOr<std::unique_ptr<SceneObjects>> Load(store::BlobStore& store,
-                                                            const SceneOutputs& outputs,
-                                                            const std::string& work_dir);
+                                                            const SceneOutputs& outputs);
 
   // The object a selector names: NOT_FOUND (with what was asked) when nothing is there,
   // INVALID_ARGUMENT / OUT_OF_RANGE for a malformed selector.
@@ -63,9 +62,8 @@ class SceneObjects {
   SceneObjects() = default;
   // Load's steps: the scene (scene.json and the splat), the segment output's labels into the
   // query index, and what the loaded scene holds in memory.
-  absl::Status LoadScene(store::BlobStore& store, const std::string& work_dir);
-  absl::Status IndexLabels(store::BlobStore& store, const store::Manifest& segment,
-                           const std::string& work_dir);
+  absl::Status LoadScene(store::BlobStore& store);
+  absl::Status IndexLabels(store::BlobStore& store, const store::Manifest& segment);
   size_t HeldBytes() const;
   absl::Status LoadExport(store::BlobStore& store, const store::Digest& digest);
   absl::Status LoadCompleted(store::BlobStore& store,
