@@ -13,35 +13,25 @@
 
 #include "instascene/client/client.h"
 
-int main(int argc, char** argv) {
-  if (argc != 6 && argc != 7) {
-    std::fprintf(stderr, "usage: %s SERVER SCENE X Y Z [OUT_DIR]\n", argv[0]);
-    return 2;
-  }
-  using instascene::client::Client;
-  using instascene::client::ObjectSelector;
-  instascene::client::ClientOptions options;
-  options.server = argv[1];
-  if (const char* token = std::getenv("INSTASCENE_TOKEN")) options.token = token;
+namespace {
+
+// The server and the bearer token: $INSTASCENE_TOKEN_FILE (a file holding the token) or
+// $INSTASCENE_TOKEN. False when the token file cannot be read.
+bool OptionsFromEnvironment(const char* server, instascene::client::ClientOptions* options) {
+  options->server = server;
+  if (const char* token = std::getenv("INSTASCENE_TOKEN")) options->token = token;
   if (const char* file = std::getenv("INSTASCENE_TOKEN_FILE")) {
     std::ifstream in(file);
-    if (!std::getline(in, options.token)) {
+    if (!std::getline(in, options->token)) {
       std::fprintf(stderr, "cannot read a token from %s\n", file);
-      return 1;
+      return false;
     }
   }
-  auto client = Client::Connect(options);
-  if (!client.ok()) {
-    std::fprintf(stderr, "connect: %s\n", client.status().ToString().c_str());
-    return 1;
-  }
-  const instascene::client::Vec3 point{std::atof(argv[3]), std::atof(argv[4]), std::atof(argv[5])};
-  auto object = (*client)->GetObject(argv[2], ObjectSelector::Point(point));
-  if (!object.ok()) {  // NOT_FOUND: nothing near that point
-    std::fprintf(stderr, "lookup: %s\n", object.status().ToString().c_str());
-    return 1;
-  }
-  const auto& o = *object;
+  return true;
+}
+
+// What a robot stack needs of the object: its pose in the scene, its size, its artefacts.
+void PrintObject(const instascene::client::ObjectInfo& o) {
   const auto& t = o.world_from_object.translation;
   std::printf("object %u of scene %s (%s, %s)\n", o.id, o.scene.c_str(), o.source.c_str(),
               o.completion.c_str());
@@ -53,8 +43,33 @@ int main(int argc, char** argv) {
   for (const auto& a : o.artefacts)
     std::printf("  artefact   %-22s %8lld bytes  %s\n", a.path.c_str(),
                 static_cast<long long>(a.bytes), a.media_type.c_str());
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  if (argc != 6 && argc != 7) {
+    std::fprintf(stderr, "usage: %s SERVER SCENE X Y Z [OUT_DIR]\n", argv[0]);
+    return 2;
+  }
+  using instascene::client::Client;
+  using instascene::client::ObjectSelector;
+  instascene::client::ClientOptions options;
+  if (!OptionsFromEnvironment(argv[1], &options)) return 1;
+  auto client = Client::Connect(options);
+  if (!client.ok()) {
+    std::fprintf(stderr, "connect: %s\n", client.status().ToString().c_str());
+    return 1;
+  }
+  const instascene::client::Vec3 point{std::atof(argv[3]), std::atof(argv[4]), std::atof(argv[5])};
+  auto object = (*client)->GetObject(argv[2], ObjectSelector::Point(point));
+  if (!object.ok()) {  // NOT_FOUND: nothing near that point
+    std::fprintf(stderr, "lookup: %s\n", object.status().ToString().c_str());
+    return 1;
+  }
+  PrintObject(*object);
   if (argc == 7) {
-    auto files = (*client)->DownloadObject(o, argv[6]);
+    auto files = (*client)->DownloadObject(*object, argv[6]);
     if (!files.ok()) {
       std::fprintf(stderr, "download: %s\n", files.status().ToString().c_str());
       return 1;

@@ -184,6 +184,30 @@ PriorOutput Abstain(const PriorInput& input, const std::string& where, PriorOutp
   return out;
 }
 
+// What the sampler did, for the completion's manifest: its settings and how many latent cells
+// were known (warped), pinned to the background or generated.
+nlohmann::json SamplingReport(const std::string& where, const DiffusionPriorOptions& options,
+                              const DdimOptions& ddim, int channels, bool unseen_mask,
+                              const PlannedTargets& planned, int64_t object_pixels, double drift,
+                              const LatentCodec& codec) {
+  return {{"denoiser", where},
+          {"latent_size", options.latent_size},
+          {"latent_shape", {channels + 1, options.latent_size, options.latent_size}},
+          {"steps", ddim.steps},
+          {"eta", ddim.eta},
+          {"guidance", ddim.guidance},
+          {"replace_known", options.replace_known},
+          {"replace_fraction", options.replace_fraction},
+          {"warp", options.warp},
+          {"unseen_mask", unseen_mask},
+          {"warped_latent_pixels", planned.warped_cells},  // latent cells known, all targets
+          {"background_cells", planned.background_cells},  // pinned to the background
+          {"generated_cells", planned.generated_cells},    // left to the sampler
+          {"generated_object_pixels", object_pixels},
+          {"known_cells_drift", drift},
+          {"vae", codec.name()}};
+}
+
 }  // namespace
 
 DiffusionPrior::DiffusionPrior(std::shared_ptr<const Denoiser> denoiser, std::string where,
@@ -225,22 +249,8 @@ absl::StatusOr<PriorOutput> DiffusionPrior::Complete(const PriorInput& input) co
   }
   out.reason = absl::StrCat("generated ", input.targets.size(), " unknown views from ",
                             input.conditions.size(), " known ones");
-  out.report = {{"denoiser", where_},
-                {"latent_size", n},
-                {"latent_shape", {channels + 1, n, n}},
-                {"steps", ddim.steps},
-                {"eta", ddim.eta},
-                {"guidance", ddim.guidance},
-                {"replace_known", options_.replace_known},
-                {"replace_fraction", options_.replace_fraction},
-                {"warp", options_.warp},
-                {"unseen_mask", unseen_mask},
-                {"warped_latent_pixels", planned.warped_cells},  // latent cells known, all targets
-                {"background_cells", planned.background_cells},  // pinned to the background
-                {"generated_cells", planned.generated_cells},    // left to the sampler
-                {"generated_object_pixels", object_pixels},
-                {"known_cells_drift", drift},
-                {"vae", codec->name()}};
+  out.report = SamplingReport(where_, options_, ddim, channels, unseen_mask, planned, object_pixels,
+                              drift, *codec);
   return out;
 }
 
