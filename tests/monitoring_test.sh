@@ -2,7 +2,7 @@
 # Monitoring (issue 16): promtool checks the scrape configuration and the alert rules and runs the
 # alerts' unit tests (deploy/monitoring/); a pipeline through `instascene serve --metrics` shows
 # up in /metrics (jobs by stage and state, queue waits, leases, finished jobs, worker durations,
-# RPC latencies, store and disk), and `promtool check metrics` passes on the output of serve and
+# RPC latencies, store and disk, the Objects service's index cache), and `promtool check metrics` passes on the output of serve and
 # of every per-service binary. Prints "N passed, N failed"; exits 1 on any failure.
 set -uo pipefail
 BIN=$1      # the instascene command
@@ -42,6 +42,8 @@ check "submit" "$BIN" submit --scene "$WORK/s" --server "$ADDR" --stages decompo
   --params '{"train":{"iterations":40,"samples":512,"pixel_pool":1024}}' --json
 IDS=$(json_get "$WORK/out.txt" "' '.join(j['id'] for j in d['jobs'])")
 check "watch until done" "$BIN" watch $IDS --server "$ADDR" --json
+check "an object, twice (one index load, one cache hit)" bash -c \
+  "'$BIN' object --scene s --id 1 --server '$ADDR' >/dev/null && '$BIN' object --scene s --id 1 --server '$ADDR' >/dev/null"
 check "scrape serve" scrape "$METRICS" "$WORK/serve.txt"
 check "promtool check metrics (serve)" bash -c "promtool check metrics < '$WORK/serve.txt'"
 check "segment succeeded in instascene_jobs" test "$(metric "$WORK/serve.txt" '^instascene_jobs\{stage="segment",state="succeeded"\}')" = 1.0
@@ -56,6 +58,11 @@ check "LeaseJob latencies by code" positive "$(metric "$WORK/serve.txt" '^instas
 check "store bytes" positive "$(metric "$WORK/serve.txt" '^instascene_store_bytes ')"
 check "store blobs" positive "$(metric "$WORK/serve.txt" '^instascene_store_blobs ')"
 check "disk capacity" positive "$(metric "$WORK/serve.txt" '^instascene_data_dir_capacity_bytes ')"
+check "one objects index loaded" test "$(metric "$WORK/serve.txt" '^instascene_objects_index_loads_total\{outcome="ok"\}')" = 1.0
+check "and no load failed" test "$(metric "$WORK/serve.txt" '^instascene_objects_index_loads_total\{outcome="failed"\}')" = 0.0
+check "one objects cache hit" test "$(metric "$WORK/serve.txt" '^instascene_objects_index_hits_total ')" = 1.0
+check "the load's duration" test "$(metric "$WORK/serve.txt" '^instascene_objects_index_load_seconds_count ')" = 1.0
+check "the objects cache's bytes" positive "$(metric "$WORK/serve.txt" '^instascene_objects_index_cache_bytes ')"
 check "no queued job left (no age series)" test "$(metric "$WORK/serve.txt" '^instascene_queue_oldest_queued_age_seconds')" = absent
 check_fails "a taken metrics port is refused" "cannot listen on $METRICS" \
   "$BIN" serve --data "$WORK/data2" --listen 127.0.0.1:0 --metrics "$METRICS"
@@ -90,6 +97,7 @@ check "refusals counted with their code" test "$(metric "$WORK/m-gateway.txt" '^
 check "request durations" positive "$(metric "$WORK/m-gateway.txt" '^instascene_http_request_duration_seconds_count\{route="health"\}')"
 check "the scheduler reports the queue" grep -q '^# TYPE instascene_jobs gauge' "$WORK/m-sched.txt"
 check "the store reports its blobs" grep -q '^instascene_store_blobs ' "$WORK/m-store.txt"
+check "instascene-objects reports its index cache" grep -q '^instascene_objects_index_cache_entries 0' "$WORK/m-objects.txt"
 check "a worker reports no store of its own" test "$(metric "$WORK/m-training.txt" '^instascene_store_blobs ')" = absent
 
 echo "$passed passed, $failed failed"

@@ -10,6 +10,7 @@
 #include "common/core/status.h"
 #include "common/core/timer.h"
 #include "common/rpc/status.h"
+#include "services/objects/objects_metrics.h"
 
 namespace instascene::objects {
 
@@ -37,7 +38,9 @@ absl::StatusOr<SceneOutputs> OutputsOf(const v1::Scene& scene) {
 
 ObjectsService::ObjectsService(store::BlobStore* store, SceneLookup lookup,
                                ObjectsServiceOptions options)
-    : store_(store), lookup_(std::move(lookup)), options_(options) {}
+    : store_(store), lookup_(std::move(lookup)), options_(options) {
+  RegisterIndexMetrics();
+}
 
 namespace {
 
@@ -92,6 +95,7 @@ ObjectsService::Loaded ObjectsService::Index(const std::string& scene, bool* fre
     }
     if (future.valid()) {
       ++hits_;
+      RecordIndexHit();
     } else {
       ++loads_;
       future = promise.get_future().share();
@@ -101,7 +105,9 @@ ObjectsService::Loaded ObjectsService::Index(const std::string& scene, bool* fre
   }
   if (!*fresh) return future.get();
   // Load outside the lock.
+  Stopwatch watch;
   const Loaded loaded = LoadGuarded(*store_, outputs, scene);
+  RecordIndexLoad(watch.ElapsedSeconds(), loaded.ok());
   promise.set_value(loaded);
   std::list<Entry> evicted;  // destroyed after the lock is released
   {
@@ -116,6 +122,9 @@ ObjectsService::Loaded ObjectsService::Index(const std::string& scene, bool* fre
       break;
     }
     evicted = Evict();
+    int64_t bytes = 0;
+    for (const Entry& e : lru_) bytes += static_cast<int64_t>(e.bytes);
+    SetIndexCache(static_cast<int64_t>(lru_.size()), bytes);
   }
   return loaded;
 }

@@ -12,6 +12,7 @@
 
 #include "common/core/testing/temp_dir.h"
 #include "common/eval/result.h"
+#include "common/metrics/metrics.h"
 #include "common/rpc/status.h"
 #include "common/scene/image_io.h"
 #include "common/store/manifest.h"
@@ -19,6 +20,13 @@
 
 namespace instascene::objects {
 namespace {
+
+// A sample's value in the process's /metrics text (0 when absent).
+double Metric(const std::string& sample) {
+  const std::string text = metrics::SerializeText();
+  const size_t at = text.find("\n" + sample + " ");
+  return at == std::string::npos ? 0.0 : std::stod(text.substr(at + sample.size() + 2));
+}
 
 class ObjectsServiceTest : public ::testing::Test {
  protected:
@@ -272,6 +280,7 @@ TEST_F(ObjectsServiceTest, ADamagedStoredBlobIsDataLossAndNothingIsWrittenToDisk
     return paths;
   };
   const std::vector<std::string> before = listing();
+  const double failed_before = Metric(R"(instascene_objects_index_loads_total{outcome="failed"})");
   // Scene s2's labels damaged in the store: one byte of the last label flipped on disk.
   absl::StatusOr<store::Manifest> segment =
       store::ReadManifest(*store_, rpc::FromProto(scenes_["s2"].outputs(0).output_manifest()));
@@ -294,6 +303,7 @@ TEST_F(ObjectsServiceTest, ADamagedStoredBlobIsDataLossAndNothingIsWrittenToDisk
   EXPECT_EQ(status.error_code(), grpc::StatusCode::DATA_LOSS) << status.error_message();
   EXPECT_NE(status.error_message().find("labels.ply"), std::string::npos) << status.error_message();
   EXPECT_EQ(service->cache_stats().entries, 0);
+  EXPECT_EQ(Metric(R"(instascene_objects_index_loads_total{outcome="failed"})") - failed_before, 1);
   ASSERT_TRUE(Get(*service, "s1", id, &answer).ok());  // the undamaged scene is answered
   EXPECT_EQ(answer.id(), 1u);
   EXPECT_EQ(listing(), before);  // indexes live in memory only
@@ -332,6 +342,8 @@ TEST_F(ObjectsServiceTest, ListObjectsPaginatesInIdOrder) {
 
 TEST_F(ObjectsServiceTest, ConcurrentFirstQueriesShareOneLoadAndTheCacheKeepsItsBudget) {
   auto service = Service();
+  const double loads_before = Metric(R"(instascene_objects_index_loads_total{outcome="ok"})");
+  const double hits_before = Metric("instascene_objects_index_hits_total");
   std::vector<std::thread> threads;
   std::atomic<int> ok{0};
   for (int t = 0; t < 6; ++t) {
@@ -347,6 +359,11 @@ TEST_F(ObjectsServiceTest, ConcurrentFirstQueriesShareOneLoadAndTheCacheKeepsIts
   EXPECT_EQ(service->cache_stats().loads, 1);
   EXPECT_EQ(service->cache_stats().hits, 5);
   EXPECT_GT(service->cache_stats().bytes, 0);
+  // What operators see (objects_metrics.h).
+  EXPECT_EQ(Metric(R"(instascene_objects_index_loads_total{outcome="ok"})") - loads_before, 1);
+  EXPECT_EQ(Metric("instascene_objects_index_hits_total") - hits_before, 5);
+  EXPECT_EQ(Metric("instascene_objects_index_cache_entries"), 1);
+  EXPECT_EQ(Metric("instascene_objects_index_cache_bytes"), service->cache_stats().bytes);
 
   // A budget smaller than one index keeps only the newest.
   ObjectsServiceOptions small;
