@@ -109,9 +109,15 @@ check "submit another slow pipeline" "$BIN" submit --scene "$WORK/b" --server "$
 cp "$WORK/out.txt" "$WORK/submit6.json"
 DRAIN=$(json_get "$WORK/submit6.json" "d['jobs'][1]['id']")
 check "it runs" wait_state "$ADDR" "$DRAIN" running training
+check_fails "gc refuses a data directory a server holds" "FAILED_PRECONDITION" "$BIN" gc --data "$WORK/data"
 kill -TERM "$SERVE"; wait "$SERVE"
 check "serve exited cleanly on SIGTERM" test $? -eq 0
 check "drain log" grep -q "draining" "$WORK/serve2.log"
+# The store's garbage collection with the server stopped: every blob a job reaches stays (the
+# next section serves the same data directory and fetches every stage of scene a).
+check "gc, dry run" "$BIN" gc --data "$WORK/data" --dry-run --json
+check "gc counted every job as a root" test "$(json_get "$WORK/out.txt" "d['jobs'] >= 10 and d['live_blobs'] > 0 and d['missing_manifests'] == 0")" = True
+check "gc without a grace period" "$BIN" gc --data "$WORK/data" --grace-hours 0 --json
 
 # 7. Workers as separate processes (each with a worker token); one killed with SIGKILL mid-job.
 check "a worker token" "$BIN" token create --data "$WORK/data" --role worker --note "test workers" --out "$WORK/worker.token"

@@ -35,6 +35,7 @@ void AddWatchCommand(CLI::App& app, Action* action);    // cmd_jobs.cc
 void AddJobsCommand(CLI::App& app, Action* action);     // cmd_jobs.cc
 void AddObjectCommands(CLI::App& app, Action* action);  // object, objects
 void AddTokenCommand(CLI::App& app, Action* action);    // token create | revoke | list
+void AddGcCommand(CLI::App& app, Action* action);       // the store's garbage collection
 
 // Prints one JSON object as the last stdout line (the --json contract).
 void PrintJsonLine(const std::string& json);

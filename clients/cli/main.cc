@@ -55,6 +55,7 @@ int Run(int argc, char** argv) {
   AddClientCommands(app, &action);
   AddObjectCommands(app, &action);
   AddTokenCommand(app, &action);
+  AddGcCommand(app, &action);
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {

@@ -9,6 +9,7 @@
 
 #include <atomic>
 #include <cstdint>
+#include <filesystem>
 #include <functional>
 #include <mutex>
 #include <string>
@@ -132,6 +133,18 @@ class FilesystemBlobStore final : public BlobStore {
 
   std::string BlobPath(const Digest& digest) const;
 
+  // For the garbage collector (services/store/garbage_collection.h), with the store's process
+  // owning the folder: every committed blob with its file's modification time (set when the blob
+  // was written, and again whenever FindMissing or Put finds it present, so that a client about
+  // to reference a blob it did not upload again keeps it young), and the removal of one blob
+  // with every tenant's grant of it.
+  struct StoredBlob {
+    Digest digest;
+    std::filesystem::file_time_type modified;
+  };
+  absl::StatusOr<std::vector<StoredBlob>> ListBlobs() const;
+  absl::Status Remove(const Digest& digest);
+
  private:
   FilesystemBlobStore(std::string root, StoreOptions options, FileLock lock)
       : root_(std::move(root)), options_(options), lock_(std::move(lock)) {}
@@ -144,6 +157,7 @@ class FilesystemBlobStore final : public BlobStore {
   // Removes interrupted uploads older than the TTL; `force` = now, else at most once a minute.
   void ExpireUploads(bool force);
   bool Contains(const Digest& digest) const;
+  void Touch(const Digest& digest) const;  // its file's modification time = now
   // Moves a verified file into cas/ (fsync + rename + directory fsync).
   absl::Status Publish(const std::string& from, const Digest& digest);
 

@@ -6,6 +6,7 @@
 #include <fcntl.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -87,9 +88,18 @@ absl::StatusOr<std::vector<Digest>> FilesystemBlobStore::FindMissing(
   std::vector<Digest> missing;
   for (const Digest& d : digests) {
     RETURN_IF_ERROR(ValidateDigest(d));
-    if (!Contains(d)) missing.push_back(d);
+    if (Contains(d)) {
+      Touch(d);  // about to be referenced: young for the garbage collector's grace period
+    } else {
+      missing.push_back(d);
+    }
   }
   return missing;
+}
+
+void FilesystemBlobStore::Touch(const Digest& digest) const {
+  std::error_code ec;  // best effort: a failed touch only shortens the blob's grace
+  fs::last_write_time(BlobPath(digest), fs::file_time_type::clock::now(), ec);
 }
 
 absl::Status FilesystemBlobStore::Publish(const std::string& from, const Digest& digest) {
@@ -106,7 +116,10 @@ absl::Status FilesystemBlobStore::Publish(const std::string& from, const Digest&
 absl::Status FilesystemBlobStore::Put(const Digest& digest, absl::string_view bytes) {
   RETURN_IF_ERROR(CheckWritable(digest, options_));
   RETURN_IF_ERROR(VerifyBlobBytes(digest, bytes));
-  if (Contains(digest)) return absl::OkStatus();
+  if (Contains(digest)) {
+    Touch(digest);
+    return absl::OkStatus();
+  }
   std::string temp;
   {
     std::lock_guard<std::mutex> lock(temp_mutex_);
@@ -292,6 +305,40 @@ absl::StatusOr<StoreStats> FilesystemBlobStore::Stats() {
   }
   stats.expired_uploads = expired_uploads_.load();
   return stats;
+}
+
+absl::StatusOr<std::vector<FilesystemBlobStore::StoredBlob>> FilesystemBlobStore::ListBlobs()
+    const {
+  std::vector<StoredBlob> blobs;
+  std::error_code ec;
+  for (auto it = fs::recursive_directory_iterator(fs::path(root_) / "cas", ec);
+       it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    if (ec) break;
+    if (!it->is_regular_file(ec)) continue;
+    StoredBlob b;
+    b.digest.hash = it->path().filename().string();
+    b.digest.size_bytes = static_cast<int64_t>(it->file_size(ec));
+    if (ec || !ValidateDigest(b.digest).ok()) continue;  // not a blob (nothing else lives there)
+    b.modified = it->last_write_time(ec);
+    if (ec) continue;
+    blobs.push_back(std::move(b));
+  }
+  if (ec) return absl::UnavailableError(absl::StrCat(root_, "/cas: ", ec.message()));
+  std::sort(blobs.begin(), blobs.end(),
+            [](const StoredBlob& a, const StoredBlob& b) { return a.digest.hash < b.digest.hash; });
+  return blobs;
+}
+
+absl::Status FilesystemBlobStore::Remove(const Digest& digest) {
+  RETURN_IF_ERROR(ValidateDigest(digest));
+  std::error_code ec;
+  fs::remove(BlobPath(digest), ec);
+  if (ec) return absl::UnavailableError(absl::StrCat(BlobPath(digest), ": ", ec.message()));
+  for (const auto& tenant : fs::directory_iterator(fs::path(root_) / "grants", ec)) {
+    std::error_code e;
+    fs::remove(GrantPath(tenant.path().filename().string(), digest), e);
+  }
+  return absl::OkStatus();
 }
 
 }  // namespace instascene::store

@@ -39,8 +39,8 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
   app.add_option(
          "--retention-hours", o->retention_hours,
          "Scheduler: prune jobs finished longer ago than this (0 = keep for ever); a pruned "
-         "result is recomputed when its pipeline is submitted again (job records only: the "
-         "store keeps their blobs)")
+         "result is recomputed when its pipeline is submitted again (job records only: "
+         "`instascene gc` removes the blobs no job reaches)")
       ->capture_default_str();
   app.add_option("--lease-seconds", o->lease_seconds, "Job lease length in seconds")
       ->capture_default_str();

@@ -1,0 +1,82 @@
+// `instascene gc`: garbage collection of the embedded default's store (DATA/store, roots from
+// DATA/jobs.db; services/store/garbage_collection.h). Offline: it takes both file locks, so it
+// refuses a data directory a running `instascene serve` holds.
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <memory>
+
+#include <nlohmann/json.hpp>
+
+#include "clients/cli/cli.h"
+#include "common/core/status.h"
+#include "services/scheduler/sqlite_queue_store.h"
+#include "services/store/garbage_collection.h"
+
+namespace instascene::cli {
+namespace {
+
+struct GcArgs {
+  std::string data = "instascene-data";
+  double grace_hours = 24;
+  bool dry_run = false, json = false;
+};
+
+absl::Status RunGc(const GcArgs& a) {
+  if (!(a.grace_hours >= 0) || a.grace_hours > 24 * 365 * 100)
+    return absl::InvalidArgumentError("--grace-hours: in [0, 876000]");
+  const std::filesystem::path data(a.data);
+  if (!std::filesystem::exists(data / "jobs.db") || !std::filesystem::is_directory(data / "store"))
+    return absl::NotFoundError(absl::StrCat(
+        a.data, ": not the data directory of `instascene serve` (no jobs.db and store/)"));
+  ASSIGN_OR_RETURN(std::unique_ptr<store::FilesystemBlobStore> blobs,
+                   store::FilesystemBlobStore::Open((data / "store").string(), {}));
+  ASSIGN_OR_RETURN(std::unique_ptr<scheduler::JobQueue> queue,
+                   scheduler::OpenSqliteJobQueue((data / "jobs.db").string(), {}));
+  store_service::GcOptions options;
+  options.grace = std::chrono::seconds(static_cast<int64_t>(a.grace_hours * 3600));
+  options.dry_run = a.dry_run;
+  ASSIGN_OR_RETURN(const store_service::GcReport r,
+                   store_service::CollectGarbage(*blobs, *queue, options));
+  std::fprintf(stderr,
+               "gc: %lld jobs; %lld blobs (%lld bytes): %lld reached from a job, %lld younger than "
+               "the grace period; %s %lld blobs (%lld bytes)%s\n",
+               static_cast<long long>(r.jobs), static_cast<long long>(r.blobs),
+               static_cast<long long>(r.bytes), static_cast<long long>(r.live_blobs),
+               static_cast<long long>(r.young_blobs), a.dry_run ? "would remove" : "removed",
+               static_cast<long long>(r.removed_blobs), static_cast<long long>(r.removed_bytes),
+               r.missing_manifests > 0 ? "; some jobs name manifests the store lacks" : "");
+  if (a.json) {
+    PrintJsonLine(nlohmann::json({{"jobs", r.jobs},
+                                  {"blobs", r.blobs},
+                                  {"bytes", r.bytes},
+                                  {"live_blobs", r.live_blobs},
+                                  {"young_blobs", r.young_blobs},
+                                  {"removed_blobs", r.removed_blobs},
+                                  {"removed_bytes", r.removed_bytes},
+                                  {"missing_manifests", r.missing_manifests},
+                                  {"dry_run", a.dry_run}})
+                      .dump());
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace
+
+void AddGcCommand(CLI::App& app, Action* action) {
+  auto args = std::make_shared<GcArgs>();
+  CLI::App* cmd = app.add_subcommand(
+      "gc",
+      "Remove the store's blobs no job reaches (embedded default: DATA/store, jobs from "
+      "DATA/jobs.db), once older than a grace period; run with the server stopped");
+  cmd->add_option("--data", args->data, "Data directory of `instascene serve`")
+      ->capture_default_str();
+  cmd->add_option("--grace-hours", args->grace_hours,
+                  "Unreachable blobs younger than this stay (uploads not yet submitted)")
+      ->capture_default_str();
+  cmd->add_flag("--dry-run", args->dry_run, "Count what would be removed, remove nothing");
+  cmd->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
+  cmd->callback([args, action] { *action = [args] { return RunGc(*args); }; });
+}
+
+}  // namespace instascene::cli

@@ -1,0 +1,80 @@
+#include "services/store/garbage_collection.h"
+
+#include <set>
+#include <string>
+
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/store/manifest.h"
+
+namespace instascene::store_service {
+namespace {
+
+// Adds a manifest and every file it lists to `live`. A manifest the store does not hold reaches
+// nothing (counted); any other failure stops the collection.
+absl::Status MarkManifest(store::BlobStore& store, const store::Digest& digest,
+                          std::set<std::string>* live, GcReport* report) {
+  if (!live->insert(digest.hash).second) return absl::OkStatus();  // marked already
+  absl::StatusOr<store::Manifest> manifest = store::ReadManifest(store, digest);
+  if (absl::IsNotFound(manifest.status())) {
+    ++report->missing_manifests;
+    return absl::OkStatus();
+  }
+  if (!manifest.ok()) {
+    return absl::Status(manifest.status().code(),
+                        absl::StrCat("manifest ", digest.ToString(), " (a job's root): ",
+                                     manifest.status().message(), "; nothing removed"));
+  }
+  for (const auto& [path, file] : manifest->files) live->insert(file.hash);
+  return absl::OkStatus();
+}
+
+// Every blob reachable from a job of the queue, newest job first, page by page.
+absl::Status MarkFromJobs(store::BlobStore& store, scheduler::JobQueue& queue,
+                          const GcOptions& options, std::set<std::string>* live, GcReport* report) {
+  scheduler::JobFilter filter;
+  filter.limit = options.page;
+  for (;;) {
+    ASSIGN_OR_RETURN(std::vector<scheduler::Job> jobs, queue.List(filter));
+    for (const scheduler::Job& job : jobs) {
+      ++report->jobs;
+      RETURN_IF_ERROR(MarkManifest(store, job.scene_manifest, live, report));
+      if (!job.output_manifest.hash.empty()) {
+        RETURN_IF_ERROR(MarkManifest(store, job.output_manifest, live, report));
+      }
+    }
+    if (static_cast<int>(jobs.size()) < filter.limit) return absl::OkStatus();
+    filter.before_seq = jobs.back().seq;
+  }
+}
+
+}  // namespace
+
+absl::StatusOr<GcReport> CollectGarbage(store::FilesystemBlobStore& store,
+                                        scheduler::JobQueue& queue, const GcOptions& options) {
+  if (options.grace.count() < 0 || options.page < 1) {
+    return absl::InvalidArgumentError("gc: the grace period must be >= 0 and the page >= 1");
+  }
+  GcReport report;
+  std::set<std::string> live;
+  RETURN_IF_ERROR(MarkFromJobs(store, queue, options, &live, &report));
+  ASSIGN_OR_RETURN(const std::vector<store::FilesystemBlobStore::StoredBlob> blobs,
+                   store.ListBlobs());
+  const auto young_after = std::filesystem::file_time_type::clock::now() - options.grace;
+  for (const store::FilesystemBlobStore::StoredBlob& b : blobs) {
+    ++report.blobs;
+    report.bytes += b.digest.size_bytes;
+    if (live.count(b.digest.hash)) {
+      ++report.live_blobs;
+    } else if (b.modified > young_after) {
+      ++report.young_blobs;
+    } else {
+      if (!options.dry_run) RETURN_IF_ERROR(store.Remove(b.digest));
+      ++report.removed_blobs;
+      report.removed_bytes += b.digest.size_bytes;
+    }
+  }
+  return report;
+}
+
+}  // namespace instascene::store_service

@@ -1,0 +1,151 @@
+// Garbage collection against a real filesystem store and SQLite queue: what jobs reach stays,
+// unreachable blobs go once past the grace period (with their grants), young ones stay, a dry
+// run removes nothing, a damaged root stops the collection before any removal.
+#include "services/store/garbage_collection.h"
+
+#include <gtest/gtest.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "common/core/testing/temp_dir.h"
+#include "common/store/manifest.h"
+#include "services/scheduler/sqlite_queue_store.h"
+
+namespace instascene::store_service {
+namespace {
+
+namespace fs = std::filesystem;
+
+class GarbageCollectionTest : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    auto blobs = store::FilesystemBlobStore::Open(temp_.Sub("store"), {});
+    ASSERT_TRUE(blobs.ok()) << blobs.status();
+    store_ = std::move(*blobs);
+    auto queue = scheduler::OpenSqliteJobQueue((temp_.path() / "jobs.db").string(), {});
+    ASSERT_TRUE(queue.ok()) << queue.status();
+    queue_ = std::move(*queue);
+  }
+
+  store::Digest Blob(const std::string& bytes) {
+    const store::Digest d = store::ComputeDigest(bytes);
+    EXPECT_TRUE(store_->Put(d, bytes).ok());
+    return d;
+  }
+  // A manifest of `files` (name -> bytes), stored with its files.
+  store::Digest StoredManifest(const std::string& kind,
+                               const std::map<std::string, std::string>& files) {
+    store::Manifest m;
+    m.kind = kind;
+    for (const auto& [name, bytes] : files) m.files[name] = Blob(bytes);
+    return Blob(store::SerializeManifest(m));
+  }
+  void MakeOld(const store::Digest& d) {
+    fs::last_write_time(store_->BlobPath(d),
+                        fs::file_time_type::clock::now() - std::chrono::hours(48));
+  }
+  bool Has(const store::Digest& d) { return fs::exists(store_->BlobPath(d)); }
+
+  instascene::testing::ScopedTempDir temp_{"gc"};
+  std::unique_ptr<store::FilesystemBlobStore> store_;
+  std::unique_ptr<scheduler::JobQueue> queue_;
+};
+
+TEST_F(GarbageCollectionTest, WhatJobsReachStaysAndOldUnreachableBlobsGo) {
+  const store::Digest scene = StoredManifest("scene", {{"scene.json", "{}"}, {"g.ply", "splat"}});
+  const store::Digest output = StoredManifest("decompose", {{"labels.ply", "labels"}});
+  scheduler::SubmitRequest request;
+  request.scene = "s";
+  request.scene_manifest = scene;
+  request.stages = {{"decompose", {{"p", 1}}, {}}};
+  ASSERT_TRUE(queue_->Submit(request).ok());
+  auto lease = queue_->LeaseNext({"decompose"}, "w");
+  ASSERT_TRUE(lease.ok() && lease->has_value());
+  ASSERT_TRUE(queue_->Complete((*lease)->job.id, (*lease)->token, output).ok());
+  // A job naming a manifest the store does not hold: it reaches nothing, and is counted.
+  scheduler::SubmitRequest absent = request;
+  absent.scene = "t";
+  absent.scene_manifest = store::ComputeDigest("never stored");
+  ASSERT_TRUE(queue_->Submit(absent).ok());
+  // Unreachable: an old orphan (granted to a tenant), a young one (an upload not yet submitted),
+  // and an old manifest no job names, with its file.
+  const store::Digest old_orphan = Blob("old orphan");
+  ASSERT_TRUE(store_->Grant("acme", {old_orphan}).ok());
+  const store::Digest young_orphan = Blob("young orphan");
+  const store::Digest stray = StoredManifest("scene", {{"x", "stray file"}});
+  const store::Digest stray_file = store::ComputeDigest("stray file");
+  for (const auto& d : {scene, output, old_orphan, stray, stray_file}) MakeOld(d);
+  MakeOld(store::ComputeDigest("labels"));
+  MakeOld(store::ComputeDigest("splat"));
+
+  GcOptions dry;
+  dry.dry_run = true;
+  absl::StatusOr<GcReport> counted = CollectGarbage(*store_, *queue_, dry);
+  ASSERT_TRUE(counted.ok()) << counted.status();
+  EXPECT_EQ(counted->jobs, 2);
+  EXPECT_EQ(counted->missing_manifests, 1);
+  EXPECT_EQ(counted->blobs, 9);
+  EXPECT_EQ(counted->live_blobs, 5);  // two manifests and their three files
+  EXPECT_EQ(counted->young_blobs, 1);
+  EXPECT_EQ(counted->removed_blobs, 3);
+  EXPECT_TRUE(Has(old_orphan) && Has(stray) && Has(stray_file));  // a dry run removes nothing
+
+  absl::StatusOr<GcReport> done = CollectGarbage(*store_, *queue_, {});
+  ASSERT_TRUE(done.ok()) << done.status();
+  EXPECT_EQ(done->removed_blobs, 3);
+  EXPECT_EQ(done->removed_bytes, old_orphan.size_bytes + stray.size_bytes + stray_file.size_bytes);
+  EXPECT_FALSE(Has(old_orphan) || Has(stray) || Has(stray_file));
+  EXPECT_TRUE(Has(young_orphan));
+  for (const auto& d : {scene, output, store::ComputeDigest("labels"),
+                        store::ComputeDigest("splat"), store::ComputeDigest("{}")}) {
+    EXPECT_TRUE(Has(d)) << d.ToString();
+  }
+  // The removed blob's grant went with it (FilesystemBlobStore's layout); the live manifests
+  // still read.
+  const fs::path grants = fs::path(temp_.Sub("store")) / "grants" / "acme";
+  EXPECT_FALSE(fs::exists(grants / old_orphan.hash.substr(0, 2) /
+                          (old_orphan.hash + "-" + std::to_string(old_orphan.size_bytes))));
+  EXPECT_TRUE(fs::exists(grants));  // the grant existed: the tenant's folder is there
+  EXPECT_TRUE(store::ReadManifest(*store_, output).ok());
+  // Collected again: nothing left to remove.
+  EXPECT_EQ(CollectGarbage(*store_, *queue_, {})->removed_blobs, 0);
+}
+
+TEST_F(GarbageCollectionTest, ABlobFoundPresentIsYoungAgain) {
+  const store::Digest d = Blob("uploaded long ago");
+  MakeOld(d);
+  // A client about to reference it asks whether the store has it: it does, and it stays.
+  ASSERT_TRUE(store_->FindMissing({d}).ok());
+  absl::StatusOr<GcReport> r = CollectGarbage(*store_, *queue_, {});
+  ASSERT_TRUE(r.ok());
+  EXPECT_EQ(r->young_blobs, 1);
+  EXPECT_TRUE(Has(d));
+  // With no grace period it goes.
+  GcOptions now;
+  now.grace = std::chrono::seconds(0);
+  EXPECT_EQ(CollectGarbage(*store_, *queue_, now)->removed_blobs, 1);
+  EXPECT_FALSE(Has(d));
+}
+
+TEST_F(GarbageCollectionTest, ADamagedRootStopsTheCollectionBeforeAnyRemoval) {
+  const store::Digest not_a_manifest = Blob("this is not a manifest");
+  scheduler::SubmitRequest request;
+  request.scene = "s";
+  request.scene_manifest = not_a_manifest;
+  request.stages = {{"decompose", {{"p", 1}}, {}}};
+  ASSERT_TRUE(queue_->Submit(request).ok());
+  const store::Digest orphan = Blob("orphan");
+  MakeOld(orphan);
+  absl::StatusOr<GcReport> r = CollectGarbage(*store_, *queue_, {});
+  EXPECT_FALSE(r.ok());
+  EXPECT_NE(r.status().message().find("nothing removed"), std::string::npos) << r.status();
+  EXPECT_TRUE(Has(orphan));
+  GcOptions bad;
+  bad.grace = std::chrono::seconds(-1);
+  EXPECT_EQ(CollectGarbage(*store_, *queue_, bad).status().code(),
+            absl::StatusCode::kInvalidArgument);
+}
+
+}  // namespace
+}  // namespace instascene::store_service
