@@ -57,11 +57,8 @@ absl::StatusOr<std::string> ReadVerifiedFile(store::BlobStore& store,
 
 absl::StatusOr<json> ReadJsonBlob(store::BlobStore& store, const store::Manifest& manifest,
                                   const std::string& file, const std::string& what) {
-  auto it = manifest.files.find(file);
-  if (it == manifest.files.end()) return absl::DataLossError(absl::StrCat(what, " has no ", file));
-  if (it->second.size_bytes > kMaxJsonBytes)
-    return absl::DataLossError(absl::StrCat(what, "/", file, " is over 64 MiB"));
-  ASSIGN_OR_RETURN(std::string text, store.Read(it->second));
+  ASSIGN_OR_RETURN(const std::string text,
+                   ReadVerifiedFile(store, manifest, file, kMaxJsonBytes, what));
   json j = json::parse(text, nullptr, false);
   if (j.is_discarded() || !j.is_object())
     return absl::DataLossError(absl::StrCat(what, "/", file, ": not a JSON object"));
