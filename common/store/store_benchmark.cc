@@ -1,6 +1,7 @@
 // Throughput of the filesystem blob store: verified small puts (hash + temp + fsync + rename) and
 // large chunked uploads (append + final hash + fsync + rename), and SHA-256 itself.
 #include <benchmark/benchmark.h>
+#include <unistd.h>
 
 #include <filesystem>
 #include <random>
@@ -20,11 +21,24 @@ std::string RandomBytes(size_t n, uint64_t seed) {
   return s;
 }
 
-std::unique_ptr<FilesystemBlobStore> FreshStore(const std::string& name) {
-  const std::string dir = std::filesystem::temp_directory_path() / ("store_bench_" + name);
-  std::filesystem::remove_all(dir);
-  return std::move(*FilesystemBlobStore::Open(dir, StoreOptions{}));
-}
+// A store in a fresh temporary folder, removed when the benchmark ends.
+struct FreshStore {
+  explicit FreshStore(const std::string& name)
+      : dir(std::filesystem::temp_directory_path() /
+            ("store_bench_" + name + "_" + std::to_string(::getpid()))) {
+    std::filesystem::remove_all(dir);
+    store = std::move(*FilesystemBlobStore::Open(dir.string(), StoreOptions{}));
+  }
+  ~FreshStore() {
+    store.reset();
+    std::error_code ec;
+    std::filesystem::remove_all(dir, ec);
+  }
+  FilesystemBlobStore* operator->() { return store.get(); }
+
+  std::filesystem::path dir;
+  std::unique_ptr<FilesystemBlobStore> store;
+};
 
 void BM_Sha256(benchmark::State& state) {
   const std::string data = RandomBytes(static_cast<size_t>(state.range(0)), 1);
@@ -34,7 +48,7 @@ void BM_Sha256(benchmark::State& state) {
 BENCHMARK(BM_Sha256)->Arg(1 << 20)->Arg(64 << 20)->Unit(benchmark::kMillisecond);
 
 void BM_PutSmallBlob(benchmark::State& state) {
-  auto store = FreshStore("small");
+  FreshStore store("small");
   uint64_t seed = 0;
   for (auto _ : state) {
     state.PauseTiming();
@@ -48,7 +62,7 @@ void BM_PutSmallBlob(benchmark::State& state) {
 BENCHMARK(BM_PutSmallBlob)->Arg(4 << 10)->Arg(1 << 20)->Unit(benchmark::kMillisecond);
 
 void BM_ChunkedUpload(benchmark::State& state) {
-  auto store = FreshStore("large");
+  FreshStore store("large");
   uint64_t seed = 100;
   const size_t size = static_cast<size_t>(state.range(0));
   for (auto _ : state) {

@@ -94,9 +94,15 @@ struct Fixture {
   }
 };
 
+// Built on first use, destroyed by main (its temporary folder with it) after the benchmarks.
+std::unique_ptr<Fixture>& SharedSlot() {
+  static std::unique_ptr<Fixture> f;
+  return f;
+}
+
 Fixture& Shared() {
-  static Fixture* f = new Fixture();
-  return *f;
+  if (!SharedSlot()) SharedSlot() = std::make_unique<Fixture>();
+  return *SharedSlot();
 }
 
 // A server like the embedded default's: scheduler + Objects service, queried over loopback TCP.
@@ -198,7 +204,16 @@ void BM_FirstQueryAfterColdStart(benchmark::State& state) {
 }
 BENCHMARK(BM_FirstQueryAfterColdStart)->Iterations(1)->Unit(benchmark::kMillisecond);
 
+void RemoveShared() { SharedSlot().reset(); }
+
 }  // namespace
 }  // namespace instascene::objects
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  benchmark::RunSpecifiedBenchmarks();
+  benchmark::Shutdown();
+  instascene::objects::RemoveShared();  // nothing left in the temporary folder
+  return 0;
+}
