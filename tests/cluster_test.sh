@@ -6,7 +6,8 @@
 # replica B); schedulers and workers reach the blobs in S3 directly. Ten scenes are submitted;
 # replica B and its worker are SIGKILLed while that worker runs a job. Every job must end succeeded
 # exactly once: no job lost, none recorded twice, every result in the store (S3, nothing on local
-# disk). Prints "N passed, N failed"; exits 1 on any failure.
+# disk). Then `instascene gc` collects the S3 store from the PostgreSQL queue with the services
+# running. Prints "N passed, N failed"; exits 1 on any failure.
 set -uo pipefail
 BIN=$1      # the instascene command
 BINDIR=$2   # folder with instascene-store, -scheduler, -decomposition, -training
@@ -68,6 +69,30 @@ for s in $(seq 2 10); do check "fetch scene $s" "$BIN" fetch --scene "s$s" --out
 check "the blobs are in S3" test "$(s3_count cas/)" -gt 30
 check "no upload left staged in S3" test "$(s3_count uploads/)" = 0
 check "nothing was stored on local disk" test ! -e "$WORK/store/store"
+
+# Garbage collection of the scale-out storage with the services running (no grace period: every
+# unreachable blob is old enough): an orphan blob granted to a tenant goes with its grant, what
+# the thirty jobs reach stays, and every scene still fetches.
+orphan=$(python3 -c "
+import boto3, hashlib
+s3 = boto3.client('s3', endpoint_url='$S3_ENDPOINT', region_name='us-east-1')
+body = b'an upload never submitted'
+h = hashlib.sha256(body).hexdigest()
+s3.put_object(Bucket='$S3_BUCKET', Key='cluster/cas/' + h, Body=body)
+s3.put_object(Bucket='$S3_BUCKET', Key='cluster/grants/acme/%s-%d' % (h, len(body)), Body=b'')
+print(h)")
+check "an orphan blob and its grant in S3" test "$(s3_count "cas/$orphan")$(s3_count "grants/acme/$orphan")" = 11
+check "gc, dry run, services running" "$BIN" gc --store "$STORE_URI" --queue "$QUEUE" --grace-hours 0 --dry-run --json
+would=$(json_get "$WORK/out.txt" "d['removed_blobs']")
+check "gc read the thirty jobs as roots" test "$(json_get "$WORK/out.txt" "d['jobs'] == 30 and d['live_blobs'] > 30 and d['missing_manifests'] == 0 and d['removed_blobs'] >= 1")" = True
+check "gc, services running" "$BIN" gc --store "$STORE_URI" --queue "$QUEUE" --grace-hours 0 --json
+check "gc removed what the dry run counted" test "$(json_get "$WORK/out.txt" "d['removed_blobs']")" = "$would"
+check "the orphan and its grant are gone" test "$(s3_count "cas/$orphan")$(s3_count "grants/acme/$orphan")" = 00
+for s in $(seq 10); do check "scene $s fetches after gc" "$BIN" fetch --scene "s$s" --out "$WORK/g$s" --server "$A" --store "$STORE"; done
+check "gc again: nothing left to remove" "$BIN" gc --store "$STORE_URI" --queue "$QUEUE" --grace-hours 0 --json
+check "nothing removed the second time" test "$(json_get "$WORK/out.txt" "d['removed_blobs']")" = 0
+check_fails "gc wants --store and --queue together" "go together" "$BIN" gc --store "$STORE_URI"
+check_fails "gc refuses a store service's address" "not a store service" "$BIN" gc --store "$STORE" --queue "$QUEUE"
 
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

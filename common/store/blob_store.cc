@@ -141,4 +141,19 @@ absl::Status BlobStore::TenantFinishUpload(const std::string&, const Digest&) {
   return NoTenants();
 }
 
+namespace {
+absl::Status NoCollection() {
+  return absl::UnimplementedError(
+      "this store cannot be garbage-collected from here (collect the storage itself: file: or "
+      "s3://)");
+}
+}  // namespace
+
+absl::StatusOr<std::vector<StoredBlob>> BlobStore::ListBlobs() { return NoCollection(); }
+absl::StatusOr<std::optional<std::chrono::system_clock::time_point>> BlobStore::BlobModified(
+    const Digest&) {
+  return NoCollection();
+}
+absl::Status BlobStore::Remove(const Digest&) { return NoCollection(); }
+
 }  // namespace instascene::store

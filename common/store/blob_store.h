@@ -8,10 +8,12 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <filesystem>
 #include <functional>
 #include <mutex>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -39,6 +41,14 @@ struct StoreStats {
   int64_t partial_uploads = 0;  // interrupted uploads still resumable
   int64_t partial_bytes = 0;
   int64_t expired_uploads = 0;  // removed by the TTL since the store was opened
+};
+
+// A committed blob as the garbage collector sees it (services/store/garbage_collection.h): its
+// digest and when it was last written, or last found present by FindMissing / Put (each backend
+// documents how it keeps a blob about to be referenced young).
+struct StoredBlob {
+  Digest digest;
+  std::chrono::system_clock::time_point modified;
 };
 
 // Progress of a transfer: bytes done, bytes total.
@@ -101,6 +111,15 @@ class BlobStore {
   virtual absl::StatusOr<int64_t> TenantAppend(const std::string& tenant, const Digest& digest,
                                                int64_t offset, absl::string_view data);
   virtual absl::Status TenantFinishUpload(const std::string& tenant, const Digest& digest);
+
+  // Garbage collection (services/store/garbage_collection.h); the base class has none
+  // (Unimplemented). Every committed blob, sorted by hash; one blob's modification time (nullopt:
+  // absent), read again just before its removal; the removal of a blob with every tenant's grant
+  // of it (removing an absent blob is not an error).
+  virtual absl::StatusOr<std::vector<StoredBlob>> ListBlobs();
+  virtual absl::StatusOr<std::optional<std::chrono::system_clock::time_point>> BlobModified(
+      const Digest& digest);
+  virtual absl::Status Remove(const Digest& digest);
 };
 
 // Blobs under <root>/cas/<hash[0:2]>/<hash>, interrupted uploads under <root>/uploads/ (a
@@ -133,17 +152,12 @@ class FilesystemBlobStore final : public BlobStore {
 
   std::string BlobPath(const Digest& digest) const;
 
-  // For the garbage collector (services/store/garbage_collection.h), with the store's process
-  // owning the folder: every committed blob with its file's modification time (set when the blob
-  // was written, and again whenever FindMissing or Put finds it present, so that a client about
-  // to reference a blob it did not upload again keeps it young), and the removal of one blob
-  // with every tenant's grant of it.
-  struct StoredBlob {
-    Digest digest;
-    std::filesystem::file_time_type modified;
-  };
-  absl::StatusOr<std::vector<StoredBlob>> ListBlobs() const;
-  absl::Status Remove(const Digest& digest);
+  // Garbage collection: a blob's file modification time is set when the blob is written and
+  // again whenever FindMissing or Put finds it present. Offline only (the folder's file lock).
+  absl::StatusOr<std::vector<StoredBlob>> ListBlobs() override;
+  absl::StatusOr<std::optional<std::chrono::system_clock::time_point>> BlobModified(
+      const Digest& digest) override;
+  absl::Status Remove(const Digest& digest) override;
 
  private:
   FilesystemBlobStore(std::string root, StoreOptions options, FileLock lock)

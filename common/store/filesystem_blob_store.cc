@@ -307,8 +307,14 @@ absl::StatusOr<StoreStats> FilesystemBlobStore::Stats() {
   return stats;
 }
 
-absl::StatusOr<std::vector<FilesystemBlobStore::StoredBlob>> FilesystemBlobStore::ListBlobs()
-    const {
+namespace {
+std::chrono::system_clock::time_point ToSystemTime(fs::file_time_type t) {
+  return std::chrono::time_point_cast<std::chrono::system_clock::duration>(
+      std::chrono::file_clock::to_sys(t));
+}
+}  // namespace
+
+absl::StatusOr<std::vector<StoredBlob>> FilesystemBlobStore::ListBlobs() {
   std::vector<StoredBlob> blobs;
   std::error_code ec;
   for (auto it = fs::recursive_directory_iterator(fs::path(root_) / "cas", ec);
@@ -319,14 +325,26 @@ absl::StatusOr<std::vector<FilesystemBlobStore::StoredBlob>> FilesystemBlobStore
     b.digest.hash = it->path().filename().string();
     b.digest.size_bytes = static_cast<int64_t>(it->file_size(ec));
     if (ec || !ValidateDigest(b.digest).ok()) continue;  // not a blob (nothing else lives there)
-    b.modified = it->last_write_time(ec);
+    const fs::file_time_type modified = it->last_write_time(ec);
     if (ec) continue;
+    b.modified = ToSystemTime(modified);
     blobs.push_back(std::move(b));
   }
   if (ec) return absl::UnavailableError(absl::StrCat(root_, "/cas: ", ec.message()));
   std::sort(blobs.begin(), blobs.end(),
             [](const StoredBlob& a, const StoredBlob& b) { return a.digest.hash < b.digest.hash; });
   return blobs;
+}
+
+absl::StatusOr<std::optional<std::chrono::system_clock::time_point>>
+FilesystemBlobStore::BlobModified(const Digest& digest) {
+  RETURN_IF_ERROR(ValidateDigest(digest));
+  std::error_code ec;
+  const fs::file_time_type modified = fs::last_write_time(BlobPath(digest), ec);
+  if (ec == std::errc::no_such_file_or_directory)
+    return std::optional<std::chrono::system_clock::time_point>();
+  if (ec) return absl::UnavailableError(absl::StrCat(BlobPath(digest), ": ", ec.message()));
+  return std::optional(ToSystemTime(modified));
 }
 
 absl::Status FilesystemBlobStore::Remove(const Digest& digest) {

@@ -24,6 +24,8 @@ absl::Status S3StoreOptions::Validate() const {
   if (verify_chunk_bytes < 1) return absl::InvalidArgumentError("verify chunk must be positive");
   if (max_buffered_uploads < 1)
     return absl::InvalidArgumentError("max_buffered_uploads must be >= 1");
+  if (touch_after_seconds < 0)
+    return absl::InvalidArgumentError("touch_after_seconds must be >= 0");
   return absl::OkStatus();
 }
 
@@ -55,11 +57,6 @@ std::string S3BlobStore::UploadKey(const Digest& digest, const std::string& spac
 std::string S3BlobStore::GrantKey(const std::string& tenant, const Digest& digest) const {
   return absl::StrCat(client_->location().prefix, "grants/", tenant, "/", digest.hash, "-",
                       digest.size_bytes);
-}
-
-absl::StatusOr<bool> S3BlobStore::Contains(const Digest& digest) {
-  ASSIGN_OR_RETURN(std::optional<int64_t> size, client_->HeadObject(BlobKey(digest)));
-  return size.has_value() && *size == digest.size_bytes;
 }
 
 absl::StatusOr<std::vector<Digest>> S3BlobStore::FindMissing(const std::vector<Digest>& digests) {

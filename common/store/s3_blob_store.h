@@ -15,6 +15,12 @@
 //   upload under `uploads/`, reads it back and hashes it, and only then copies it to `cas/`
 //   (multipart copy above `copy_part_bytes`); a mismatch deletes it and nothing becomes visible.
 // - FindMissing is one HEAD per digest (never a bucket listing), 16 in flight; Stats lists `cas/`.
+// - Garbage collection (services/store/garbage_collection.h) reads an object's LastModified; every
+//   presence check (FindMissing, Put, Grant, FinishUpload, ...) that finds a blob last written
+//   longer than `touch_after_seconds` ago copies it onto itself (metadata replaced: S3's way to
+//   set the time; a multipart self-copy above `copy_part_bytes`), so a blob a client is about to
+//   reference again is young to the collector. Removal deletes the blob, then its grant under
+//   each tenant folder of `grants/`.
 // Abandoned multipart uploads are not visible and cost storage only: configure the bucket's
 // lifecycle rule AbortIncompleteMultipartUpload (docs/DEPLOY.md).
 #pragma once
@@ -35,6 +41,9 @@ struct S3StoreOptions {
   int64_t copy_part_bytes = int64_t{1} << 30;     // above this, copy to cas/ by multipart copy
   int64_t verify_chunk_bytes = int64_t{8} << 20;  // read-back chunk when verifying an upload
   int max_buffered_uploads = 16;  // uploads holding an unsent buffer; the oldest is dropped
+  // A blob found present and written longer ago than this is touched (see above): the collector's
+  // grace period must exceed it plus the longest time from a client's FindMissing to its Submit.
+  int64_t touch_after_seconds = 3600;
 
   absl::Status Validate() const;
 };
@@ -64,6 +73,10 @@ class S3BlobStore final : public BlobStore {
   absl::StatusOr<int64_t> TenantAppend(const std::string& tenant, const Digest& digest,
                                        int64_t offset, absl::string_view data) override;
   absl::Status TenantFinishUpload(const std::string& tenant, const Digest& digest) override;
+  absl::StatusOr<std::vector<StoredBlob>> ListBlobs() override;
+  absl::StatusOr<std::optional<std::chrono::system_clock::time_point>> BlobModified(
+      const Digest& digest) override;
+  absl::Status Remove(const Digest& digest) override;
 
   std::string BlobKey(const Digest& digest) const;
   // The upload's staging key: the shared one (space "") or a tenant's own.
@@ -86,7 +99,9 @@ class S3BlobStore final : public BlobStore {
 
   S3BlobStore(std::unique_ptr<S3Client> client, StoreOptions options, S3StoreOptions s3_options)
       : client_(std::move(client)), options_(options), s3_options_(s3_options) {}
+  // Whether the store holds the blob; touches it when found old (s3_collection.cc).
   absl::StatusOr<bool> Contains(const Digest& digest);
+  absl::Status Touch(const Digest& digest);
   std::shared_ptr<Upload> GetUpload(const std::string& key);
   void Forget(const std::string& key);
   void NoteBuffered(const std::string& key);  // LRU of uploads holding a buffer

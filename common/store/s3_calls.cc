@@ -8,6 +8,7 @@
 
 #include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
+#include "absl/time/time.h"
 #include "common/core/status.h"
 #include "common/store/s3_client.h"
 
@@ -56,6 +57,19 @@ std::string ContentMd5(absl::string_view body) {
   return std::string(reinterpret_cast<char*>(b64), static_cast<size_t>(n));
 }
 
+// S3's two time formats: ListObjectsV2's ISO 8601 (2026-12-07T13:00:00.000Z) and HTTP's
+// Last-Modified (Mon, 07 Dec 2026 13:00:00 GMT).
+absl::StatusOr<std::chrono::system_clock::time_point> ParseS3Time(const std::string& text,
+                                                                  bool http) {
+  absl::Time t;
+  std::string error;
+  if (!absl::ParseTime(http ? "%a, %d %b %Y %H:%M:%S GMT" : "%Y-%m-%d%ET%H:%M:%E*SZ", text,
+                       absl::UTCTimeZone(), &t, &error))
+    return absl::DataLossError(
+        absl::StrCat("S3: unreadable time '", text.substr(0, 40), "': ", error));
+  return std::chrono::time_point_cast<std::chrono::system_clock::duration>(absl::ToChronoTime(t));
+}
+
 }  // namespace
 
 absl::Status S3Client::HeadBucket() {
@@ -80,6 +94,20 @@ absl::StatusOr<std::optional<int64_t>> S3Client::HeadObject(const std::string& k
   if (!absl::SimpleAtoi(response.headers["content-length"], &size))
     return absl::DataLossError(absl::StrCat("S3 HEAD ", key, ": no Content-Length"));
   return std::optional<int64_t>(size);
+}
+
+absl::StatusOr<std::optional<S3Client::ObjectInfo>> S3Client::StatObject(const std::string& key) {
+  S3Request r;
+  r.method = "HEAD";
+  r.key = key;
+  ASSIGN_OR_RETURN(S3Response response, Send(r));
+  if (response.status == 404) return std::optional<ObjectInfo>();
+  if (response.status != 200) return ToStatus(r, response);
+  ObjectInfo info;
+  if (!absl::SimpleAtoi(response.headers["content-length"], &info.size))
+    return absl::DataLossError(absl::StrCat("S3 HEAD ", key, ": no Content-Length"));
+  ASSIGN_OR_RETURN(info.modified, ParseS3Time(response.headers["last-modified"], /*http=*/true));
+  return std::optional<ObjectInfo>(info);
 }
 
 absl::Status S3Client::PutObject(const std::string& key, absl::string_view bytes) {
@@ -115,6 +143,15 @@ absl::Status S3Client::CopyObject(const std::string& from_key, const std::string
   r.key = to_key;
   r.headers = {
       absl::StrCat("x-amz-copy-source: /", location_.bucket, "/", AwsUriEncode(from_key, true))};
+  return Call(r).status();
+}
+
+absl::Status S3Client::TouchObject(const std::string& key) {
+  S3Request r;
+  r.method = "PUT";
+  r.key = key;
+  r.headers = {absl::StrCat("x-amz-copy-source: /", location_.bucket, "/", AwsUriEncode(key, true)),
+               "x-amz-metadata-directive: REPLACE"};
   return Call(r).status();
 }
 
@@ -253,13 +290,37 @@ absl::StatusOr<std::vector<S3Client::Object>> S3Client::ListObjects(const std::s
     ASSIGN_OR_RETURN(S3Response response, Call(r));
     pugi::xml_document doc;
     ASSIGN_OR_RETURN(pugi::xml_node root, ParseXml(doc, response.body, "ListObjectsV2"));
-    for (pugi::xml_node c : root.children("Contents"))
-      objects.push_back({c.child_value("Key"), c.child("Size").text().as_llong()});
+    for (pugi::xml_node c : root.children("Contents")) {
+      ASSIGN_OR_RETURN(const auto modified,
+                       ParseS3Time(c.child_value("LastModified"), /*http=*/false));
+      objects.push_back({c.child_value("Key"), c.child("Size").text().as_llong(), modified});
+    }
     if (std::string(root.child_value("IsTruncated")) != "true" || objects.empty()) break;
     if (objects.back().key == after) break;
     after = objects.back().key;
   }
   return objects;
+}
+
+absl::StatusOr<std::vector<std::string>> S3Client::ListPrefixes(const std::string& prefix) {
+  std::vector<std::string> prefixes;
+  std::string after;
+  for (;;) {
+    S3Request r;
+    r.query = {{"list-type", "2"}, {"prefix", prefix}, {"delimiter", "/"}};
+    if (!after.empty()) r.query.push_back({"start-after", after});
+    ASSIGN_OR_RETURN(S3Response response, Call(r));
+    pugi::xml_document doc;
+    ASSIGN_OR_RETURN(pugi::xml_node root, ParseXml(doc, response.body, "ListObjectsV2"));
+    const size_t before = prefixes.size();
+    for (pugi::xml_node c : root.children("CommonPrefixes"))
+      prefixes.push_back(c.child_value("Prefix"));
+    if (std::string(root.child_value("IsTruncated")) != "true" || prefixes.size() == before) break;
+    // Past every key of the last folder: its trailing '/' raised to the next character ('0').
+    after = prefixes.back();
+    after.back() = '/' + 1;
+  }
+  return prefixes;
 }
 
 }  // namespace instascene::store

@@ -13,6 +13,7 @@
 // (a pool of curl handles keeps connections alive).
 #pragma once
 
+#include <chrono>
 #include <cstdint>
 #include <map>
 #include <memory>
@@ -67,12 +68,21 @@ class S3Client {
   absl::Status HeadBucket();
   // The object's size, or nullopt if it does not exist.
   absl::StatusOr<std::optional<int64_t>> HeadObject(const std::string& key);
+  struct ObjectInfo {
+    int64_t size = 0;
+    std::chrono::system_clock::time_point modified;  // Last-Modified (whole seconds)
+  };
+  // The object's size and modification time, or nullopt if it does not exist.
+  absl::StatusOr<std::optional<ObjectInfo>> StatObject(const std::string& key);
   absl::Status PutObject(const std::string& key, absl::string_view bytes);
   // Bytes [offset, offset + limit) (limit 0 = to the end).
   absl::StatusOr<std::string> GetObject(const std::string& key, int64_t offset = 0,
                                         int64_t limit = 0);
   absl::Status DeleteObject(const std::string& key);
   absl::Status CopyObject(const std::string& from_key, const std::string& to_key);
+  // Copies an object (up to 5 GiB) onto itself with its metadata replaced, which S3 allows and
+  // which sets its modification time to now (the store's "touch").
+  absl::Status TouchObject(const std::string& key);
 
   struct Part {
     int number = 0;
@@ -98,9 +108,13 @@ class S3Client {
   struct Object {
     std::string key;
     int64_t size = 0;
+    std::chrono::system_clock::time_point modified;  // LastModified
   };
   // Every object under `prefix` (all pages).
   absl::StatusOr<std::vector<Object>> ListObjects(const std::string& prefix);
+  // The "folders" directly under `prefix` (ListObjectsV2 with delimiter '/': its CommonPrefixes,
+  // each ending in '/'), all pages.
+  absl::StatusOr<std::vector<std::string>> ListPrefixes(const std::string& prefix);
 
  private:
   void* AcquireHandle();

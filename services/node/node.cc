@@ -6,7 +6,6 @@
 
 #include <spdlog/spdlog.h>
 
-#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "absl/strings/str_join.h"
 #include "common/core/file_io.h"
@@ -17,7 +16,7 @@
 #include "common/store/blob_store_uri.h"
 #include "services/gateway/gateway.h"
 #include "services/pipeline/memory.h"
-#include "services/scheduler/postgres_queue_store.h"
+#include "services/scheduler/queue_uri.h"
 #include "services/scheduler/scheduler_metrics.h"
 #include "services/scheduler/scheduler_service.h"
 #include "services/scheduler/sqlite_queue_store.h"
@@ -61,12 +60,7 @@ absl::StatusOr<std::unique_ptr<scheduler::JobQueue>> OpenQueue(
   if (q.empty())
     return scheduler::OpenSqliteJobQueue((fs::path(options.data_dir) / "jobs.db").string(),
                                          queue_options);
-  if (absl::StartsWith(q, "sqlite:"))
-    return scheduler::OpenSqliteJobQueue(q.substr(7), queue_options);
-  if (absl::StartsWith(q, "postgres://") || absl::StartsWith(q, "postgresql://"))
-    return scheduler::OpenPostgresJobQueue(q, queue_options);
-  return absl::InvalidArgumentError(
-      absl::StrCat("--queue: expected sqlite:PATH or postgres://..., not '", q.substr(0, 80), "'"));
+  return scheduler::OpenJobQueueUri(q, queue_options);
 }
 
 // Store contents and the data directory's disk, read at scrape time.

@@ -50,18 +50,18 @@ absl::Status MarkFromJobs(store::BlobStore& store, scheduler::JobQueue& queue,
 
 }  // namespace
 
-absl::StatusOr<GcReport> CollectGarbage(store::FilesystemBlobStore& store,
-                                        scheduler::JobQueue& queue, const GcOptions& options) {
+absl::StatusOr<GcReport> CollectGarbage(store::BlobStore& store, scheduler::JobQueue& queue,
+                                        const GcOptions& options) {
   if (options.grace.count() < 0 || options.page < 1) {
     return absl::InvalidArgumentError("gc: the grace period must be >= 0 and the page >= 1");
   }
+  const auto young_after = options.now.value_or(std::chrono::system_clock::now()) - options.grace;
   GcReport report;
+  // Listed before the roots are read (the header says why).
+  ASSIGN_OR_RETURN(const std::vector<store::StoredBlob> blobs, store.ListBlobs());
   std::set<std::string> live;
   RETURN_IF_ERROR(MarkFromJobs(store, queue, options, &live, &report));
-  ASSIGN_OR_RETURN(const std::vector<store::FilesystemBlobStore::StoredBlob> blobs,
-                   store.ListBlobs());
-  const auto young_after = std::filesystem::file_time_type::clock::now() - options.grace;
-  for (const store::FilesystemBlobStore::StoredBlob& b : blobs) {
+  for (const store::StoredBlob& b : blobs) {
     ++report.blobs;
     report.bytes += b.digest.size_bytes;
     if (live.count(b.digest.hash)) {
@@ -69,7 +69,14 @@ absl::StatusOr<GcReport> CollectGarbage(store::FilesystemBlobStore& store,
     } else if (b.modified > young_after) {
       ++report.young_blobs;
     } else {
-      if (!options.dry_run) RETURN_IF_ERROR(store.Remove(b.digest));
+      if (!options.dry_run) {
+        ASSIGN_OR_RETURN(const auto modified, store.BlobModified(b.digest));
+        if (!modified.has_value() || *modified > young_after) {
+          ++report.raced_blobs;
+          continue;
+        }
+        RETURN_IF_ERROR(store.Remove(b.digest));
+      }
       ++report.removed_blobs;
       report.removed_bytes += b.digest.size_bytes;
     }

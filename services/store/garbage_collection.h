@@ -1,16 +1,23 @@
-// services/store/garbage_collection.h: garbage collection of the embedded default's filesystem
-// store. The roots are the job queue's jobs, in any state: each job's scene manifest and, once it
-// succeeded, its output manifest, with every file they list. A blob no root reaches is removed
-// (with its tenants' grants) once its file is older than the grace period: a client uploads a
-// scene's files before it submits the scene, and FindMissing / Put make a blob young again when
-// they find it present, so a blob about to be referenced is never collected.
+// services/store/garbage_collection.h: garbage collection of the content-addressed store, for the
+// embedded default (filesystem store + SQLite queue, offline) and for scale-out (S3 + PostgreSQL,
+// with the services running). The roots are the job queue's jobs, in any state: each job's scene
+// manifest and, once it succeeded, its output manifest, with every file they list. A blob no root
+// reaches is removed (with its tenants' grants) once it is older than the grace period.
 //
-// Offline: the caller opens the store and the queue, which takes both folders' file locks, so no
-// node can serve them meanwhile (`instascene gc` refuses a data directory in use).
+// Why concurrent clients stay safe: a client uploads a scene's files before it submits the scene
+// (new blobs are young), and FindMissing / Put make a blob they find present young again (the
+// filesystem store on every check, S3 when it was written over `touch_after_seconds` ago). The
+// collector lists the blobs first and reads the roots after, so a job submitted after the roots
+// were read references only blobs young at the listing, provided the grace period exceeds the
+// touch interval plus the longest FindMissing-to-Submit time. Each blob's time is read again
+// just before its removal; what remains is the one round trip between that read and the delete,
+// and a job that loses a blob there fails with NotFound naming it (submitting again re-uploads
+// it).
 #pragma once
 
 #include <chrono>
 #include <cstdint>
+#include <optional>
 
 #include "absl/status/statusor.h"
 #include "common/store/blob_store.h"
@@ -22,6 +29,8 @@ struct GcOptions {
   std::chrono::seconds grace{24 * 3600};  // unreachable blobs younger than this stay
   bool dry_run = false;                   // count what would be removed, remove nothing
   int page = 1000;                        // jobs read per query
+  // The collection's clock (tests move it; unset: the system clock when the collection starts).
+  std::optional<std::chrono::system_clock::time_point> now;
 };
 
 struct GcReport {
@@ -31,11 +40,14 @@ struct GcReport {
   int64_t young_blobs = 0;                       // unreachable but inside the grace period
   int64_t removed_blobs = 0, removed_bytes = 0;  // (would be, with dry_run)
   int64_t missing_manifests = 0;                 // referenced by a job but not in the store
+  int64_t raced_blobs = 0;  // old at the listing but gone or young again at removal: kept
 };
 
-// Marks from every job, then sweeps. Stops before removing anything if a manifest a job names
-// cannot be read for another reason than its absence (a damaged manifest could hide live blobs).
-absl::StatusOr<GcReport> CollectGarbage(store::FilesystemBlobStore& store,
-                                        scheduler::JobQueue& queue, const GcOptions& options);
+// Lists the blobs, marks from every job, then sweeps. Stops before removing anything if a
+// manifest a job names cannot be read for another reason than its absence (a damaged manifest
+// could hide live blobs). The store must implement ListBlobs / BlobModified / Remove (file: and
+// s3:// storage; a store service's client does not).
+absl::StatusOr<GcReport> CollectGarbage(store::BlobStore& store, scheduler::JobQueue& queue,
+                                        const GcOptions& options);
 
 }  // namespace instascene::store_service

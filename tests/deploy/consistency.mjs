@@ -3,8 +3,10 @@
 // container port is the port its --listen argument binds (the port named "metrics": its --metrics
 // argument, which the pod's prometheus.io/port annotation names too); every container checks
 // tokens from the instascene-auth Secret, and one that reaches other services has its own token
-// (the gateway: none at all, callers' tokens pass through; HTTP probes on its --listen port). Usage: node consistency.mjs BIN_DIR
+// (the gateway: none at all, callers' tokens pass through; HTTP probes on its --listen port); every
+// CronJob runs the CLI with flags its subcommand takes. Usage: node consistency.mjs BIN_DIR
 // DOCKERFILE FILE.yaml... Prints "N passed, N failed"; exits 1 on any mismatch.
+import { execFileSync } from "node:child_process";
 import { existsSync, readFileSync } from "node:fs";
 import { basename, join } from "node:path";
 import yaml from "js-yaml";
@@ -20,8 +22,33 @@ const check = (ok, what) => {
     console.log(`FAIL ${what}`);
   }
 };
+// A CronJob runs a command of the CLI (BIN_DIR/../clients/cli/instascene, the Dockerfile's `cli`
+// target): its subcommand must take every flag the manifest gives it (its --help lists them).
+const cli = join(binDir, "..", "clients", "cli", "instascene");
+const checkCronJob = (file, doc) => {
+  for (const c of doc.spec.jobTemplate.spec.template.spec.containers) {
+    const what = `${file}: ${doc.metadata.name}/${c.name}`;
+    const command = (c.command ?? [])[0] ?? "";
+    check(basename(command) === "instascene" && existsSync(cli), `${what}: ${command} is not the CLI ${cli}`);
+    check(docker.includes(`ENTRYPOINT ["${command}"]`), `${what}: no Dockerfile ENTRYPOINT ${command}`);
+    const [sub, ...args] = c.args ?? [];
+    let help = "";
+    try {
+      help = execFileSync(cli, [sub, "--help"], { encoding: "utf8" });
+    } catch (e) {
+      help = "";
+    }
+    check(help.length > 0, `${what}: \`instascene ${sub} --help\` failed`);
+    for (const a of args.filter((x) => x.startsWith("--"))) {
+      const flag = a.split("=")[0];
+      const listed = new RegExp(`(^|[\\s,])${flag}(?![\\w-])`, "m").test(help);
+      check(listed, `${what}: instascene ${sub} takes no ${flag}`);
+    }
+  }
+};
 for (const file of files) {
   for (const doc of yaml.loadAll(readFileSync(file, "utf8")).filter((d) => d)) {
+    if (doc.kind === "CronJob") checkCronJob(file, doc);
     if (doc.kind !== "Deployment") continue;
     for (const c of doc.spec.template.spec.containers) {
       const what = `${file}: ${doc.metadata.name}/${c.name}`;

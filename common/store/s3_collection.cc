@@ -1,0 +1,71 @@
+// S3BlobStore's side of garbage collection (s3_blob_store.h): presence checks that keep a blob
+// about to be referenced young, the listing of `cas/` with modification times, and removal of a
+// blob with its grants.
+#include <algorithm>
+
+#include "absl/strings/match.h"
+#include "absl/strings/str_cat.h"
+#include "common/core/status.h"
+#include "common/store/s3_blob_store.h"
+
+namespace instascene::store {
+
+absl::StatusOr<bool> S3BlobStore::Contains(const Digest& digest) {
+  ASSIGN_OR_RETURN(std::optional<S3Client::ObjectInfo> info, client_->StatObject(BlobKey(digest)));
+  if (!info.has_value() || info->size != digest.size_bytes) return false;
+  if (std::chrono::system_clock::now() - info->modified >
+      std::chrono::seconds(s3_options_.touch_after_seconds)) {
+    // A failed touch fails the call: a collector could otherwise remove what the caller is about
+    // to reference (every caller retries on Unavailable).
+    RETURN_IF_ERROR(Touch(digest));
+  }
+  return true;
+}
+
+absl::Status S3BlobStore::Touch(const Digest& digest) {
+  // One copy request up to copy_part_bytes (<= 5 GiB, S3's limit of a copy); above, the
+  // multipart copy FinishUpload uses, here from the blob onto itself.
+  if (digest.size_bytes <= s3_options_.copy_part_bytes)
+    return client_->TouchObject(BlobKey(digest));
+  return CopyToBlob(BlobKey(digest), digest);
+}
+
+absl::StatusOr<std::vector<StoredBlob>> S3BlobStore::ListBlobs() {
+  const std::string prefix = absl::StrCat(client_->location().prefix, "cas/");
+  ASSIGN_OR_RETURN(std::vector<S3Client::Object> objects, client_->ListObjects(prefix));
+  std::vector<StoredBlob> blobs;
+  for (const S3Client::Object& o : objects) {
+    StoredBlob b;
+    b.digest.hash = o.key.substr(prefix.size());
+    b.digest.size_bytes = o.size;
+    if (!ValidateDigest(b.digest).ok()) continue;  // not a blob (nothing else lives there)
+    b.modified = o.modified;
+    blobs.push_back(std::move(b));
+  }
+  std::sort(blobs.begin(), blobs.end(),
+            [](const StoredBlob& a, const StoredBlob& b) { return a.digest.hash < b.digest.hash; });
+  return blobs;
+}
+
+absl::StatusOr<std::optional<std::chrono::system_clock::time_point>> S3BlobStore::BlobModified(
+    const Digest& digest) {
+  RETURN_IF_ERROR(ValidateDigest(digest));
+  ASSIGN_OR_RETURN(std::optional<S3Client::ObjectInfo> info, client_->StatObject(BlobKey(digest)));
+  if (!info.has_value()) return std::optional<std::chrono::system_clock::time_point>();
+  return std::optional(info->modified);
+}
+
+absl::Status S3BlobStore::Remove(const Digest& digest) {
+  RETURN_IF_ERROR(ValidateDigest(digest));
+  RETURN_IF_ERROR(client_->DeleteObject(BlobKey(digest)));  // S3 answers 204 for an absent key
+  const std::string grants = absl::StrCat(client_->location().prefix, "grants/");
+  ASSIGN_OR_RETURN(const std::vector<std::string> tenants, client_->ListPrefixes(grants));
+  for (const std::string& folder : tenants) {
+    const std::string tenant = folder.substr(grants.size(), folder.size() - grants.size() - 1);
+    if (!CheckTenantName(tenant).ok()) continue;  // not a tenant's folder
+    RETURN_IF_ERROR(client_->DeleteObject(GrantKey(tenant, digest)));
+  }
+  return absl::OkStatus();
+}
+
+}  // namespace instascene::store
