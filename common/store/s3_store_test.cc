@@ -25,9 +25,8 @@ namespace {
 using instascene::testing::RandomBytes;
 using store::testing::BlobStoreConformanceTest;
 using store::testing::S3Server;
+using store::testing::SharedS3Server;
 constexpr int64_t kMiB = int64_t{1} << 20;
-
-S3Server* server = nullptr;  // one for the whole binary (main)
 
 std::string UniquePrefix() {
   static int counter = 0;
@@ -44,9 +43,9 @@ S3StoreOptions SmallParts() {
 class S3Backend : public store::testing::BlobStoreBackend {
  public:
   absl::StatusOr<std::unique_ptr<BlobStore>> Open(const StoreOptions& options) override {
-    ASSIGN_OR_RETURN(
-        std::unique_ptr<S3BlobStore> store,
-        S3BlobStore::Open(server->Location(prefix_), server->credentials(), options, SmallParts()));
+    ASSIGN_OR_RETURN(std::unique_ptr<S3BlobStore> store,
+                     S3BlobStore::Open(SharedS3Server().Location(prefix_),
+                                       SharedS3Server().credentials(), options, SmallParts()));
     return std::unique_ptr<BlobStore>(std::move(store));
   }
   int64_t resume_loss_bytes() const override { return 5 * kMiB - 1; }
@@ -62,8 +61,8 @@ INSTANTIATE_TEST_SUITE_P(S3, BlobStoreConformanceTest,
 
 std::unique_ptr<S3BlobStore> OpenS3(const std::string& prefix, S3StoreOptions s3 = SmallParts(),
                                     S3ClientOptions client = {}) {
-  auto store = S3BlobStore::Open(server->Location(prefix), server->credentials(), StoreOptions{},
-                                 s3, client);
+  auto store = S3BlobStore::Open(SharedS3Server().Location(prefix), SharedS3Server().credentials(),
+                                 StoreOptions{}, s3, client);
   EXPECT_TRUE(store.ok()) << store.status();
   return store.ok() ? std::move(*store) : nullptr;
 }
@@ -220,38 +219,41 @@ TEST(S3CredentialsTest, EnvironmentThenSharedFile) {
 }
 
 TEST(S3ClientTest, WrongSecretIsRefusedBySignatureCheckAndNeverEchoed) {
-  S3Credentials wrong = server->credentials();
+  S3Credentials wrong = SharedS3Server().credentials();
   wrong.secret_access_key = "not-the-secret-0123456789";
-  auto store = S3BlobStore::Open(server->Location("wrong"), wrong, StoreOptions{});
+  auto store = S3BlobStore::Open(SharedS3Server().Location("wrong"), wrong, StoreOptions{});
   EXPECT_EQ(store.status().code(), absl::StatusCode::kPermissionDenied) << store.status();
   EXPECT_NE(store.status().message().find("SignatureDoesNotMatch"), std::string::npos)
       << store.status();
   EXPECT_EQ(store.status().message().find("not-the-secret"), std::string::npos);
-  S3Location missing = server->Location("x");
+  S3Location missing = SharedS3Server().Location("x");
   missing.bucket = "no-such-bucket";
-  store = S3BlobStore::Open(missing, server->credentials(), StoreOptions{});
+  store = S3BlobStore::Open(missing, SharedS3Server().credentials(), StoreOptions{});
   EXPECT_EQ(store.status().code(), absl::StatusCode::kNotFound) << store.status();
 }
 
 TEST(S3ClientTest, UnreachableEndpointIsUnavailable) {
-  S3Location nowhere = server->Location("x");
+  S3Location nowhere = SharedS3Server().Location("x");
   nowhere.endpoint = "http://127.0.0.1:1";
   S3ClientOptions client;
   client.max_attempts = 2;
   client.initial_backoff_ms = 1;
-  auto store = S3BlobStore::Open(nowhere, server->credentials(), StoreOptions{}, {}, client);
+  auto store =
+      S3BlobStore::Open(nowhere, SharedS3Server().credentials(), StoreOptions{}, {}, client);
   EXPECT_EQ(store.status().code(), absl::StatusCode::kUnavailable) << store.status();
 }
 
 TEST(S3ClientTest, VirtualHostedAddressing) {
   // bucket.s3.test resolves to the local server, as bucket.s3.REGION.amazonaws.com would to AWS.
-  const std::string port = server->endpoint().substr(server->endpoint().rfind(':') + 1);
-  S3Location loc = server->Location("virtual");
+  const std::string port =
+      SharedS3Server().endpoint().substr(SharedS3Server().endpoint().rfind(':') + 1);
+  S3Location loc = SharedS3Server().Location("virtual");
   loc.endpoint = absl::StrCat("http://s3.test:", port);
   loc.path_style = false;
   S3ClientOptions client;
-  client.resolve = {absl::StrCat(server->bucket(), ".s3.test:", port, ":127.0.0.1")};
-  auto store = S3BlobStore::Open(loc, server->credentials(), StoreOptions{}, SmallParts(), client);
+  client.resolve = {absl::StrCat(SharedS3Server().bucket(), ".s3.test:", port, ":127.0.0.1")};
+  auto store =
+      S3BlobStore::Open(loc, SharedS3Server().credentials(), StoreOptions{}, SmallParts(), client);
   ASSERT_TRUE(store.ok()) << store.status();
   const std::string data = RandomBytes(3000, 41);
   const Digest d = ComputeDigest(data);
@@ -319,10 +321,11 @@ TEST(S3BlobStoreTest, BufferedBytesAreBoundedAndADroppedBufferIsResent) {
 }
 
 TEST(S3BlobStoreTest, StoreUriOpensS3WithEnvironmentCredentials) {
-  ::setenv("AWS_ACCESS_KEY_ID", server->credentials().access_key_id.c_str(), 1);
-  ::setenv("AWS_SECRET_ACCESS_KEY", server->credentials().secret_access_key.c_str(), 1);
-  const std::string uri = absl::StrCat(
-      "s3://", server->bucket(), "/uri?endpoint=", server->endpoint(), "&query_slash=literal");
+  ::setenv("AWS_ACCESS_KEY_ID", SharedS3Server().credentials().access_key_id.c_str(), 1);
+  ::setenv("AWS_SECRET_ACCESS_KEY", SharedS3Server().credentials().secret_access_key.c_str(), 1);
+  const std::string uri =
+      absl::StrCat("s3://", SharedS3Server().bucket(),
+                   "/uri?endpoint=", SharedS3Server().endpoint(), "&query_slash=literal");
   auto store = OpenBlobStoreUri(uri, StoreOptions{});
   ::unsetenv("AWS_ACCESS_KEY_ID");
   ::unsetenv("AWS_SECRET_ACCESS_KEY");
@@ -335,14 +338,3 @@ TEST(S3BlobStoreTest, StoreUriOpensS3WithEnvironmentCredentials) {
 
 }  // namespace
 }  // namespace instascene::store
-
-int main(int argc, char** argv) {
-  ::testing::InitGoogleTest(&argc, argv);
-  auto server = instascene::store::testing::S3Server::Start();
-  if (!server.ok()) {
-    std::fprintf(stderr, "FAIL: %s\n", server.status().ToString().c_str());
-    return 1;
-  }
-  instascene::store::server = server->get();
-  return RUN_ALL_TESTS();
-}

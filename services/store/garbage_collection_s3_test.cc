@@ -5,47 +5,31 @@
 // pairing with PostgreSQL and running services is tests/cluster_test.sh.
 #include <gtest/gtest.h>
 
-#include <cstdio>
-
-#include "common/core/testing/temp_dir.h"
-#include "common/store/manifest.h"
 #include "common/store/s3_blob_store.h"
 #include "common/store/testing/s3_server.h"
-#include "services/scheduler/sqlite_queue_store.h"
 #include "services/store/garbage_collection.h"
+#include "services/store/testing/gc_fixture.h"
 
 namespace instascene::store_service {
 namespace {
 
-store::testing::S3Server* server = nullptr;  // one for the whole binary (main)
+using store::testing::SharedS3Server;
 
-class S3GarbageCollectionTest : public ::testing::Test {
+class S3GarbageCollectionTest : public testing::GcFixture {
  protected:
   void SetUp() override {
     static int counter = 0;
     prefix_ = "gc" + std::to_string(++counter);
     store_ = OpenStore({});
-    auto queue = scheduler::OpenSqliteJobQueue((temp_.path() / "jobs.db").string(), {});
-    ASSERT_TRUE(queue.ok()) << queue.status();
-    queue_ = std::move(*queue);
+    ASSERT_NE(store_, nullptr);
+    OpenQueue();
   }
+  store::BlobStore& blobs() override { return *store_; }
   std::unique_ptr<store::S3BlobStore> OpenStore(const store::S3StoreOptions& options) {
-    auto s =
-        store::S3BlobStore::Open(server->Location(prefix_), server->credentials(), {}, options);
+    auto s = store::S3BlobStore::Open(SharedS3Server().Location(prefix_),
+                                      SharedS3Server().credentials(), {}, options);
     EXPECT_TRUE(s.ok()) << s.status();
     return s.ok() ? std::move(*s) : nullptr;
-  }
-  store::Digest Blob(const std::string& bytes) {
-    const store::Digest d = store::ComputeDigest(bytes);
-    EXPECT_TRUE(store_->Put(d, bytes).ok());
-    return d;
-  }
-  store::Digest StoredManifest(const std::string& kind,
-                               const std::map<std::string, std::string>& files) {
-    store::Manifest m;
-    m.kind = kind;
-    for (const auto& [name, bytes] : files) m.files[name] = Blob(bytes);
-    return Blob(store::SerializeManifest(m));
   }
   bool Exists(const std::string& key) {
     auto size = store_->client().HeadObject(key);
@@ -62,23 +46,14 @@ class S3GarbageCollectionTest : public ::testing::Test {
     return CollectGarbage(*store_, *queue_, o);
   }
 
-  instascene::testing::ScopedTempDir temp_{"gc-s3"};
   std::string prefix_;
   std::unique_ptr<store::S3BlobStore> store_;
-  std::unique_ptr<scheduler::JobQueue> queue_;
 };
 
 TEST_F(S3GarbageCollectionTest, WhatJobsReachStaysAndOldUnreachableBlobsGoWithTheirGrants) {
   const store::Digest scene = StoredManifest("scene", {{"scene.json", "{}"}, {"g.ply", "splat"}});
   const store::Digest output = StoredManifest("decompose", {{"labels.ply", "labels"}});
-  scheduler::SubmitRequest request;
-  request.scene = "s";
-  request.scene_manifest = scene;
-  request.stages = {{"decompose", {{"p", 1}}, {}}};
-  ASSERT_TRUE(queue_->Submit(request).ok());
-  auto lease = queue_->LeaseNext({"decompose"}, "w");
-  ASSERT_TRUE(lease.ok() && lease->has_value());
-  ASSERT_TRUE(queue_->Complete((*lease)->job.id, (*lease)->token, output).ok());
+  SucceededJob("s", scene, output);
   const store::Digest orphan = Blob("orphan");
   ASSERT_TRUE(store_->Grant("acme", {orphan}).ok());
   ASSERT_TRUE(store_->Grant("beta", {orphan}).ok());
@@ -161,14 +136,3 @@ TEST_F(S3GarbageCollectionTest, APresenceCheckTouchesABlobWrittenLongAgo) {
 
 }  // namespace
 }  // namespace instascene::store_service
-
-int main(int argc, char** argv) {
-  ::testing::InitGoogleTest(&argc, argv);
-  auto server = instascene::store::testing::S3Server::Start();
-  if (!server.ok()) {
-    std::fprintf(stderr, "FAIL: %s\n", server.status().ToString().c_str());
-    return 1;
-  }
-  instascene::store_service::server = server->get();
-  return RUN_ALL_TESTS();
-}

@@ -8,66 +8,38 @@
 #include <filesystem>
 #include <fstream>
 
-#include "common/core/testing/temp_dir.h"
-#include "common/store/manifest.h"
-#include "services/scheduler/sqlite_queue_store.h"
+#include "services/store/testing/gc_fixture.h"
 
 namespace instascene::store_service {
 namespace {
 
 namespace fs = std::filesystem;
 
-class GarbageCollectionTest : public ::testing::Test {
+class GarbageCollectionTest : public testing::GcFixture {
  protected:
   void SetUp() override {
     auto blobs = store::FilesystemBlobStore::Open(temp_.Sub("store"), {});
     ASSERT_TRUE(blobs.ok()) << blobs.status();
     store_ = std::move(*blobs);
-    auto queue = scheduler::OpenSqliteJobQueue((temp_.path() / "jobs.db").string(), {});
-    ASSERT_TRUE(queue.ok()) << queue.status();
-    queue_ = std::move(*queue);
+    OpenQueue();
   }
+  store::BlobStore& blobs() override { return *store_; }
 
-  store::Digest Blob(const std::string& bytes) {
-    const store::Digest d = store::ComputeDigest(bytes);
-    EXPECT_TRUE(store_->Put(d, bytes).ok());
-    return d;
-  }
-  // A manifest of `files` (name -> bytes), stored with its files.
-  store::Digest StoredManifest(const std::string& kind,
-                               const std::map<std::string, std::string>& files) {
-    store::Manifest m;
-    m.kind = kind;
-    for (const auto& [name, bytes] : files) m.files[name] = Blob(bytes);
-    return Blob(store::SerializeManifest(m));
-  }
   void MakeOld(const store::Digest& d) {
     fs::last_write_time(store_->BlobPath(d),
                         fs::file_time_type::clock::now() - std::chrono::hours(48));
   }
   bool Has(const store::Digest& d) { return fs::exists(store_->BlobPath(d)); }
 
-  instascene::testing::ScopedTempDir temp_{"gc"};
   std::unique_ptr<store::FilesystemBlobStore> store_;
-  std::unique_ptr<scheduler::JobQueue> queue_;
 };
 
 TEST_F(GarbageCollectionTest, WhatJobsReachStaysAndOldUnreachableBlobsGo) {
   const store::Digest scene = StoredManifest("scene", {{"scene.json", "{}"}, {"g.ply", "splat"}});
   const store::Digest output = StoredManifest("decompose", {{"labels.ply", "labels"}});
-  scheduler::SubmitRequest request;
-  request.scene = "s";
-  request.scene_manifest = scene;
-  request.stages = {{"decompose", {{"p", 1}}, {}}};
-  ASSERT_TRUE(queue_->Submit(request).ok());
-  auto lease = queue_->LeaseNext({"decompose"}, "w");
-  ASSERT_TRUE(lease.ok() && lease->has_value());
-  ASSERT_TRUE(queue_->Complete((*lease)->job.id, (*lease)->token, output).ok());
+  SucceededJob("s", scene, output);
   // A job naming a manifest the store does not hold: it reaches nothing, and is counted.
-  scheduler::SubmitRequest absent = request;
-  absent.scene = "t";
-  absent.scene_manifest = store::ComputeDigest("never stored");
-  ASSERT_TRUE(queue_->Submit(absent).ok());
+  ASSERT_TRUE(queue_->Submit(Request("t", store::ComputeDigest("never stored"))).ok());
   // Unreachable: an old orphan (granted to a tenant), a young one (an upload not yet submitted),
   // and an old manifest no job names, with its file.
   const store::Digest old_orphan = Blob("old orphan");
@@ -129,12 +101,7 @@ TEST_F(GarbageCollectionTest, ABlobFoundPresentIsYoungAgain) {
 }
 
 TEST_F(GarbageCollectionTest, ADamagedRootStopsTheCollectionBeforeAnyRemoval) {
-  const store::Digest not_a_manifest = Blob("this is not a manifest");
-  scheduler::SubmitRequest request;
-  request.scene = "s";
-  request.scene_manifest = not_a_manifest;
-  request.stages = {{"decompose", {{"p", 1}}, {}}};
-  ASSERT_TRUE(queue_->Submit(request).ok());
+  ASSERT_TRUE(queue_->Submit(Request("s", Blob("this is not a manifest"))).ok());
   const store::Digest orphan = Blob("orphan");
   MakeOld(orphan);
   absl::StatusOr<GcReport> r = CollectGarbage(*store_, *queue_, {});

@@ -35,4 +35,8 @@ class S3Server {
   S3Credentials credentials_;
 };
 
+// The test binary's one server, started by the `main` of s3_test_main.cc (link the object library
+// instascene_s3_test_main), which runs every test after it started.
+S3Server& SharedS3Server();
+
 }  // namespace instascene::store::testing
