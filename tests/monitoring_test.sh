@@ -3,7 +3,8 @@
 # alerts' unit tests (deploy/monitoring/); a pipeline through `instascene serve --metrics` shows
 # up in /metrics (jobs by stage and state, queue waits, leases, finished jobs, worker durations,
 # RPC latencies, store and disk, the Objects service's index cache), and `promtool check metrics` passes on the output of serve and
-# of every per-service binary. Prints "N passed, N failed"; exits 1 on any failure.
+# of every per-service binary; the Grafana dashboard's every query evaluates on a real Prometheus
+# scraping them. Prints "N passed, N failed"; exits 1 on any failure.
 set -uo pipefail
 BIN=$1      # the instascene command
 BINDIR=$2   # folder with instascene-store, -scheduler, -decomposition, -training, -generation, -objects
@@ -99,6 +100,30 @@ check "the scheduler reports the queue" grep -q '^# TYPE instascene_jobs gauge' 
 check "the store reports its blobs" grep -q '^instascene_store_blobs ' "$WORK/m-store.txt"
 check "instascene-objects reports its index cache" grep -q '^instascene_objects_index_cache_entries 0' "$WORK/m-objects.txt"
 check "a worker reports no store of its own" test "$(metric "$WORK/m-training.txt" '^instascene_store_blobs ')" = absent
+
+# 3. The Grafana dashboard against a real Prometheus scraping all of the above every second: every
+# panel's query evaluates and (but for a documented few) returns data (tests/monitoring/).
+targets="\"$METRICS\""
+for svc in store sched decomposition training generation objects gateway; do
+  targets="$targets, \"$(sed -n 's/^metrics=//p' "$WORK/r-$svc")\""
+done
+printf 'global:\n  scrape_interval: 1s\nscrape_configs:\n  - job_name: instascene\n    static_configs:\n      - targets: [%s]\n' \
+  "$targets" >"$WORK/prometheus.yml"
+check "promtool check config (the test's Prometheus)" promtool check config "$WORK/prometheus.yml"
+prometheus --config.file="$WORK/prometheus.yml" --storage.tsdb.path="$WORK/tsdb" \
+  --web.listen-address=127.0.0.1:0 >"$WORK/prometheus.log" 2>&1 8>&- 9>&- &
+PIDS+=("$!")
+PROM=""
+for _ in $(seq 300); do  # its log names the bound port (30 s at most)
+  PROM=$(sed -n 's/.*msg="Listening on" address=\([0-9.:]*\).*/\1/p' "$WORK/prometheus.log")
+  [ -n "$PROM" ] && break
+  sleep 0.1
+done
+check "Prometheus started" test -n "$PROM"
+check "the dashboard's every query on real data (deploy/monitoring/grafana)" \
+  python3 "$(dirname "$0")/monitoring/dashboard_check.py" "$MON/grafana/instascene.json" "http://$PROM" 8 \
+  "$WORK/serve.txt" "$WORK"/m-*.txt
+tail -n 1 "$WORK/out.txt"
 
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]
