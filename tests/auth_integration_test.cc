@@ -1,7 +1,8 @@
 // Authentication and tenants across the services in one process over loopback gRPC: every method
 // of every service refuses a call without a valid token; roles limit what a token may call; two
 // tenants share the store and the queue and see nothing of each other (scenes, jobs, blobs), while
-// workers and admins see everything; a completed job's outputs are granted to its tenant only.
+// workers and admins see everything; a completed job's outputs are granted to its tenant only; a
+// tenant's unfinished jobs are bounded.
 #include <grpcpp/generic/generic_stub.h>
 #include <gtest/gtest.h>
 
@@ -41,7 +42,9 @@ class AuthTest : public ::testing::Test {
     admin_ = *auth::CreateToken(tokens, Role::kAdmin, "", "");
     auth_ = *auth::Authenticator::FromFile(tokens, std::chrono::milliseconds(0));  // no wait
     store_ = std::move(*store::FilesystemBlobStore::Open(root + "/store", {}));
-    queue_ = std::move(*scheduler::OpenSqliteJobQueue(root + "/jobs.db", {}));
+    scheduler::QueueOptions queue_options;
+    queue_options.max_unfinished_per_tenant = 1;  // one job in flight per tenant
+    queue_ = std::move(*scheduler::OpenSqliteJobQueue(root + "/jobs.db", queue_options));
     pipeline::StageSpec echo;
     echo.kind = "echo";
     echo.canonicalize = [](const nlohmann::json& p) -> absl::StatusOr<nlohmann::json> { return p; };
@@ -89,7 +92,7 @@ class AuthTest : public ::testing::Test {
   }
   // Uploads the scene as `token`'s tenant and submits the echo stage for it.
   grpc::Status Submit(const std::string& token, v1::SubmitPipelineResponse* response,
-                      bool upload = true) {
+                      bool upload = true, const std::string& parameters_json = "") {
     auto manifest = *store::SceneManifestFromDirectory(scene_dir_);
     store::Digest digest = store::ComputeDigest(store::SerializeManifest(manifest));
     if (upload) digest = store::UploadManifest(*Store(token), manifest, scene_dir_)->manifest;
@@ -97,6 +100,7 @@ class AuthTest : public ::testing::Test {
     rpc::ToProto(digest, request.mutable_scene_manifest());
     request.set_scene("tiny");
     request.add_stages("echo");
+    request.set_parameters_json(parameters_json);
     grpc::ClientContext context;
     return v1::Scheduler::NewStub(Channel(token))->SubmitPipeline(&context, request, response);
   }
@@ -184,6 +188,27 @@ TEST_F(AuthTest, RolesLimitWhatATokenMayCall) {
   EXPECT_EQ(code(admin_, "/instascene.v1.Scheduler/GetQueueStats"), grpc::StatusCode::OK);
   EXPECT_EQ(code(admin_, "/instascene.v1.Decomposition/GetWorkerStatus"), grpc::StatusCode::OK);
   EXPECT_EQ(code(acme_, "/instascene.v1.Scheduler/ListStages"), grpc::StatusCode::OK);
+}
+
+TEST_F(AuthTest, ATenantsUnfinishedJobsAreBoundedOthersAreNot) {
+  v1::SubmitPipelineResponse r;
+  ASSERT_TRUE(Submit(acme_, &r).ok());
+  const std::string other = R"({"echo": {"n": 2}})";  // another job of the same scene
+  const grpc::Status over = Submit(acme_, &r, true, other);
+  EXPECT_EQ(over.error_code(), grpc::StatusCode::RESOURCE_EXHAUSTED);
+  EXPECT_NE(over.error_message().find("over its limit of 1"), std::string::npos)
+      << over.error_message();
+  EXPECT_TRUE(Submit(acme_, &r).ok()) << "resubmitting what it holds adds nothing";
+  EXPECT_TRUE(Submit(beta_, &r).ok()) << "another tenant has its own budget";
+  EXPECT_TRUE(Submit(admin_, &r, true, other).ok()) << "admins' scenes have no tenant";
+  grpc::ClientContext context;
+  v1::ListJobsResponse listed;
+  ASSERT_TRUE(v1::Scheduler::NewStub(Channel(admin_))
+                  ->ListJobs(&context, v1::ListJobsRequest(), &listed)
+                  .ok());
+  std::multiset<std::string> scenes;
+  for (const v1::Job& j : listed.jobs()) scenes.insert(j.scene());
+  EXPECT_EQ(scenes, (std::multiset<std::string>{"acme:tiny", "beta:tiny", "tiny"}));
 }
 
 TEST_F(AuthTest, TenantsSeeNothingOfEachOtherAndOutputsAreGrantedToTheirTenant) {

@@ -46,6 +46,8 @@ absl::Status NodeOptions::Validate() const {
   if (index_cache_bytes < 0) return absl::InvalidArgumentError("--index-cache-bytes must be >= 0");
   if (!(retention_hours >= 0 && retention_hours <= 24 * 3650))
     return absl::InvalidArgumentError("--retention-hours must be in [0, 87600]");
+  if (max_unfinished_per_tenant < 0)
+    return absl::InvalidArgumentError("--max-unfinished-jobs-per-tenant must be >= 0");
   if (no_auth && !auth_tokens.empty())
     return absl::InvalidArgumentError("--no-auth and --auth-tokens contradict each other");
   RETURN_IF_ERROR(rpc::ValidateChannelOptions(peer_tls));
@@ -225,6 +227,7 @@ absl::Status Node::AddScheduler() {
   scheduler::QueueOptions queue_options;
   queue_options.lease_ms = int64_t{options_.lease_seconds} * 1000;
   queue_options.max_lease_ms = std::max(queue_options.max_lease_ms, queue_options.lease_ms);
+  queue_options.max_unfinished_per_tenant = options_.max_unfinished_per_tenant;
   for (const std::string& kind : stages_.Kinds()) {
     if (stages_.Find(kind)->spec.partial_join) queue_options.partial_join_kinds.insert(kind);
   }

@@ -42,12 +42,13 @@ struct NodeOptions {
   // URI "postgres://HOST[:PORT]/DB?..." (scale-out; several schedulers may share it). Passwords
   // come from PGPASSWORD or ~/.pgpass, never from this flag.
   std::string queue;
-  std::string scheduler_address;            // where the scheduler is when !run_scheduler
-  double retention_hours = 0;               // scheduler: prune jobs finished longer ago (0 = keep)
-  int lease_seconds = 30;                   // job lease length; heartbeats renew it every lease/4
-  int drain_seconds = 30;                   // SIGTERM: how long running jobs may take to finish
-  int num_threads = 0;                      // per job; 0 = all cores
-  int64_t cache_bytes = int64_t{20} << 30;  // per worker: input cache budget (0 = unlimited)
+  std::string scheduler_address;             // where the scheduler is when !run_scheduler
+  double retention_hours = 0;                // scheduler: prune jobs finished longer ago (0 = keep)
+  int64_t max_unfinished_per_tenant = 5000;  // scheduler: a tenant's queued/running jobs (0 = any)
+  int lease_seconds = 30;                    // job lease length; heartbeats renew it every lease/4
+  int drain_seconds = 30;                    // SIGTERM: how long running jobs may take to finish
+  int num_threads = 0;                       // per job; 0 = all cores
+  int64_t cache_bytes = int64_t{20} << 30;   // per worker: input cache budget (0 = unlimited)
   int64_t index_cache_bytes = int64_t{4} << 30;  // Objects service: loaded scene indexes
   std::string ready_file;  // written with the bound address once serving ("" = none)
   // Prometheus /metrics on this host:port ("" = off): RPC latencies, the queue (with a

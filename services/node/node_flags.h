@@ -42,6 +42,11 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
          "result is recomputed when its pipeline is submitted again (job records only: "
          "`instascene gc` removes the blobs no job reaches)")
       ->capture_default_str();
+  app.add_option("--max-unfinished-jobs-per-tenant", o->max_unfinished_per_tenant,
+                 "Scheduler: most queued, leased and running jobs one tenant may hold; a "
+                 "submission over it is RESOURCE_EXHAUSTED and adds nothing (0 = no limit; "
+                 "admins' scenes without a tenant are not limited)")
+      ->capture_default_str();
   app.add_option("--lease-seconds", o->lease_seconds, "Job lease length in seconds")
       ->capture_default_str();
   app.add_option("--drain-seconds", o->drain_seconds,

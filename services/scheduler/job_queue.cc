@@ -16,6 +16,8 @@ absl::Status QueueOptions::Validate() const {
   if (backoff_jitter < 0 || backoff_jitter >= 1)
     return absl::InvalidArgumentError("backoff_jitter must be in [0, 1)");
   if (max_items < 0) return absl::InvalidArgumentError("max_items must be >= 0");
+  if (max_unfinished_per_tenant < 0)
+    return absl::InvalidArgumentError("max_unfinished_per_tenant must be >= 0");
   return absl::OkStatus();
 }
 

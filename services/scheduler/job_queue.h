@@ -37,7 +37,11 @@ struct QueueOptions {
   int64_t backoff_cap_ms = 60000;  // delays double per attempt up to this cap
   double backoff_jitter = 0.25;    // delay *= 1 - jitter * U[0,1) (spreads retry storms)
   int64_t max_items = 10000;       // most items one fan-out job may report
-  uint64_t seed = 1;               // jitter and lease-token random seed
+  // Most unfinished (queued, leased, running) jobs one tenant's scenes may hold when a submission
+  // adds jobs (0 = no limit): over it the submission is ResourceExhausted and adds nothing. Jobs
+  // a fan-out creates when its source completes are not refused (max_items bounds them).
+  int64_t max_unfinished_per_tenant = 0;
+  uint64_t seed = 1;  // jitter and lease-token random seed
   // Join stages that run over the items that succeeded (StageSpec::partial_join): a failed or
   // cancelled per-item input is left out instead of cancelling the join. Set from the registry;
   // every scheduler of one queue must agree.
@@ -48,7 +52,8 @@ struct QueueOptions {
 
 struct SubmitResult {
   Job job;
-  bool created = false;  // false: an existing job (maybe already succeeded) was returned
+  bool created = false;   // false: an existing job (maybe already succeeded) was returned
+  bool requeued = false;  // an existing failed or cancelled job queued again
 };
 
 struct Lease {
@@ -128,6 +133,10 @@ class JobQueue {
   // Creates the deferred jobs of one plan of a succeeded fan-out job.
   absl::Status Expand(QueueTx& tx, const Job& source, const nlohmann::json& plan,
                       std::vector<SubmitResult>* results);
+  // ResourceExhausted when a submission that added jobs leaves its scene's tenant over
+  // max_unfinished_per_tenant (the caller's transaction then rolls back).
+  absl::Status CheckTenantLimit(QueueTx& tx, const std::string& scene,
+                                const std::vector<SubmitResult>& results);
   absl::Status RetryOrFail(QueueTx& tx, Job* job, const std::string& error, bool retryable);
   absl::Status EndCancelled(QueueTx& tx, Job* job, const std::string& why);
   // A job ended failed or cancelled: its dependents are cancelled, except partial joins, which

@@ -83,6 +83,7 @@ absl::StatusOr<SubmitResult> JobQueue::SubmitOne(QueueTx& tx, const SubmitReques
       RETURN_IF_ERROR(Apply(&*existing, JobEvent::kResubmit));
       ResetForResubmit(request, pending, &*existing);
       RETURN_IF_ERROR(tx.Update(*existing));
+      return SubmitResult{*std::move(existing), false, true};
     }
     return SubmitResult{*std::move(existing), false};
   }
@@ -234,9 +235,26 @@ absl::StatusOr<std::vector<SubmitResult>> JobQueue::Submit(const SubmitRequest& 
       }
       if (source.state == JobState::kSucceeded) RETURN_IF_ERROR(Expand(tx, source, plan, &results));
     }
-    return absl::OkStatus();
+    return CheckTenantLimit(tx, request.scene, results);
   }));
   return results;
+}
+
+absl::Status JobQueue::CheckTenantLimit(QueueTx& tx, const std::string& scene,
+                                        const std::vector<SubmitResult>& results) {
+  const std::string tenant = auth::SceneTenant(scene);
+  const int64_t added = std::count_if(results.begin(), results.end(), [](const SubmitResult& r) {
+    return r.created || r.requeued;
+  });
+  if (options_.max_unfinished_per_tenant == 0 || tenant.empty() || added == 0)
+    return absl::OkStatus();
+  ASSIGN_OR_RETURN(const int64_t unfinished, tx.CountUnfinished(tenant + ":"));
+  if (unfinished <= options_.max_unfinished_per_tenant) return absl::OkStatus();
+  return absl::ResourceExhaustedError(absl::StrCat(
+      "tenant ", tenant, " would hold ", unfinished, " unfinished jobs with this submission's ",
+      added, ", over its limit of ", options_.max_unfinished_per_tenant,
+      " (the scheduler's --max-unfinished-jobs-per-tenant); nothing was submitted: wait for "
+      "jobs to finish or cancel some"));
 }
 
 }  // namespace instascene::scheduler

@@ -11,6 +11,7 @@ namespace {
 
 constexpr int kRetries = 8;  // whole-transaction retries on conflicts between replicas
 constexpr int64_t kMigrationLock = 0x1a57a5ce;  // pg_advisory_xact_lock key of the migrations
+constexpr int kTenantLock = 0x1a57;  // first key of a tenant's lock (the second: its hash)
 
 constexpr char kColumns[] =
     "id, key, scene, kind, parameters, scene_manifest, parent, item, pending, items, plans, "
@@ -229,6 +230,17 @@ class PostgresTx final : public QueueTx {
     }
     for (Job& j : jobs) LoadDependencies(&j);
     return jobs;
+  }
+
+  absl::StatusOr<int64_t> CountUnfinished(const std::string& scene_prefix) override {
+    // Replicas submit concurrently: the prefix's advisory lock, held to the transaction's end,
+    // makes the count see every earlier submission of the tenant committed.
+    tx_.exec_params("SELECT pg_advisory_xact_lock($1, hashtext($2))", kTenantLock, scene_prefix);
+    const pqxx::result r = tx_.exec_params(
+        "SELECT COUNT(*) FROM jobs WHERE state IN ($1, $2, $3) AND "
+        "substr(scene, 1, length($4)) = $4",
+        Code(JobState::kQueued), Code(JobState::kLeased), Code(JobState::kRunning), scene_prefix);
+    return r[0][0].as<int64_t>();
   }
 
   absl::StatusOr<int> DeleteFinishedBefore(int64_t cutoff_ms) override {

@@ -61,6 +61,12 @@ class QueueTx {
   // Held (leased or running) jobs whose lease expired before now.
   virtual absl::StatusOr<std::vector<std::string>> Expired(int64_t now_ms) = 0;
   virtual absl::StatusOr<std::vector<Job>> List(const JobFilter& filter) = 0;
+  // Unfinished (queued, leased, running) jobs of the scenes whose name starts with
+  // `scene_prefix` (a tenant's "acme:"), this transaction's own changes included. A backend where
+  // transactions of several processes run concurrently (PostgreSQL) first takes a lock on the
+  // prefix held to the transaction's end, so two submissions of one tenant count one after the
+  // other.
+  virtual absl::StatusOr<int64_t> CountUnfinished(const std::string& scene_prefix) = 0;
   // Deletes finished jobs (succeeded, failed, cancelled) last changed before `cutoff_ms` that no
   // unfinished job depends on, with their dependency rows; returns how many.
   virtual absl::StatusOr<int> DeleteFinishedBefore(int64_t cutoff_ms) = 0;

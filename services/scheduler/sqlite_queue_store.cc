@@ -227,6 +227,18 @@ class SqliteTx final : public QueueTx {
     return jobs;
   }
 
+  absl::StatusOr<int64_t> CountUnfinished(const std::string& scene_prefix) override {
+    // One writer at a time (SQLite's lock): submissions are counted one after the other.
+    Statement s(db_,
+                "SELECT COUNT(*) FROM jobs WHERE state IN (?, ?, ?) AND "
+                "substr(scene, 1, length(?)) = ?");
+    s.Bind(1, Code(JobState::kQueued)).Bind(2, Code(JobState::kLeased));
+    s.Bind(3, Code(JobState::kRunning)).Bind(4, scene_prefix).Bind(5, scene_prefix);
+    ASSIGN_OR_RETURN(bool row, s.Step());
+    if (!row) return absl::InternalError("COUNT(*) returned no row");
+    return s.Int(0);
+  }
+
   absl::StatusOr<int> DeleteFinishedBefore(int64_t cutoff_ms) override {
     Statement pick(db_,
                    "SELECT id FROM jobs WHERE state IN (4, 5, 6) AND updated_ms < ? AND NOT EXISTS "

@@ -64,6 +64,9 @@ class FailingTx final : public QueueTx {
     return inner_.Expired(now);
   }
   absl::StatusOr<std::vector<Job>> List(const JobFilter& f) override { return inner_.List(f); }
+  absl::StatusOr<int64_t> CountUnfinished(const std::string& prefix) override {
+    return inner_.CountUnfinished(prefix);
+  }
   absl::StatusOr<int> DeleteFinishedBefore(int64_t cutoff) override {
     return inner_.DeleteFinishedBefore(cutoff);
   }

@@ -265,6 +265,46 @@ TEST_P(JobQueueConformanceTest, TenantsShareNoJobsAndListOnlyTheirScenes) {
   EXPECT_TRUE(queue_->List(filter)->empty());
 }
 
+TEST_P(JobQueueConformanceTest, ATenantsUnfinishedJobsAreBounded) {
+  options_.max_unfinished_per_tenant = 3;
+  queue_.reset();  // the store's lock goes with it
+  queue_ = Open();
+  const std::vector<PlannedStage> two = {Stage("decompose"), Stage("train", {{"decompose"}})};
+  auto submit = [&](const std::string& scene, const std::vector<PlannedStage>& stages) {
+    SubmitRequest r;
+    r.scene = scene;
+    r.scene_manifest = Out(scene);
+    r.stages = stages;
+    return queue_->Submit(r);
+  };
+  auto acme = [&] {
+    JobFilter f;
+    f.scene_prefix = "acme:";
+    return queue_->List(f).value();
+  };
+  const auto a = submit("acme:a", two);  // 2 of 3
+  ASSERT_TRUE(a.ok()) << a.status();
+  const auto over = submit("acme:b", two);  // 4 of 3: refused, nothing of it stored
+  EXPECT_EQ(over.status().code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_NE(over.status().message().find("tenant acme would hold 4 unfinished jobs"),
+            std::string::npos)
+      << over.status();
+  EXPECT_EQ(acme().size(), 2u);
+  EXPECT_TRUE(submit("acme:a", two).ok());  // what it holds already adds nothing
+  // Neither another tenant (one whose name extends acme's) nor an admin's scene counts for acme.
+  EXPECT_TRUE(submit("acme-2:b", two).ok());
+  EXPECT_TRUE(submit("b", two).ok());
+  EXPECT_TRUE(submit("acme:c", {Stage("decompose")}).ok());  // 3 of 3
+  EXPECT_EQ(submit("acme:d", {Stage("decompose")}).status().code(),
+            absl::StatusCode::kResourceExhausted);
+  // Finished jobs do not count: a's two cancelled, b's two fit; a queued again would not.
+  ASSERT_TRUE(queue_->Cancel((*a)[0].job.id).ok());
+  EXPECT_TRUE(submit("acme:b", two).ok());
+  EXPECT_EQ(submit("acme:a", two).status().code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_EQ(queue_->Get((*a)[0].job.id)->state, JobState::kCancelled);  // rolled back
+  EXPECT_EQ(acme().size(), 5u);
+}
+
 TEST_P(JobQueueConformanceTest, PruningRemovesOldFinishedJobsNothingStillNeeded) {
   auto ids = SubmitStages("s", {Stage("decompose"), Stage("train", {{"decompose"}})});
   auto lease = MustLease({"decompose"});
