@@ -3,7 +3,6 @@
 // blob with its grants.
 #include <algorithm>
 
-#include "absl/strings/match.h"
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
 #include "common/store/s3_blob_store.h"
