@@ -10,8 +10,9 @@
 
 namespace instascene::node {
 
-inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address,
-                         bool needs_scheduler_address) {
+// Where the node keeps its data and serves, and where the store, the scheduler and the queue are.
+inline void AddLocationFlags(CLI::App& app, NodeOptions* o, bool needs_store_address,
+                             bool needs_scheduler_address) {
   app.add_option("--data", o->data_dir, "Data directory (store/, jobs.db, work/)")
       ->capture_default_str();
   app.add_option("--listen", o->listen, "host:port to serve on (port 0 = any free port)")
@@ -36,6 +37,10 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
       "--queue", o->queue,
       "Job queue storage: sqlite:PATH (default DATA/jobs.db) or postgres://HOST[:PORT]/DB "
       "(password from PGPASSWORD or ~/.pgpass)");
+}
+
+// The scheduler's queue policy: retention, a tenant's bound, leases, draining.
+inline void AddSchedulerFlags(CLI::App& app, NodeOptions* o) {
   app.add_option(
          "--retention-hours", o->retention_hours,
          "Scheduler: prune jobs finished longer ago than this (0 = keep for ever); a pruned "
@@ -52,6 +57,10 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
   app.add_option("--drain-seconds", o->drain_seconds,
                  "On SIGTERM, how long running jobs may take before they are handed back")
       ->capture_default_str();
+}
+
+// Workers' resources, the denoiser, the gateway, metrics and the ready file.
+inline void AddRuntimeFlags(CLI::App& app, NodeOptions* o) {
   app.add_option("--threads", o->num_threads, "Threads per job (0 = all cores)");
   app.add_option(
          "--cache-bytes", o->cache_bytes,
@@ -82,6 +91,10 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
   app.add_option("--metrics", o->metrics_listen,
                  "Serve Prometheus metrics at http://HOST:PORT/metrics (port 0 = any free port; "
                  "default: off)");
+}
+
+// Authentication and TLS, as a server and towards the services it reaches.
+inline void AddSecurityFlags(CLI::App& app, NodeOptions* o) {
   app.add_option("--auth-tokens", o->auth_tokens,
                  "Token file every call is checked against (default DATA/auth/tokens.json, "
                  "created on first start with an admin token in DATA/auth/admin.token); edit it "
@@ -101,6 +114,10 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
                  "Mutual TLS towards --store / --scheduler: this node's certificate (PEM)");
   app.add_option("--tls-client-key", o->peer_tls.tls_key_file,
                  "Mutual TLS towards --store / --scheduler: this node's private key (PEM)");
+}
+
+// The store's limits.
+inline void AddStoreLimitFlags(CLI::App& app, NodeOptions* o) {
   app.add_option("--max-blob-bytes", o->store_options.max_blob_bytes,
                  "Largest blob the store accepts")
       ->capture_default_str();
@@ -109,6 +126,15 @@ inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address
                  "never)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
+}
+
+inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address,
+                         bool needs_scheduler_address) {
+  AddLocationFlags(app, o, needs_store_address, needs_scheduler_address);
+  AddSchedulerFlags(app, o);
+  AddRuntimeFlags(app, o);
+  AddSecurityFlags(app, o);
+  AddStoreLimitFlags(app, o);
 }
 
 // main() of a per-service binary: `stages` are the stages it knows, `services` the stage services
