@@ -93,6 +93,7 @@ check "gc again: nothing left to remove" "$BIN" gc --store "$STORE_URI" --queue 
 check "nothing removed the second time" test "$(json_get "$WORK/out.txt" "d['removed_blobs']")" = 0
 check_fails "gc wants --store and --queue together" "go together" "$BIN" gc --store "$STORE_URI"
 check_fails "gc refuses a store service's address" "not a store service" "$BIN" gc --store "$STORE" --queue "$QUEUE"
+check_fails "gc refuses a queue URI it does not know" "expected sqlite:PATH or postgres://" "$BIN" gc --store "$STORE_URI" --queue mysql://db/jobs
 
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]
