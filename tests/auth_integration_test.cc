@@ -161,7 +161,7 @@ TEST_F(AuthTest, EveryMethodOfEveryServiceRefusesCallsWithoutAValidToken) {
       EXPECT_EQ(CallEmpty(Channel(forged), method), grpc::StatusCode::UNAUTHENTICATED) << method;
     }
   }
-  EXPECT_EQ(methods, 27);  // a new method must join this test (and choose its roles)
+  EXPECT_EQ(methods, 28);  // a new method must join this test (and choose its roles)
   // A revoked token is refused (the authenticator re-reads the changed file).
   EXPECT_EQ(CallEmpty(Channel(revoked), "/instascene.v1.Scheduler/GetQueueStats"),
             grpc::StatusCode::UNAUTHENTICATED);
@@ -181,8 +181,8 @@ TEST_F(AuthTest, RolesLimitWhatATokenMayCall) {
   // Workers: no submitting, listing, cancelling or monitoring.
   for (const char* m :
        {"/instascene.v1.Scheduler/SubmitPipeline", "/instascene.v1.Scheduler/ListJobs",
-        "/instascene.v1.Scheduler/CancelJob", "/instascene.v1.Objects/GetObject",
-        "/instascene.v1.Generation/GetWorkerStatus"})
+        "/instascene.v1.Scheduler/CancelJob", "/instascene.v1.Scheduler/DeleteScene",
+        "/instascene.v1.Objects/GetObject", "/instascene.v1.Generation/GetWorkerStatus"})
     EXPECT_EQ(code(worker_, m), grpc::StatusCode::PERMISSION_DENIED) << m;
   // Admins: monitoring works.
   EXPECT_EQ(code(admin_, "/instascene.v1.Scheduler/GetQueueStats"), grpc::StatusCode::OK);
@@ -262,6 +262,15 @@ TEST_F(AuthTest, TenantsSeeNothingOfEachOtherAndOutputsAreGrantedToTheirTenant) 
     for (const v1::Job& j : all.jobs()) scenes.insert(j.scene());
     EXPECT_EQ(scenes, (std::set<std::string>{"acme:tiny", "beta:tiny"}));
   }
+  auto delete_scene = [&](const std::string& token, v1::DeleteSceneResponse* deleted) {
+    grpc::ClientContext context;
+    v1::DeleteSceneRequest request;
+    request.set_scene("tiny");
+    return v1::Scheduler::NewStub(Channel(token))->DeleteScene(&context, request, deleted);
+  };
+  v1::DeleteSceneResponse deleted;
+  EXPECT_EQ(delete_scene(acme_, &deleted).error_code(), grpc::StatusCode::FAILED_PRECONDITION)
+      << "a scene with a queued job is not deleted";
   // A worker runs acme's job: its output is granted to acme, not to beta.
   auto worker_store = Store(worker_);
   const std::string result = "{\"echo\": true}";
@@ -311,6 +320,18 @@ TEST_F(AuthTest, TenantsSeeNothingOfEachOtherAndOutputsAreGrantedToTheirTenant) 
   const grpc::Status s = objects->ListObjects(&c, list, &listed);
   EXPECT_EQ(s.error_code(), grpc::StatusCode::NOT_FOUND);
   EXPECT_NE(s.error_message().find("beta:tiny"), std::string::npos) << s.error_message();
+  // Deleting a scene deletes the caller's own: beta's failed job goes, acme's stays, then goes.
+  ASSERT_TRUE(delete_scene(beta_, &deleted).ok());
+  EXPECT_EQ(deleted.deleted_jobs(), 1);
+  grpc::ClientContext c2;
+  v1::ListJobsResponse left;
+  ASSERT_TRUE(admin->ListJobs(&c2, v1::ListJobsRequest(), &left).ok());
+  ASSERT_EQ(left.jobs_size(), 1);
+  EXPECT_EQ(left.jobs(0).scene(), "acme:tiny");
+  ASSERT_TRUE(delete_scene(acme_, &deleted).ok());
+  EXPECT_EQ(deleted.deleted_jobs(), 1);
+  EXPECT_EQ(deleted.kept_jobs(), 0);
+  EXPECT_EQ(delete_scene(acme_, &deleted).error_code(), grpc::StatusCode::NOT_FOUND);
 }
 
 }  // namespace

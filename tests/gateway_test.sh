@@ -3,7 +3,8 @@
 # browser's code would: health; the error model (JSON with the status name, HTTP codes of Google's
 # mapping); authentication (bearer header, access_token for EventSource) and tenants; live job
 # events as Server-Sent Events until the job ends; jobs, scenes, stages, queue; resumable blob
-# uploads (Upload-Offset) and downloads with Range requests and content types; bounded bodies.
+# uploads (Upload-Offset) and downloads with Range requests and content types; bounded bodies;
+# deleting a scene.
 # Prints "N passed, N failed"; exits 1 on any failure.
 set -uo pipefail
 BIN=$1     # the instascene command
@@ -156,6 +157,14 @@ start gateway "$WORK/ready-gw" "$BINDIR/instascene-gateway" --listen 127.0.0.1:0
 GW=http://$(cat "$WORK/ready-gw")
 http GET "/api/v1/jobs/$JOB" -H "$H"
 check "instascene-gateway answers like the embedded one" test "$(code)/$(body "d['id']")" = "200/$JOB"
+
+# Deleting a scene whose jobs ended: a tenant's "a" is its own (none: 404), the admin's goes.
+http DELETE /api/v1/scenes/a -H "Authorization: Bearer $BETA"
+check "a tenant deleting a scene it has not: 404" test "$(code)/$(body "d['error']['status']")" = 404/NOT_FOUND
+http DELETE /api/v1/scenes/a -H "$H"
+check "the admin deletes scene a: 200, its jobs" test "$(code)/$(body "int(d['deleted_jobs']) >= 2")" = 200/True
+http GET "/api/v1/jobs?scene=a" -H "$H"
+check "no job of scene a left" test "$(body "len(d.get('jobs', []))")" = 0
 
 echo "$passed passed, $failed failed"
 [ "$failed" -eq 0 ]

@@ -196,6 +196,10 @@ check_fails "beta cannot fetch acme's job" "NOT_FOUND" "$BIN" fetch "$ACMEJOB" -
 check_fails "beta cannot cancel acme's job" "NOT_FOUND" "$BIN" cancel "$ACMEJOB" --server "$ADDR3" $TLS $BETA
 check_fails "beta cannot fetch acme's scene" "NOT_FOUND" "$BIN" fetch --scene a --out "$WORK/beta-out" --server "$ADDR3" $TLS $BETA
 check "the admin sees the stored name" test "$(json_get <("$BIN" jobs --server "$ADDR3" $TLS $ADMIN --json) "d['jobs'][0]['scene']")" = "acme:a"
+check_fails "beta cannot delete acme's scene" "NOT_FOUND" "$BIN" delete --scene a --server "$ADDR3" $TLS $BETA
+check "acme deletes its scene" "$BIN" delete --scene a --server "$ADDR3" $TLS $ACME --json
+check "its one job deleted" test "$(json_get "$WORK/out.txt" "d['deleted_jobs']")" = 1
+check "acme has no job left" test "$(json_get <("$BIN" jobs --server "$ADDR3" $TLS $ACME --json) "len(d['jobs'])")" = 0
 ACMEID=$(cut -c5-16 "$WORK/acme.token")
 check "revoke acme's token" "$BIN" token revoke "$ACMEID" --data "$WORK/data3"
 revoked() {  # servers re-read the changed token file at the next call (polled: a kubelet may lag)

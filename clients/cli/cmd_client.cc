@@ -272,6 +272,50 @@ void AddCancelCommand(CLI::App& app, Action* action) {
   k->callback([cancel, action] { *action = [cancel] { return RunCancel(*cancel); }; });
 }
 
+struct DeleteArgs {
+  std::string server = kDefaultServer, scene;
+  bool json = false;
+  ConnectionFlags connection;
+};
+
+// `delete`: a scene's jobs, once all of them have ended (its blobs go with the next `gc`).
+void AddDeleteCommand(CLI::App& app, Action* action) {
+  auto args = std::make_shared<DeleteArgs>();
+  CLI::App* d = app.add_subcommand(
+      "delete",
+      "Delete a scene's jobs once all of them have ended (cancel the scene first); its results' "
+      "blobs go with the store's next garbage collection (`instascene gc`)");
+  d->add_option("--scene", args->scene, "Scene name")->required();
+  d->add_option("--server", args->server, "Scheduler address")->capture_default_str();
+  d->add_flag("--json", args->json, "Print a JSON summary as the last stdout line");
+  AddConnectionFlags(d, &args->connection);
+  d->callback([args, action] {
+    *action = [args]() -> absl::Status {
+      ASSIGN_OR_RETURN(std::unique_ptr<client::Client> c,
+                       ConnectClient(args->connection, args->server));
+      v1::DeleteSceneRequest request;
+      request.set_scene(args->scene);
+      v1::DeleteSceneResponse response;
+      RETURN_IF_ERROR(client::Call(*c, "scheduler", [&](grpc::ClientContext* context) {
+        return client::SchedulerStub(*c).DeleteScene(context, request, &response);
+      }));
+      std::fprintf(stderr, "scene %s: %lld jobs deleted%s\n", args->scene.c_str(),
+                   static_cast<long long>(response.deleted_jobs()),
+                   response.kept_jobs() > 0
+                       ? absl::StrCat(", ", response.kept_jobs(),
+                                      " kept (another scene's unfinished jobs need them)")
+                             .c_str()
+                       : "");
+      if (args->json)
+        PrintJsonLine(nlohmann::json({{"scene", args->scene},
+                                      {"deleted_jobs", response.deleted_jobs()},
+                                      {"kept_jobs", response.kept_jobs()}})
+                          .dump());
+      return absl::OkStatus();
+    };
+  });
+}
+
 }  // namespace
 
 void AddClientCommands(CLI::App& app, Action* action) {
@@ -280,6 +324,7 @@ void AddClientCommands(CLI::App& app, Action* action) {
   AddJobsCommand(app, action);
   AddFetchCommand(app, action);
   AddCancelCommand(app, action);
+  AddDeleteCommand(app, action);
 }
 
 }  // namespace instascene::cli

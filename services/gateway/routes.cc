@@ -120,8 +120,8 @@ void AddJobRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) {
   });
 }
 
-// A scene and its cancellation, pipeline submission, the queue's statistics: the Scheduler
-// service.
+// A scene, its cancellation and deletion, pipeline submission, the queue's statistics: the
+// Scheduler service.
 void AddSceneRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) {
   http.Get(R"(/api/v1/scenes/([^/]+))", [stubs](const httplib::Request& req,
                                                 httplib::Response& res) {
@@ -140,6 +140,15 @@ void AddSceneRoutes(httplib::Server& http, const std::shared_ptr<Stubs>& stubs) 
                     return stubs->scheduler->CancelScene(c, q, r);
                   });
             });
+  http.Delete(R"(/api/v1/scenes/([^/]+))",
+              [stubs](const httplib::Request& req, httplib::Response& res) {
+                v1::DeleteSceneRequest request;
+                request.set_scene(req.matches[1]);
+                Unary<v1::DeleteSceneRequest, v1::DeleteSceneResponse>(
+                    req, res, request, [&](auto* c, const auto& q, auto* r) {
+                      return stubs->scheduler->DeleteScene(c, q, r);
+                    });
+              });
   http.Post("/api/v1/pipelines", [stubs](const httplib::Request& req, httplib::Response& res) {
     v1::SubmitPipelineRequest request;
     if (!ParseBody(req, res, &request)) return;

@@ -195,7 +195,7 @@ absl::StatusOr<int> JobQueue::PruneFinished(int64_t retention_ms) {
   if (retention_ms < 0) return absl::InvalidArgumentError("retention must be >= 0");
   int pruned = 0;
   RETURN_IF_ERROR(store_->Transact(false, [&](QueueTx& tx) -> absl::Status {
-    ASSIGN_OR_RETURN(pruned, tx.DeleteFinishedBefore(clock_->NowMs() - retention_ms));
+    ASSIGN_OR_RETURN(pruned, tx.DeleteFinished(clock_->NowMs() - retention_ms, ""));
     return absl::OkStatus();
   }));
   return pruned;

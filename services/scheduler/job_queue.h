@@ -109,6 +109,14 @@ class JobQueue {
   // Cancels every unfinished job of a scene; returns each of them as it is now (cancelled, or
   // asked to stop when held). NotFound for an unknown scene.
   absl::StatusOr<std::vector<Job>> CancelScene(const std::string& scene);
+  // Deletes a scene's jobs once every one of them has ended (FailedPrecondition naming how many
+  // have not: cancel the scene and wait), but those an unfinished job of another scene still
+  // needs. NotFound if the scene has no jobs. Its blobs stay until the store's garbage collection
+  // finds them unreachable.
+  struct DeletedScene {
+    int deleted = 0, kept = 0;
+  };
+  absl::StatusOr<DeletedScene> DeleteScene(const std::string& scene);
   absl::StatusOr<Job> Get(const std::string& id);
   absl::StatusOr<std::vector<Job>> List(const JobFilter& filter);
   absl::StatusOr<QueueStats> Stats();

@@ -1,6 +1,8 @@
-// JobQueue: cancelling jobs and what depends on them.
+// JobQueue: cancelling jobs and what depends on them, and deleting a scene whose jobs ended.
 #include "services/scheduler/job_queue.h"
 
+#include <algorithm>
+#include <limits>
 #include <map>
 #include <set>
 
@@ -56,6 +58,28 @@ absl::StatusOr<Job> JobQueue::Cancel(const std::string& id) {
     result.cancel_requested = true;
     result.updated_ms = clock_->NowMs();
     return tx.Update(result);
+  }));
+  return result;
+}
+
+absl::StatusOr<JobQueue::DeletedScene> JobQueue::DeleteScene(const std::string& scene) {
+  if (scene.empty()) return absl::InvalidArgumentError("delete: scene is empty");
+  DeletedScene result;
+  RETURN_IF_ERROR(store_->Transact(false, [&](QueueTx& tx) -> absl::Status {
+    JobFilter filter;
+    filter.scene = scene;
+    filter.limit = kMaxSceneJobs;
+    ASSIGN_OR_RETURN(std::vector<Job> jobs, tx.List(filter));
+    if (jobs.empty()) return absl::NotFoundError(absl::StrCat("no jobs for scene ", scene));
+    const auto unfinished =
+        std::count_if(jobs.begin(), jobs.end(), [](const Job& j) { return !IsFinal(j.state); });
+    if (unfinished > 0)
+      return absl::FailedPreconditionError(
+          absl::StrCat("scene ", scene, " has ", unfinished,
+                       " unfinished jobs: cancel the scene and delete it once they have ended"));
+    ASSIGN_OR_RETURN(result.deleted, tx.DeleteFinished(std::numeric_limits<int64_t>::max(), scene));
+    result.kept = static_cast<int>(jobs.size()) - result.deleted;
+    return absl::OkStatus();
   }));
   return result;
 }

@@ -243,14 +243,15 @@ class PostgresTx final : public QueueTx {
     return r[0][0].as<int64_t>();
   }
 
-  absl::StatusOr<int> DeleteFinishedBefore(int64_t cutoff_ms) override {
+  absl::StatusOr<int> DeleteFinished(int64_t cutoff_ms, const std::string& scene) override {
     const pqxx::result r = tx_.exec_params(
-        "WITH doomed AS (SELECT id FROM jobs WHERE state IN (4, 5, 6) AND updated_ms < $1 AND NOT "
+        "WITH doomed AS (SELECT id FROM jobs WHERE state IN (4, 5, 6) AND updated_ms < $1 AND "
+        "($2 = '' OR scene = $2) AND NOT "
         "EXISTS (SELECT 1 FROM job_dependencies e JOIN jobs d ON d.id = e.job_id WHERE "
         "e.dependency_id = jobs.id AND d.state IN (1, 2, 3)) FOR UPDATE SKIP LOCKED), "
         "gone AS (DELETE FROM job_dependencies WHERE job_id IN (SELECT id FROM doomed)) "
         "DELETE FROM jobs WHERE id IN (SELECT id FROM doomed)",
-        cutoff_ms);
+        cutoff_ms, scene);
     return static_cast<int>(r.affected_rows());
   }
 

@@ -68,8 +68,9 @@ class QueueTx {
   // other.
   virtual absl::StatusOr<int64_t> CountUnfinished(const std::string& scene_prefix) = 0;
   // Deletes finished jobs (succeeded, failed, cancelled) last changed before `cutoff_ms` that no
-  // unfinished job depends on, with their dependency rows; returns how many.
-  virtual absl::StatusOr<int> DeleteFinishedBefore(int64_t cutoff_ms) = 0;
+  // unfinished job depends on, with their dependency rows; only `scene`'s when it is not empty.
+  // Returns how many.
+  virtual absl::StatusOr<int> DeleteFinished(int64_t cutoff_ms, const std::string& scene) = 0;
   virtual absl::StatusOr<QueueStats> Stats(int64_t now_ms) = 0;
 };
 

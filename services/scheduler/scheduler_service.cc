@@ -308,4 +308,20 @@ grpc::Status SchedulerService::CancelScene(grpc::ServerContext* context,
   return grpc::Status::OK;
 }
 
+grpc::Status SchedulerService::DeleteScene(grpc::ServerContext* context,
+                                           const v1::DeleteSceneRequest* request,
+                                           v1::DeleteSceneResponse* response) {
+  absl::StatusOr<auth::Identity> who = Caller(context, {Role::kClient, Role::kAdmin});
+  if (!who.ok()) return ToGrpcStatus(who.status());
+  if (request->scene().empty())
+    return ToGrpcStatus(absl::InvalidArgumentError("DeleteScene: no scene given"));
+  absl::StatusOr<JobQueue::DeletedScene> deleted =
+      queue_->DeleteScene(auth::StoredScene(*who, request->scene()));
+  if (!deleted.ok()) return ToGrpcStatus(deleted.status());
+  response->set_deleted_jobs(deleted->deleted);
+  response->set_kept_jobs(deleted->kept);
+  Notify();
+  return grpc::Status::OK;
+}
+
 }  // namespace instascene::scheduler

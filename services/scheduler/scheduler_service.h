@@ -51,6 +51,8 @@ class SchedulerService final : public v1::Scheduler::Service {
                          v1::Job* response) override;
   grpc::Status CancelScene(grpc::ServerContext*, const v1::CancelSceneRequest* request,
                            v1::CancelSceneResponse* response) override;
+  grpc::Status DeleteScene(grpc::ServerContext*, const v1::DeleteSceneRequest* request,
+                           v1::DeleteSceneResponse* response) override;
   grpc::Status GetScene(grpc::ServerContext*, const v1::GetSceneRequest* request,
                         v1::Scene* response) override;
   grpc::Status ListStages(grpc::ServerContext*, const v1::ListStagesRequest* request,

@@ -239,12 +239,13 @@ class SqliteTx final : public QueueTx {
     return s.Int(0);
   }
 
-  absl::StatusOr<int> DeleteFinishedBefore(int64_t cutoff_ms) override {
+  absl::StatusOr<int> DeleteFinished(int64_t cutoff_ms, const std::string& scene) override {
     Statement pick(db_,
-                   "SELECT id FROM jobs WHERE state IN (4, 5, 6) AND updated_ms < ? AND NOT EXISTS "
+                   "SELECT id FROM jobs WHERE state IN (4, 5, 6) AND updated_ms < ? AND "
+                   "(? = '' OR scene = ?) AND NOT EXISTS "
                    "(SELECT 1 FROM job_dependencies e JOIN jobs d ON d.id = e.job_id WHERE "
                    "e.dependency_id = jobs.id AND d.state IN (1, 2, 3))");
-    pick.Bind(1, cutoff_ms);
+    pick.Bind(1, cutoff_ms).Bind(2, scene).Bind(3, scene);
     ASSIGN_OR_RETURN(std::vector<std::string> ids, Ids(pick));
     for (const std::string& id : ids) {
       Statement deps(db_, "DELETE FROM job_dependencies WHERE job_id = ?");

@@ -67,8 +67,8 @@ class FailingTx final : public QueueTx {
   absl::StatusOr<int64_t> CountUnfinished(const std::string& prefix) override {
     return inner_.CountUnfinished(prefix);
   }
-  absl::StatusOr<int> DeleteFinishedBefore(int64_t cutoff) override {
-    return inner_.DeleteFinishedBefore(cutoff);
+  absl::StatusOr<int> DeleteFinished(int64_t cutoff, const std::string& scene) override {
+    return inner_.DeleteFinished(cutoff, scene);
   }
   absl::StatusOr<QueueStats> Stats(int64_t now) override { return inner_.Stats(now); }
 

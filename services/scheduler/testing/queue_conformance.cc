@@ -305,6 +305,29 @@ TEST_P(JobQueueConformanceTest, ATenantsUnfinishedJobsAreBounded) {
   EXPECT_EQ(acme().size(), 5u);
 }
 
+TEST_P(JobQueueConformanceTest, ASceneIsDeletedOnceEveryJobOfItEnded) {
+  auto ids = SubmitStages("s", {Stage("decompose"), Stage("train", {{"decompose"}})});
+  const std::string other = SubmitOne("u", "decompose");
+  auto refused = queue_->DeleteScene("s");
+  EXPECT_EQ(refused.status().code(), absl::StatusCode::kFailedPrecondition);
+  EXPECT_NE(refused.status().message().find("2 unfinished jobs"), std::string::npos)
+      << refused.status();
+  auto lease = MustLease({"decompose"});
+  ASSERT_TRUE(queue_->Complete(lease->job.id, lease->token, Out("d")).ok());
+  ASSERT_EQ(lease->job.id, ids["decompose"]);  // submitted first
+  ASSERT_TRUE(queue_->CancelScene("s").ok());  // train: cancelled at once (queued)
+  auto deleted = queue_->DeleteScene("s");
+  ASSERT_TRUE(deleted.ok()) << deleted.status();
+  EXPECT_EQ(deleted->deleted, 2);
+  EXPECT_EQ(deleted->kept, 0);
+  EXPECT_EQ(queue_->Get(ids["train"]).status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(queue_->Get(other)->state, JobState::kQueued);  // another scene untouched
+  EXPECT_EQ(queue_->DeleteScene("s").status().code(), absl::StatusCode::kNotFound);
+  EXPECT_EQ(queue_->DeleteScene("").status().code(), absl::StatusCode::kInvalidArgument);
+  // Deleted results are computed again when the pipeline is submitted again, under the same ids.
+  EXPECT_EQ(SubmitStages("s", {Stage("decompose"), Stage("train", {{"decompose"}})}), ids);
+}
+
 TEST_P(JobQueueConformanceTest, PruningRemovesOldFinishedJobsNothingStillNeeded) {
   auto ids = SubmitStages("s", {Stage("decompose"), Stage("train", {{"decompose"}})});
   auto lease = MustLease({"decompose"});
