@@ -52,6 +52,10 @@ export async function post(path, body = {}) {
   return (await check(response)).json();
 }
 
+export async function del(path) {
+  return (await check(await fetch(`api/v1${path}`, { method: "DELETE", headers: headers() }))).json();
+}
+
 // One chunk of a resumable blob upload at `offset` (Upload-Offset).
 export async function putChunk(digest, offset, bytes, signal) {
   const response = await fetch(`api/v1/blobs/${digest.hash}/${digest.size_bytes}`, {

@@ -1,7 +1,7 @@
 // scenes.js: the scenes list and one scene's jobs (the DAG: each job with the jobs it depends on),
 // kept live by the gateway's Server-Sent Events: state, phase, step, loss and ETA per job.
 import * as api from "./api.js";
-import { el, formatSeconds, formatTime, showError } from "./ui.js";
+import { announce, el, formatSeconds, formatTime, showError } from "./ui.js";
 
 const MAX_LISTED_JOBS = 2000;
 
@@ -79,10 +79,13 @@ export function renderScene(main, scene) {
   const viewerLink = el("a", { href: `#/viewer/${encodeURIComponent(scene)}`, class: "button" }, "Open the viewer");
   const cancel = el("button", { type: "button" }, "Cancel the scene's jobs");
   const retry = el("button", { type: "button", id: "retry-scene" }, "Retry failed and cancelled jobs");
+  // Deleting: once every job has ended (the scheduler refuses before); its blobs go with the
+  // store's next garbage collection.
+  const remove = el("button", { type: "button", id: "delete-scene", disabled: true }, "Delete the scene");
   main.replaceChildren(el("section", { class: "card" },
     el("h1", {}, `Scene ${scene}`),
     summary,
-    el("div", { class: "actions" }, viewerLink, cancel, retry),
+    el("div", { class: "actions" }, viewerLink, cancel, retry, remove),
     el("table", { id: "jobs" },
       el("caption", { class: "sr-only" }, "The scene's jobs"),
       el("thead", {}, el("tr", {}, ["Stage", "State", "Progress", "Inputs", "Attempts", "Worker", "Error", ""].map((h) => el("th", { scope: "col" }, h)))),
@@ -119,11 +122,27 @@ export function renderScene(main, scene) {
     }
     summary.textContent = `${rows.size} jobs: ${Object.entries(counts).map(([s, n]) => `${n} ${s}`).join(", ")}`;
     summary.dataset.done = String(rows.size > 0 && [...rows.values()].every(({ job: j }) => ["succeeded", "failed", "cancelled"].includes(api.stateName(j.state))));
+    remove.disabled = summary.dataset.done !== "true";
   }
 
   let source = null;
   cancel.addEventListener("click", () =>
     api.post(`/scenes/${encodeURIComponent(scene)}/cancel`).catch((e) => showError(summary, e)));
+  remove.addEventListener("click", async () => {
+    if (!window.confirm(`Delete scene ${scene} and its ${rows.size} jobs? Their results are removed from the store at its next garbage collection.`)) return;
+    try {
+      source?.close();
+      const deleted = await api.del(`/scenes/${encodeURIComponent(scene)}`);
+      rows.clear();
+      body.replaceChildren();
+      remove.disabled = true;
+      summary.dataset.deleted = "true";
+      summary.textContent = `Deleted ${Number(deleted.deleted_jobs || 0)} jobs of scene ${scene}.`;
+      announce(summary.textContent);
+    } catch (e) {
+      showError(summary, e);
+    }
+  });
   retry.addEventListener("click", async () => {
     try {
       await api.resubmitScene(scene, [...rows.values()].map((r) => r.job));

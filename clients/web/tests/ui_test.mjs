@@ -173,6 +173,19 @@ try {
   check("a cancelled job runs again after Retry", again);
   await page.click("text=Cancel the scene's jobs");
   await page.waitForSelector("#jobs tr[data-state=cancelled]", { timeout: 60_000 });
+  // Once every job of it has ended, the scene is deleted from its page (the confirmation accepted).
+  await page.waitForSelector("#scene-summary[data-done=true]", { timeout: 60_000 });
+  page.once("dialog", (dialog) => dialog.accept());
+  await page.click("#delete-scene");
+  await page.waitForSelector("#scene-summary[data-deleted=true]", { timeout: 30_000 });
+  const deletedText = await page.textContent("#scene-summary");
+  check("a scene whose jobs ended is deleted from its page", /^Deleted [1-9][0-9]* jobs/.test(deletedText), deletedText);
+  const left = await page.evaluate(async ([name]) => {
+    const headers = { Authorization: `Bearer ${sessionStorage.getItem("instascene.token")}` };
+    const r = await fetch(`api/v1/jobs?scene=${encodeURIComponent(name)}`, { headers });
+    return ((await r.json()).jobs || []).length;
+  }, [long[1]]);
+  check("the scheduler lists none of the deleted scene's jobs", left === 0, String(left));
 
   // The queue dashboard.
   await page.click("text=Queue");
