@@ -33,6 +33,7 @@ using auth::Role;
 
 class AuthTest : public ::testing::Test {
  protected:
+  static constexpr int64_t kQuota = int64_t{8} << 20;  // bytes one tenant may hold
   void SetUp() override {
     const std::string root = temp_.str();
     const std::string tokens = temp_.Sub("tokens.json");
@@ -41,7 +42,9 @@ class AuthTest : public ::testing::Test {
     worker_ = *auth::CreateToken(tokens, Role::kWorker, "", "");
     admin_ = *auth::CreateToken(tokens, Role::kAdmin, "", "");
     auth_ = *auth::Authenticator::FromFile(tokens, std::chrono::milliseconds(0));  // no wait
-    store_ = std::move(*store::FilesystemBlobStore::Open(root + "/store", {}));
+    store::StoreOptions store_options;
+    store_options.tenant_quota_bytes = kQuota;
+    store_ = std::move(*store::FilesystemBlobStore::Open(root + "/store", store_options));
     scheduler::QueueOptions queue_options;
     queue_options.max_unfinished_per_tenant = 1;  // one job in flight per tenant
     queue_ = std::move(*scheduler::OpenSqliteJobQueue(root + "/jobs.db", queue_options));
@@ -209,6 +212,30 @@ TEST_F(AuthTest, ATenantsUnfinishedJobsAreBoundedOthersAreNot) {
   std::multiset<std::string> scenes;
   for (const v1::Job& j : listed.jobs()) scenes.insert(j.scene());
   EXPECT_EQ(scenes, (std::multiset<std::string>{"acme:tiny", "beta:tiny", "tiny"}));
+}
+
+TEST_F(AuthTest, ATenantsStoredBytesAreBoundedByItsQuota) {
+  v1::SubmitPipelineResponse r;
+  ASSERT_TRUE(Submit(acme_, &r).ok());  // the tiny scene: about 1 MB of acme's 8 MiB
+  const int64_t held = *store_->TenantBytes("acme");
+  ASSERT_GT(held, 0);
+  auto acme = Store(acme_);
+  const std::string over(static_cast<size_t>(kQuota - held + 1), 'a');  // streamed (Write)
+  const absl::Status refused = acme->Put(store::ComputeDigest(over), over);
+  EXPECT_EQ(refused.code(), absl::StatusCode::kResourceExhausted) << refused;
+  EXPECT_NE(refused.message().find(absl::StrCat("tenant acme holds ", held, " bytes")),
+            std::string::npos)
+      << refused;
+  const std::string fits(static_cast<size_t>(kQuota - held), 'b');  // exactly up to the quota
+  EXPECT_TRUE(acme->Put(store::ComputeDigest(fits), fits).ok());
+  const absl::Status again = acme->Put(store::ComputeDigest(fits), fits);
+  EXPECT_TRUE(again.ok()) << "held already: not counted; " << again;
+  const std::string one = "c";  // a batch upload
+  EXPECT_EQ(acme->Put(store::ComputeDigest(one), one).code(), absl::StatusCode::kResourceExhausted);
+  EXPECT_EQ(*store_->TenantBytes("acme"), kQuota);
+  EXPECT_TRUE(Store(beta_)->Put(store::ComputeDigest(over), over).ok())
+      << "another tenant has its own quota";
+  EXPECT_TRUE(Store(admin_)->Put(store::ComputeDigest(one), one).ok()) << "admins have none";
 }
 
 TEST_F(AuthTest, TenantsSeeNothingOfEachOtherAndOutputsAreGrantedToTheirTenant) {

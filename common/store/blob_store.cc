@@ -4,6 +4,7 @@
 #include <fstream>
 #include <vector>
 
+#include "absl/strings/numbers.h"
 #include "absl/strings/str_cat.h"
 #include "common/core/file_io.h"
 #include "common/core/status.h"
@@ -14,6 +15,7 @@ absl::Status StoreOptions::Validate() const {
   if (max_blob_bytes <= 0) return absl::InvalidArgumentError("max_blob_bytes must be > 0");
   if (max_batch_bytes <= 0) return absl::InvalidArgumentError("max_batch_bytes must be > 0");
   if (upload_ttl_seconds < 0) return absl::InvalidArgumentError("upload_ttl_seconds must be >= 0");
+  if (tenant_quota_bytes < 0) return absl::InvalidArgumentError("tenant_quota_bytes must be >= 0");
   return absl::OkStatus();
 }
 
@@ -139,6 +141,16 @@ absl::StatusOr<int64_t> BlobStore::TenantAppend(const std::string&, const Digest
 }
 absl::Status BlobStore::TenantFinishUpload(const std::string&, const Digest&) {
   return NoTenants();
+}
+absl::StatusOr<int64_t> BlobStore::TenantBytes(const std::string&) { return NoTenants(); }
+
+absl::StatusOr<int64_t> GrantNameBytes(absl::string_view name) {
+  const size_t dash = name.rfind('-');
+  int64_t size = 0;
+  if (dash == absl::string_view::npos || !absl::SimpleAtoi(name.substr(dash + 1), &size) ||
+      size < 0)
+    return absl::DataLossError(absl::StrCat("grant '", name, "' does not end in -SIZE"));
+  return size;
 }
 
 namespace {

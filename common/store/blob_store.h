@@ -31,6 +31,10 @@ struct StoreOptions {
   // most once a minute when an upload starts; S3: the bucket's AbortIncompleteMultipartUpload
   // lifecycle rule, docs/DEPLOY.md). 0 = keep them for ever.
   int64_t upload_ttl_seconds = 24 * 3600;
+  // The most bytes of blobs granted to one tenant (its uploads and its jobs' outputs) before the
+  // store service refuses the tenant's new uploads (0 = no limit). Enforced by the store service
+  // (services/store/tenant_quota.h), read here so that every binary's --store flags set it.
+  int64_t tenant_quota_bytes = int64_t{256} << 30;
 
   absl::Status Validate() const;
 };
@@ -63,6 +67,8 @@ absl::Status VerifyBlobBytes(const Digest& digest, absl::string_view bytes);
 // (FailedPrecondition: resume at the committed size) and stay within the digest's size
 // (InvalidArgument).
 absl::Status CheckAppend(const Digest& digest, int64_t offset, int64_t committed, size_t bytes);
+// The size a grant's name (HASH-SIZE, both backends) records; DataLoss for another name.
+absl::StatusOr<int64_t> GrantNameBytes(absl::string_view name);
 // A tenant name safe as a path or key component: 1-32 of [a-z0-9-], not starting with '-' (the
 // rule common/auth/tokens.h documents; checked here too because the store sits below auth).
 absl::Status CheckTenantName(absl::string_view tenant);
@@ -111,6 +117,9 @@ class BlobStore {
   virtual absl::StatusOr<int64_t> TenantAppend(const std::string& tenant, const Digest& digest,
                                                int64_t offset, absl::string_view data);
   virtual absl::Status TenantFinishUpload(const std::string& tenant, const Digest& digest);
+  // The bytes of every blob granted to `tenant` (read from the grants' names; a grant whose blob
+  // was removed does not exist). The base class has none (Unimplemented).
+  virtual absl::StatusOr<int64_t> TenantBytes(const std::string& tenant);
 
   // Garbage collection (services/store/garbage_collection.h); the base class has none
   // (Unimplemented). Every committed blob, sorted by hash; one blob's modification time (nullopt:
@@ -149,6 +158,7 @@ class FilesystemBlobStore final : public BlobStore {
   absl::StatusOr<int64_t> TenantAppend(const std::string& tenant, const Digest& digest,
                                        int64_t offset, absl::string_view data) override;
   absl::Status TenantFinishUpload(const std::string& tenant, const Digest& digest) override;
+  absl::StatusOr<int64_t> TenantBytes(const std::string& tenant) override;
 
   std::string BlobPath(const Digest& digest) const;
 

@@ -336,6 +336,23 @@ absl::StatusOr<std::vector<StoredBlob>> FilesystemBlobStore::ListBlobs() {
   return blobs;
 }
 
+absl::StatusOr<int64_t> FilesystemBlobStore::TenantBytes(const std::string& tenant) {
+  RETURN_IF_ERROR(CheckTenantName(tenant));
+  int64_t total = 0;
+  std::error_code ec;
+  const fs::path folder = fs::path(root_) / "grants" / tenant;
+  if (!fs::exists(folder, ec)) return total;
+  for (auto it = fs::recursive_directory_iterator(folder, ec);
+       it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    if (ec) break;
+    if (!it->is_regular_file(ec)) continue;
+    ASSIGN_OR_RETURN(const int64_t size, GrantNameBytes(it->path().filename().string()));
+    total += size;
+  }
+  if (ec) return absl::UnavailableError(absl::StrCat(folder.string(), ": ", ec.message()));
+  return total;
+}
+
 absl::StatusOr<std::optional<std::chrono::system_clock::time_point>>
 FilesystemBlobStore::BlobModified(const Digest& digest) {
   RETURN_IF_ERROR(ValidateDigest(digest));

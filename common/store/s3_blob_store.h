@@ -73,6 +73,7 @@ class S3BlobStore final : public BlobStore {
   absl::StatusOr<int64_t> TenantAppend(const std::string& tenant, const Digest& digest,
                                        int64_t offset, absl::string_view data) override;
   absl::Status TenantFinishUpload(const std::string& tenant, const Digest& digest) override;
+  absl::StatusOr<int64_t> TenantBytes(const std::string& tenant) override;
   absl::StatusOr<std::vector<StoredBlob>> ListBlobs() override;
   absl::StatusOr<std::optional<std::chrono::system_clock::time_point>> BlobModified(
       const Digest& digest) override;

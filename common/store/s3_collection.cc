@@ -1,6 +1,6 @@
-// S3BlobStore's side of garbage collection (s3_blob_store.h): presence checks that keep a blob
-// about to be referenced young, the listing of `cas/` with modification times, and removal of a
-// blob with its grants.
+// S3BlobStore's side of garbage collection and tenants' usage (s3_blob_store.h): presence checks
+// that keep a blob about to be referenced young, the listing of `cas/` with modification times,
+// removal of a blob with its grants, and the bytes granted to a tenant.
 #include <algorithm>
 
 #include "absl/strings/str_cat.h"
@@ -52,6 +52,18 @@ absl::StatusOr<std::optional<std::chrono::system_clock::time_point>> S3BlobStore
   ASSIGN_OR_RETURN(std::optional<S3Client::ObjectInfo> info, client_->StatObject(BlobKey(digest)));
   if (!info.has_value()) return std::optional<std::chrono::system_clock::time_point>();
   return std::optional(info->modified);
+}
+
+absl::StatusOr<int64_t> S3BlobStore::TenantBytes(const std::string& tenant) {
+  RETURN_IF_ERROR(CheckTenantName(tenant));
+  const std::string folder = absl::StrCat(client_->location().prefix, "grants/", tenant, "/");
+  ASSIGN_OR_RETURN(std::vector<S3Client::Object> grants, client_->ListObjects(folder));
+  int64_t total = 0;
+  for (const S3Client::Object& g : grants) {
+    ASSIGN_OR_RETURN(const int64_t size, GrantNameBytes(g.key.substr(folder.size())));
+    total += size;
+  }
+  return total;
 }
 
 absl::Status S3BlobStore::Remove(const Digest& digest) {

@@ -126,6 +126,11 @@ inline void AddStoreLimitFlags(CLI::App& app, NodeOptions* o) {
                  "never)")
       ->capture_default_str()
       ->check(CLI::NonNegativeNumber);
+  app.add_option("--tenant-quota-bytes", o->store_options.tenant_quota_bytes,
+                 "Store service: the most bytes of blobs granted to one tenant (its uploads and "
+                 "its jobs' outputs); a new upload over it is RESOURCE_EXHAUSTED (0 = no limit)")
+      ->capture_default_str()
+      ->check(CLI::NonNegativeNumber);
 }
 
 inline void AddNodeFlags(CLI::App& app, NodeOptions* o, bool needs_store_address,

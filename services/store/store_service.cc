@@ -59,6 +59,14 @@ absl::StatusOr<auth::Identity> StoreService::Caller(grpc::ServerContext* context
   return auth::Authorize(auth_, context, {Role::kClient, Role::kWorker, Role::kAdmin});
 }
 
+absl::Status StoreService::AdmitNew(const auth::Identity& who, const store::Digest& digest) {
+  if (!who.scoped()) return absl::OkStatus();
+  ASSIGN_OR_RETURN(std::vector<store::Digest> ungranted,
+                   store_->FindUngranted(who.tenant, {digest}));
+  if (ungranted.empty()) return absl::OkStatus();  // proving possession again adds nothing
+  return quota_.Admit(who.tenant, digest);
+}
+
 absl::Status StoreService::CheckReadable(const auth::Identity& who,
                                          const store::Digest& digest) const {
   if (!who.scoped()) return absl::OkStatus();
@@ -100,7 +108,8 @@ grpc::Status StoreService::BatchUpdateBlobs(grpc::ServerContext* context,
     absl::StatusOr<store::Digest> d =
         rpc::ParseProtoDigest(blob.digest(), absl::StrCat("blobs[", i, "].digest"));
     // Put verifies the bytes even when the store holds the blob: a tenant proves possession.
-    absl::Status s = d.ok() ? store_->Put(*d, blob.data()) : d.status();
+    absl::Status s = d.ok() ? AdmitNew(*who, *d) : d.status();
+    if (s.ok()) s = store_->Put(*d, blob.data());
     if (s.ok() && who->scoped()) s = store_->Grant(who->tenant, {*d});
     SetBlobStatus(rpc::FromProto(blob.digest()), s, response->add_statuses());
   }
@@ -150,12 +159,17 @@ grpc::Status StoreService::Write(grpc::ServerContext* context,
                      store_->options().max_blob_bytes, " bytes")));
   absl::StatusOr<int64_t> committed = uploads.CommittedSize(*d);
   if (!committed.ok()) return ToGrpcStatus(committed.status());
+  if (*committed < d->size_bytes) {
+    if (absl::Status s = AdmitNew(*who, *d); !s.ok()) return ToGrpcStatus(s);
+  }
   bool finished = false;
   do {
     if (finished) return ToGrpcStatus(absl::InvalidArgumentError("Write: data after finish_write"));
     if (!request.data().empty() || request.write_offset() != *committed) {
-      if (*committed == d->size_bytes && request.data().empty()) {
-        // Already complete (e.g. resumed after the final chunk landed): nothing to append.
+      if (*committed == d->size_bytes && request.write_offset() >= 0 &&
+          request.write_offset() + static_cast<int64_t>(request.data().size()) <= d->size_bytes) {
+        // Already complete (resumed after the final chunk landed, or a blob the store or the
+        // tenant holds already): the stream's chunks within the blob add nothing.
       } else {
         committed = uploads.Append(*d, request.write_offset(), request.data());
         if (!committed.ok()) return ToGrpcStatus(committed.status());

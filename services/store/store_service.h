@@ -1,6 +1,7 @@
 // services/store/store_service.h: the ContentStore gRPC service (store.proto), a thin adapter over
 // a BlobStore. Statuses: INVALID_ARGUMENT malformed digest or digest mismatch (nothing stored),
-// RESOURCE_EXHAUSTED blob or batch over the limits, NOT_FOUND unknown digest, FAILED_PRECONDITION
+// RESOURCE_EXHAUSTED blob or batch over the limits or a tenant's upload over its quota
+// (tenant_quota.h), NOT_FOUND unknown digest, FAILED_PRECONDITION
 // write at the wrong offset (the message names the committed size to resume at), OUT_OF_RANGE bad
 // read range. Every call is authorized first (common/auth): clients see their tenant's blobs only
 // (store.proto says how), workers and admins the whole store; UNAUTHENTICATED without a valid
@@ -10,6 +11,7 @@
 #include "common/auth/authenticator.h"
 #include "common/store/blob_store.h"
 #include "instascene/v1/store.grpc.pb.h"
+#include "services/store/tenant_quota.h"
 
 namespace instascene::store_service {
 
@@ -17,7 +19,7 @@ class StoreService final : public v1::ContentStore::Service {
  public:
   // `auth` null = authentication off (every caller unrestricted). Both must outlive the service.
   explicit StoreService(store::BlobStore* store, auth::Authenticator* auth = nullptr)
-      : store_(store), auth_(auth) {}
+      : store_(store), auth_(auth), quota_(store) {}
 
   grpc::Status FindMissingBlobs(grpc::ServerContext*, const v1::FindMissingBlobsRequest* request,
                                 v1::FindMissingBlobsResponse* response) override;
@@ -44,8 +46,12 @@ class StoreService final : public v1::ContentStore::Service {
   // NotFound for a blob the caller may not read (the same answer as for a blob nobody stored).
   absl::Status CheckReadable(const auth::Identity& who, const store::Digest& digest) const;
 
+  // A tenant's new blob within its quota (OK for unscoped callers and blobs it holds already).
+  absl::Status AdmitNew(const auth::Identity& who, const store::Digest& digest);
+
   store::BlobStore* store_;    // not owned
   auth::Authenticator* auth_;  // not owned; null = off
+  TenantQuota quota_;
 };
 
 }  // namespace instascene::store_service
