@@ -283,6 +283,21 @@ TEST(S3BlobStoreTest, LargeBlobsUseMultipartUploadAndCopyAndClearTheirStaging) {
   EXPECT_TRUE(store->client().ListMultipartUploads("multipart/")->empty());
 }
 
+TEST(S3BlobStoreTest, ATenantsBytesAreTheSizesOfItsGrants) {
+  auto store = OpenS3("tenant-bytes");
+  ASSERT_NE(store, nullptr);
+  EXPECT_EQ(*store->TenantBytes("acme"), 0);
+  const std::string a = "seven b", b = "eleven byte";
+  for (const std::string* s : {&a, &b}) ASSERT_TRUE(store->Put(ComputeDigest(*s), *s).ok());
+  ASSERT_TRUE(store->Grant("acme", {ComputeDigest(a), ComputeDigest(b)}).ok());
+  ASSERT_TRUE(store->Grant("acme", {ComputeDigest(a)}).ok());
+  ASSERT_TRUE(store->Grant("acme-2", {ComputeDigest(a)}).ok());  // a name extending acme's
+  EXPECT_EQ(*store->TenantBytes("acme"), 18);
+  EXPECT_EQ(*store->TenantBytes("acme-2"), 7);
+  ASSERT_TRUE(store->Remove(ComputeDigest(b)).ok());
+  EXPECT_EQ(*store->TenantBytes("acme"), 7);
+}
+
 TEST(S3BlobStoreTest, AnUploadCorruptedInStorageIsNeverPublished) {
   // A client's upload was assembled under uploads/, then its bytes changed before verification
   // (bit rot, a buggy proxy): finishing must verify and refuse it.

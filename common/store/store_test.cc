@@ -173,6 +173,23 @@ TEST(ManifestTest, SceneUploadSendsOnlyWhatIsMissing) {
   EXPECT_NE(outside.status().message().find("outside the scene folder"), std::string::npos);
 }
 
+TEST(BlobStoreTest, ATenantsBytesAreTheSizesOfItsGrants) {
+  instascene::testing::ScopedTempDir temp("tenant_bytes");
+  auto store = FilesystemBlobStore::Open(temp.str(), StoreOptions{});
+  ASSERT_TRUE(store.ok()) << store.status();
+  EXPECT_EQ(*(*store)->TenantBytes("acme"), 0);  // no grants yet
+  const std::string a = "seven b", b = "eleven byte";
+  for (const std::string* s : {&a, &b}) ASSERT_TRUE((*store)->Put(ComputeDigest(*s), *s).ok());
+  ASSERT_TRUE((*store)->Grant("acme", {ComputeDigest(a), ComputeDigest(b)}).ok());
+  ASSERT_TRUE((*store)->Grant("acme", {ComputeDigest(a)}).ok());  // granted twice: once
+  ASSERT_TRUE((*store)->Grant("beta", {ComputeDigest(a)}).ok());
+  EXPECT_EQ(*(*store)->TenantBytes("acme"), 18);
+  EXPECT_EQ(*(*store)->TenantBytes("beta"), 7);
+  ASSERT_TRUE((*store)->Remove(ComputeDigest(b)).ok());  // removal takes its grants along
+  EXPECT_EQ(*(*store)->TenantBytes("acme"), 7);
+  EXPECT_EQ((*store)->TenantBytes("../x").status().code(), absl::StatusCode::kInvalidArgument);
+}
+
 TEST(BlobStoreTest, OneProcessOwnsAStoreFolder) {
   const instascene::testing::ScopedTempDir temp("store_lock");
   auto first = FilesystemBlobStore::Open(temp.str(), StoreOptions{});
