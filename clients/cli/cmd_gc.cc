@@ -26,28 +26,34 @@ struct GcArgs {
   bool dry_run = false, json = false;
 };
 
-absl::Status RunGc(const GcArgs& a) {
-  if (!(a.grace_hours >= 0) || a.grace_hours > 24 * 365 * 100)
-    return absl::InvalidArgumentError("--grace-hours: in [0, 876000]");
-  std::unique_ptr<store::BlobStore> blobs;
-  std::unique_ptr<scheduler::JobQueue> queue;
+// The store and the queue to collect: --store and --queue (scale-out), else --data's.
+absl::Status OpenTargets(const GcArgs& a, std::unique_ptr<store::BlobStore>* blobs,
+                         std::unique_ptr<scheduler::JobQueue>* queue) {
   if (!a.store.empty() || !a.queue.empty()) {
     if (a.store.empty() || a.queue.empty())
       return absl::InvalidArgumentError("--store and --queue go together (scale-out storage)");
     if (!store::IsBlobStoreUri(a.store))
       return absl::InvalidArgumentError(
           "--store: the storage itself (s3://... or file:DIR), not a store service's address");
-    ASSIGN_OR_RETURN(blobs, store::OpenBlobStoreUri(a.store, {}));
-    ASSIGN_OR_RETURN(queue, scheduler::OpenJobQueueUri(a.queue, {}));
-  } else {
-    const std::filesystem::path data(a.data);
-    if (!std::filesystem::exists(data / "jobs.db") ||
-        !std::filesystem::is_directory(data / "store"))
-      return absl::NotFoundError(absl::StrCat(
-          a.data, ": not the data directory of `instascene serve` (no jobs.db and store/)"));
-    ASSIGN_OR_RETURN(blobs, store::FilesystemBlobStore::Open((data / "store").string(), {}));
-    ASSIGN_OR_RETURN(queue, scheduler::OpenSqliteJobQueue((data / "jobs.db").string(), {}));
+    ASSIGN_OR_RETURN(*blobs, store::OpenBlobStoreUri(a.store, {}));
+    ASSIGN_OR_RETURN(*queue, scheduler::OpenJobQueueUri(a.queue, {}));
+    return absl::OkStatus();
   }
+  const std::filesystem::path data(a.data);
+  if (!std::filesystem::exists(data / "jobs.db") || !std::filesystem::is_directory(data / "store"))
+    return absl::NotFoundError(absl::StrCat(
+        a.data, ": not the data directory of `instascene serve` (no jobs.db and store/)"));
+  ASSIGN_OR_RETURN(*blobs, store::FilesystemBlobStore::Open((data / "store").string(), {}));
+  ASSIGN_OR_RETURN(*queue, scheduler::OpenSqliteJobQueue((data / "jobs.db").string(), {}));
+  return absl::OkStatus();
+}
+
+absl::Status RunGc(const GcArgs& a) {
+  if (!(a.grace_hours >= 0) || a.grace_hours > 24 * 365 * 100)
+    return absl::InvalidArgumentError("--grace-hours: in [0, 876000]");
+  std::unique_ptr<store::BlobStore> blobs;
+  std::unique_ptr<scheduler::JobQueue> queue;
+  RETURN_IF_ERROR(OpenTargets(a, &blobs, &queue));
   store_service::GcOptions options;
   options.grace = std::chrono::seconds(static_cast<int64_t>(a.grace_hours * 3600));
   options.dry_run = a.dry_run;
