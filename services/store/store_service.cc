@@ -61,10 +61,11 @@ absl::StatusOr<auth::Identity> StoreService::Caller(grpc::ServerContext* context
 
 absl::Status StoreService::AdmitNew(const auth::Identity& who, const store::Digest& digest) {
   if (!who.scoped()) return absl::OkStatus();
-  ASSIGN_OR_RETURN(std::vector<store::Digest> ungranted,
-                   store_->FindUngranted(who.tenant, {digest}));
-  if (ungranted.empty()) return absl::OkStatus();  // proving possession again adds nothing
-  return quota_.Admit(who.tenant, digest);
+  return quota_.Admit(who.tenant, digest, [&]() -> absl::StatusOr<bool> {
+    ASSIGN_OR_RETURN(std::vector<store::Digest> ungranted,
+                     store_->FindUngranted(who.tenant, {digest}));
+    return ungranted.empty();
+  });
 }
 
 absl::Status StoreService::CheckReadable(const auth::Identity& who,

@@ -46,7 +46,7 @@ class StoreService final : public v1::ContentStore::Service {
   // NotFound for a blob the caller may not read (the same answer as for a blob nobody stored).
   absl::Status CheckReadable(const auth::Identity& who, const store::Digest& digest) const;
 
-  // A tenant's new blob within its quota (OK for unscoped callers and blobs it holds already).
+  // A tenant's upload within its quota (OK for unscoped callers and blobs it holds already).
   absl::Status AdmitNew(const auth::Identity& who, const store::Digest& digest);
 
   store::BlobStore* store_;    // not owned
