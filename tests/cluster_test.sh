@@ -83,14 +83,14 @@ s3.put_object(Bucket='$S3_BUCKET', Key='cluster/grants/acme/%s-%d' % (h, len(bod
 print(h)")
 check "an orphan blob and its grant in S3" test "$(s3_count "cas/$orphan")$(s3_count "grants/acme/$orphan")" = 11
 check "gc, dry run, services running" "$BIN" gc --store "$STORE_URI" --queue "$QUEUE" --grace-hours 0 --dry-run --json
-would=$(json_get "$WORK/out.txt" "d['removed_blobs']")
-check "gc read the thirty jobs as roots" test "$(json_get "$WORK/out.txt" "d['jobs'] == 30 and d['live_blobs'] > 30 and d['missing_manifests'] == 0 and d['removed_blobs'] >= 1")" = True
+would=$(json_get "$WORK/out.txt" "(d['removed_blobs'], d['removed_grants'])")
+check "gc read the thirty jobs as roots" test "$(json_get "$WORK/out.txt" "d['jobs'] == 30 and d['live_blobs'] > 30 and d['missing_manifests'] == 0 and d['removed_blobs'] >= 1 and d['removed_grants'] >= 1")" = True
 check "gc, services running" "$BIN" gc --store "$STORE_URI" --queue "$QUEUE" --grace-hours 0 --json
-check "gc removed what the dry run counted" test "$(json_get "$WORK/out.txt" "d['removed_blobs']")" = "$would"
+check "gc removed what the dry run counted" test "$(json_get "$WORK/out.txt" "(d['removed_blobs'], d['removed_grants'])")" = "$would"
 check "the orphan and its grant are gone" test "$(s3_count "cas/$orphan")$(s3_count "grants/acme/$orphan")" = 00
 for s in $(seq 10); do check "scene $s fetches after gc" "$BIN" fetch --scene "s$s" --out "$WORK/g$s" --server "$A" --store "$STORE"; done
 check "gc again: nothing left to remove" "$BIN" gc --store "$STORE_URI" --queue "$QUEUE" --grace-hours 0 --json
-check "nothing removed the second time" test "$(json_get "$WORK/out.txt" "d['removed_blobs']")" = 0
+check "nothing removed the second time" test "$(json_get "$WORK/out.txt" "d['removed_blobs'] + d['removed_grants']")" = 0
 check_fails "gc wants --store and --queue together" "go together" "$BIN" gc --store "$STORE_URI"
 check_fails "gc refuses a store service's address" "not a store service" "$BIN" gc --store "$STORE" --queue "$QUEUE"
 check_fails "gc refuses a queue URI it does not know" "expected sqlite:PATH or postgres://" "$BIN" gc --store "$STORE_URI" --queue mysql://db/jobs

@@ -48,6 +48,33 @@ absl::Status OpenTargets(const GcArgs& a, std::unique_ptr<store::BlobStore>* blo
   return absl::OkStatus();
 }
 
+// The summary on stderr, and the report as JSON on stdout with --json.
+void PrintReport(const store_service::GcReport& r, const GcArgs& a) {
+  auto n = [](int64_t v) { return static_cast<long long>(v); };
+  std::fprintf(stderr,
+               "gc: %lld jobs; %lld blobs (%lld bytes): %lld reached from a job, %lld younger than "
+               "the grace period; %s %lld blobs (%lld bytes) and %lld of %lld grants%s%s\n",
+               n(r.jobs), n(r.blobs), n(r.bytes), n(r.live_blobs), n(r.young_blobs),
+               a.dry_run ? "would remove" : "removed", n(r.removed_blobs), n(r.removed_bytes),
+               n(r.removed_grants), n(r.grants),
+               r.missing_manifests > 0 ? "; some jobs name manifests the store lacks" : "",
+               r.raced_blobs > 0 ? "; some were found present again meanwhile and kept" : "");
+  if (!a.json) return;
+  PrintJsonLine(nlohmann::json({{"jobs", r.jobs},
+                                {"blobs", r.blobs},
+                                {"bytes", r.bytes},
+                                {"live_blobs", r.live_blobs},
+                                {"young_blobs", r.young_blobs},
+                                {"removed_blobs", r.removed_blobs},
+                                {"removed_bytes", r.removed_bytes},
+                                {"missing_manifests", r.missing_manifests},
+                                {"raced_blobs", r.raced_blobs},
+                                {"grants", r.grants},
+                                {"removed_grants", r.removed_grants},
+                                {"dry_run", a.dry_run}})
+                    .dump());
+}
+
 absl::Status RunGc(const GcArgs& a) {
   if (!(a.grace_hours >= 0) || a.grace_hours > 24 * 365 * 100)
     return absl::InvalidArgumentError("--grace-hours: in [0, 876000]");
@@ -59,28 +86,7 @@ absl::Status RunGc(const GcArgs& a) {
   options.dry_run = a.dry_run;
   ASSIGN_OR_RETURN(const store_service::GcReport r,
                    store_service::CollectGarbage(*blobs, *queue, options));
-  std::fprintf(stderr,
-               "gc: %lld jobs; %lld blobs (%lld bytes): %lld reached from a job, %lld younger than "
-               "the grace period; %s %lld blobs (%lld bytes)%s%s\n",
-               static_cast<long long>(r.jobs), static_cast<long long>(r.blobs),
-               static_cast<long long>(r.bytes), static_cast<long long>(r.live_blobs),
-               static_cast<long long>(r.young_blobs), a.dry_run ? "would remove" : "removed",
-               static_cast<long long>(r.removed_blobs), static_cast<long long>(r.removed_bytes),
-               r.missing_manifests > 0 ? "; some jobs name manifests the store lacks" : "",
-               r.raced_blobs > 0 ? "; some were found present again meanwhile and kept" : "");
-  if (a.json) {
-    PrintJsonLine(nlohmann::json({{"jobs", r.jobs},
-                                  {"blobs", r.blobs},
-                                  {"bytes", r.bytes},
-                                  {"live_blobs", r.live_blobs},
-                                  {"young_blobs", r.young_blobs},
-                                  {"removed_blobs", r.removed_blobs},
-                                  {"removed_bytes", r.removed_bytes},
-                                  {"missing_manifests", r.missing_manifests},
-                                  {"raced_blobs", r.raced_blobs},
-                                  {"dry_run", a.dry_run}})
-                      .dump());
-  }
+  PrintReport(r, a);
   return absl::OkStatus();
 }
 

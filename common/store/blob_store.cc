@@ -153,6 +153,16 @@ absl::StatusOr<int64_t> GrantNameBytes(absl::string_view name) {
   return size;
 }
 
+std::optional<Digest> GrantNameDigest(absl::string_view name) {
+  const size_t dash = name.rfind('-');
+  if (dash == absl::string_view::npos) return std::nullopt;
+  Digest d;
+  d.hash = std::string(name.substr(0, dash));
+  if (!absl::SimpleAtoi(name.substr(dash + 1), &d.size_bytes) || !ValidateDigest(d).ok())
+    return std::nullopt;
+  return d;
+}
+
 namespace {
 absl::Status NoCollection() {
   return absl::UnimplementedError(
@@ -167,5 +177,7 @@ absl::StatusOr<std::optional<std::chrono::system_clock::time_point>> BlobStore::
   return NoCollection();
 }
 absl::Status BlobStore::Remove(const Digest&) { return NoCollection(); }
+absl::StatusOr<std::vector<StoredGrant>> BlobStore::ListGrants() { return NoCollection(); }
+absl::Status BlobStore::RemoveGrant(const std::string&, const Digest&) { return NoCollection(); }
 
 }  // namespace instascene::store

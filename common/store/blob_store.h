@@ -55,6 +55,14 @@ struct StoredBlob {
   std::chrono::system_clock::time_point modified;
 };
 
+// A tenant's grant of a blob as the garbage collector sees it: the blob it names (which the
+// store may no longer hold) and when the grant was written.
+struct StoredGrant {
+  std::string tenant;
+  Digest digest;
+  std::chrono::system_clock::time_point modified;
+};
+
 // Progress of a transfer: bytes done, bytes total.
 using TransferProgress = std::function<void(int64_t done, int64_t total)>;
 
@@ -69,6 +77,8 @@ absl::Status VerifyBlobBytes(const Digest& digest, absl::string_view bytes);
 absl::Status CheckAppend(const Digest& digest, int64_t offset, int64_t committed, size_t bytes);
 // The size a grant's name (HASH-SIZE, both backends) records; DataLoss for another name.
 absl::StatusOr<int64_t> GrantNameBytes(absl::string_view name);
+// The digest a grant's name records; nullopt for a name that is not HASH-SIZE of a valid digest.
+std::optional<Digest> GrantNameDigest(absl::string_view name);
 // A tenant name safe as a path or key component: 1-32 of [a-z0-9-], not starting with '-' (the
 // rule common/auth/tokens.h documents; checked here too because the store sits below auth).
 absl::Status CheckTenantName(absl::string_view tenant);
@@ -117,18 +127,21 @@ class BlobStore {
   virtual absl::StatusOr<int64_t> TenantAppend(const std::string& tenant, const Digest& digest,
                                                int64_t offset, absl::string_view data);
   virtual absl::Status TenantFinishUpload(const std::string& tenant, const Digest& digest);
-  // The bytes of every blob granted to `tenant` (read from the grants' names; a grant whose blob
-  // was removed does not exist). The base class has none (Unimplemented).
+  // The bytes of every blob granted to `tenant`, read from the grants' names (the garbage
+  // collector removes the grants of a blob it removed). The base class has none (Unimplemented).
   virtual absl::StatusOr<int64_t> TenantBytes(const std::string& tenant);
 
   // Garbage collection (services/store/garbage_collection.h); the base class has none
   // (Unimplemented). Every committed blob, sorted by hash; one blob's modification time (nullopt:
-  // absent), read again just before its removal; the removal of a blob with every tenant's grant
-  // of it (removing an absent blob is not an error).
+  // absent), read again just before its removal; the removal of a blob (its grants stay: the
+  // collector removes them). Every tenant's every grant, sorted by tenant and hash (a grant's
+  // blob may be absent); the removal of one grant. Removing what is absent is not an error.
   virtual absl::StatusOr<std::vector<StoredBlob>> ListBlobs();
   virtual absl::StatusOr<std::optional<std::chrono::system_clock::time_point>> BlobModified(
       const Digest& digest);
   virtual absl::Status Remove(const Digest& digest);
+  virtual absl::StatusOr<std::vector<StoredGrant>> ListGrants();
+  virtual absl::Status RemoveGrant(const std::string& tenant, const Digest& digest);
 };
 
 // Blobs under <root>/cas/<hash[0:2]>/<hash>, interrupted uploads under <root>/uploads/ (a
@@ -168,6 +181,8 @@ class FilesystemBlobStore final : public BlobStore {
   absl::StatusOr<std::optional<std::chrono::system_clock::time_point>> BlobModified(
       const Digest& digest) override;
   absl::Status Remove(const Digest& digest) override;
+  absl::StatusOr<std::vector<StoredGrant>> ListGrants() override;
+  absl::Status RemoveGrant(const std::string& tenant, const Digest& digest) override;
 
  private:
   FilesystemBlobStore(std::string root, StoreOptions options, FileLock lock)

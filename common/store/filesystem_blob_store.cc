@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <tuple>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -369,10 +370,41 @@ absl::Status FilesystemBlobStore::Remove(const Digest& digest) {
   std::error_code ec;
   fs::remove(BlobPath(digest), ec);
   if (ec) return absl::UnavailableError(absl::StrCat(BlobPath(digest), ": ", ec.message()));
-  for (const auto& tenant : fs::directory_iterator(fs::path(root_) / "grants", ec)) {
-    std::error_code e;
-    fs::remove(GrantPath(tenant.path().filename().string(), digest), e);
+  return absl::OkStatus();
+}
+
+absl::StatusOr<std::vector<StoredGrant>> FilesystemBlobStore::ListGrants() {
+  std::vector<StoredGrant> grants;
+  std::error_code ec;
+  const fs::path folder = fs::path(root_) / "grants";
+  if (!fs::exists(folder, ec)) return grants;
+  // grants/<tenant>/<hash[0:2]>/<hash>-<size>: anything else there is not a grant.
+  for (auto it = fs::recursive_directory_iterator(folder, ec);
+       it != fs::recursive_directory_iterator(); it.increment(ec)) {
+    if (ec) break;
+    if (it.depth() != 2 || !it->is_regular_file(ec)) continue;
+    const fs::path& path = it->path();
+    std::optional<Digest> digest = GrantNameDigest(path.filename().string());
+    const std::string tenant = path.parent_path().parent_path().filename().string();
+    if (!digest.has_value() || !CheckTenantName(tenant).ok()) continue;
+    const fs::file_time_type modified = it->last_write_time(ec);
+    if (ec) continue;
+    grants.push_back({tenant, std::move(*digest), ToSystemTime(modified)});
   }
+  if (ec) return absl::UnavailableError(absl::StrCat(folder.string(), ": ", ec.message()));
+  std::sort(grants.begin(), grants.end(), [](const StoredGrant& a, const StoredGrant& b) {
+    return std::tie(a.tenant, a.digest.hash) < std::tie(b.tenant, b.digest.hash);
+  });
+  return grants;
+}
+
+absl::Status FilesystemBlobStore::RemoveGrant(const std::string& tenant, const Digest& digest) {
+  RETURN_IF_ERROR(CheckTenantName(tenant));
+  RETURN_IF_ERROR(ValidateDigest(digest));
+  std::error_code ec;
+  fs::remove(GrantPath(tenant, digest), ec);
+  if (ec)
+    return absl::UnavailableError(absl::StrCat(GrantPath(tenant, digest), ": ", ec.message()));
   return absl::OkStatus();
 }
 

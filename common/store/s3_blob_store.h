@@ -78,6 +78,8 @@ class S3BlobStore final : public BlobStore {
   absl::StatusOr<std::optional<std::chrono::system_clock::time_point>> BlobModified(
       const Digest& digest) override;
   absl::Status Remove(const Digest& digest) override;
+  absl::StatusOr<std::vector<StoredGrant>> ListGrants() override;
+  absl::Status RemoveGrant(const std::string& tenant, const Digest& digest) override;
 
   std::string BlobKey(const Digest& digest) const;
   // The upload's staging key: the shared one (space "") or a tenant's own.

@@ -302,25 +302,4 @@ absl::StatusOr<std::vector<S3Client::Object>> S3Client::ListObjects(const std::s
   return objects;
 }
 
-absl::StatusOr<std::vector<std::string>> S3Client::ListPrefixes(const std::string& prefix) {
-  std::vector<std::string> prefixes;
-  std::string after;
-  for (;;) {
-    S3Request r;
-    r.query = {{"list-type", "2"}, {"prefix", prefix}, {"delimiter", "/"}};
-    if (!after.empty()) r.query.push_back({"start-after", after});
-    ASSIGN_OR_RETURN(S3Response response, Call(r));
-    pugi::xml_document doc;
-    ASSIGN_OR_RETURN(pugi::xml_node root, ParseXml(doc, response.body, "ListObjectsV2"));
-    const size_t before = prefixes.size();
-    for (pugi::xml_node c : root.children("CommonPrefixes"))
-      prefixes.push_back(c.child_value("Prefix"));
-    if (std::string(root.child_value("IsTruncated")) != "true" || prefixes.size() == before) break;
-    // Past every key of the last folder: its trailing '/' raised to the next character ('0').
-    after = prefixes.back();
-    after.back() = '/' + 1;
-  }
-  return prefixes;
-}
-
 }  // namespace instascene::store

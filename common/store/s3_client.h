@@ -112,9 +112,6 @@ class S3Client {
   };
   // Every object under `prefix` (all pages).
   absl::StatusOr<std::vector<Object>> ListObjects(const std::string& prefix);
-  // The "folders" directly under `prefix` (ListObjectsV2 with delimiter '/': its CommonPrefixes,
-  // each ending in '/'), all pages.
-  absl::StatusOr<std::vector<std::string>> ListPrefixes(const std::string& prefix);
 
  private:
   void* AcquireHandle();

@@ -1,7 +1,8 @@
 // S3BlobStore's side of garbage collection and tenants' usage (s3_blob_store.h): presence checks
-// that keep a blob about to be referenced young, the listing of `cas/` with modification times,
-// removal of a blob with its grants, and the bytes granted to a tenant.
+// that keep a blob about to be referenced young, the listings of `cas/` and `grants/` with
+// modification times, removal of a blob and of a grant, and the bytes granted to a tenant.
 #include <algorithm>
+#include <tuple>
 
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
@@ -68,15 +69,36 @@ absl::StatusOr<int64_t> S3BlobStore::TenantBytes(const std::string& tenant) {
 
 absl::Status S3BlobStore::Remove(const Digest& digest) {
   RETURN_IF_ERROR(ValidateDigest(digest));
-  RETURN_IF_ERROR(client_->DeleteObject(BlobKey(digest)));  // S3 answers 204 for an absent key
-  const std::string grants = absl::StrCat(client_->location().prefix, "grants/");
-  ASSIGN_OR_RETURN(const std::vector<std::string> tenants, client_->ListPrefixes(grants));
-  for (const std::string& folder : tenants) {
-    const std::string tenant = folder.substr(grants.size(), folder.size() - grants.size() - 1);
-    if (!CheckTenantName(tenant).ok()) continue;  // not a tenant's folder
-    RETURN_IF_ERROR(client_->DeleteObject(GrantKey(tenant, digest)));
+  return client_->DeleteObject(BlobKey(digest));  // S3 answers 204 for an absent key
+}
+
+absl::StatusOr<std::vector<StoredGrant>> S3BlobStore::ListGrants() {
+  const std::string prefix = absl::StrCat(client_->location().prefix, "grants/");
+  ASSIGN_OR_RETURN(std::vector<S3Client::Object> objects, client_->ListObjects(prefix));
+  std::vector<StoredGrant> grants;
+  for (const S3Client::Object& o : objects) {
+    // grants/<tenant>/<hash>-<size>: anything else there is not a grant.
+    const std::string rest = o.key.substr(prefix.size());
+    const size_t slash = rest.find('/');
+    if (slash == std::string::npos) continue;
+    StoredGrant g;
+    g.tenant = rest.substr(0, slash);
+    std::optional<Digest> digest = GrantNameDigest(rest.substr(slash + 1));
+    if (!digest.has_value() || !CheckTenantName(g.tenant).ok()) continue;
+    g.digest = std::move(*digest);
+    g.modified = o.modified;
+    grants.push_back(std::move(g));
   }
-  return absl::OkStatus();
+  std::sort(grants.begin(), grants.end(), [](const StoredGrant& a, const StoredGrant& b) {
+    return std::tie(a.tenant, a.digest.hash) < std::tie(b.tenant, b.digest.hash);
+  });
+  return grants;
+}
+
+absl::Status S3BlobStore::RemoveGrant(const std::string& tenant, const Digest& digest) {
+  RETURN_IF_ERROR(CheckTenantName(tenant));
+  RETURN_IF_ERROR(ValidateDigest(digest));
+  return client_->DeleteObject(GrantKey(tenant, digest));
 }
 
 }  // namespace instascene::store

@@ -294,8 +294,19 @@ TEST(S3BlobStoreTest, ATenantsBytesAreTheSizesOfItsGrants) {
   ASSERT_TRUE(store->Grant("acme-2", {ComputeDigest(a)}).ok());  // a name extending acme's
   EXPECT_EQ(*store->TenantBytes("acme"), 18);
   EXPECT_EQ(*store->TenantBytes("acme-2"), 7);
+  // A removed blob's grants stay until the collector removes them (garbage_collection.h).
   ASSERT_TRUE(store->Remove(ComputeDigest(b)).ok());
+  auto grants = store->ListGrants();
+  ASSERT_TRUE(grants.ok()) << grants.status();
+  ASSERT_EQ(grants->size(), 3u);
+  EXPECT_EQ((*grants)[0].tenant, "acme");
+  EXPECT_EQ((*grants)[2].tenant, "acme-2");
+  EXPECT_EQ((*grants)[2].digest, ComputeDigest(a));
+  EXPECT_EQ(*store->TenantBytes("acme"), 18);
+  ASSERT_TRUE(store->RemoveGrant("acme", ComputeDigest(b)).ok());
+  ASSERT_TRUE(store->RemoveGrant("acme", ComputeDigest(b)).ok());  // absent: not an error
   EXPECT_EQ(*store->TenantBytes("acme"), 7);
+  EXPECT_EQ(store->ListGrants()->size(), 2u);
 }
 
 TEST(S3BlobStoreTest, AnUploadCorruptedInStorageIsNeverPublished) {

@@ -185,9 +185,22 @@ TEST(BlobStoreTest, ATenantsBytesAreTheSizesOfItsGrants) {
   ASSERT_TRUE((*store)->Grant("beta", {ComputeDigest(a)}).ok());
   EXPECT_EQ(*(*store)->TenantBytes("acme"), 18);
   EXPECT_EQ(*(*store)->TenantBytes("beta"), 7);
-  ASSERT_TRUE((*store)->Remove(ComputeDigest(b)).ok());  // removal takes its grants along
+  // A removed blob's grants stay until the collector removes them (garbage_collection.h).
+  ASSERT_TRUE((*store)->Remove(ComputeDigest(b)).ok());
+  auto grants = (*store)->ListGrants();
+  ASSERT_TRUE(grants.ok()) << grants.status();
+  ASSERT_EQ(grants->size(), 3u);
+  EXPECT_EQ((*grants)[0].tenant, "acme");
+  EXPECT_EQ((*grants)[2].tenant, "beta");
+  EXPECT_EQ((*grants)[2].digest, ComputeDigest(a));
+  EXPECT_EQ(*(*store)->TenantBytes("acme"), 18);
+  ASSERT_TRUE((*store)->RemoveGrant("acme", ComputeDigest(b)).ok());
+  ASSERT_TRUE((*store)->RemoveGrant("acme", ComputeDigest(b)).ok());  // absent: not an error
   EXPECT_EQ(*(*store)->TenantBytes("acme"), 7);
+  EXPECT_EQ((*store)->ListGrants()->size(), 2u);
   EXPECT_EQ((*store)->TenantBytes("../x").status().code(), absl::StatusCode::kInvalidArgument);
+  EXPECT_EQ((*store)->RemoveGrant("../x", ComputeDigest(a)).code(),
+            absl::StatusCode::kInvalidArgument);
 }
 
 TEST(BlobStoreTest, OneProcessOwnsAStoreFolder) {

@@ -2,7 +2,9 @@
 // embedded default (filesystem store + SQLite queue, offline) and for scale-out (S3 + PostgreSQL,
 // with the services running). The roots are the job queue's jobs, in any state: each job's scene
 // manifest and, once it succeeded, its output manifest, with every file they list. A blob no root
-// reaches is removed (with its tenants' grants) once it is older than the grace period.
+// reaches is removed once it is older than the grace period; then every grant whose blob the store
+// does not hold goes: those of the blobs just removed, and orphans (a grant written in the round
+// trip between a blob's removal and the listing of the grants) once older than the grace period.
 //
 // Why concurrent clients stay safe: a client uploads a scene's files before it submits the scene
 // (new blobs are young), and FindMissing / Put make a blob they find present young again (the
@@ -40,10 +42,13 @@ struct GcReport {
   int64_t young_blobs = 0;                       // unreachable but inside the grace period
   int64_t removed_blobs = 0, removed_bytes = 0;  // (would be, with dry_run)
   int64_t missing_manifests = 0;                 // referenced by a job but not in the store
-  int64_t raced_blobs = 0;  // old at the listing but gone or young again at removal: kept
+  int64_t raced_blobs = 0;     // old at the listing but gone or young again at removal: kept
+  int64_t grants = 0;          // tenants' grants listed after the blobs were swept
+  int64_t removed_grants = 0;  // of blobs the store does not hold (would be, with dry_run)
 };
 
-// Lists the blobs, marks from every job, then sweeps. Stops before removing anything if a
+// Lists the blobs, marks from every job, then sweeps the blobs and the grants. Stops before
+// removing anything if a
 // manifest a job names cannot be read for another reason than its absence (a damaged manifest
 // could hide live blobs). The store must implement ListBlobs / BlobModified / Remove (file: and
 // s3:// storage; a store service's client does not).

@@ -1,8 +1,9 @@
 // Garbage collection of the S3 store against a real S3-compatible server (moto, started here):
 // what jobs reach stays, unreachable blobs past the grace period go with every tenant's grant, a
-// dry run removes nothing, and a presence check touches a blob written long ago (S3's self-copy
-// with its metadata replaced) but not a recent one. The queue is SQLite here; the scale-out
-// pairing with PostgreSQL and running services is tests/cluster_test.sh.
+// grant whose blob is gone goes once old, a dry run removes nothing, and a presence check touches a
+// blob written long ago (S3's self-copy with its metadata replaced) but not a recent one. The queue
+// is SQLite here; the scale-out pairing with PostgreSQL and running services is
+// tests/cluster_test.sh.
 #include <gtest/gtest.h>
 
 #include "common/store/s3_blob_store.h"
@@ -77,6 +78,8 @@ TEST_F(S3GarbageCollectionTest, WhatJobsReachStaysAndOldUnreachableBlobsGoWithTh
   ASSERT_TRUE(done.ok()) << done.status();
   EXPECT_EQ(done->removed_blobs, 3);
   EXPECT_EQ(done->raced_blobs, 0);
+  EXPECT_EQ(done->grants, 3);
+  EXPECT_EQ(done->removed_grants, 2);  // the orphan's two, not the live blob's
   EXPECT_EQ(done->removed_bytes,
             orphan.size_bytes + stray.size_bytes + store::ComputeDigest("stray file").size_bytes);
   EXPECT_FALSE(Has(orphan) || Has(stray) || Has(store::ComputeDigest("stray file")));
@@ -89,6 +92,24 @@ TEST_F(S3GarbageCollectionTest, WhatJobsReachStaysAndOldUnreachableBlobsGoWithTh
   }
   EXPECT_TRUE(store::ReadManifest(*store_, output).ok());
   EXPECT_EQ(Collect(2)->removed_blobs, 0);
+}
+
+// A grant whose blob is gone (written while a collector removed the blob): kept while young (it
+// may be of a blob written since the listing), removed once past the grace period.
+TEST_F(S3GarbageCollectionTest, AGrantWhoseBlobIsGoneGoesOnceOld) {
+  const store::Digest gone = Blob("gone");
+  ASSERT_TRUE(store_->Grant("acme", {gone}).ok());
+  ASSERT_TRUE(store_->Remove(gone).ok());  // the blob only
+  ASSERT_TRUE(Exists(store_->GrantKey("acme", gone)));
+  absl::StatusOr<GcReport> young = Collect(0);
+  ASSERT_TRUE(young.ok()) << young.status();
+  EXPECT_EQ(young->grants, 1);
+  EXPECT_EQ(young->removed_grants, 0);
+  EXPECT_EQ(Collect(2, /*dry_run=*/true)->removed_grants, 1);
+  EXPECT_TRUE(Exists(store_->GrantKey("acme", gone)));
+  EXPECT_EQ(Collect(2)->removed_grants, 1);
+  EXPECT_FALSE(Exists(store_->GrantKey("acme", gone)));
+  EXPECT_EQ(*store_->TenantBytes("acme"), 0);
 }
 
 TEST_F(S3GarbageCollectionTest, APresenceCheckTouchesABlobWrittenLongAgo) {

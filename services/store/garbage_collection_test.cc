@@ -1,6 +1,7 @@
 // Garbage collection against a real filesystem store and SQLite queue: what jobs reach stays,
-// unreachable blobs go once past the grace period (with their grants), young ones stay, a dry
-// run removes nothing, a damaged root stops the collection before any removal.
+// unreachable blobs go once past the grace period (with their grants), young ones stay, grants
+// whose blob is gone go once old, a dry run removes nothing, a damaged root stops the collection
+// before any removal.
 #include "services/store/garbage_collection.h"
 
 #include <gtest/gtest.h>
@@ -66,6 +67,7 @@ TEST_F(GarbageCollectionTest, WhatJobsReachStaysAndOldUnreachableBlobsGo) {
   absl::StatusOr<GcReport> done = CollectGarbage(*store_, *queue_, {});
   ASSERT_TRUE(done.ok()) << done.status();
   EXPECT_EQ(done->removed_blobs, 3);
+  EXPECT_EQ(done->removed_grants, 1);  // the old orphan's
   EXPECT_EQ(done->removed_bytes, old_orphan.size_bytes + stray.size_bytes + stray_file.size_bytes);
   EXPECT_FALSE(Has(old_orphan) || Has(stray) || Has(stray_file));
   EXPECT_TRUE(Has(young_orphan));
@@ -82,6 +84,36 @@ TEST_F(GarbageCollectionTest, WhatJobsReachStaysAndOldUnreachableBlobsGo) {
   EXPECT_TRUE(store::ReadManifest(*store_, output).ok());
   // Collected again: nothing left to remove.
   EXPECT_EQ(CollectGarbage(*store_, *queue_, {})->removed_blobs, 0);
+}
+
+// Grants whose blob is gone (one written while a collector removed its blob): each goes once
+// older than the grace period; a young one (perhaps of a blob written since the listing) and one
+// whose blob came back stay.
+TEST_F(GarbageCollectionTest, GrantsWhoseBlobIsGoneGoOnceOld) {
+  const store::Digest gone = Blob("gone"), young = Blob("young grant"), back = Blob("back");
+  ASSERT_TRUE(store_->Grant("acme", {gone, young, back}).ok());
+  for (const auto& d : {gone, young, back}) ASSERT_TRUE(store_->Remove(d).ok());  // grants stay
+  Blob("back");  // uploaded again: a young unreachable blob
+  for (const auto& d : {gone, back}) {
+    fs::last_write_time(fs::path(temp_.Sub("store")) / "grants" / "acme" / d.hash.substr(0, 2) /
+                            (d.hash + "-" + std::to_string(d.size_bytes)),
+                        fs::file_time_type::clock::now() - std::chrono::hours(48));
+  }
+  GcOptions dry;
+  dry.dry_run = true;
+  absl::StatusOr<GcReport> counted = CollectGarbage(*store_, *queue_, dry);
+  ASSERT_TRUE(counted.ok()) << counted.status();
+  EXPECT_EQ(counted->grants, 3);
+  EXPECT_EQ(counted->removed_grants, 1);
+  EXPECT_EQ(store_->ListGrants()->size(), 3u);
+  absl::StatusOr<GcReport> done = CollectGarbage(*store_, *queue_, {});
+  ASSERT_TRUE(done.ok()) << done.status();
+  EXPECT_EQ(done->removed_blobs, 0);
+  EXPECT_EQ(done->removed_grants, 1);
+  auto grants = store_->ListGrants();
+  ASSERT_TRUE(grants.ok() && grants->size() == 2u);
+  for (const store::StoredGrant& g : *grants) EXPECT_NE(g.digest, gone);
+  EXPECT_EQ(*store_->TenantBytes("acme"), young.size_bytes + back.size_bytes);
 }
 
 TEST_F(GarbageCollectionTest, ABlobFoundPresentIsYoungAgain) {
