@@ -141,9 +141,12 @@ absl::StatusOr<InstanceSplit> FrameInstance(const std::vector<PinholeCamera>& ca
                                             const CompletionOptions& options,
                                             CompletedObject* out) {
   ASSIGN_OR_RETURN(InstanceSplit split, SplitInstance(labels, id, options.min_gaussians));
-  RemoveStrayGaussians(surfels, &split);
+  const StrayComponents strays = RemoveStrayGaussians(surfels, &split);
   out->id = id;
   out->frame = ComputeObjectFrame(surfels, split, cameras);
+  if (ReturnTips(surfels, out->frame, strays, &split) > 0) {
+    out->frame = ComputeObjectFrame(surfels, split, cameras);  // the top was short of the tip
+  }
   if (RemoveSupportSurfels(surfels, out->frame, &split) > 0) {
     out->frame = ComputeObjectFrame(surfels, split, cameras);  // the bottom was the support's
   }

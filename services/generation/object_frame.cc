@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <iterator>
+#include <limits>
 #include <optional>
 
 #include "absl/strings/str_cat.h"
@@ -48,13 +50,13 @@ absl::StatusOr<InstanceSplit> SplitInstance(const std::vector<uint32_t>& labels,
   return split;
 }
 
-void RemoveStrayGaussians(const GaussianCloud& cloud, InstanceSplit* split, float link_spacings,
-                          float min_share) {
+StrayComponents RemoveStrayGaussians(const GaussianCloud& cloud, InstanceSplit* split,
+                                     float link_spacings, float min_share) {
   std::vector<Eigen::Vector3f> points;
   points.reserve(split->instance.size());
   for (uint32_t g : split->instance) points.emplace_back(&cloud.positions[3 * g]);
   const float link = link_spacings * MedianSpacing(points);
-  if (!(link > 0)) return;
+  if (!(link > 0)) return {};
   const PointIndex3 index(points);
   std::vector<int> component(points.size(), -1);
   std::vector<size_t> sizes;
@@ -79,16 +81,72 @@ void RemoveStrayGaussians(const GaussianCloud& cloud, InstanceSplit* split, floa
   }
   const size_t largest = *std::max_element(sizes.begin(), sizes.end());
   std::vector<uint32_t> kept;
+  std::vector<int> stray_of(sizes.size(), -1);
+  StrayComponents strays;
   for (size_t i = 0; i < points.size(); ++i) {
-    if (sizes[component[i]] >= min_share * largest) {
+    const int c = component[i];
+    if (sizes[c] >= min_share * largest) {
       kept.push_back(split->instance[i]);
-    } else {
-      split->occluders.push_back(split->instance[i]);
+      continue;
     }
+    if (stray_of[c] < 0) {
+      stray_of[c] = static_cast<int>(strays.size());
+      strays.emplace_back();
+    }
+    strays[stray_of[c]].push_back(split->instance[i]);
+    split->occluders.push_back(split->instance[i]);
   }
   split->outliers += split->instance.size() - kept.size();
   split->instance = std::move(kept);
   std::sort(split->occluders.begin(), split->occluders.end());
+  return strays;
+}
+
+size_t ReturnTips(const GaussianCloud& cloud, const ObjectFrame& frame,
+                  const StrayComponents& strays, InstanceSplit* split, size_t max_surfels,
+                  float max_gap_spacings) {
+  if (strays.empty() || split->instance.empty() || !(frame.spacing > 0)) return 0;
+  auto position = [&](uint32_t g) { return Eigen::Vector3f(&cloud.positions[3 * g]); };
+  const Eigen::Vector3f up = frame.up;
+  auto horizontal = [&](const Eigen::Vector3f& p) { return Eigen::Vector3f(p - up.dot(p) * up); };
+  float top = -std::numeric_limits<float>::infinity();
+  for (uint32_t g : split->instance) top = std::max(top, up.dot(position(g)));
+  // The top band's centre and farthest reach from it, across the up.
+  Eigen::Vector3f centre = Eigen::Vector3f::Zero();
+  std::vector<Eigen::Vector3f> band;
+  for (uint32_t g : split->instance) {
+    if (up.dot(position(g)) < top - frame.spacing) continue;
+    band.push_back(horizontal(position(g)));
+    centre += band.back();
+  }
+  centre /= static_cast<float>(band.size());
+  float reach = 0;
+  for (const Eigen::Vector3f& p : band) reach = std::max(reach, (p - centre).norm());
+  reach += frame.spacing;
+  std::vector<uint32_t> returned;
+  for (const std::vector<uint32_t>& component : strays) {
+    if (component.empty() || component.size() > max_surfels) continue;
+    float lowest = std::numeric_limits<float>::infinity();
+    bool over_top = true;
+    for (uint32_t g : component) {
+      const Eigen::Vector3f p = position(g);
+      lowest = std::min(lowest, up.dot(p));
+      over_top = over_top && (horizontal(p) - centre).norm() <= reach;
+    }
+    if (over_top && lowest > top && lowest - top <= max_gap_spacings * frame.spacing) {
+      returned.insert(returned.end(), component.begin(), component.end());
+    }
+  }
+  if (returned.empty()) return 0;
+  std::sort(returned.begin(), returned.end());
+  std::vector<uint32_t> occluders;
+  std::set_difference(split->occluders.begin(), split->occluders.end(), returned.begin(),
+                      returned.end(), std::back_inserter(occluders));
+  split->occluders = std::move(occluders);
+  split->instance.insert(split->instance.end(), returned.begin(), returned.end());
+  std::sort(split->instance.begin(), split->instance.end());
+  split->outliers -= returned.size();
+  return returned.size();
 }
 
 std::vector<uint8_t> NeighbourLabelled(const GaussianCloud& cloud,

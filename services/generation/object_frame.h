@@ -40,12 +40,27 @@ struct InstanceSplit {
 absl::StatusOr<InstanceSplit> SplitInstance(const std::vector<uint32_t>& labels, uint32_t id,
                                             size_t min_gaussians);
 
+// The connected components RemoveStrayGaussians moved to the occluders (cloud indices).
+using StrayComponents = std::vector<std::vector<uint32_t>>;
+
 // Segmentations carry stray Gaussians (floaters, a few surfels of the support or a neighbour);
 // completing them would mirror and revolve them into rings of garbage. Keeps the connected
 // components of the instance (link: `link_spacings` median spacings) holding at least
-// `min_share` of the largest one's Gaussians; the rest become occluders.
-void RemoveStrayGaussians(const GaussianCloud& cloud, InstanceSplit* split,
-                          float link_spacings = 4.0f, float min_share = 0.2f);
+// `min_share` of the largest one's Gaussians; the rest become occluders (returned).
+StrayComponents RemoveStrayGaussians(const GaussianCloud& cloud, InstanceSplit* split,
+                                     float link_spacings = 4.0f, float min_share = 0.2f);
+
+// A sharp tip is sampled sparsely (surfels spread by area leave a cone's last ones apart), so
+// the stray removal cuts it off though it continues the object. A removed component of at most
+// `max_surfels` returns to the instance when its lowest surfel stands above the body's highest
+// one by at most `max_gap_spacings` frame spacings and every surfel of it stands within the
+// outline of the body's top: horizontally within the top band's (the body's surfels within one
+// spacing of its top) farthest reach from the band's centre, plus one spacing. A neighbour's or the
+// support's surfels stand beside or below the object, not over its top. Returns how many surfels
+// returned; the caller recomputes the frame.
+size_t ReturnTips(const GaussianCloud& cloud, const ObjectFrame& frame,
+                  const StrayComponents& strays, InstanceSplit* split, size_t max_surfels = 8,
+                  float max_gap_spacings = 6.0f);
 
 // Surfels of the support labelled as the instance (the table's small surfels around an object's
 // base): instance surfels within `band_spacings` frame spacings of the support plane whose

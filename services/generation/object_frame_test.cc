@@ -69,6 +69,50 @@ TEST(ObjectFrame, NeighbourLabelledMarksTheSurfelsFacingATouchingNeighbour) {
   EXPECT_EQ(std::count(own.begin(), own.end(), 1), 0);
 }
 
+// A cone whose top is bare but for two surfels on its tip (spread by area, a sharp tip's surfels
+// stand apart): the stray removal cuts them off and they return; a neighbour's surfel beside the
+// top and a floater high above it stay out.
+TEST(ObjectFrame, ATipTheStrayRemovalCutOffReturns) {
+  ShapeSpec cone;
+  cone.kind = ShapeKind::kCone;
+  cone.size = {0.036f, 0, 0.094f};
+  PartialObject scene = MakePartialObject(MakeShapeMesh(cone), 1200, 7);
+  std::vector<uint32_t> keep, labels;
+  for (uint32_t g = 0; g < scene.cloud.size(); ++g) {
+    if (scene.labels[g] == 1 && scene.cloud.positions[3 * g + 2] > 0.083f) continue;
+    keep.push_back(g);
+    labels.push_back(scene.labels[g]);
+  }
+  scene.cloud = scene.cloud.Subset(keep);
+  scene.labels = labels;
+  const size_t before = scene.cloud.size();
+  AppendObjectSurfelsAt({{0, 0, 0.094f},
+                         {0.001f, 0, 0.091f},  // the tip
+                         {0.03f, 0, 0.087f},   // a neighbour's, beside the top
+                         {0, 0, 0.14f}},       // a floater
+                        &scene);
+  auto split = SplitInstance(scene.labels, 1, 50);
+  ASSERT_TRUE(split.ok());
+  const StrayComponents strays = RemoveStrayGaussians(scene.cloud, &*split);
+  auto in = [](const std::vector<uint32_t>& v, uint32_t g) {
+    return std::binary_search(v.begin(), v.end(), g);
+  };
+  for (uint32_t g = before; g < before + 4; ++g) ASSERT_TRUE(in(split->occluders, g)) << g;
+  const size_t removed = split->outliers;
+  const ObjectFrame frame = ComputeObjectFrame(scene.cloud, *split, scene.cameras);
+  EXPECT_EQ(ReturnTips(scene.cloud, frame, strays, &*split), 2u);
+  EXPECT_TRUE(in(split->instance, before) && in(split->instance, before + 1));
+  EXPECT_TRUE(in(split->occluders, before + 2) && in(split->occluders, before + 3));
+  EXPECT_FALSE(in(split->occluders, before) || in(split->instance, before + 2));
+  EXPECT_TRUE(std::is_sorted(split->instance.begin(), split->instance.end()));
+  EXPECT_EQ(split->outliers, removed - 2);
+  EXPECT_EQ(split->instance.size() + split->occluders.size(), scene.cloud.size());
+  // Returned once: nothing more the second time.
+  EXPECT_EQ(
+      ReturnTips(scene.cloud, ComputeObjectFrame(scene.cloud, *split, scene.cameras), {}, &*split),
+      0u);
+}
+
 // A segmentation that gave the bottle the table's surfels around its base: they leave the
 // instance (the bottle's own surfels all stay), and the support and bottom are the table's.
 TEST(ObjectFrame, TheSupportsSurfelsAroundTheBaseLeaveTheInstance) {
