@@ -33,9 +33,10 @@ AxisCoordinates CoordinatesAbout(const SymmetryHypothesis& axis, const InstanceS
 // spacings beyond the body's median radius at their height (the 95th percentile of the body's
 // radii, and the profile's 90th, stand on the handle's lower end where it is a tenth of the
 // surfels). A part that reaches a surfel a neighbour's label surrounds is that neighbour's patch
-// at the contact, not a handle: the profile rules judge it. The parts join `b->off`.
-void JoinHandleParts(const AxisCoordinates& c, float step, const InstanceSurfels& s, AxisBody* b,
-                     AxisBodies* out) {
+// at the contact, not a handle: the profile rules judge it. The parts join `b->off`; those of
+// fewer than `min_surfels` are no handle but a neighbour's stray (`out->small_part`).
+void JoinHandleParts(const AxisCoordinates& c, float step, const InstanceSurfels& s,
+                     int min_surfels, AxisBody* b, AxisBodies* out) {
   const size_t n = s.size();
   std::vector<uint8_t> held(n);
   for (uint32_t g = 0; g < n; ++g) held[g] = !b->off[g];
@@ -61,11 +62,12 @@ void JoinHandleParts(const AxisCoordinates& c, float step, const InstanceSurfels
       }
     }
     if (touches) continue;
+    const bool handle = part.size() >= static_cast<size_t>(std::max(min_surfels, 0));
     for (uint32_t g : part) {
-      out->handle_joined += !b->off[g];
-      b->off[g] = 1;
+      out->handle_joined += handle && !b->off[g];
+      b->off[g] = 1;  // no witness of the profile either way
       b->off_beyond_body[g] = 1;
-      out->handle[g] = 1;
+      (handle ? out->handle : out->small_part)[g] = 1;
     }
   }
 }
@@ -116,6 +118,7 @@ AxisBodies AnalyseAxisBodies(const std::vector<SymmetryHypothesis>& hypotheses,
   const size_t n = s.size();
   AxisBodies out;
   out.handle.assign(n, 0);
+  out.small_part.assign(n, 0);
   const float step = std::max(s.frame.spacing, 1e-6f);
   for (const SymmetryHypothesis& axis : hypotheses) {
     if (!axis.accepted || axis.kind != SymmetryKind::kAxis) continue;
@@ -140,7 +143,7 @@ AxisBodies AnalyseAxisBodies(const std::vector<SymmetryHypothesis>& hypotheses,
     if (options.handle_joins_its_part && axis.order == 0 &&
         std::find(b.off_beyond_body.begin(), b.off_beyond_body.end(), 1) !=
             b.off_beyond_body.end()) {
-      JoinHandleParts(c, step, s, &b, &out);
+      JoinHandleParts(c, step, s, options.min_handle_surfels, &b, &out);
     }
     if (options.skip_beyond_axis_profile && axis.order == 0) ApplyProfile(c, step, s, options, &b);
     // About an n-fold axis (no profile: a box's radius varies around it), those beyond the body's
@@ -161,6 +164,7 @@ std::vector<uint8_t> ForeignSurfels(const AxisBodies& bodies, const InstanceSurf
   const size_t n = s.size();
   std::vector<uint8_t> foreign(n, 0);
   for (uint32_t g = 0; g < n; ++g) {
+    foreign[g] = bodies.small_part[g];
     for (const AxisBody& b : bodies.bodies) {
       foreign[g] |= options.drop_beyond_axis_profile && b.beyond_profile[g];
       foreign[g] |= !b.neighbours_beyond_profile.empty() && b.neighbours_beyond_profile[g];
@@ -200,7 +204,8 @@ std::vector<uint8_t> ForeignSurfels(const AxisBodies& bodies, const InstanceSurf
 std::vector<uint8_t> SkippedSources(const SymmetryHypothesis& h, const AxisBodies& bodies,
                                     const InstanceSurfels& s,
                                     const GeometricPriorOptions& options) {
-  std::vector<uint8_t> skip(s.size(), 0);
+  std::vector<uint8_t> skip = bodies.small_part;  // a neighbour's stray lends nothing
+  skip.resize(s.size(), 0);
   const float sin_tolerance = std::sin(10.0f * static_cast<float>(M_PI) / 180.0f);
   for (const AxisBody& b : bodies.bodies) {
     const SymmetryHypothesis& axis = *b.axis;

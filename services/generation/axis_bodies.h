@@ -65,21 +65,24 @@ struct AxisBody {
 struct AxisBodies {
   std::vector<AxisBody> bodies;  // one per accepted axis that most of the object agrees with
   std::vector<uint8_t> handle;   // per surfel: part of a handle an axis does not hold for
-  int handle_joined = 0;         // sources a handle's part took from what an axis held for
+  // Per surfel: part of a handle's part too small to be one (a neighbour's stray).
+  std::vector<uint8_t> small_part;
+  int handle_joined = 0;  // sources a handle's part took from what an axis held for
 };
 
 // The bodies of the accepted axes among `hypotheses` (which must outlive the result).
 AxisBodies AnalyseAxisBodies(const std::vector<SymmetryHypothesis>& hypotheses,
                              const InstanceSurfels& s, const GeometricPriorOptions& options);
 
-// Per surfel: not the object's (a neighbour's surfels beyond a body's profile or reach, and the
-// patches they belong to).
+// Per surfel: not the object's (a neighbour's surfels beyond a body's profile or reach, the
+// patches they belong to, and parts too small to be a handle).
 std::vector<uint8_t> ForeignSurfels(const AxisBodies& bodies, const InstanceSurfels& s,
                                     const GeometricPriorOptions& options);
 
-// Per surfel: sources `h` lends no images beyond its own asymmetric ones. An axis, those beyond
-// its profile; a plane containing an axis (oriented about it only by the parts the axis does not
-// hold for), those and the parts beyond the body that the axis does not hold for.
+// Per surfel: sources `h` lends no images beyond its own asymmetric ones. Every hypothesis, parts
+// too small to be a handle; an axis, those beyond its profile; a plane containing an axis (oriented
+// about it only by the parts the axis does not hold for), those and the parts beyond the body that
+// the axis does not hold for.
 std::vector<uint8_t> SkippedSources(const SymmetryHypothesis& h, const AxisBodies& bodies,
                                     const InstanceSurfels& s, const GeometricPriorOptions& options);
 

@@ -85,6 +85,12 @@ struct GeometricPriorOptions {
   // evidence, revolved it into a ring and lifted the body's profile with it. Measured in
   // RESULTS.md ("A handle's lower end is the handle's").
   bool handle_joins_its_part = true;
+  // A handle is many surfels: a part (as above) of fewer than this many, clear of every other
+  // instance's label, is not a handle but a neighbour's stray that the segmentation gave the
+  // object among the neighbour's unlabelled surfels (where the label test cannot see it): it
+  // leaves the object (PriorOutput::foreign). 0 = every part is a handle. Measured in RESULTS.md
+  // ("A handle is more than a stray").
+  int min_handle_surfels = 3;
   // Refuse a candidate standing off the observed surface beside it (observed_surface.h).
   // Measured in RESULTS.md ("Free-space violations: candidates off the observed surface").
   ObservedSurfaceOptions observed_surface;
