@@ -1,5 +1,6 @@
 #include "services/store/garbage_collection.h"
 
+#include <algorithm>
 #include <chrono>
 #include <set>
 #include <string>
@@ -49,11 +50,15 @@ absl::Status MarkFromJobs(store::BlobStore& store, scheduler::JobQueue& queue,
   }
 }
 
-// The grants whose blob the store does not hold: every grant of a blob this collection removed
-// (would remove, in a dry run), and a grant of a blob absent at the listing once the grant is
-// older than `young_after` (a younger one may be of a blob written since). Each blob's absence
-// is read again just before its grant's removal (re-uploaded since: the grant stays).
-absl::Status SweepGrants(store::BlobStore& store, const std::set<std::string>& listed,
+const std::string& HashOf(const store::StoredBlob& b) { return b.digest.hash; }
+const std::string& HashOf(const std::string& hash) { return hash; }
+
+// The grants whose blob the store does not hold (`listed`: the blobs listed, sorted by hash): every
+// grant of a blob this collection removed (would remove, in a dry run), and a grant of a blob
+// absent at the listing once the grant is older than `young_after` (a younger one may be of a blob
+// written since). Each blob's absence is read again just before its grant's removal (re-uploaded
+// since: the grant stays).
+absl::Status SweepGrants(store::BlobStore& store, const std::vector<store::StoredBlob>& listed,
                          const std::set<std::string>& removed,
                          std::chrono::system_clock::time_point young_after, bool dry_run,
                          GcReport* report) {
@@ -61,7 +66,10 @@ absl::Status SweepGrants(store::BlobStore& store, const std::set<std::string>& l
   for (const store::StoredGrant& g : grants) {
     ++report->grants;
     const bool of_removed = removed.count(g.digest.hash) > 0;
-    if (!of_removed && (listed.count(g.digest.hash) > 0 || g.modified > young_after)) continue;
+    const bool was_listed =
+        std::binary_search(listed.begin(), listed.end(), g.digest.hash,
+                           [](const auto& a, const auto& b) { return HashOf(a) < HashOf(b); });
+    if (!of_removed && (was_listed || g.modified > young_after)) continue;
     if (!dry_run) {
       ASSIGN_OR_RETURN(const auto modified, store.BlobModified(g.digest));
       if (modified.has_value()) continue;
@@ -83,10 +91,9 @@ absl::StatusOr<GcReport> CollectGarbage(store::BlobStore& store, scheduler::JobQ
   GcReport report;
   // Listed before the roots are read (the header says why).
   ASSIGN_OR_RETURN(const std::vector<store::StoredBlob> blobs, store.ListBlobs());
-  std::set<std::string> live, listed, removed;
+  std::set<std::string> live, removed;
   RETURN_IF_ERROR(MarkFromJobs(store, queue, options, &live, &report));
   for (const store::StoredBlob& b : blobs) {
-    listed.insert(b.digest.hash);
     ++report.blobs;
     report.bytes += b.digest.size_bytes;
     if (live.count(b.digest.hash)) {
@@ -107,7 +114,7 @@ absl::StatusOr<GcReport> CollectGarbage(store::BlobStore& store, scheduler::JobQ
       report.removed_bytes += b.digest.size_bytes;
     }
   }
-  RETURN_IF_ERROR(SweepGrants(store, listed, removed, young_after, options.dry_run, &report));
+  RETURN_IF_ERROR(SweepGrants(store, blobs, removed, young_after, options.dry_run, &report));
   return report;
 }
 
