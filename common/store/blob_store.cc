@@ -2,6 +2,7 @@
 
 #include <cstdio>
 #include <fstream>
+#include <tuple>
 #include <vector>
 
 #include "absl/strings/numbers.h"
@@ -151,6 +152,10 @@ absl::StatusOr<int64_t> GrantNameBytes(absl::string_view name) {
       size < 0)
     return absl::DataLossError(absl::StrCat("grant '", name, "' does not end in -SIZE"));
   return size;
+}
+
+bool GrantOrder(const StoredGrant& a, const StoredGrant& b) {
+  return std::tie(a.tenant, a.digest.hash) < std::tie(b.tenant, b.digest.hash);
 }
 
 std::optional<Digest> GrantNameDigest(absl::string_view name) {

@@ -63,6 +63,9 @@ struct StoredGrant {
   std::chrono::system_clock::time_point modified;
 };
 
+// The order ListGrants returns: by tenant, then hash.
+bool GrantOrder(const StoredGrant& a, const StoredGrant& b);
+
 // Progress of a transfer: bytes done, bytes total.
 using TransferProgress = std::function<void(int64_t done, int64_t total)>;
 

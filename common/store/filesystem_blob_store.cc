@@ -10,7 +10,6 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <tuple>
 #include <vector>
 
 #include "absl/strings/str_cat.h"
@@ -392,9 +391,7 @@ absl::StatusOr<std::vector<StoredGrant>> FilesystemBlobStore::ListGrants() {
     grants.push_back({tenant, std::move(*digest), ToSystemTime(modified)});
   }
   if (ec) return absl::UnavailableError(absl::StrCat(folder.string(), ": ", ec.message()));
-  std::sort(grants.begin(), grants.end(), [](const StoredGrant& a, const StoredGrant& b) {
-    return std::tie(a.tenant, a.digest.hash) < std::tie(b.tenant, b.digest.hash);
-  });
+  std::sort(grants.begin(), grants.end(), GrantOrder);
   return grants;
 }
 

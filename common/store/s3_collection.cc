@@ -2,7 +2,6 @@
 // that keep a blob about to be referenced young, the listings of `cas/` and `grants/` with
 // modification times, removal of a blob and of a grant, and the bytes granted to a tenant.
 #include <algorithm>
-#include <tuple>
 
 #include "absl/strings/str_cat.h"
 #include "common/core/status.h"
@@ -89,9 +88,7 @@ absl::StatusOr<std::vector<StoredGrant>> S3BlobStore::ListGrants() {
     g.modified = o.modified;
     grants.push_back(std::move(g));
   }
-  std::sort(grants.begin(), grants.end(), [](const StoredGrant& a, const StoredGrant& b) {
-    return std::tie(a.tenant, a.digest.hash) < std::tie(b.tenant, b.digest.hash);
-  });
+  std::sort(grants.begin(), grants.end(), GrantOrder);
   return grants;
 }
 
