@@ -25,6 +25,34 @@ float MedianSpacing(const std::vector<Eigen::Vector3f>& points) {
   return Median(std::move(nearest));
 }
 
+// Per point, its connected component (points linked within `link`, repeatedly); `sizes` gets
+// each component's size.
+std::vector<int> LinkedComponents(const std::vector<Eigen::Vector3f>& points, float link,
+                                  std::vector<size_t>* sizes) {
+  const PointIndex3 index(points);
+  std::vector<int> component(points.size(), -1);
+  std::vector<uint32_t> stack;
+  for (uint32_t seed = 0; seed < points.size(); ++seed) {
+    if (component[seed] >= 0) continue;
+    const int c = static_cast<int>(sizes->size());
+    sizes->push_back(0);
+    component[seed] = c;
+    stack.push_back(seed);
+    while (!stack.empty()) {
+      const uint32_t i = stack.back();
+      stack.pop_back();
+      ++(*sizes)[c];
+      for (uint32_t j : index.WithinRadius(points[i], link)) {
+        if (component[j] < 0) {
+          component[j] = c;
+          stack.push_back(j);
+        }
+      }
+    }
+  }
+  return component;
+}
+
 }  // namespace
 
 Eigen::Matrix3f ObjectFrame::Basis() const {
@@ -57,28 +85,8 @@ StrayComponents RemoveStrayGaussians(const GaussianCloud& cloud, InstanceSplit* 
   for (uint32_t g : split->instance) points.emplace_back(&cloud.positions[3 * g]);
   const float link = link_spacings * MedianSpacing(points);
   if (!(link > 0)) return {};
-  const PointIndex3 index(points);
-  std::vector<int> component(points.size(), -1);
   std::vector<size_t> sizes;
-  std::vector<uint32_t> stack;
-  for (uint32_t seed = 0; seed < points.size(); ++seed) {
-    if (component[seed] >= 0) continue;
-    const int c = static_cast<int>(sizes.size());
-    sizes.push_back(0);
-    component[seed] = c;
-    stack.push_back(seed);
-    while (!stack.empty()) {
-      const uint32_t i = stack.back();
-      stack.pop_back();
-      ++sizes[c];
-      for (uint32_t j : index.WithinRadius(points[i], link)) {
-        if (component[j] < 0) {
-          component[j] = c;
-          stack.push_back(j);
-        }
-      }
-    }
-  }
+  const std::vector<int> component = LinkedComponents(points, link, &sizes);
   const size_t largest = *std::max_element(sizes.begin(), sizes.end());
   std::vector<uint32_t> kept;
   std::vector<int> stray_of(sizes.size(), -1);

@@ -83,50 +83,51 @@ ObjectsService::Loaded ObjectsService::Index(const std::string& scene, bool* fre
   ASSIGN_OR_RETURN(SceneOutputs outputs, OutputsOf(described));
   const std::string key = outputs.Key();
   std::promise<Loaded> promise;
-  std::shared_future<Loaded> future;
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    for (auto it = lru_.begin(); it != lru_.end(); ++it) {
-      if (it->key == key) {
-        lru_.splice(lru_.begin(), lru_, it);
-        future = lru_.front().future;
-        break;
-      }
-    }
-    if (future.valid()) {
-      ++hits_;
-      RecordIndexHit();
-    } else {
-      ++loads_;
-      future = promise.get_future().share();
-      lru_.push_front(Entry{key, future, 0});
-      *fresh = true;
-    }
-  }
+  const std::shared_future<Loaded> future = Reserve(key, &promise, fresh);
   if (!*fresh) return future.get();
   // Load outside the lock.
   Stopwatch watch;
   const Loaded loaded = LoadGuarded(*store_, outputs, scene);
   RecordIndexLoad(watch.ElapsedSeconds(), loaded.ok());
   promise.set_value(loaded);
-  std::list<Entry> evicted;  // destroyed after the lock is released
-  {
-    std::lock_guard<std::mutex> lock(mutex_);
-    for (auto it = lru_.begin(); it != lru_.end(); ++it) {
-      if (it->key != key) continue;
-      if (loaded.ok()) {
-        it->bytes = (*loaded)->ByteSize();
-      } else {
-        lru_.erase(it);  // a failed load is retried by the next query
-      }
-      break;
-    }
-    evicted = Evict();
-    int64_t bytes = 0;
-    for (const Entry& e : lru_) bytes += static_cast<int64_t>(e.bytes);
-    SetIndexCache(static_cast<int64_t>(lru_.size()), bytes);
-  }
+  Settle(key, loaded);
   return loaded;
+}
+
+std::shared_future<ObjectsService::Loaded> ObjectsService::Reserve(const std::string& key,
+                                                                   std::promise<Loaded>* promise,
+                                                                   bool* fresh) {
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (auto it = lru_.begin(); it != lru_.end(); ++it) {
+    if (it->key != key) continue;
+    lru_.splice(lru_.begin(), lru_, it);
+    ++hits_;
+    RecordIndexHit();
+    return lru_.front().future;
+  }
+  ++loads_;
+  std::shared_future<Loaded> future = promise->get_future().share();
+  lru_.push_front(Entry{key, future, 0});
+  *fresh = true;
+  return future;
+}
+
+void ObjectsService::Settle(const std::string& key, const Loaded& loaded) {
+  std::list<Entry> evicted;  // destroyed after the lock is released
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (auto it = lru_.begin(); it != lru_.end(); ++it) {
+    if (it->key != key) continue;
+    if (loaded.ok()) {
+      it->bytes = (*loaded)->ByteSize();
+    } else {
+      lru_.erase(it);  // a failed load is retried by the next query
+    }
+    break;
+  }
+  evicted = Evict();
+  int64_t bytes = 0;
+  for (const Entry& e : lru_) bytes += static_cast<int64_t>(e.bytes);
+  SetIndexCache(static_cast<int64_t>(lru_.size()), bytes);
 }
 
 std::list<ObjectsService::Entry> ObjectsService::Evict() {

@@ -60,6 +60,13 @@ class ObjectsService final : public v1::Objects::Service {
   };
   // The index of a scene's latest outputs; *fresh is true when this call loaded it.
   Loaded Index(const std::string& scene, bool* fresh);
+  // The cache's entry for `key` (moved to the front), or a new one whose future `promise` will
+  // fulfil (*fresh true: the caller loads it and calls Settle).
+  std::shared_future<Loaded> Reserve(const std::string& key, std::promise<Loaded>* promise,
+                                     bool* fresh);
+  // Records a loaded entry's size (a failed load's entry goes: the next query retries) and evicts
+  // past the budget.
+  void Settle(const std::string& key, const Loaded& loaded);
   // Drops loaded entries past the byte budget (mutex_ held); returns them so that the caller
   // destroys them after unlocking (a SceneObjects joins its warm-up thread when destroyed).
   std::list<Entry> Evict();
