@@ -129,6 +129,17 @@ ProjectionParams MakeProjectionParams(const PinholeCamera& camera, const RenderO
 
 namespace {
 
+using raster_internal::Ceil4d;
+using raster_internal::Exp4f;
+using raster_internal::Floor4d;
+using raster_internal::Log4f;
+using raster_internal::Max4d;
+using raster_internal::Min4d;
+using raster_internal::Splat4d;
+using raster_internal::Splat4f;
+using raster_internal::Sqrt4d;
+using raster_internal::ToDouble;
+using raster_internal::ToFloat;
 using raster_internal::v4d;
 using raster_internal::v4f;
 using raster_internal::v4l;
@@ -139,9 +150,6 @@ using raster_internal::v4l;
 // denominator d, the centre and the half extents.
 INSTASCENE_INLINE void ScreenBox4(v4d c2, const v4d tu[3], const v4d tv[3], const v4d tw[3], v4d* d,
                                   v4d center[2], v4d extent[2]) {
-  using raster_internal::Max4d;
-  using raster_internal::Splat4d;
-  using raster_internal::Sqrt4d;
   *d = c2 * tw[0] * tw[0] + c2 * tw[1] * tw[1] - tw[2] * tw[2];
   const v4d inv_d = Splat4d(1.0) / *d;
   const v4d f0 = c2 * inv_d, f2 = -inv_d;
@@ -158,9 +166,6 @@ INSTASCENE_INLINE void ScreenBox4(v4d c2, const v4d tu[3], const v4d tv[3], cons
 INSTASCENE_INLINE void SurfelAxes4(const GaussianCloud& cloud, const size_t idx[4],
                                    const ProjectionParams& p, v4d pv[3], v4d a[3], v4d b[3],
                                    v4d n[3]) {
-  using raster_internal::Exp4f;
-  using raster_internal::Splat4d;
-  using raster_internal::ToDouble;
   auto gather = [&](const std::vector<float>& v, int stride, int k) {
     return v4d{v[stride * idx[0] + k], v[stride * idx[1] + k], v[stride * idx[2] + k],
                v[stride * idx[3] + k]};
@@ -222,23 +227,37 @@ INSTASCENE_INLINE bool StoreLane(const GaussianCloud& cloud, size_t g, const Pro
   return true;
 }
 
+// The lanes' opacity, origin pixel and pixel window (ALGORITHM.md 2.2): where alpha = opacity *
+// max(G3d, G2d) >= 1/255 is possible, rho <= rho_max = 2 ln(255 opacity); empty when the opacity
+// alone is below 1/255.
+INSTASCENE_INLINE void PixelWindow4(const GaussianCloud& cloud, const size_t idx[4],
+                                    const ProjectionParams& p, Surfel4& s) {
+  s.opacity =
+      Splat4f(1.0f) /
+      (Splat4f(1.0f) + Exp4f(-v4f{cloud.opacity_logits[idx[0]], cloud.opacity_logits[idx[1]],
+                                  cloud.opacity_logits[idx[2]], cloud.opacity_logits[idx[3]]}));
+  // Integer origin pixel near the splat for the per-pixel planes.
+  s.ox = Min4d(Max4d(Floor4d(s.mean[0] + Splat4d(0.5)), Splat4d(-1e6)), Splat4d(1e6));
+  s.oy = Min4d(Max4d(Floor4d(s.mean[1] + Splat4d(0.5)), Splat4d(-1e6)), Splat4d(1e6));
+  s.rho_max = Splat4d(2.0) * ToDouble(Log4f(Splat4f(255.0f) * s.opacity));
+  const v4d r2d = Sqrt4d(Splat4d(0.5) * s.rho_max);  // low-pass disk: 2 |mu - x|^2 <= rho_max
+  v4d d3, c3[2], e3[2];
+  ScreenBox4(s.rho_max, s.tu, s.tv, s.tw, &d3, c3, e3);
+  // Bounded ellipse: its box is exact; otherwise (grazing, or crossing the camera plane) the
+  // whole image.
+  const v4l bounded = d3 < Splat4d(0.0);
+  s.x_lo = bounded ? Min4d(s.mean[0] - r2d, c3[0] - e3[0]) : Splat4d(0.0);
+  s.x_hi = bounded ? Max4d(s.mean[0] + r2d, c3[0] + e3[0]) : Splat4d(p.width);
+  s.y_lo = bounded ? Min4d(s.mean[1] - r2d, c3[1] - e3[1]) : Splat4d(0.0);
+  s.y_hi = bounded ? Max4d(s.mean[1] + r2d, c3[1] + e3[1]) : Splat4d(p.height);
+}
+
 // Projects 4 surfels, lane l = Gaussian idx[l]; every lane computes exactly what a one-lane call
 // computes. Double precision for the transform and the bounding boxes keeps the stored planes
 // accurate for the float per-pixel loop; transcendentals of float inputs (scales, opacity) are
 // evaluated in float, since their inputs carry no more precision than that.
 void ProjectSurfel4(const GaussianCloud& cloud, const size_t idx[4], const ProjectionParams& p,
                     ProjectedSplat* out[4], bool ok_out[4]) {
-  using raster_internal::Ceil4d;
-  using raster_internal::Exp4f;
-  using raster_internal::Floor4d;
-  using raster_internal::Log4f;
-  using raster_internal::Max4d;
-  using raster_internal::Min4d;
-  using raster_internal::Splat4d;
-  using raster_internal::Splat4f;
-  using raster_internal::Sqrt4d;
-  using raster_internal::ToDouble;
-  using raster_internal::ToFloat;
   Surfel4 s;
   v4d a[3], b[3];
   SurfelAxes4(cloud, idx, p, s.pv, a, b, s.n);
@@ -258,26 +277,7 @@ void ProjectSurfel4(const GaussianCloud& cloud, const size_t idx[4], const Proje
   ScreenBox4(Splat4d(kCutoff * kCutoff), s.tu, s.tv, s.tw, &d, s.mean, extent);
   ok &= d != Splat4d(0.0);
   s.radius = ToFloat(Ceil4d(Max4d(Max4d(extent[0], extent[1]), Splat4d(kCutoff * kFilterSize))));
-  s.opacity =
-      Splat4f(1.0f) /
-      (Splat4f(1.0f) + Exp4f(-v4f{cloud.opacity_logits[idx[0]], cloud.opacity_logits[idx[1]],
-                                  cloud.opacity_logits[idx[2]], cloud.opacity_logits[idx[3]]}));
-  // Integer origin pixel near the splat for the per-pixel planes.
-  s.ox = Min4d(Max4d(Floor4d(s.mean[0] + Splat4d(0.5)), Splat4d(-1e6)), Splat4d(1e6));
-  s.oy = Min4d(Max4d(Floor4d(s.mean[1] + Splat4d(0.5)), Splat4d(-1e6)), Splat4d(1e6));
-  // Pixel window where alpha = opacity * max(G3d, G2d) >= 1/255 is possible:
-  // rho <= rho_max = 2 ln(255 opacity); empty when the opacity alone is below 1/255.
-  s.rho_max = Splat4d(2.0) * ToDouble(Log4f(Splat4f(255.0f) * s.opacity));
-  const v4d r2d = Sqrt4d(Splat4d(0.5) * s.rho_max);  // low-pass disk: 2 |mu - x|^2 <= rho_max
-  v4d d3, c3[2], e3[2];
-  ScreenBox4(s.rho_max, s.tu, s.tv, s.tw, &d3, c3, e3);
-  // Bounded ellipse: its box is exact; otherwise (grazing, or crossing the camera plane) the
-  // whole image.
-  const v4l bounded = d3 < Splat4d(0.0);
-  s.x_lo = bounded ? Min4d(s.mean[0] - r2d, c3[0] - e3[0]) : Splat4d(0.0);
-  s.x_hi = bounded ? Max4d(s.mean[0] + r2d, c3[0] + e3[0]) : Splat4d(p.width);
-  s.y_lo = bounded ? Min4d(s.mean[1] - r2d, c3[1] - e3[1]) : Splat4d(0.0);
-  s.y_hi = bounded ? Max4d(s.mean[1] + r2d, c3[1] + e3[1]) : Splat4d(p.height);
+  PixelWindow4(cloud, idx, p, s);
   for (int l = 0; l < 4; ++l) {
     ok_out[l] = ok[l] && StoreLane(cloud, idx[l], p, s, l, out[l]);
   }

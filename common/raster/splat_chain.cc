@@ -45,13 +45,35 @@ void AddMeanGradient(const double tu[3], const double tv[3], const double tw[3],
   }
 }
 
+// dL/d(quaternion) from dL/d of the rotation's columns r0, r1 (scaled tangent axes, through the
+// camera's rotation) and of the camera-frame normal n = sign R_cam r2 (sign: the one that makes it
+// face the camera, `normal_view`); the columns carry their derivatives by the quaternion.
+Eigen::Vector4d QuaternionGradient(const Eigen::Matrix3d& rot, const Quat r0[3], const Quat r1[3],
+                                   const Quat r2[3], const Eigen::Vector3d& d_r0,
+                                   const Eigen::Vector3d& d_r1, const double d_normal[3],
+                                   const float normal_view[3]) {
+  Eigen::Vector3d r2v;
+  for (int k = 0; k < 3; ++k) r2v[k] = r2[k].value();
+  const Eigen::Vector3d n_cam = rot * r2v;
+  const double facing =
+      n_cam[0] * normal_view[0] + n_cam[1] * normal_view[1] + n_cam[2] * normal_view[2] < 0 ? -1.0
+                                                                                            : 1.0;
+  const Eigen::Vector3d d_r2 =
+      facing * (rot.transpose() * Eigen::Vector3d(d_normal[0], d_normal[1], d_normal[2]));
+  Eigen::Vector4d d_quat = Eigen::Vector4d::Zero();
+  for (int k = 0; k < 3; ++k) {
+    d_quat += d_r0[k] * r0[k].derivatives() + d_r1[k] * r1[k].derivatives() +
+              d_r2[k] * r2[k].derivatives();
+  }
+  return d_quat;
+}
+
 // Carries dL/d(Tu, Tv, Tw, low-pass centre, opacity) of surfel g to its 10 parameters (position
 // 3, log-scale 2, quaternion 4, logit 1) through the production projection (projection.cc):
 // M = K [R_cam r0 su | R_cam r1 sv | R_cam p + t] with rows Tu, Tv, Tw, the centre of the 3-sigma
 // ellipse's screen box, opacity = sigmoid(logit), and of its camera-frame normal
-// n = sign R_cam r2 (sign: the one that makes it face the camera, `normal_view`). The quaternion's
-// rotation columns are differentiated by forward-mode AD (4 derivatives); the rest is the chain
-// rule by hand.
+// n = sign R_cam r2 (QuaternionGradient). The quaternion's rotation columns are differentiated by
+// forward-mode AD (4 derivatives); the rest is the chain rule by hand.
 void ChainToParameters(const GaussianCloud& cloud, size_t g, const ProjectionParams& p,
                        double dTu[3], double dTv[3], double dTw[3], const double d_mean[2],
                        double d_opacity, const double d_normal[3], const float normal_view[3],
@@ -67,11 +89,10 @@ void ChainToParameters(const GaussianCloud& cloud, size_t g, const ProjectionPar
   const double sv = std::exp(double(cloud.log_scales[2 * g + 1])) * p.scale_modifier;
   Quat r0[3], r1[3], r2[3];
   RotationColumns(&cloud.rotations[4 * g], r0, r1, r2);
-  Eigen::Vector3d r0v, r1v, r2v;
+  Eigen::Vector3d r0v, r1v;
   for (int k = 0; k < 3; ++k) {
     r0v[k] = r0[k].value();
     r1v[k] = r1[k].value();
-    r2v[k] = r2[k].value();
   }
   const Eigen::Vector3d a = rot * r0v * su, b = rot * r1v * sv, c = rot * pos + trans;
   const Eigen::Vector3d* cols[3] = {&a, &b, &c};
@@ -88,22 +109,12 @@ void ChainToParameters(const GaussianCloud& cloud, size_t g, const ProjectionPar
     dcol[k] = Eigen::Vector3d(p.fx * dTu[k], p.fy * dTv[k], p.cx * dTu[k] + p.cy * dTv[k] + dTw[k]);
   }
   const Eigen::Vector3d d_pos = rot.transpose() * dcol[2];
-  const Eigen::Vector3d d_r0 = su * (rot.transpose() * dcol[0]);
-  const Eigen::Vector3d d_r1 = sv * (rot.transpose() * dcol[1]);
   for (int k = 0; k < 3; ++k) out[k] = d_pos[k];
   out[3] = dcol[0].dot(a);  // d a / d log su = a
   out[4] = dcol[1].dot(b);
-  const Eigen::Vector3d n_cam = rot * r2v;
-  const double facing =
-      n_cam[0] * normal_view[0] + n_cam[1] * normal_view[1] + n_cam[2] * normal_view[2] < 0 ? -1.0
-                                                                                            : 1.0;
-  const Eigen::Vector3d d_r2 =
-      facing * (rot.transpose() * Eigen::Vector3d(d_normal[0], d_normal[1], d_normal[2]));
-  Eigen::Vector4d d_quat = Eigen::Vector4d::Zero();
-  for (int k = 0; k < 3; ++k) {
-    d_quat += d_r0[k] * r0[k].derivatives() + d_r1[k] * r1[k].derivatives() +
-              d_r2[k] * r2[k].derivatives();
-  }
+  const Eigen::Vector4d d_quat =
+      QuaternionGradient(rot, r0, r1, r2, su * (rot.transpose() * dcol[0]),
+                         sv * (rot.transpose() * dcol[1]), d_normal, normal_view);
   for (int k = 0; k < 4; ++k) out[5 + k] = d_quat[k];
   const double opacity = 1.0 / (1.0 + std::exp(-double(cloud.opacity_logits[g])));
   out[9] = d_opacity * opacity * (1.0 - opacity);

@@ -215,27 +215,28 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
                       ImageAdjoints{.color = dloss_dcolor, .alpha = dloss_dalpha});
 }
 
-absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
-                                             const PinholeCamera& camera,
-                                             const RenderOptions& options,
-                                             const RenderResult& forward,
-                                             const ImageAdjoints& adjoints) {
-  RETURN_IF_ERROR(CheckForward(cloud, camera, forward, adjoints));
-  const ContributorTrace& trace = forward.trace;
-  const ProjectionParams params = MakeProjectionParams(camera, options, cloud.sh_degree);
+namespace {
+
+// The splats exactly as the forward blended them: the forward's own when it left them in the
+// workspace, else projected again into `own` (the same function, the same result).
+const ProjectedSplat* ForwardSplats(const GaussianCloud& cloud, const RenderOptions& options,
+                                    const ProjectionParams& params,
+                                    std::vector<ProjectedSplat>* own) {
   const size_t n = cloud.size();
-  // The splats exactly as the forward blended them: the forward's own when it left them in the
-  // workspace, else projected again (the same function, the same result).
-  std::vector<ProjectedSplat> own;
-  const ProjectedSplat* splats = nullptr;
   if (options.workspace != nullptr && options.workspace->splats.size() == n) {
-    splats = options.workspace->splats.data();
-  } else {
-    own.resize(n);
-    std::vector<uint8_t> visible(n);
-    ProjectSurfels(cloud, 0, n, params, own.data(), visible.data());
-    splats = own.data();
+    return options.workspace->splats.data();
   }
+  own->resize(n);
+  std::vector<uint8_t> visible(n);
+  ProjectSurfels(cloud, 0, n, params, own->data(), visible.data());
+  return own->data();
+}
+
+// Each band of kTileSize image rows' gradients per splat, the bands in parallel.
+std::vector<Band> BandGradients(const ContributorTrace& trace, const PinholeCamera& camera,
+                                const RenderOptions& options, const ProjectionParams& params,
+                                const ProjectedSplat* splats, size_t n,
+                                const ImageAdjoints& adjoints) {
   const double bg[3] = {options.background[0], options.background[1], options.background[2]};
   const int bands = (camera.height + kTileSize - 1) / kTileSize;
   std::vector<Band> band_grads(bands);
@@ -257,6 +258,23 @@ absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
       out.slot = {};
     });
   });
+  return band_grads;
+}
+
+}  // namespace
+
+absl::StatusOr<SurfelGradients> TileBackward(const GaussianCloud& cloud,
+                                             const PinholeCamera& camera,
+                                             const RenderOptions& options,
+                                             const RenderResult& forward,
+                                             const ImageAdjoints& adjoints) {
+  RETURN_IF_ERROR(CheckForward(cloud, camera, forward, adjoints));
+  const ProjectionParams params = MakeProjectionParams(camera, options, cloud.sh_degree);
+  const size_t n = cloud.size();
+  std::vector<ProjectedSplat> own;
+  const ProjectedSplat* splats = ForwardSplats(cloud, options, params, &own);
+  const std::vector<Band> band_grads =
+      BandGradients(forward.trace, camera, options, params, splats, n, adjoints);
   std::vector<uint8_t> touched;
   const std::vector<SplatGrad> total = SumBands(band_grads, n, &touched);
   SurfelGradients out = SurfelGradients::Zeros(cloud);

@@ -283,32 +283,104 @@ void WriteTile(const FrameContext& ctx, const TileState& st, int px0, int py0, i
   }
 }
 
+// A tile's bounds and what its splats' rows share while they blend.
+struct TileRun {
+  int px0, py0, px1, py1;
+  int tile_pixels;
+  Outputs want;
+  const uint8_t* trace_mask;  // null: every pixel traced
+  v8f min_weight;             // the trace's, in lanes
+  // Every blended weight is at least (1/255) * 1e-4 > 0, so without a positive minimum weight
+  // the trace keeps exactly the blended fragments and the per-pixel counts are the contributor
+  // counts (copied at the end instead of maintained per vector).
+  bool counts_are_contributors;
+  VectorTraceCursor cursor;
+  int num_done = 0;
+  v8i blends = {}, live = {};  // lane-wise counters, summed once per tile
+};
+
+// Tile `tile`'s bounds and the frame's options its rows read.
+INSTASCENE_INLINE TileRun StartTile(const FrameContext& ctx, int tile) {
+  const ProjectionParams& p = *ctx.params;
+  const RenderOptions& opt = *ctx.options;
+  const int tx = tile % p.tiles_x, ty = tile / p.tiles_x;
+  TileRun run{.px0 = tx * kTileSize, .py0 = ty * kTileSize};
+  run.px1 = std::min(run.px0 + kTileSize, p.width);
+  run.py1 = std::min(run.py0 + kTileSize, p.height);
+  run.tile_pixels = (run.px1 - run.px0) * (run.py1 - run.py0);
+  run.want = Outputs{opt.color, opt.depth, opt.normal};
+  run.trace_mask = ctx.trace_mask->empty() ? nullptr : ctx.trace_mask->data();
+  run.min_weight = Splat(opt.trace.min_weight);
+  run.counts_are_contributors = !(opt.trace.min_weight > 0.0f);
+  return run;
+}
+
+// Blends splat `s` (Gaussian `gid`) into row y of the tile, pixels [x0, x1): the branch-free
+// vector pass, then the second pass where features or the scalar trace need it.
+template <bool kSurfel, TraceMode kTraceMode, bool kFeatures>
+INSTASCENE_INLINE void BlendSplatRow(const FrameContext& ctx, const ProjectedSplat& s,
+                                     const SplatLanes& v, uint32_t gid, int y, int x0, int x1,
+                                     TileRun& run, TileState& st, TileTrace* tile_trace) {
+  constexpr bool kTrace = kTraceMode != TraceMode::kNone;
+  constexpr bool kVectorTrace = kTraceMode == TraceMode::kVector;
+  constexpr bool kSecondPass = kFeatures || (kTrace && !kVectorTrace);
+  const int row = (y - run.py0) * kTileSize - run.px0;  // + x = local pixel index
+  const float ry = static_cast<float>(y - s.origin_px[1]);
+  const float dy_s = s.mean_px[1] - static_cast<float>(y);
+  const RowLanes row_lanes{Splat(ry * s.tw[0] + s.tv[0]), Splat(ry * s.tw[1] + s.tv[1]),
+                           Splat(ry * s.tw[2] + s.tv[2]), Splat(dy_s), Splat(dy_s * dy_s)};
+  uint32_t row_blend_bits = 0;
+  for (int x = x0; x < x1; x += kLanes) {
+    const int i = row + x;
+    const v8i xs = SplatI(x) + kLaneIndex;
+    const v8i in_range = xs < SplatI(x1);
+    const v8f dx = v.mx - __builtin_convertvector(xs, v8f);
+    const Footprint f = EvaluateFootprint<kSurfel>(s, v, row_lanes, xs, dx, ctx.params->near_plane);
+    const v8f e = v.opacity * FastExpNonPositive8(f.power);
+    const v8f alpha = e < Splat(kAlphaMax) ? e : Splat(kAlphaMax);
+    const v8i live = in_range & (LoadI(&st.done[i]) == SplatI(0));
+    const v8i valid = live & f.ok & (alpha >= Splat(kAlphaMin));
+    const v8f T = Load(&st.T[i]);
+    const v8f next_T = T * (Splat(1.0f) - alpha);
+    const v8i stop = valid & (next_T < Splat(kTransmittanceMin));
+    const v8i blend = valid & ~stop;
+    const v8f w = blend ? alpha * T : Splat(0.0f);
+    Accumulate(run.want, v, st, i, w, blend, T, f.depth);
+    Store(&st.T[i], blend ? next_T : T);
+    StoreI(&st.done[i], LoadI(&st.done[i]) | (stop & SplatI(1)));
+    StoreI(&st.contributors[i], LoadI(&st.contributors[i]) + (blend & SplatI(1)));
+    if constexpr (kSecondPass) {  // inputs of the second pass
+      Store(&st.row_weight[x - x0], w);
+      Store(&st.row_transmittance[x - x0], T);
+    }
+    if constexpr (kVectorTrace) {
+      AppendVectorTrace(gid, i, w, blend, run.min_weight, run.counts_are_contributors, tile_trace,
+                        run.cursor);
+    }
+    const uint32_t stop_bits = MaskBits(stop);
+    st.row_done[y - run.py0] |= stop_bits << (x - run.px0);
+    run.num_done += std::popcount(stop_bits);
+    row_blend_bits |= MaskBits(blend) << (x - x0);
+    run.blends -= blend;
+    run.live -= live;
+  }
+  if constexpr (kSecondPass) {
+    RowSecondPass<kTrace && !kVectorTrace, kFeatures>(ctx, gid, row, x0, y, row_blend_bits,
+                                                      run.trace_mask, st, tile_trace);
+  }
+}
+
 template <bool kSurfel, TraceMode kTraceMode, bool kFeatures>
 void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& out,
                TileCounters& counters, TileTrace* tile_trace) {
   constexpr bool kTrace = kTraceMode != TraceMode::kNone;
   constexpr bool kVectorTrace = kTraceMode == TraceMode::kVector;
-  constexpr bool kSecondPass = kFeatures || (kTrace && !kVectorTrace);
-  const ProjectionParams& p = *ctx.params;
   const RenderOptions& opt = *ctx.options;
-  const int tx = tile % p.tiles_x, ty = tile / p.tiles_x;
-  const int px0 = tx * kTileSize, py0 = ty * kTileSize;
-  const int px1 = std::min(px0 + kTileSize, p.width), py1 = std::min(py0 + kTileSize, p.height);
-  const int tile_pixels = (px1 - px0) * (py1 - py0);
+  TileRun run = StartTile(ctx, tile);
   ResetTile<kTrace, kFeatures>(opt, st, tile_trace);
-  const uint8_t* trace_mask = ctx.trace_mask->empty() ? nullptr : ctx.trace_mask->data();
-  const v8f v_min_weight = Splat(opt.trace.min_weight);
-  // Every blended weight is at least (1/255) * 1e-4 > 0, so without a positive minimum weight
-  // the trace keeps exactly the blended fragments and the per-pixel counts are the contributor
-  // counts (copied at the end instead of maintained per vector).
-  const bool counts_are_contributors = !(opt.trace.min_weight > 0.0f);
-  VectorTraceCursor cursor;
-  const Outputs want{opt.color, opt.depth, opt.normal};
-  int num_done = 0;
-  v8i tile_blends = {}, tile_live = {};  // lane-wise counters, summed once per tile
 
   const uint64_t begin = (*ctx.tile_offsets)[tile], end = (*ctx.tile_offsets)[tile + 1];
-  for (uint64_t k = begin; k < end && num_done < tile_pixels; ++k) {
+  for (uint64_t k = begin; k < end && run.num_done < run.tile_pixels; ++k) {
     const uint32_t gid = static_cast<uint32_t>((*ctx.keys)[k] & 0xffffffffu);
     const ProjectedSplat& s = (*ctx.splats)[gid];
     // The list visits splats in depth order, i.e. scattered in memory: fetch ahead.
@@ -318,77 +390,34 @@ void BlendTile(const FrameContext& ctx, int tile, TileState& st, RenderResult& o
       __builtin_prefetch(ahead);
       __builtin_prefetch(ahead + 64);
     }
-    const int x0 = std::max(px0, s.window[0]), x1 = std::min(px1, s.window[1]);
-    const int y0 = std::max(py0, s.window[2]), y1 = std::min(py1, s.window[3]);
+    const int x0 = std::max(run.px0, s.window[0]), x1 = std::min(run.px1, s.window[1]);
+    const int y0 = std::max(run.py0, s.window[2]), y1 = std::min(run.py1, s.window[3]);
     if (x0 >= x1 || y0 >= y1) continue;
     if constexpr (kVectorTrace) {
       // One splat adds at most one entry per window pixel (+ a vector of store slack).
-      tile_trace->size = cursor.size;
+      tile_trace->size = run.cursor.size;
       tile_trace->Reserve(static_cast<size_t>((x1 - x0) * (y1 - y0)) + kLanes, false);
-      cursor.entries = tile_trace->entries.data();
-      cursor.pixels = tile_trace->pixels.data();
+      run.cursor.entries = tile_trace->entries.data();
+      run.cursor.pixels = tile_trace->pixels.data();
     }
     const SplatLanes v(s);
-    const uint32_t window_bits = ((1u << (x1 - x0)) - 1u) << (x0 - px0);
+    const uint32_t window_bits = ((1u << (x1 - x0)) - 1u) << (x0 - run.px0);
     for (int y = y0; y < y1; ++y) {
       // Skip rows whose window pixels are all done (common once most of the tile is opaque).
-      if ((st.row_done[y - py0] & window_bits) == window_bits) continue;
-      const int row = (y - py0) * kTileSize - px0;  // + x = local pixel index
-      const float ry = static_cast<float>(y - s.origin_px[1]);
-      const float dy_s = s.mean_px[1] - static_cast<float>(y);
-      const RowLanes row_lanes{Splat(ry * s.tw[0] + s.tv[0]), Splat(ry * s.tw[1] + s.tv[1]),
-                               Splat(ry * s.tw[2] + s.tv[2]), Splat(dy_s), Splat(dy_s * dy_s)};
-      uint32_t row_blend_bits = 0;
-      for (int x = x0; x < x1; x += kLanes) {
-        const int i = row + x;
-        const v8i xs = SplatI(x) + kLaneIndex;
-        const v8i in_range = xs < SplatI(x1);
-        const v8f dx = v.mx - __builtin_convertvector(xs, v8f);
-        const Footprint f = EvaluateFootprint<kSurfel>(s, v, row_lanes, xs, dx, p.near_plane);
-        const v8f e = v.opacity * FastExpNonPositive8(f.power);
-        const v8f alpha = e < Splat(kAlphaMax) ? e : Splat(kAlphaMax);
-        const v8i live = in_range & (LoadI(&st.done[i]) == SplatI(0));
-        const v8i valid = live & f.ok & (alpha >= Splat(kAlphaMin));
-        const v8f T = Load(&st.T[i]);
-        const v8f next_T = T * (Splat(1.0f) - alpha);
-        const v8i stop = valid & (next_T < Splat(kTransmittanceMin));
-        const v8i blend = valid & ~stop;
-        const v8f w = blend ? alpha * T : Splat(0.0f);
-        Accumulate(want, v, st, i, w, blend, T, f.depth);
-        Store(&st.T[i], blend ? next_T : T);
-        StoreI(&st.done[i], LoadI(&st.done[i]) | (stop & SplatI(1)));
-        StoreI(&st.contributors[i], LoadI(&st.contributors[i]) + (blend & SplatI(1)));
-        if constexpr (kSecondPass) {  // inputs of the second pass
-          Store(&st.row_weight[x - x0], w);
-          Store(&st.row_transmittance[x - x0], T);
-        }
-        if constexpr (kVectorTrace) {
-          AppendVectorTrace(gid, i, w, blend, v_min_weight, counts_are_contributors, tile_trace,
-                            cursor);
-        }
-        const uint32_t stop_bits = MaskBits(stop);
-        st.row_done[y - py0] |= stop_bits << (x - px0);
-        num_done += std::popcount(stop_bits);
-        row_blend_bits |= MaskBits(blend) << (x - x0);
-        tile_blends -= blend;
-        tile_live -= live;
-      }
-      if constexpr (kSecondPass) {
-        RowSecondPass<kTrace && !kVectorTrace, kFeatures>(ctx, gid, row, x0, y, row_blend_bits,
-                                                          trace_mask, st, tile_trace);
-      }
+      if ((st.row_done[y - run.py0] & window_bits) == window_bits) continue;
+      BlendSplatRow<kSurfel, kTraceMode, kFeatures>(ctx, s, v, gid, y, x0, x1, run, st, tile_trace);
     }
   }
   if constexpr (kVectorTrace) {
-    tile_trace->size = cursor.size;
-    if (counts_are_contributors) {
+    tile_trace->size = run.cursor.size;
+    if (run.counts_are_contributors) {
       for (int l = 0; l < kTilePixels; ++l)
         tile_trace->counts[l] = static_cast<uint32_t>(st.contributors[l]);
     }
   }
-  counters.evaluated += static_cast<uint64_t>(SumLanes(tile_live));
-  counters.blended += static_cast<uint64_t>(SumLanes(tile_blends));
-  WriteTile<kFeatures>(ctx, st, px0, py0, px1, py1, out);
+  counters.evaluated += static_cast<uint64_t>(SumLanes(run.live));
+  counters.blended += static_cast<uint64_t>(SumLanes(run.blends));
+  WriteTile<kFeatures>(ctx, st, run.px0, run.py0, run.px1, run.py1, out);
 }
 
 #undef INSTASCENE_INLINE

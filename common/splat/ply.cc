@@ -22,6 +22,14 @@ namespace {
 
 constexpr float kMaxExactInteger = 16777216.0f;  // 2^24: integers beyond it do not fit a float
 
+// The scalar of type T in the first sizeof(T) bytes of `buf`, as double.
+template <typename T>
+double Read(const unsigned char* buf) {
+  T v;
+  std::memcpy(&v, buf, sizeof(T));
+  return static_cast<double>(v);
+}
+
 // Decodes one binary scalar at p (which has at least ScalarTypeSize bytes) as double.
 double DecodeBinary(const char* p, ScalarType type, bool big_endian) {
   unsigned char buf[8];
@@ -31,46 +39,22 @@ double DecodeBinary(const char* p, ScalarType type, bool big_endian) {
     for (int i = 0; i < n / 2; ++i) std::swap(buf[i], buf[n - 1 - i]);
   }
   switch (type) {
-    case ScalarType::kInt8: {
-      int8_t v;
-      std::memcpy(&v, buf, 1);
-      return v;
-    }
-    case ScalarType::kUint8: {
-      uint8_t v;
-      std::memcpy(&v, buf, 1);
-      return v;
-    }
-    case ScalarType::kInt16: {
-      int16_t v;
-      std::memcpy(&v, buf, 2);
-      return v;
-    }
-    case ScalarType::kUint16: {
-      uint16_t v;
-      std::memcpy(&v, buf, 2);
-      return v;
-    }
-    case ScalarType::kInt32: {
-      int32_t v;
-      std::memcpy(&v, buf, 4);
-      return v;
-    }
-    case ScalarType::kUint32: {
-      uint32_t v;
-      std::memcpy(&v, buf, 4);
-      return v;
-    }
-    case ScalarType::kFloat32: {
-      float v;
-      std::memcpy(&v, buf, 4);
-      return v;
-    }
-    case ScalarType::kFloat64: {
-      double v;
-      std::memcpy(&v, buf, 8);
-      return v;
-    }
+    case ScalarType::kInt8:
+      return Read<int8_t>(buf);
+    case ScalarType::kUint8:
+      return Read<uint8_t>(buf);
+    case ScalarType::kInt16:
+      return Read<int16_t>(buf);
+    case ScalarType::kUint16:
+      return Read<uint16_t>(buf);
+    case ScalarType::kInt32:
+      return Read<int32_t>(buf);
+    case ScalarType::kUint32:
+      return Read<uint32_t>(buf);
+    case ScalarType::kFloat32:
+      return Read<float>(buf);
+    case ScalarType::kFloat64:
+      return Read<double>(buf);
   }
   return 0.0;
 }
