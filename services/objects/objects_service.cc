@@ -79,11 +79,14 @@ absl::StatusOr<std::shared_ptr<const SceneObjects>> LoadGuarded(store::BlobStore
 ObjectsService::Loaded ObjectsService::Index(const std::string& scene, bool* fresh) {
   *fresh = false;
   RETURN_IF_ERROR(CheckSceneName(scene));
-  ASSIGN_OR_RETURN(v1::Scene described, lookup_(scene));
-  ASSIGN_OR_RETURN(SceneOutputs outputs, OutputsOf(described));
+  absl::StatusOr<v1::Scene> described = lookup_(scene);
+  if (absl::IsNotFound(described.status())) Forget(scene, "");
+  RETURN_IF_ERROR(described.status());
+  ASSIGN_OR_RETURN(SceneOutputs outputs, OutputsOf(*described));
   const std::string key = outputs.Key();
   std::promise<Loaded> promise;
-  const std::shared_future<Loaded> future = Reserve(key, &promise, fresh);
+  const std::shared_future<Loaded> future = Reserve(key, scene, &promise, fresh);
+  Forget(scene, key);
   if (!*fresh) return future.get();
   // Load outside the lock.
   Stopwatch watch;
@@ -95,6 +98,7 @@ ObjectsService::Loaded ObjectsService::Index(const std::string& scene, bool* fre
 }
 
 std::shared_future<ObjectsService::Loaded> ObjectsService::Reserve(const std::string& key,
+                                                                   const std::string& scene,
                                                                    std::promise<Loaded>* promise,
                                                                    bool* fresh) {
   std::lock_guard<std::mutex> lock(mutex_);
@@ -107,7 +111,7 @@ std::shared_future<ObjectsService::Loaded> ObjectsService::Reserve(const std::st
   }
   ++loads_;
   std::shared_future<Loaded> future = promise->get_future().share();
-  lru_.push_front(Entry{key, future, 0});
+  lru_.push_front(Entry{key, future, 0, scene});
   *fresh = true;
   return future;
 }
@@ -125,9 +129,25 @@ void ObjectsService::Settle(const std::string& key, const Loaded& loaded) {
     break;
   }
   evicted = Evict();
+  PublishCacheSize();
+}
+
+void ObjectsService::PublishCacheSize() const {
   int64_t bytes = 0;
   for (const Entry& e : lru_) bytes += static_cast<int64_t>(e.bytes);
   SetIndexCache(static_cast<int64_t>(lru_.size()), bytes);
+}
+
+void ObjectsService::Forget(const std::string& scene, const std::string& key) {
+  std::list<Entry> dropped;  // destroyed after the lock is released
+  std::lock_guard<std::mutex> lock(mutex_);
+  for (auto it = lru_.begin(); it != lru_.end();) {
+    auto next = std::next(it);
+    // A loading entry's waiters hold its future; its Settle finds nothing to record.
+    if (it->scene == scene && it->key != key) dropped.splice(dropped.end(), lru_, it);
+    it = next;
+  }
+  if (!dropped.empty()) PublishCacheSize();
 }
 
 std::list<ObjectsService::Entry> ObjectsService::Evict() {

@@ -1,7 +1,8 @@
 // services/objects/objects_service.h: the Objects gRPC service (objects.proto). A scene name is
 // resolved to its latest stored outputs through the scheduler (GetScene, every query, so a rerun
 // is seen at once); the index over those outputs (scene_objects.h) is loaded on first use and kept
-// in an LRU cache bounded in bytes. Concurrent first queries of one scene share one load; loads
+// in an LRU cache bounded in bytes; an index whose scene was rerun or deleted leaves it at the
+// first query that sees so. Concurrent first queries of one scene share one load; loads
 // run outside the cache lock, so a cold scene never stalls queries on loaded ones. Thread-safe.
 #pragma once
 
@@ -56,20 +57,26 @@ class ObjectsService final : public v1::Objects::Service {
   struct Entry {
     std::string key;
     std::shared_future<Loaded> future;
-    size_t bytes = 0;  // once loaded
+    size_t bytes = 0;   // once loaded
+    std::string scene;  // whose outputs (the key names it too)
   };
   // The index of a scene's latest outputs; *fresh is true when this call loaded it.
   Loaded Index(const std::string& scene, bool* fresh);
   // The cache's entry for `key` (moved to the front), or a new one whose future `promise` will
   // fulfil (*fresh true: the caller loads it and calls Settle).
-  std::shared_future<Loaded> Reserve(const std::string& key, std::promise<Loaded>* promise,
-                                     bool* fresh);
+  std::shared_future<Loaded> Reserve(const std::string& key, const std::string& scene,
+                                     std::promise<Loaded>* promise, bool* fresh);
+  // `scene`'s latest outputs are `key`'s (empty: it was deleted): its other entries leave the
+  // cache at once instead of waiting for the budget.
+  void Forget(const std::string& scene, const std::string& key);
   // Records a loaded entry's size (a failed load's entry goes: the next query retries) and evicts
   // past the budget.
   void Settle(const std::string& key, const Loaded& loaded);
   // Drops loaded entries past the byte budget (mutex_ held); returns them so that the caller
   // destroys them after unlocking (a SceneObjects joins its warm-up thread when destroyed).
   std::list<Entry> Evict();
+  // The cache's entries and bytes to the metrics (mutex_ held).
+  void PublishCacheSize() const;
 
   store::BlobStore* store_;
   SceneLookup lookup_;
