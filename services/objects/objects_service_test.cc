@@ -380,5 +380,38 @@ TEST_F(ObjectsServiceTest, ConcurrentFirstQueriesShareOneLoadAndTheCacheKeepsIts
   EXPECT_EQ(tight->cache_stats().loads, 3);
 }
 
+TEST_F(ObjectsServiceTest, ARerunOrDeletedScenesIndexLeavesTheCacheAtOnce) {
+  auto service = Service();
+  v1::ObjectSelector id;
+  id.set_id(1);
+  v1::Object o;
+  ASSERT_TRUE(Get(*service, "s1", id, &o).ok());
+  ASSERT_TRUE(Get(*service, "s2", id, &o).ok());
+  EXPECT_EQ(service->cache_stats().entries, 2);
+  // s1 rerun: it now has other outputs (s2's); its old index goes, the budget notwithstanding.
+  v1::Scene rerun = scenes_["s2"];
+  rerun.set_name("s1");
+  scenes_["s1"] = rerun;
+  ASSERT_TRUE(Get(*service, "s1", id, &o).ok());
+  EXPECT_FALSE(o.index_loaded());
+  EXPECT_EQ(service->cache_stats().entries, 2);
+  EXPECT_EQ(Metric("instascene_objects_index_cache_entries"), 2);
+  ASSERT_TRUE(Get(*service, "s1", id, &o).ok());
+  EXPECT_TRUE(o.index_loaded());
+  // s2 deleted: its index goes, s1's stays; a failed lookup of another kind keeps s1's.
+  scenes_.erase("s2");
+  EXPECT_EQ(Get(*service, "s2", id, &o).error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(service->cache_stats().entries, 1);
+  scenes_["s1"].clear_outputs();  // before segmentation: FAILED_PRECONDITION
+  EXPECT_EQ(Get(*service, "s1", id, &o).error_code(), grpc::StatusCode::FAILED_PRECONDITION);
+  EXPECT_EQ(service->cache_stats().entries, 1);
+  scenes_.erase("s1");
+  EXPECT_EQ(Get(*service, "s1", id, &o).error_code(), grpc::StatusCode::NOT_FOUND);
+  EXPECT_EQ(service->cache_stats().entries, 0);
+  EXPECT_EQ(service->cache_stats().bytes, 0);
+  EXPECT_EQ(Metric("instascene_objects_index_cache_entries"), 0);
+  EXPECT_EQ(service->cache_stats().loads, 3);
+}
+
 }  // namespace
 }  // namespace instascene::objects
