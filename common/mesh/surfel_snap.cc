@@ -19,6 +19,21 @@ constexpr float kMinAcross = 0.3f;
 // A sliding vertex's layer is extrapolated to its height where the layer's heights spread by at
 // least this share of the neighbourhood's radius (standard deviation 0.1 radius).
 constexpr float kMinRiseSpread = 0.01f;
+// A rim vertex's outward normal needs this much across the slide normal to extend (a flat
+// base's inside has none; its outer ring, where the fused floor rounds into the side, some).
+constexpr float kMinRimAcross = 0.05f;
+// A rim extends onto a side that narrows upwards: its layer's normals tilt up by at least this
+// (6 degrees; the side's radius falls by as much per unit height), and the layer is taken down
+// that slope to the rim's height. The normals, not a line fitted to the offsets over height: a
+// side's lowest surfels are few and stand within a row or two of one another (the fit gave
+// -0.1 to -0.2 on a box's vertical sides, +0.15 to +0.45 on a cone's). A vertical side (a box's,
+// a cylinder's) stays with the clamps, which hold it to its surfels exactly, and the
+// move along a corner's diagonal would stand out past one of its faces; a side that widens upwards
+// (a bowl's foot, a torus's underside) extrapolated down does not reach the support where it does.
+constexpr float kMinRimNarrowing = 0.1f;
+// And the facing surfels' offsets fall with height by at least this share of what their normals
+// say (on a cone the two agree; at a bottle's foot a few tilted surfels did not).
+constexpr float kMinSlopeAgreement = 0.5f;
 
 // Area-weighted vertex normals, pointing out of the volume the mesh encloses (by the sign of its
 // signed volume; an open mesh keeps its winding's side).
@@ -81,35 +96,59 @@ void SlideDirections(const std::vector<uint8_t>& fixed, const Eigen::Vector3f& s
 
 struct Facing {
   float along, weight, rise;  // offset along the normal, weight, height along the slide
+  float tilt;  // the surfel's normal, turned to face the vertex's way, along the slide normal
 };
 
-// The signed move of the vertex at `p` along `nv` onto the outermost layer of the surfels that
-// face its way; nullopt where fewer than min_surfels do.
-std::optional<float> SnapOffset(const Eigen::Vector3f& p, const Eigen::Vector3f& nv, bool sliding,
-                                const PointIndex3& index,
-                                const std::vector<Eigen::Vector3f>& points,
-                                const std::vector<Eigen::Vector3f>& normals,
-                                const SurfelSnapOptions& options, std::vector<Facing>& facing) {
-  const int min_surfels = std::max(1, options.min_surfels);
+// The outermost layer of the surfels around `p` that face `nv`'s way: its offset along `nv`, its
+// height along the slide normal and its normals' tilt along it.
+struct LayerFit {
+  float offset = 0.0f;  // extrapolated to the vertex's height when sliding
+  // The layer's mean normal (turned to face the vertex's way): its part along the slide normal
+  // over its part across it. A side whose width falls by t per unit height has tilt t.
+  float tilt = 0.0f;
+  float mean_offset = 0.0f, mean_rise = 0.0f;  // the layer's, before any extrapolation
+};
+
+// The surfels around the vertex at `p` that face its normal `nv`'s way (either sign), weighted by
+// their distance across the normal.
+void GatherFacing(const Eigen::Vector3f& p, const Eigen::Vector3f& nv, const PointIndex3& index,
+                  const std::vector<Eigen::Vector3f>& points,
+                  const std::vector<Eigen::Vector3f>& normals, const SurfelSnapOptions& options,
+                  std::vector<Facing>& facing) {
   const float tangential_var = 0.25f * options.radius * options.radius;
   facing.clear();
   for (uint32_t i : index.WithinRadius(p, options.radius)) {
-    if (std::abs(normals[i].dot(nv)) < options.min_cos) continue;
+    const float cos = normals[i].dot(nv);
+    if (std::abs(cos) < options.min_cos) continue;
     const Eigen::Vector3f d = points[i] - p;
     const float along = d.dot(nv);
     const float tangential_sq = std::max(0.0f, d.squaredNorm() - along * along);
-    facing.push_back(
-        {along, std::exp(-0.5f * tangential_sq / tangential_var), d.dot(options.slide_normal)});
+    const float tilt = std::copysign(1.0f, cos) * normals[i].dot(options.slide_normal);
+    facing.push_back({along, std::exp(-0.5f * tangential_sq / tangential_var),
+                      d.dot(options.slide_normal), tilt});
   }
+}
+
+// The layer around the vertex at `p` (normal `nv`); nullopt where fewer than min_surfels face
+// its way. `sliding`: extrapolated down (or up) to the vertex's height along the slide normal.
+std::optional<LayerFit> FitLayer(const Eigen::Vector3f& p, const Eigen::Vector3f& nv, bool sliding,
+                                 const PointIndex3& index,
+                                 const std::vector<Eigen::Vector3f>& points,
+                                 const std::vector<Eigen::Vector3f>& normals,
+                                 const SurfelSnapOptions& options, std::vector<Facing>& facing) {
+  const int min_surfels = std::max(1, options.min_surfels);
+  GatherFacing(p, nv, index, points, normals, options, facing);
   if (static_cast<int>(facing.size()) < min_surfels) return std::nullopt;
   // The outermost layer: surfels within `layer` of the min_surfels-th outermost one (fewer stray
   // surfels standing farther out do not define it, nor count in it).
   std::nth_element(facing.begin(), facing.begin() + (min_surfels - 1), facing.end(),
                    [](const Facing& a, const Facing& b) { return a.along > b.along; });
   const float outer = facing[min_surfels - 1].along;
-  double sum = 0, weight = 0, rise = 0, rise_sq = 0, rise_along = 0;
+  double sum = 0, weight = 0, rise = 0, rise_sq = 0, rise_along = 0, tilt = 0, facing_cos = 0;
   for (const Facing& f : facing) {
     if (std::abs(f.along - outer) > options.layer) continue;
+    tilt += f.weight * f.tilt;
+    facing_cos += f.weight * std::sqrt(std::max(0.0f, 1.0f - f.tilt * f.tilt));
     sum += f.weight * f.along;
     weight += f.weight;
     rise += f.weight * f.rise;
@@ -117,6 +156,10 @@ std::optional<float> SnapOffset(const Eigen::Vector3f& p, const Eigen::Vector3f&
     rise_along += f.weight * f.rise * f.along;
   }
   if (weight <= 0) return std::nullopt;
+  LayerFit fit;
+  fit.tilt = static_cast<float>(tilt / std::max(facing_cos, 1e-9));
+  fit.mean_offset = static_cast<float>(sum / weight);
+  fit.mean_rise = static_cast<float>(rise / weight);
   double offset = sum / weight;
   // A sliding vertex (a base's rim) has the side's surfels only above it: where the side slopes
   // (a cone's) their mean stands inside the rim, so the layer is extrapolated down to the
@@ -125,11 +168,65 @@ std::optional<float> SnapOffset(const Eigen::Vector3f& p, const Eigen::Vector3f&
     const double mean_rise = rise / weight;
     const double var_rise = rise_sq / weight - mean_rise * mean_rise;
     if (var_rise > kMinRiseSpread * options.radius * options.radius) {
-      const double slope = (rise_along / weight - mean_rise * offset) / var_rise;
+      const double slope = (rise_along / weight - mean_rise * sum / weight) / var_rise;
       offset -= slope * mean_rise;
     }
   }
-  return std::clamp(static_cast<float>(offset), -options.max_move, options.max_move);
+  fit.offset = static_cast<float>(offset);
+  return fit;
+}
+
+// The slope of the facing surfels' offsets over their heights (a weighted line fit), where their
+// heights spread enough to fit one.
+std::optional<float> SideSlope(const std::vector<Facing>& facing, float radius) {
+  double weight = 0, rise = 0, along = 0, rise_sq = 0, rise_along = 0;
+  for (const Facing& f : facing) {
+    weight += f.weight;
+    rise += f.weight * f.rise;
+    along += f.weight * f.along;
+    rise_sq += f.weight * f.rise * f.rise;
+    rise_along += f.weight * f.rise * f.along;
+  }
+  if (weight <= 0) return std::nullopt;
+  const double mean_rise = rise / weight;
+  const double var_rise = rise_sq / weight - mean_rise * mean_rise;
+  if (!(var_rise > kMinRiseSpread * radius * radius)) return std::nullopt;
+  return static_cast<float>((rise_along / weight - mean_rise * along / weight) / var_rise);
+}
+
+// ExtendRimToSide's move of the rim vertex at `p` along `nv` (across the slide normal): onto its
+// side's foot, or 0.
+float RimMove(const Eigen::Vector3f& p, const Eigen::Vector3f& nv, const PointIndex3& index,
+              const std::vector<Eigen::Vector3f>& points,
+              const std::vector<Eigen::Vector3f>& normals, const SurfelSnapOptions& options,
+              std::vector<Facing>& facing) {
+  const std::optional<LayerFit> fit =
+      FitLayer(p, nv, /*sliding=*/false, index, points, normals, options, facing);
+  if (!fit || !(fit->tilt >= kMinRimNarrowing)) return 0.0f;
+  // The surfels' offsets fall with height as their normals say (a few tilted surfels at a
+  // vertical side's foot, added by the support's walls, do not make it a cone's).
+  const std::optional<float> slope = SideSlope(facing, options.radius);
+  if (!slope || !(*slope <= -kMinSlopeAgreement * fit->tilt)) return 0.0f;
+  // The layer's offset taken down its normals' slope to the vertex's height. A vertex more than
+  // two layers' widths inside the layer itself, or whose foot stands farther than max_move, is
+  // not at its side's foot (a floor vertex whose layer is a side's surfels 4-14 mm away, a dent
+  // 3 mm inside a bottle's foot).
+  if (fit->mean_offset > 2 * options.layer) return 0.0f;
+  const float offset = fit->mean_offset + fit->tilt * fit->mean_rise;
+  return offset > 0 && offset <= options.max_move ? offset : 0.0f;
+}
+
+// The signed move of the vertex at `p` along `nv` onto the outermost layer of the surfels that
+// face its way; nullopt where fewer than min_surfels do.
+std::optional<float> SnapOffset(const Eigen::Vector3f& p, const Eigen::Vector3f& nv, bool sliding,
+                                const PointIndex3& index,
+                                const std::vector<Eigen::Vector3f>& points,
+                                const std::vector<Eigen::Vector3f>& normals,
+                                const SurfelSnapOptions& options, std::vector<Facing>& facing) {
+  const std::optional<LayerFit> fit =
+      FitLayer(p, nv, sliding, index, points, normals, options, facing);
+  if (!fit) return std::nullopt;
+  return std::clamp(fit->offset, -options.max_move, options.max_move);
 }
 
 // Each vertex's 1-ring neighbours (with repeats).
@@ -230,6 +327,44 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
   for (size_t v = 0; v < n; ++v) {
     mesh->vertices[v] += pull[v];
     moved += !snapped[v] && !pull[v].isZero();
+  }
+  return moved;
+}
+
+size_t ExtendRimToSide(const std::vector<Eigen::Vector3f>& points,
+                       const std::vector<Eigen::Vector3f>& normals,
+                       const SurfelSnapOptions& options, TriangleMesh* mesh,
+                       const std::vector<uint8_t>& rim) {
+  const Eigen::Vector3f& up = options.slide_normal;
+  if (points.empty() || rim.size() != mesh->vertices.size() || options.radius <= 0 ||
+      options.max_move <= 0 || up.isZero()) {
+    return 0;
+  }
+  std::vector<Eigen::Vector3f> direction = OutwardVertexNormals(*mesh);
+  for (size_t v = 0; v < direction.size(); ++v) {
+    const Eigen::Vector3f across = direction[v] - direction[v].dot(up) * up;
+    direction[v] = rim[v] && across.norm() >= kMinRimAcross ? Eigen::Vector3f(across.normalized())
+                                                            : Eigen::Vector3f::Zero();
+  }
+  const PointIndex3 index(points);
+  const size_t n = mesh->vertices.size();
+  std::vector<float> move(n, 0.0f);
+  tbb::parallel_for(
+      tbb::blocked_range<size_t>(0, n, 256), [&](const tbb::blocked_range<size_t>& r) {
+        std::vector<Facing> facing;
+        for (size_t v = r.begin(); v != r.end(); ++v) {
+          if (direction[v].isZero()) continue;
+          move[v] =
+              RimMove(mesh->vertices[v], direction[v], index, points, normals, options, facing);
+        }
+      });
+  // Not smoothed over the mesh: the ring's vertices stand at different heights of a slope, each
+  // move is to its own height's point of the side, and the fit already averages the side's
+  // surfels around it.
+  size_t moved = 0;
+  for (size_t v = 0; v < n; ++v) {
+    mesh->vertices[v] += move[v] * direction[v];
+    moved += move[v] > 0;
   }
   return moved;
 }

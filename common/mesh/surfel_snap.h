@@ -47,4 +47,21 @@ size_t SnapToSurfels(const std::vector<Eigen::Vector3f>& points,
                      const std::vector<Eigen::Vector3f>& normals, const SurfelSnapOptions& options,
                      TriangleMesh* mesh, const std::vector<uint8_t>& fixed = {});
 
+// A base's outer ring on its support (vertices flagged in `rim`) moves outward only, across
+// `options.slide_normal` (the support's up), onto its side's foot: the outermost layer of the
+// surfels facing its way, taken down the slope their normals give to the vertex's height, where
+// that side narrows upwards (a cone's, by at least 6 degrees). A side's lowest surfels stand a
+// few millimetres above the support, on a cone inside the true rim, and a fused floor's rounded
+// corner, or a clamp to the surfel centres' extremes, left the ring there. A vertex moves along
+// the part of its outward normal across the slide normal (at least 0.05 of it: the inside of a
+// flat base has none), not at all where the foot stands farther than max_move (the vertex is not
+// at that side's foot) or where too few surfels face its way; the moves are not smoothed (the
+// layer averages the side's surfels around each vertex). A vertical side (its surfels reach the
+// support's height already) or one that widens upwards (a bowl's foot, a torus's underside)
+// leaves the ring where it is. Returns how many vertices moved.
+size_t ExtendRimToSide(const std::vector<Eigen::Vector3f>& points,
+                       const std::vector<Eigen::Vector3f>& normals,
+                       const SurfelSnapOptions& options, TriangleMesh* mesh,
+                       const std::vector<uint8_t>& rim);
+
 }  // namespace instascene

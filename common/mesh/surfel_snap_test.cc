@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <vector>
 
 #include <gtest/gtest.h>
@@ -207,6 +208,83 @@ TEST(SurfelSnap, AConesBaseRimSlidesToWhereItsSideMeetsTheBase) {
     if (v.z() == 0) rim = std::max(rim, v.head<2>().norm());
   }
   EXPECT_NEAR(rim, 1.0f, 0.012f);
+}
+
+// A base's outer ring after the clamps: a fused floor out to radius 0.9 that rounds into the side
+// at (0.95, 0.04), the side 0.02 inside the surfels above (r = 0.98 - 0.5 z).
+TriangleMesh RoundedBase(const std::function<float(float)>& side_radius) {
+  std::vector<Eigen::Vector2f> profile = {{0, 0}, {0.5f, 0}, {0.9f, 0}, {0.95f, 0.04f}};
+  for (int i = 0; i < 8; ++i) {
+    const float z = 0.12f + 0.2f * i;
+    profile.emplace_back(side_radius(z), z);
+  }
+  profile.emplace_back(0, 1.8f);
+  return MakeLathe(profile, 64, false);
+}
+
+float WidestAt(const TriangleMesh& mesh, float z) {
+  float widest = 0;
+  for (const Eigen::Vector3f& v : mesh.vertices) {
+    if (std::abs(v.z() - z) < 1e-5f) widest = std::max(widest, v.head<2>().norm());
+  }
+  return widest;
+}
+
+TEST(SurfelSnap, AConesRimExtendsToWhereItsSideMeetsTheSupport) {
+  std::vector<Eigen::Vector3f> points, normals;
+  ConeSideSurfels(&points, &normals);  // the lowest at z = 0.04, r = 0.98
+  const TriangleMesh start = RoundedBase([](float z) { return 0.98f - 0.5f * z; });
+  std::vector<uint8_t> rim(start.vertices.size());
+  for (size_t v = 0; v < rim.size(); ++v) rim[v] = start.vertices[v].z() <= 0.05f;
+  SurfelSnapOptions o = Options();
+  o.max_move = 0.15f;
+  o.slide_normal = Eigen::Vector3f::UnitZ();
+  TriangleMesh extended = start;
+  EXPECT_GT(ExtendRimToSide(points, normals, o, &extended, rim), 0u);
+  EXPECT_NEAR(WidestAt(extended, 0.0f), 1.0f, 0.012f);    // the floor's ring: 0.9 -> the true 1
+  EXPECT_NEAR(WidestAt(extended, 0.04f), 0.98f, 0.012f);  // the corner: 0.95 -> 0.98
+  for (size_t v = 0; v < start.vertices.size(); ++v) {
+    EXPECT_EQ(extended.vertices[v].z(), start.vertices[v].z());  // heights kept
+    if (!rim[v] || start.vertices[v].head<2>().norm() < 0.6f) {
+      EXPECT_EQ(extended.vertices[v], start.vertices[v]);  // nothing else moves, nor the inside
+    }
+  }
+  // A foot farther than max_move (the floor's ring, 0.1 inside), or no slide normal: the ring
+  // stays; the corner, 0.03 inside, still moves.
+  o.max_move = 0.05f;
+  TriangleMesh bounded = start;
+  ExtendRimToSide(points, normals, o, &bounded, rim);
+  EXPECT_NEAR(WidestAt(bounded, 0.0f), 0.9f, 1e-5f);
+  EXPECT_NEAR(WidestAt(bounded, 0.04f), 0.98f, 0.012f);
+  o.slide_normal = Eigen::Vector3f::Zero();
+  TriangleMesh unmoved = start;
+  EXPECT_EQ(ExtendRimToSide(points, normals, o, &unmoved, rim), 0u);
+}
+
+TEST(SurfelSnap, ARimUnderAVerticalSideOrOneThatWidensUpwardsStays) {
+  // A cylinder's side (vertical: the clamps hold such a side to its surfels, and a corner's
+  // diagonal move would stand out past a face) and a side that widens upwards (a bowl's foot, a
+  // torus's underside: extrapolated down, it would stand out where the true one curves in).
+  std::vector<Eigen::Vector3f> cylinder, cylinder_normals, widening, widening_normals;
+  CylinderSideSurfels(&cylinder, &cylinder_normals);
+  for (int k = 0; k < 24; ++k) {
+    const float z = 0.04f + 0.08f * k, r = 0.9f + 0.3f * z;
+    const int n = static_cast<int>(std::lround(2 * M_PI * r / 0.08));
+    for (int j = 0; j < n; ++j) {
+      const float a = static_cast<float>(2 * M_PI * (j + 0.5f * (k % 2)) / n);
+      widening.emplace_back(r * std::cos(a), r * std::sin(a), z);
+      widening_normals.push_back(Eigen::Vector3f(std::cos(a), std::sin(a), -0.3f).normalized());
+    }
+  }
+  SurfelSnapOptions o = Options();
+  o.slide_normal = Eigen::Vector3f::UnitZ();
+  const TriangleMesh start = RoundedBase([](float) { return 0.96f; });
+  std::vector<uint8_t> rim(start.vertices.size());
+  for (size_t v = 0; v < rim.size(); ++v) rim[v] = start.vertices[v].z() <= 0.05f;
+  TriangleMesh mesh = start;
+  EXPECT_EQ(ExtendRimToSide(cylinder, cylinder_normals, o, &mesh, rim), 0u);
+  EXPECT_EQ(ExtendRimToSide(widening, widening_normals, o, &mesh, rim), 0u);
+  for (size_t v = 0; v < start.vertices.size(); ++v) EXPECT_EQ(mesh.vertices[v], start.vertices[v]);
 }
 
 TEST(SurfelSnap, PastTheSurfelsEdgeTheReachPullsTheSurfaceBack) {

@@ -56,6 +56,8 @@ MeshingOptions MeshingFromManifest(const nlohmann::json& m) {
   // And before the base's slide with a fixed base.
   meshing.snap_base_across = j.value("snap_base_across", false);
   meshing.base_on_support = j.value("base_on_support", false);
+  // And before the rim's extension without it.
+  meshing.rim_to_side = j.value("rim_to_side", false);
   // And before the visual hull without it.
   meshing.enclose_hull = j.value("enclose_hull", false);
   // And before the top and side clamps without them.
@@ -102,6 +104,7 @@ nlohmann::json MeshingToManifest(const MeshingOptions& m) {
           {"snap_reach_spacings", m.snap_reach_spacings},
           {"snap_base_across", m.snap_base_across},
           {"base_on_support", m.base_on_support},
+          {"rim_to_side", m.rim_to_side},
           {"carve_views", m.carve_views},
           {"enclose_hull", m.enclose_hull},
           {"top_at_highest_surfel", m.top_at_highest_surfel},

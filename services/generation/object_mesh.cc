@@ -246,15 +246,21 @@ void LowerFloorOntoSupport(const ObjectFrame& frame, float floor, float voxel, T
   }
 }
 
-void SnapMeshToSurfels(const std::vector<Eigen::Vector3f>& points,
-                       const std::vector<Eigen::Vector3f>& normals, const ObjectFrame& frame,
-                       const MeshingOptions& options, float voxel, const std::vector<uint8_t>& base,
-                       TriangleMesh* mesh) {
+SurfelSnapOptions SnapOptions(const ObjectFrame& frame, const MeshingOptions& options,
+                              float voxel) {
   SurfelSnapOptions snap;
   snap.radius = options.snap_radius_spacings * frame.spacing;
   snap.layer = options.snap_layer_spacings * frame.spacing;
   snap.max_move = options.snap_max_voxels * voxel;
   snap.reach = options.snap_reach_spacings * frame.spacing;
+  return snap;
+}
+
+void SnapMeshToSurfels(const std::vector<Eigen::Vector3f>& points,
+                       const std::vector<Eigen::Vector3f>& normals, const ObjectFrame& frame,
+                       const MeshingOptions& options, float voxel, const std::vector<uint8_t>& base,
+                       TriangleMesh* mesh) {
+  SurfelSnapOptions snap = SnapOptions(frame, options, voxel);
   // The base on the support stays flat: it is where the object stands (a sphere's cap, a
   // bottle's foot), and a rounded base rolls in a simulator.
   if (frame.has_support && options.snap_base_across) snap.slide_normal = frame.up;
@@ -274,7 +280,8 @@ void CapAtHighestSurfel(const GaussianCloud& object, const ObjectFrame& frame, T
 }
 
 // The fused mesh's clean-up on closed meshes: the floor on the support, the vertices snapped to
-// the surfels (the base sliding across), the sides within the surfels, the top at the highest.
+// the surfels (the base sliding across), the sides within the surfels, the base's ring out to
+// where its side meets the support, the top at the highest.
 void ShapeClosedMesh(const GaussianCloud& object, const std::vector<Eigen::Vector3f>& points,
                      const std::vector<Eigen::Vector3f>& normals, const ObjectFrame& frame,
                      const MeshingOptions& options, const DepthFusionOptions& fusion,
@@ -296,6 +303,13 @@ void ShapeClosedMesh(const GaussianCloud& object, const std::vector<Eigen::Vecto
     SnapMeshToSurfels(points, normals, frame, options, fusion.voxel, base, mesh);
   }
   if (clamp_sides && object.size() > 0) ClampToSurfelPolygon(points, frame, mesh);
+  if (frame.has_support && options.rim_to_side && frame.spacing > 0) {
+    SurfelSnapOptions rim = SnapOptions(frame, options, fusion.voxel);
+    rim.slide_normal = frame.up;
+    // A side's lowest surfels stand 2-6 mm above the support, a few per 3 spacings of rim.
+    rim.radius *= 2;
+    ExtendRimToSide(points, normals, rim, mesh, base);
+  }
   if (options.top_at_highest_surfel && object.size() > 0) CapAtHighestSurfel(object, frame, mesh);
 }
 

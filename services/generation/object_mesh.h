@@ -104,6 +104,13 @@ struct MeshingOptions {
   // voxel above the plane it was cut at: bottles 0.74 mm short). Both measured in
   // docs/RESULTS.md "Meshing: the base on its support".
   bool base_on_support = true;
+  // Closed meshing with a support only: after the clamps, the base's outer ring (its vertices
+  // within a voxel of the support) moves outward onto its side's foot, the side's surfels taken
+  // down their slope to the support where that side narrows upwards (ExtendRimToSide,
+  // common/mesh/surfel_snap.h; the neighbourhood twice the snap's): a cone's lowest surfels stand
+  // a few millimetres above the support, inside the true rim, and the ring stood 1-3 mm inside
+  // it (docs/RESULTS.md "Meshing: a cone's rim at its side's foot").
+  bool rim_to_side = true;
   // Closed meshing only: no vertex stands higher (along the frame's up) than the object's highest
   // surfel centre; those above it are lowered onto that height. A surfel's footprint reaches past
   // a top face's edge and a rim's, and the fused top stood 2.2 mm (median; cups' rims 4.7 mm)
