@@ -99,6 +99,27 @@ struct Facing {
   float tilt;  // the surfel's normal, turned to face the vertex's way, along the slide normal
 };
 
+// A weighted line fit of surfels' offsets (along) over their heights (rise).
+struct RiseLine {
+  double weight = 0, rise = 0, along = 0, rise_sq = 0, rise_along = 0;
+  void Add(const Facing& f) {
+    along += f.weight * f.along;
+    weight += f.weight;
+    rise += f.weight * f.rise;
+    rise_sq += f.weight * f.rise * f.rise;
+    rise_along += f.weight * f.rise * f.along;
+  }
+  // The slope, where the heights spread enough to fit one (their variance above kMinRiseSpread
+  // times the neighbourhood's radius squared).
+  std::optional<double> Slope(float radius) const {
+    if (weight <= 0) return std::nullopt;
+    const double mean_rise = rise / weight;
+    const double var_rise = rise_sq / weight - mean_rise * mean_rise;
+    if (!(var_rise > kMinRiseSpread * radius * radius)) return std::nullopt;
+    return (rise_along / weight - mean_rise * along / weight) / var_rise;
+  }
+};
+
 // The outermost layer of the surfels around `p` that face `nv`'s way: its offset along `nv`, its
 // height along the slide normal and its normals' tilt along it.
 struct LayerFit {
@@ -144,32 +165,26 @@ std::optional<LayerFit> FitLayer(const Eigen::Vector3f& p, const Eigen::Vector3f
   std::nth_element(facing.begin(), facing.begin() + (min_surfels - 1), facing.end(),
                    [](const Facing& a, const Facing& b) { return a.along > b.along; });
   const float outer = facing[min_surfels - 1].along;
-  double sum = 0, weight = 0, rise = 0, rise_sq = 0, rise_along = 0, tilt = 0, facing_cos = 0;
+  RiseLine line;  // over the layer
+  double tilt = 0, facing_cos = 0;
   for (const Facing& f : facing) {
     if (std::abs(f.along - outer) > options.layer) continue;
     tilt += f.weight * f.tilt;
     facing_cos += f.weight * std::sqrt(std::max(0.0f, 1.0f - f.tilt * f.tilt));
-    sum += f.weight * f.along;
-    weight += f.weight;
-    rise += f.weight * f.rise;
-    rise_sq += f.weight * f.rise * f.rise;
-    rise_along += f.weight * f.rise * f.along;
+    line.Add(f);
   }
-  if (weight <= 0) return std::nullopt;
+  if (line.weight <= 0) return std::nullopt;
   LayerFit fit;
   fit.tilt = static_cast<float>(tilt / std::max(facing_cos, 1e-9));
-  fit.mean_offset = static_cast<float>(sum / weight);
-  fit.mean_rise = static_cast<float>(rise / weight);
-  double offset = sum / weight;
+  fit.mean_offset = static_cast<float>(line.along / line.weight);
+  fit.mean_rise = static_cast<float>(line.rise / line.weight);
+  double offset = line.along / line.weight;
   // A sliding vertex (a base's rim) has the side's surfels only above it: where the side slopes
   // (a cone's) their mean stands inside the rim, so the layer is extrapolated down to the
   // vertex's height (a weighted line fit of the offset over the height).
   if (sliding) {
-    const double mean_rise = rise / weight;
-    const double var_rise = rise_sq / weight - mean_rise * mean_rise;
-    if (var_rise > kMinRiseSpread * options.radius * options.radius) {
-      const double slope = (rise_along / weight - mean_rise * sum / weight) / var_rise;
-      offset -= slope * mean_rise;
+    if (const std::optional<double> slope = line.Slope(options.radius)) {
+      offset -= *slope * (line.rise / line.weight);
     }
   }
   fit.offset = static_cast<float>(offset);
@@ -179,19 +194,11 @@ std::optional<LayerFit> FitLayer(const Eigen::Vector3f& p, const Eigen::Vector3f
 // The slope of the facing surfels' offsets over their heights (a weighted line fit), where their
 // heights spread enough to fit one.
 std::optional<float> SideSlope(const std::vector<Facing>& facing, float radius) {
-  double weight = 0, rise = 0, along = 0, rise_sq = 0, rise_along = 0;
-  for (const Facing& f : facing) {
-    weight += f.weight;
-    rise += f.weight * f.rise;
-    along += f.weight * f.along;
-    rise_sq += f.weight * f.rise * f.rise;
-    rise_along += f.weight * f.rise * f.along;
-  }
-  if (weight <= 0) return std::nullopt;
-  const double mean_rise = rise / weight;
-  const double var_rise = rise_sq / weight - mean_rise * mean_rise;
-  if (!(var_rise > kMinRiseSpread * radius * radius)) return std::nullopt;
-  return static_cast<float>((rise_along / weight - mean_rise * along / weight) / var_rise);
+  RiseLine line;
+  for (const Facing& f : facing) line.Add(f);
+  const std::optional<double> slope = line.Slope(radius);
+  if (!slope) return std::nullopt;
+  return static_cast<float>(*slope);
 }
 
 // ExtendRimToSide's move of the rim vertex at `p` along `nv` (across the slide normal): onto its
