@@ -244,8 +244,10 @@ void FillOutput(const std::vector<SymmetryHypothesis>& hypotheses, const Gaussia
                 const std::map<std::string, int>& added_by, PriorOutput* out) {
   const std::vector<Candidate>& added = filter.added();
   out->added = BuildSurfels(instance, added);
-  out->reason =
-      absl::StrCat(accepted, " symmetry hypothesis(es) accepted; ", added.size(), " surfels added");
+  out->reason = accepted > 0 ? absl::StrCat(accepted, " symmetry hypothesis(es) accepted; ",
+                                            added.size(), " surfels added")
+                             : absl::StrCat("no symmetry hypothesis passed; ", added.size(),
+                                            " surfels added on the support");
   out->report["added"] = added.size();
   out->report["added_by"] = added_by;
   out->report["asymmetric_sources"] = counts.asymmetric;
@@ -357,10 +359,15 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   }
   PriorOutput out;
   out.report["hypotheses"] = images.tried;
-  if (images.accepted == 0) return Abstention(hypotheses, instance, std::move(out));
+  if (images.accepted == 0 && !options_.support_without_symmetry) {
+    return Abstention(hypotheses, instance, std::move(out));
+  }
   if (options_.support_cap && frame.has_support &&
       frame.bottom_height - frame.support_height <= options_.max_support_gap_radii * frame.radius) {
     AddSupport(hypotheses, instance, s, own, options_, &filter, &added_by);
+  }
+  if (images.accepted == 0 && filter.added().empty()) {
+    return Abstention(hypotheses, instance, std::move(out));
   }
   FillOutput(hypotheses, instance, filter, images.counts, bodies, foreign, images.accepted,
              added_by, &out);

@@ -3,8 +3,9 @@
 // (symmetry.h), adds the mirrored / revolved images of observed surfels, extends walls down to the
 // support and closes the underside on it (support_completion.h); a candidate is added only where
 // space is neither observed-empty (FreeSpaceGrid) nor already covered by a surfel, with appearance
-// (DC colour, opacity, scales) taken from its source surfel. When no hypothesis passes it abstains
-// and says so. Thread-safe (stateless apart from options).
+// (DC colour, opacity, scales) taken from its source surfel. The support part holds for objects
+// no hypothesis holds for too; when nothing is added it abstains and says so. Thread-safe
+// (stateless apart from options).
 #pragma once
 
 #include "services/generation/observed_surface.h"
@@ -31,6 +32,10 @@ struct GeometricPriorOptions {
   // RESULTS.md ("Free-space violations").
   int candidate_free_views = 1;
   float max_support_gap_radii = 1.0f;  // no support completion when it is farther below
+  // An object no symmetry hypothesis holds for still rests on its support: its walls are
+  // extended down to it and its underside closed on it (the prior abstains only where that adds
+  // nothing too). Measured in RESULTS.md ("The support without a symmetry").
+  bool support_without_symmetry = true;
   // Support walls: a lowest-band surfel more than asin(this) (15 degrees) off vertical on a
   // surface that narrows downwards is extended down its own slope, inwards, not straight down
   // (support_completion.h; 0 = always straight down). Measured in RESULTS.md ("Support walls

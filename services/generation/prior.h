@@ -52,7 +52,7 @@ struct PriorInput {
 struct PriorOutput {
   GaussianCloud added;  // completed surfels (same SH degree as the instance), may be empty
   std::vector<ViewImages> generated;  // images at the target views, or empty
-  bool abstained = false;             // no hypothesis passed: the object stays a closed crop
+  bool abstained = false;             // nothing added: the object stays a closed crop
   std::string reason;                 // why it abstained, or what it did
   nlohmann::json report = nlohmann::json::object();  // prior-specific details for the manifest
   // Instance surfels (indices into PriorInput::instance) the prior found not to be the object's
