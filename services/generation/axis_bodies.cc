@@ -143,7 +143,10 @@ AxisBodies AnalyseAxisBodies(const std::vector<SymmetryHypothesis>& hypotheses,
     if (options.handle_joins_its_part && axis.order == 0 &&
         std::find(b.off_beyond_body.begin(), b.off_beyond_body.end(), 1) !=
             b.off_beyond_body.end()) {
-      JoinHandleParts(c, step, s, options.min_handle_surfels, &b, &out);
+      const int min_surfels =
+          std::max(options.min_handle_surfels,
+                   static_cast<int>(std::ceil(options.min_handle_share * static_cast<float>(n))));
+      JoinHandleParts(c, step, s, min_surfels, &b, &out);
     }
     if (options.skip_beyond_axis_profile && axis.order == 0) ApplyProfile(c, step, s, options, &b);
     // About an n-fold axis (no profile: a box's radius varies around it), those beyond the body's
