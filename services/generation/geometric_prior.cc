@@ -218,7 +218,8 @@ void AddSupport(const std::vector<SymmetryHypothesis>& hypotheses, const Gaussia
   (*added_by)["support_walls"] = static_cast<int>(filter->added().size() - before);
   gather();
   before = filter->added().size();
-  for (const Candidate& c : SupportCap(positions, sources, frame, s.free_space)) {
+  for (const Candidate& c :
+       SupportCap(positions, sources, frame, s.free_space, options.cap_rim_inside_walls)) {
     filter->Consider(c);
   }
   (*added_by)["support_cap"] = static_cast<int>(filter->added().size() - before);

@@ -36,6 +36,9 @@ struct GeometricPriorOptions {
   // extended down to it and its underside closed on it (the prior abstains only where that adds
   // nothing too). Measured in RESULTS.md ("The support without a symmetry").
   bool support_without_symmetry = true;
+  // The cap's rim cells put their surfels no farther out than the walls' surfels in them
+  // (support_completion.h). Measured in RESULTS.md ("The cap's rim inside the walls").
+  bool cap_rim_inside_walls = true;
   // Support walls: a lowest-band surfel more than asin(this) (15 degrees) off vertical on a
   // surface that narrows downwards is extended down its own slope, inwards, not straight down
   // (support_completion.h; 0 = always straight down). Measured in RESULTS.md ("Support walls

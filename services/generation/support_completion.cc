@@ -199,11 +199,51 @@ bool NextToOutside(const std::vector<uint8_t>& outside, int side, int i, int j) 
   return false;
 }
 
+// The mean plane coordinates (x, y) of the low surfels in each cell, with their count in z.
+std::vector<Eigen::Vector3f> CellMeans(const std::vector<Eigen::Vector3f>& low,
+                                       const ObjectFrame& frame, const CapGrid& grid) {
+  const Eigen::Matrix3f basis = frame.Basis();
+  std::vector<Eigen::Vector3f> sum(static_cast<size_t>(grid.side) * grid.side,
+                                   Eigen::Vector3f::Zero());
+  for (const Eigen::Vector3f& p : low) {
+    const Eigen::Vector3f q = basis.transpose() * (p - frame.center);
+    int i = 0, j = 0;
+    if (grid.Cell(q, &i, &j)) sum[j * grid.side + i] += Eigen::Vector3f(q.x(), q.y(), 1);
+  }
+  for (Eigen::Vector3f& m : sum) {
+    if (m.z() > 0) m.head<2>() /= m.z();
+  }
+  return sum;
+}
+
+// A rim cell's cap point no farther out than its wall: the cell's centre, moved back along the
+// outward direction (away from the footprint's cells around it) onto the line through the
+// mean of the wall's surfels in the cell where the centre stands beyond it.
+Eigen::Vector2f InsideTheWall(const Eigen::Vector2f& centre, const Eigen::Vector3f& wall,
+                              const std::vector<uint8_t>& outside, const CapGrid& grid, int i,
+                              int j) {
+  if (wall.z() <= 0) return centre;
+  Eigen::Vector2f inward = Eigen::Vector2f::Zero();
+  for (int dj = -1; dj <= 1; ++dj) {
+    for (int di = -1; di <= 1; ++di) {
+      const int ni = i + di, nj = j + dj;
+      const bool in =
+          ni >= 0 && nj >= 0 && ni < grid.side && nj < grid.side && !outside[nj * grid.side + ni];
+      if (in) inward += Eigen::Vector2f(static_cast<float>(di), static_cast<float>(dj));
+    }
+  }
+  if (inward.norm() < 1e-6f) return centre;
+  const Eigen::Vector2f out = -inward.normalized();
+  const float beyond = (centre - wall.head<2>()).dot(out);
+  return beyond > 0 ? Eigen::Vector2f(centre - beyond * out) : centre;
+}
+
 }  // namespace
 
 std::vector<SurfelCandidate> SupportCap(const std::vector<Eigen::Vector3f>& positions,
                                         const std::vector<uint32_t>& sources,
-                                        const ObjectFrame& frame, const FreeSpaceGrid& free_space) {
+                                        const ObjectFrame& frame, const FreeSpaceGrid& free_space,
+                                        bool rim_inside_walls) {
   std::vector<SurfelCandidate> out;
   if (!frame.has_support || positions.empty()) return out;
   const Eigen::Matrix3f basis = frame.Basis();
@@ -222,15 +262,18 @@ std::vector<SurfelCandidate> SupportCap(const std::vector<Eigen::Vector3f>& posi
       (frame.support_height + 0.25f * frame.spacing - frame.up.dot(frame.center)) * frame.up;
   const float lift = 3.0f * free_space.voxel();
   const int side = grid.side, half = grid.half;
+  const std::vector<Eigen::Vector3f> wall = CellMeans(low, frame, grid);
   for (int j = 0; j < side; ++j) {
     for (int i = 0; i < side; ++i) {
       if (outside[j * side + i]) continue;
       // A cell on the hull's rim is footprint only where a surfel lies in it, else the cap would
       // overhang the walls by a cell.
-      if (!seen[j * side + i] && NextToOutside(outside, side, i, j)) continue;
+      const bool rim = NextToOutside(outside, side, i, j);
+      if (!seen[j * side + i] && rim) continue;
+      Eigen::Vector2f at((i - half + 0.5f) * grid.cell, (j - half + 0.5f) * grid.cell);
+      if (rim && rim_inside_walls) at = InsideTheWall(at, wall[j * side + i], outside, grid, i, j);
       SurfelCandidate c;
-      c.position = plane_origin + basis.col(0) * ((i - half + 0.5f) * grid.cell) +
-                   basis.col(1) * ((j - half + 0.5f) * grid.cell);
+      c.position = plane_origin + basis.col(0) * at.x() + basis.col(1) * at.y();
       if (free_space.IsFree(c.position + lift * frame.up)) continue;  // seen through: a hole
       c.rotation = basis;
       c.source = low_sources[low_index.Nearest(c.position).first];

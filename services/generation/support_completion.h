@@ -52,8 +52,12 @@ std::vector<SurfelCandidate> WallExtension(
     const std::vector<uint32_t>& sources, const ObjectFrame& frame, float slope_min_sin = 0,
     const std::optional<Eigen::Vector3f>& vertical_axis = std::nullopt);
 
+// `rim_inside_walls`: a cap cell on the footprint's rim (kept where a surfel lies in it) puts its
+// surfel no farther out than the wall's surfels in it, not at the cell's centre (up to half a
+// cell past the wall).
 std::vector<SurfelCandidate> SupportCap(const std::vector<Eigen::Vector3f>& positions,
                                         const std::vector<uint32_t>& sources,
-                                        const ObjectFrame& frame, const FreeSpaceGrid& free_space);
+                                        const ObjectFrame& frame, const FreeSpaceGrid& free_space,
+                                        bool rim_inside_walls = true);
 
 }  // namespace instascene::generation

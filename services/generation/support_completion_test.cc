@@ -118,9 +118,10 @@ TEST(SupportCompletion, WallsLeaningDownFollowTheirSlope) {
 }
 
 // The support cap fills the footprint of the lower walls and stops at them: a cylinder's wall of
-// surfels (radius 5 cm, 4 mm apart) gets a cap no wider than the wall plus half a grid cell (the
-// cap's cells are 1.5 spacings; the dilation that keeps the outside from leaking in between the
-// wall's surfels is taken back), and covers the inside.
+// surfels (radius 5 cm, 4 mm apart) gets a cap that covers the inside and reaches the wall but
+// not past it (the cap's cells are 1.5 spacings; a rim cell's surfel at the cell's centre, where
+// `rim_inside_walls` is off, stood up to half a cell past the wall: seed 42's l-block_5 was 3 mm
+// too wide so).
 TEST(SupportCompletion, TheCapFillsTheFootprintWithoutOverhangingTheWalls) {
   ObjectFrame frame;
   frame.center = Eigen::Vector3f(0.2f, -0.1f, 0.05f);
@@ -144,22 +145,25 @@ TEST(SupportCompletion, TheCapFillsTheFootprintWithoutOverhangingTheWalls) {
   ASSERT_TRUE(caster.ok());
   auto grid = FreeSpaceGrid::Carve({}, **caster, frame, FreeSpaceOptions{});  // nothing seen
   ASSERT_TRUE(grid.ok()) << grid.status();
-  const std::vector<SurfelCandidate> cap = SupportCap(positions, sources, frame, *grid);
-  ASSERT_FALSE(cap.empty());
   const float cell = 1.5f * frame.spacing;
   const double disc_cells = M_PI * wall * wall / (cell * cell);  // the disc's area in cells
-  float widest = 0;
-  for (const SurfelCandidate& c : cap) {
-    const Eigen::Vector3f q = c.position - frame.center;
-    widest = std::max(widest, std::hypot(q.x(), q.y()));
-    EXPECT_NEAR(c.position.z(), 0.25f * frame.spacing, 1e-5f);
-  }
-  EXPECT_LE(widest, wall + 0.75f * cell)
-      << "cap " << cap.size() << " cells for a disc of "
-      << disc_cells;  // a cell's centre in a cell the wall crosses
-  EXPECT_GE(widest, wall - 1.5f * cell);
-  EXPECT_GT(cap.size(), 0.9 * disc_cells);
-  EXPECT_LT(cap.size(), 1.25 * disc_cells);
+  auto widest = [&](bool rim_inside_walls) {
+    const std::vector<SurfelCandidate> cap =
+        SupportCap(positions, sources, frame, *grid, rim_inside_walls);
+    EXPECT_GT(cap.size(), 0.9 * disc_cells);
+    EXPECT_LT(cap.size(), 1.25 * disc_cells);
+    float out = 0;
+    for (const SurfelCandidate& c : cap) {
+      const Eigen::Vector3f q = c.position - frame.center;
+      out = std::max(out, std::hypot(q.x(), q.y()));
+      EXPECT_NEAR(c.position.z(), 0.25f * frame.spacing, 1e-5f);
+    }
+    return out;
+  };
+  const float inside = widest(true), centres = widest(false);
+  EXPECT_LE(inside, wall + 0.1f * cell);
+  EXPECT_GE(inside, wall - 0.5f * cell);
+  EXPECT_GT(centres, wall + 0.3f * cell);  // a cell's centre in a cell the wall crosses
 }
 
 }  // namespace
