@@ -22,15 +22,18 @@ namespace {
 using namespace testing;  // NOLINT(build/namespaces): the test scenes
 
 // The stage's thresholds reach the prior: the completion of the L-block above mirrors the arm
-// with the defaults and accepts no plane when a plane needs 0.93 (it only rests on its support).
+// when a plane needs 0.85 and accepts no plane with the default 0.93 (it only rests on its
+// support).
 TEST(CompleteStage, SymmetryThresholdsReachTheGeometricPrior) {
-  auto decoded = CompleteCodec().Decode({{"min_plane_agreement", 0.93}, {"mesh_size", 64}});
+  auto decoded = CompleteCodec().Decode({{"mesh_size", 64}});
   ASSERT_TRUE(decoded.ok()) << decoded.status();
   const CompletionOptions strict = ToCompletionOptions(*decoded);
   EXPECT_EQ(strict.geometric.symmetry.min_plane_agreement, 0.93);
   EXPECT_EQ(strict.geometric.symmetry.min_agreement, 0.85);
-  CompletionOptions lenient = strict;
-  lenient.geometric.symmetry.min_plane_agreement = CompleteStageOptions{}.min_plane_agreement;
+  decoded = CompleteCodec().Decode({{"min_plane_agreement", 0.85}, {"mesh_size", 64}});
+  ASSERT_TRUE(decoded.ok()) << decoded.status();
+  const CompletionOptions lenient = ToCompletionOptions(*decoded);
+  EXPECT_EQ(lenient.geometric.symmetry.min_plane_agreement, 0.85);
   const PartialObject scene = LBlockArmTowardsTheViews();
   auto unmirrored = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, strict);
   auto mirrored = CompleteObject(scene.cameras, scene.cloud, scene.labels, 1, lenient);

@@ -18,7 +18,7 @@ struct CompleteStageOptions {
   int top_training_views = 10;
   int free_space_resolution = 64;     // voxels per axis
   double min_agreement = 0.85;        // symmetry acceptance
-  double min_plane_agreement = 0.85;  // a mirror plane's acceptance (SymmetryOptions)
+  double min_plane_agreement = 0.93;  // a mirror plane's acceptance (SymmetryOptions)
   int mesh_size = 160;                // meshing view size, px
   double mesh_min_alpha = 0.9;        // meshing: alpha a fused pixel needs
   double mesh_inset_sigmas = 0.4;     // meshing: surface moved inward, in median surfel sigmas

@@ -52,10 +52,11 @@ struct SymmetryOptions {
   // A mirror plane needs this agreement as well (an axis min_agreement alone: a mug's handle
   // contradicts the body's axis and its surfels lend no images). Mirror-symmetric shapes agree
   // 0.95 and more, under mask noise too; bodies symmetric but for a part agree 0.86-0.91 where
-  // the part's images land in space no view saw (an L-block's arm mirrored behind its bar). 0.93
-  // rejects those planes, and with them the rest of the completion they gave; measured and left
-  // at min_agreement's value (docs/RESULTS.md "Mirror planes that agree 0.86-0.91").
-  double min_plane_agreement = 0.85;
+  // the part's images land in space no view saw (an L-block's arm mirrored behind its bar), and
+  // 0.93 rejects those planes. What such a plane also completed (the bar's hidden back) the
+  // support part now gives without it (docs/RESULTS.md "Mirror planes that agree 0.86-0.91",
+  // "A stricter mirror plane with the support").
+  double min_plane_agreement = 0.93;
   double min_evidence = 0.2;
   int plane_angles = 36;   // normal directions over 180 degrees
   int plane_offsets = 21;  // offsets per direction over +- offset_range_radii
