@@ -360,10 +360,8 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   }
   PriorOutput out;
   out.report["hypotheses"] = images.tried;
-  if (images.accepted == 0 && !options_.support_without_symmetry) {
-    return Abstention(hypotheses, instance, std::move(out));
-  }
-  if (options_.support_cap && frame.has_support &&
+  if ((images.accepted > 0 || options_.support_without_symmetry) && options_.support_cap &&
+      frame.has_support &&
       frame.bottom_height - frame.support_height <= options_.max_support_gap_radii * frame.radius) {
     AddSupport(hypotheses, instance, s, own, options_, &filter, &added_by);
   }

@@ -250,7 +250,7 @@ TEST(GeometricPrior, AThinBottlesBodyIsSymmetricWhereViewsGrazeIt) {
 // An object no symmetry holds for still rests on its support. An L-block seen all round whose
 // lowest 2 cm the segmentation gave the background (seed 178's l-block_5 stood 4.5 mm short so):
 // no plane or axis passes, yet its walls come down to the support on its own faces; with
-// `support_without_symmetry` off the prior abstains and the object stops 2 cm above the table.
+// `support_without_symmetry` off the prior abstains.
 TEST(GeometricPrior, AnObjectWithoutASymmetryStillRestsOnItsSupport) {
   ShapeSpec spec;
   spec.kind = ShapeKind::kLBlock;
