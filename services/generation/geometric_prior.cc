@@ -328,12 +328,12 @@ absl::StatusOr<PriorOutput> GeometricPrior::Complete(const PriorInput& input) co
   const ObjectFrame& frame = input.frame;
   std::vector<Eigen::Vector3f> points, normals;
   CentresAndNormals(instance, &points, &normals);
-  const std::vector<SymmetryHypothesis> hypotheses =
-      DetectSymmetries(points, normals, frame, *input.free_space, options_.symmetry);
-  RETURN_IF_ERROR(CheckCancelled(input.cancel, "complete"));
   const PointIndex3 observed(points);
   const ObservedSurface observed_surface(&observed, normals, input.seen_through, frame.center,
                                          frame.spacing, options_.observed_surface);
+  const std::vector<SymmetryHypothesis> hypotheses = DetectSymmetries(
+      points, normals, frame, *input.free_space, options_.symmetry, &observed_surface);
+  RETURN_IF_ERROR(CheckCancelled(input.cancel, "complete"));
   CandidateFilter filter(frame, observed, observed_surface, *input.free_space, input.seen_through,
                          options_);
   const InstanceSurfels s{

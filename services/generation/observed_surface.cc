@@ -51,13 +51,14 @@ ObservedSurface::ObservedSurface(const PointIndex3* index,
   search_ = std::max(front_, options.behind_spacings * s) + lateral_;
 }
 
-bool ObservedSurface::Contradicts(const Eigen::Vector3f& p) const {
+bool ObservedSurface::Test(const Eigen::Vector3f& p, bool behind) const {
   if (index_ == nullptr) return false;
-  for (uint32_t q : index_->WithinRadius(p, search_)) {
+  const float search = behind ? search_ : front_ + lateral_;
+  for (uint32_t q : index_->WithinRadius(p, search)) {
     const Eigen::Vector3f& n = seen_normals_[q];
     const Eigen::Vector3f d = p - index_->points()[q];
     const float along = d.dot(n);
-    if ((along > front_ || along < -behind_) &&
+    if ((along > front_ || (behind && along < -behind_)) &&
         (d - along * n).squaredNorm() < lateral_ * lateral_) {
       return true;
     }

@@ -43,9 +43,16 @@ class ObservedSurface {
   ObservedSurface(const PointIndex3* index, const std::vector<Eigen::Vector3f>& normals,
                   const SeenThroughTest* seen, const Eigen::Vector3f& center, float spacing,
                   const ObservedSurfaceOptions& options);
-  bool Contradicts(const Eigen::Vector3f& p) const;
+  bool Contradicts(const Eigen::Vector3f& p) const { return Test(p, true); }
+  // The first half of the test only, asked of the surfels within front + lateral spacings: p
+  // stands in front of a seen surfel, where the views looked through. (Behind a surfel is no
+  // contradiction at a convex corner's unseen face: its points lie behind the seen neighbouring
+  // face's edge surfels, within their lateral reach.)
+  bool InFrontOfSeenSurface(const Eigen::Vector3f& p) const { return Test(p, false); }
 
  private:
+  bool Test(const Eigen::Vector3f& p, bool behind) const;
+
   const PointIndex3* index_;                   // null: the test is off
   std::vector<Eigen::Vector3f> seen_normals_;  // SeenSideNormals of the index's points
   float front_ = 0, behind_ = 0, lateral_ = 0, search_ = 0;

@@ -43,6 +43,21 @@ TEST_F(ObservedSurfaceTest, RefusesCandidatesInFrontOfOrDeepBehindTheSeenSide) {
   EXPECT_TRUE(surface.Contradicts({0.115f, 0.0f, 0.01f}));
 }
 
+// The symmetry search's alignment cost asks the front half only (symmetry.h,
+// cost_observed_surface): behind a seen surfel is where a box's unseen face lies beside the edge
+// of the seen face next to it.
+TEST_F(ObservedSurfaceTest, InFrontOfTheSeenSurfaceIsTheFrontHalfOfTheTest) {
+  const ObservedSurface surface = Surface(ObservedSurfaceOptions{});
+  EXPECT_TRUE(surface.InFrontOfSeenSurface({0.003f, 0.0f, 0.01f}));  // a spacing in front
+  EXPECT_TRUE(surface.InFrontOfSeenSurface({0.0f, 0.004f, 0.02f}));  // two spacings in front
+  // Only surfels within front + lateral spacings are asked (2.75 here).
+  EXPECT_FALSE(surface.InFrontOfSeenSurface({0.0f, 0.004f, 0.03f}));
+  EXPECT_FALSE(surface.InFrontOfSeenSurface({0.003f, 0.0f, 0.005f}));  // on the layer
+  EXPECT_FALSE(surface.InFrontOfSeenSurface({0.0f, 0.0f, -0.02f}));    // behind: Contradicts only
+  EXPECT_TRUE(surface.Contradicts({0.0f, 0.0f, -0.02f}));
+  EXPECT_FALSE(surface.InFrontOfSeenSurface({0.125f, 0.0f, 0.01f}));  // beside the patch
+}
+
 TEST_F(ObservedSurfaceTest, ZeroBehindTestsTheFrontOnlyAndZeroFrontTurnsTheTestOff) {
   ObservedSurfaceOptions options;
   options.behind_spacings = 0;
@@ -55,6 +70,7 @@ TEST_F(ObservedSurfaceTest, ZeroBehindTestsTheFrontOnlyAndZeroFrontTurnsTheTestO
   ASSERT_TRUE(options.Validate().ok());
   const ObservedSurface off = Surface(options);
   EXPECT_FALSE(off.Contradicts({0.0f, 0.0f, 0.03f}));
+  EXPECT_FALSE(off.InFrontOfSeenSurface({0.0f, 0.0f, 0.03f}));
   EXPECT_FALSE(off.Contradicts({0.0f, 0.0f, -0.02f}));
 }
 

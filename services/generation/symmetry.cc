@@ -191,18 +191,26 @@ void ScoreWithIndex(const std::vector<Eigen::Vector3f>& points,
 // squared distance to the nearest observed point, a contradicting one the squared match distance;
 // normalised by match^2 and the decided images. Agreement counts images within the match distance
 // and is flat across a few degrees; this cost is not, so it places a plane to a fraction of a step.
+// An image in front of a seen surfel (ObservedSurface::InFrontOfSeenSurface) counts as
+// contradicting: the free-space grid stops its rays a margin before the first surface, and an
+// image there would otherwise leave the cost.
 double AlignmentCost(const std::vector<Eigen::Vector3f>& points,
                      const std::vector<Eigen::Vector3f>& normals, const PointIndex3& index,
                      const ObjectFrame& frame, const FreeSpaceGrid& free_space,
-                     const SymmetryOptions& options, const SymmetryHypothesis& h) {
+                     const SymmetryOptions& options, const SymmetryHypothesis& h,
+                     const ObservedSurface* surface) {
   const float match = options.match_spacings * std::max(frame.spacing, 1e-6f);
   double cost = 0;
   size_t decided = 0;
   for (size_t i = 0; i < points.size(); ++i) {
     for (int k = 0; k < h.copies; ++k) {
       float dist_sq = 0;
-      const Image image =
+      Image image =
           ClassifyImage(points, normals, index, free_space, options, match, h, i, k, &dist_sq);
+      if (image == Image::kUnknown && surface != nullptr &&
+          surface->InFrontOfSeenSurface(h.MapPoint(points[i], k))) {
+        image = Image::kContradicts;
+      }
       if (image == Image::kUnknown) continue;
       cost += image == Image::kAgrees ? dist_sq : match * match;
       ++decided;

@@ -21,6 +21,7 @@
 
 #include "services/generation/free_space.h"
 #include "services/generation/object_frame.h"
+#include "services/generation/observed_surface.h"
 
 namespace instascene::generation {
 
@@ -70,6 +71,12 @@ struct SymmetryOptions {
   int refine_steps = 8;
   // The axis point found by agreement is moved to the least alignment cost nearby (symmetry.cc).
   bool refine_axis = true;
+  // The alignment cost counts an image in front of a seen surfel, where the views looked through
+  // (ObservedSurface::InFrontOfSeenSurface), as contradicting, not as unknown: near the object
+  // the free-space grid's margin leaves such images unknown, and a plane shifted by 4 mm moved a
+  // box's mirrored face 8 mm past its seen one at a lower cost (docs/RESULTS.md "A mirror plane
+  // placed against the seen surface").
+  bool cost_observed_surface = true;
   // A solid of revolution must agree at every turn (AgreesAtEveryTurn); false = the whole's
   // agreement alone decides.
   bool revolution_every_turn = true;
@@ -79,12 +86,14 @@ struct SymmetryOptions {
 };
 
 // The best plane and the best axis found (each reported even when rejected, so the manifest can
-// say what was tried), accepted first. `points` / `normals`: the observed instance surfels.
+// say what was tried), accepted first. `points` / `normals`: the observed instance surfels;
+// `observed_surface` (may be null: not used) the test of SymmetryOptions::cost_observed_surface.
 std::vector<SymmetryHypothesis> DetectSymmetries(const std::vector<Eigen::Vector3f>& points,
                                                  const std::vector<Eigen::Vector3f>& normals,
                                                  const ObjectFrame& frame,
                                                  const FreeSpaceGrid& free_space,
-                                                 const SymmetryOptions& options);
+                                                 const SymmetryOptions& options,
+                                                 const ObservedSurface* observed_surface = nullptr);
 
 // Whether no turn of an axis agrees less than min_agreement beyond chance: for each turn decided
 // for at least min_turn_decided images, the one-sided 95 % Wilson upper bound of its agree /

@@ -28,6 +28,7 @@ struct ScoredPoints {
   const ObjectFrame& frame;
   const FreeSpaceGrid& free_space;
   const SymmetryOptions& options;
+  const ObservedSurface* surface;  // null: the alignment cost does not ask it
 
   void Score(SymmetryHypothesis* h) const {
     ScoreWithIndex(points, normals, index, frame, free_space, options, h);
@@ -74,8 +75,8 @@ SymmetryHypothesis BestPlane(const ScoredPoints& in) {
     const int da = static_cast<int>(slot) / (2 * n + 1) - n;
     const int doff = static_cast<int>(slot) % (2 * n + 1) - n;
     fine[slot] = VerticalPlane(frame, theta0 + da * angle_step, offset0 + doff * offset_step);
-    cost[slot] =
-        AlignmentCost(in.points, in.normals, in.index, frame, in.free_space, options, fine[slot]);
+    cost[slot] = AlignmentCost(in.points, in.normals, in.index, frame, in.free_space, options,
+                               fine[slot], in.surface);
   });
   const size_t best = static_cast<size_t>(std::min_element(cost.begin(), cost.end()) -
                                           cost.begin());  // first minimum: deterministic
@@ -114,10 +115,11 @@ class AxisSearch {
   // about an axis 3 mm off stands 6 mm proud of itself on the far side). The point with the
   // least alignment cost (as for the planes) over the coarse sample.
   Eigen::Vector3f Refine(const Eigen::Vector3f& start, int reach, float step_radii) const {
-    return BestShift(
-        start, 6, reach, step_radii, [&](const SymmetryOptions& coarse, SymmetryHypothesis* h) {
-          return -AlignmentCost(points_, normals_, *index_, in_.frame, in_.free_space, coarse, *h);
-        });
+    return BestShift(start, 6, reach, step_radii,
+                     [&](const SymmetryOptions& coarse, SymmetryHypothesis* h) {
+                       return -AlignmentCost(points_, normals_, *index_, in_.frame, in_.free_space,
+                                             coarse, *h, in_.surface);
+                     });
   }
 
  private:
@@ -208,7 +210,8 @@ std::vector<SymmetryHypothesis> DetectSymmetries(const std::vector<Eigen::Vector
                                                  const std::vector<Eigen::Vector3f>& all_normals,
                                                  const ObjectFrame& frame,
                                                  const FreeSpaceGrid& free_space,
-                                                 const SymmetryOptions& options) {
+                                                 const SymmetryOptions& options,
+                                                 const ObservedSurface* observed_surface) {
   std::vector<Eigen::Vector3f> points, normals;
   const size_t stride =
       std::max<size_t>(1, all_points.size() / static_cast<size_t>(std::max(1, options.max_points)));
@@ -218,7 +221,13 @@ std::vector<SymmetryHypothesis> DetectSymmetries(const std::vector<Eigen::Vector
   }
   if (points.size() < 10) return {};
   const PointIndex3 index(points);
-  const ScoredPoints in{points, normals, index, frame, free_space, options};
+  const ScoredPoints in{points,
+                        normals,
+                        index,
+                        frame,
+                        free_space,
+                        options,
+                        options.cost_observed_surface ? observed_surface : nullptr};
   std::vector<SymmetryHypothesis> out = {BestAxis(in, all_points), BestPlane(in)};
   std::stable_sort(out.begin(), out.end(), Better);
   return out;

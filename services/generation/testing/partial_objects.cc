@@ -6,6 +6,7 @@
 
 #include <gtest/gtest.h>
 
+#include "common/geometry/point_index.h"
 #include "common/geometry/rigid.h"
 #include "common/mesh/surfel_mesh.h"
 #include "common/synth/primitives.h"
@@ -137,7 +138,11 @@ Detected Detect(const PartialObject& scene, const SymmetryOptions& options) {
     const float* q = &scene.cloud.rotations[4 * g];
     normals.push_back(RotationFromQuaternionWxyz(q[0], q[1], q[2], q[3]).col(2).cast<float>());
   }
-  d.hypotheses = DetectSymmetries(points, normals, d.frame, *space.grid, options);
+  // The observed surface as the prior builds it, without a seen-through test (normals turned
+  // away from the frame's centre).
+  const PointIndex3 index(points);
+  const ObservedSurface surface(&index, normals, nullptr, d.frame.center, d.frame.spacing, {});
+  d.hypotheses = DetectSymmetries(points, normals, d.frame, *space.grid, options, &surface);
   return d;
 }
 

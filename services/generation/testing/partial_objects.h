@@ -78,6 +78,7 @@ struct Detected {
   std::vector<SymmetryHypothesis> hypotheses;
 };
 
+// With the observed surface the prior builds (no seen-through test) for the alignment cost.
 Detected Detect(const PartialObject& scene, const SymmetryOptions& options = {});
 
 // Three surfels of a neighbour, 1 cm beside the base of `Bottle()`.
