@@ -191,9 +191,11 @@ void ScoreWithIndex(const std::vector<Eigen::Vector3f>& points,
 // squared distance to the nearest observed point, a contradicting one the squared match distance;
 // normalised by match^2 and the decided images. Agreement counts images within the match distance
 // and is flat across a few degrees; this cost is not, so it places a plane to a fraction of a step.
-// An image in front of a seen surfel (ObservedSurface::InFrontOfSeenSurface) counts as
-// contradicting: the free-space grid stops its rays a margin before the first surface, and an
-// image there would otherwise leave the cost.
+// An image beyond the match distance from every observed surfel that stands in front of a seen
+// one (ObservedSurface::InFrontOfSeenSurface) counts as contradicting: the free-space grid stops
+// its rays a margin before the first surface, and an image there would otherwise leave the cost.
+// (Nearer images with a turned normal stay unknown: asked too, they moved 13 planes of 45 scenes
+// by more than 0.3 mm, 9 of them away from their objects' centres.)
 double AlignmentCost(const std::vector<Eigen::Vector3f>& points,
                      const std::vector<Eigen::Vector3f>& normals, const PointIndex3& index,
                      const ObjectFrame& frame, const FreeSpaceGrid& free_space,
@@ -207,7 +209,7 @@ double AlignmentCost(const std::vector<Eigen::Vector3f>& points,
       float dist_sq = 0;
       Image image =
           ClassifyImage(points, normals, index, free_space, options, match, h, i, k, &dist_sq);
-      if (image == Image::kUnknown && surface != nullptr &&
+      if (image == Image::kUnknown && surface != nullptr && dist_sq > match * match &&
           surface->InFrontOfSeenSurface(h.MapPoint(points[i], k))) {
         image = Image::kContradicts;
       }

@@ -71,11 +71,12 @@ struct SymmetryOptions {
   int refine_steps = 8;
   // The axis point found by agreement is moved to the least alignment cost nearby (symmetry.cc).
   bool refine_axis = true;
-  // The planes' alignment cost counts an image in front of a seen surfel, where the views looked
-  // through (ObservedSurface::InFrontOfSeenSurface), as contradicting, not as unknown: near the
-  // object the free-space grid's margin leaves such images unknown, and a plane shifted by 4 mm
-  // moved a box's mirrored face 8 mm past its seen one at a lower cost (docs/RESULTS.md "A mirror
-  // plane placed against the seen surface"). The axis's refinement does not ask it.
+  // The planes' alignment cost counts an image beyond the match distance that stands in front of
+  // a seen surfel, where the views looked through (ObservedSurface::InFrontOfSeenSurface), as
+  // contradicting, not as unknown: near the object the free-space grid's margin leaves such
+  // images unknown, and a plane shifted by 4 mm moved a box's mirrored face 8 mm past its seen
+  // one at a lower cost (docs/RESULTS.md "A mirror plane placed against the seen surface"). The
+  // axis's refinement does not ask it.
   bool cost_observed_surface = true;
   // A solid of revolution must agree at every turn (AgreesAtEveryTurn); false = the whole's
   // agreement alone decides.

@@ -32,8 +32,8 @@ void ScoreWithIndex(const std::vector<Eigen::Vector3f>& points,
 
 // How far h maps the observed points from observed points over the images it decides
 // (normalised; 1 = every decided image contradicts): places a plane or an axis finer than the
-// agreement, which is flat over a few millimetres. An image in front of a surfel `surface` (may be
-// null) holds as seen is decided and contradicts too.
+// agreement, which is flat over a few millimetres. An image beyond the match distance in front of
+// a surfel `surface` (may be null) holds as seen is decided and contradicts too.
 double AlignmentCost(const std::vector<Eigen::Vector3f>& points,
                      const std::vector<Eigen::Vector3f>& normals, const PointIndex3& index,
                      const ObjectFrame& frame, const FreeSpaceGrid& free_space,
